@@ -1,0 +1,43 @@
+# PLE — two commands on a fresh machine: `make demo` and `make test`.
+PYTHON ?= python3.11
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+SYSLIBS := libegl1 libegl-mesa0 libgl1-mesa-dri libxi6 libxxf86vm1 libxfixes3 libxrender1 libxkbcommon0 libsm6
+PIP_FLAGS := --disable-pip-version-check -q
+
+.PHONY: setup syslibs demo test lint bench extension docs clean
+
+setup: $(STAMP)
+
+# system libraries that the bpy wheel and headless EGL rendering load
+syslibs:
+	@missing=""; for p in $(SYSLIBS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing system libraries:$$missing"; \
+	  SUDO=""; [ "$$(id -u)" = 0 ] || SUDO=sudo; \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq $$missing; \
+	fi
+
+$(STAMP): pyproject.toml | syslibs
+	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) is required (bpy 5.0.1 needs Python 3.11)"; exit 2; }
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install $(PIP_FLAGS) --upgrade pip
+	$(BIN)/pip install $(PIP_FLAGS) -e ".[dev,blender]"
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/python -m ple.demo
+
+test: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/python -m pytest tests
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/run_all.py
+
+clean:
+	rm -rf $(VENV) dist build out *.egg-info core/*.egg-info

@@ -1,0 +1,1 @@
+"""Sub-commands of ``ple``; every module here is discovered by ``ple.cli``."""

@@ -1,0 +1,32 @@
+"""Argument helpers shared by sub-commands (not itself a command)."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from ..files import atomic_path
+from ..lattice import Lattice
+from ..program import load_lattice
+
+
+def register(sub) -> None:  # this module adds no command
+    return None
+
+
+def add_lattice_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("lattice", metavar="LATTICE", help="a program .py, an IR .json, or a preset name")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="set a program input (repeatable)")
+
+
+def lattice_from_args(args) -> Lattice:
+    return load_lattice(args.lattice, args.param)
+
+
+def save_npz(path, arrays: dict) -> None:
+    """Write arrays to ``path`` (.npz) atomically."""
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)

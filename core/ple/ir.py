@@ -1,0 +1,196 @@
+"""Data-only lattice files, format ``ple-lattice/1`` (SPEC §5): load, validate, save.
+
+Loading never runs code. Every validation error names the offending field with a
+JSON path such as ``U.similarity.axis`` or ``beams[3].to``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .errors import PleError
+from .files import atomic_write_text
+from .lattice import Direction, Lattice
+from .similarity import Similarity, similarity_from_dict
+
+FORMAT = "ple-lattice/1"
+TOP_KEYS = {"format", "nodes", "beams", "U", "V", "W", "placement", "becots", "description", "meta"}
+
+
+def _num(x, where: str) -> float:
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        raise PleError(f"{where}: expected a number, got {x!r}")
+    if not math.isfinite(float(x)):
+        raise PleError(f"{where}: must be finite, got {x!r}")
+    return float(x)
+
+
+def _vec3(x, where: str) -> list[float]:
+    if not isinstance(x, list) or len(x) != 3:
+        raise PleError(f"{where}: expected a list of 3 numbers, got {x!r}")
+    return [_num(c, f"{where}[{n}]") for n, c in enumerate(x)]
+
+
+def _similarity(d, where: str) -> Similarity:
+    """``{"matrix": 4x4}`` or ``{"similarity": {"kind": ...}}``."""
+    if not isinstance(d, dict):
+        raise PleError(f"{where}: expected an object")
+    if ("matrix" in d) == ("similarity" in d):
+        raise PleError(f"{where}: give exactly one of 'matrix' or 'similarity'")
+    if "matrix" in d:
+        m = d["matrix"]
+        if not isinstance(m, list) or len(m) != 4 or any(not isinstance(row, list) or len(row) != 4 for row in m):
+            raise PleError(f"{where}.matrix: expected 4 rows of 4 numbers")
+        vals = [[_num(v, f"{where}.matrix[{r}][{c}]") for c, v in enumerate(row)] for r, row in enumerate(m)]
+        return Similarity.from_matrix(np.array(vals), f"{where}.matrix")
+    sim = d["similarity"]
+    if isinstance(sim, dict):
+        for key, val in sim.items():
+            if key in ("axis", "point", "vector"):
+                _vec3(val, f"{where}.similarity.{key}")
+            elif key in ("angle", "factor", "distance"):
+                _num(val, f"{where}.similarity.{key}")
+    return similarity_from_dict(sim, f"{where}.similarity")
+
+
+def lattice_from_dict(data) -> Lattice:
+    """Build a Lattice from parsed ``ple-lattice/1`` data (validated)."""
+    if not isinstance(data, dict):
+        raise PleError("lattice file: expected a JSON object at the top level")
+    if data.get("format") != FORMAT:
+        raise PleError(f"format: expected {FORMAT!r}, got {data.get('format')!r}")
+    unknown = sorted(set(data) - TOP_KEYS)
+    if unknown:
+        raise PleError(f"{unknown[0]}: unknown field (expected some of {', '.join(sorted(TOP_KEYS))})")
+    lat = Lattice()
+    nodes = data.get("nodes")
+    if not isinstance(nodes, list) or not nodes:
+        raise PleError("nodes: expected a non-empty list of nodes")
+    for n, node in enumerate(nodes):
+        where = f"nodes[{n}]"
+        if not isinstance(node, dict):
+            raise PleError(f"{where}: expected an object with center and radius")
+        for key in ("center", "radius"):
+            if key not in node:
+                raise PleError(f"{where}.{key}: missing")
+        center = _vec3(node["center"], f"{where}.center")
+        radius = _num(node["radius"], f"{where}.radius")
+        if radius <= 0:
+            raise PleError(f"{where}.radius: must be positive, got {radius}")
+        name = node.get("id")
+        if name is not None and not isinstance(name, (str, int)) or isinstance(name, bool):
+            raise PleError(f"{where}.id: must be a string or an integer")
+        if isinstance(name, int) and name != n:
+            raise PleError(f"{where}.id: an integer id must equal the node's position {n}")
+        label = name if isinstance(name, str) else None
+        if label is not None and any(x.name == label for x in lat.nodes):
+            raise PleError(f"{where}.id: {label!r} is used twice")
+        lat.add_node(center, radius, label)
+    for b, beam in enumerate(data.get("beams", [])):
+        where = f"beams[{b}]"
+        if not isinstance(beam, dict):
+            raise PleError(f"{where}: expected an object with from, to, offset")
+        for key in ("from", "to"):
+            if key not in beam:
+                raise PleError(f"{where}.{key}: missing")
+            try:
+                lat.node_id(beam[key])
+            except PleError:
+                raise PleError(f"{where}.{key}: unknown node id {beam[key]!r}") from None
+        offset = beam.get("offset", [0, 0, 0])
+        if not isinstance(offset, list) or len(offset) != 3 or any(isinstance(x, bool) or not isinstance(x, int) for x in offset):
+            raise PleError(f"{where}.offset: expected 3 integers, got {offset!r}")
+        try:
+            lat.add_beam(beam["from"], beam["to"], *offset)
+        except PleError as exc:
+            raise PleError(f"{where}: {exc}") from None
+    for name in ("U", "V", "W"):
+        if name not in data:
+            continue
+        d = data[name]
+        if not isinstance(d, dict):
+            raise PleError(f"{name}: expected an object with count and a similarity")
+        count = d.get("count", 1)
+        if isinstance(count, bool) or not isinstance(count, int):
+            raise PleError(f"{name}.count: expected an integer, got {count!r}")
+        cumulative = d.get("cumulative", False)
+        if not isinstance(cumulative, bool):
+            raise PleError(f"{name}.cumulative: expected true or false")
+        sim = _similarity({k: v for k, v in d.items() if k in ("matrix", "similarity")}, name)
+        try:
+            getattr(lat, f"set_{name.lower()}")(count, sim, cumulative)
+        except PleError as exc:
+            raise PleError(f"{name}.count: {exc}") from None
+    if "placement" in data:
+        lat.set_placement(_similarity(data["placement"], "placement"))
+    if "becots" in data:
+        try:
+            from .becots import becots_from_ir
+        except ImportError:
+            raise PleError("becots: BeCOTS slabs are not available in this version") from None
+        becots_from_ir(lat, data["becots"], "becots")
+    if "description" in data:
+        lat.meta["description"] = str(data["description"])
+    return lat
+
+
+def load_ir(path) -> Lattice:
+    """Load and validate a ``ple-lattice/1`` file."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise PleError(f"{path}: cannot read ({exc.strerror})") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise PleError(f"{path}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+    try:
+        return lattice_from_dict(data)
+    except PleError as exc:
+        raise PleError(f"{path}: {exc}") from None
+
+
+def _matrix_list(s: Similarity) -> list[list[float]]:
+    return [[float(x) for x in row] for row in s.matrix]
+
+
+def lattice_to_dict(lat: Lattice, resolved: bool = True) -> dict:
+    """The IR of a lattice. ``resolved``: every U/V/W as its incremental 4x4 matrix (what
+    ``ple ir`` writes); otherwise canonical similarities with their cumulative flags."""
+    out: dict = {"format": FORMAT}
+    if lat.meta.get("description"):
+        out["description"] = lat.meta["description"]
+    out["nodes"] = [{"id": n.name if n.name is not None else i, "center": [float(c) for c in n.center],
+                     "radius": float(n.radius)} for i, n in enumerate(lat.nodes)]
+
+    def ref(i: int):
+        return lat.nodes[i].name if lat.nodes[i].name is not None else i
+
+    out["beams"] = [{"from": ref(b.n1), "to": ref(b.n2), "offset": [b.di, b.dj, b.dk]} for b in lat.beams]
+    for name, d in (("U", lat.u), ("V", lat.v), ("W", lat.w)):
+        if resolved:
+            out[name] = {"count": d.count, "matrix": _matrix_list(d.incremental)}
+        else:
+            entry = {"count": d.count, "similarity": d.similarity.to_dict()}
+            if d.cumulative:
+                entry["cumulative"] = True
+            out[name] = entry
+    out["placement"] = ({"matrix": _matrix_list(lat.placement)} if resolved
+                        else {"similarity": lat.placement.to_dict()})
+    if lat.becots is not None and not resolved:
+        out["becots"] = lat.becots.to_ir()
+        del out["U"], out["V"]
+    return out
+
+
+def save_ir(lat: Lattice, path, resolved: bool = True) -> None:
+    """Write the IR atomically (no partial file on failure)."""
+    atomic_write_text(path, json.dumps(lattice_to_dict(lat, resolved), indent=1) + "\n")
+
+
+__all__ = ["FORMAT", "Direction", "lattice_from_dict", "lattice_to_dict", "load_ir", "save_ir"]

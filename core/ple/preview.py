@@ -1,0 +1,50 @@
+"""Ball-and-beam preview meshes (not watertight: overlapping spheres and frusta).
+
+Vectorized instancing: one template sphere and one template frustum ring, placed per
+ball and per beam with numpy, so a 10⁵-beam preview builds in well under a second.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+
+def _frames(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors orthogonal to each row of unit ``axis`` (M, 3)."""
+    helper = np.where(np.abs(axis[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+    e1 = np.cross(axis, helper)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    return e1, np.cross(axis, e1)
+
+
+def balls_beams_mesh(center: np.ndarray, radius: np.ndarray, beam_nodes: np.ndarray,
+                     sphere_subdivisions: int = 1, segments: int = 8,
+                     beam_scale: float = 1.0) -> trimesh.Trimesh:
+    """Preview mesh: an icosphere per ball (centres (N, 3), radii (N,)) and a frustum per
+    beam (beam_nodes (M, 2) rows into the ball arrays), radii scaled by ``beam_scale``."""
+    sphere = trimesh.creation.icosphere(subdivisions=sphere_subdivisions)
+    sv, sf = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    verts = (sv[None] * radius[:, None, None] + center[:, None]).reshape(-1, 3)
+    faces = (sf[None] + (np.arange(len(center)) * len(sv))[:, None, None]).reshape(-1, 3)
+    parts_v, parts_f, offset = [verts], [faces], len(verts)
+    if len(beam_nodes):
+        a, b = center[beam_nodes[:, 0]], center[beam_nodes[:, 1]]
+        ra, rb = radius[beam_nodes[:, 0]] * beam_scale, radius[beam_nodes[:, 1]] * beam_scale
+        d = b - a
+        length = np.linalg.norm(d, axis=1, keepdims=True)
+        axis = d / np.where(length > 0, length, 1.0)
+        e1, e2 = _frames(axis)
+        t = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+        ring = np.cos(t)[None, :, None] * e1[:, None] + np.sin(t)[None, :, None] * e2[:, None]  # (M, s, 3)
+        bottom = a[:, None] + ring * ra[:, None, None]
+        top = b[:, None] + ring * rb[:, None, None]
+        bv = np.concatenate([bottom, top], axis=1).reshape(-1, 3)
+        s = np.arange(segments)
+        n = (s + 1) % segments
+        quad = np.stack([np.stack([s, n, n + segments], 1), np.stack([s, n + segments, s + segments], 1)], 1)
+        quad = quad.reshape(-1, 3)
+        bf = quad[None] + (np.arange(len(a)) * 2 * segments)[:, None, None] + offset
+        parts_v.append(bv)
+        parts_f.append(bf.reshape(-1, 3))
+    return trimesh.Trimesh(np.concatenate(parts_v), np.concatenate(parts_f), process=False)
