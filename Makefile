@@ -41,3 +41,9 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) dist build out *.egg-info core/*.egg-info
+
+extension: $(STAMP)
+	$(BIN)/python -m ple_addon.build
+
+docs: $(STAMP)
+	$(BIN)/python -m ple.docs_build

@@ -229,6 +229,13 @@ class Lattice:
             raise PleError("placement must be a Similarity")
         self.placement = similarity
 
+    def set_becots(self, a, b, c, d, counts=(1, 1), **options) -> None:
+        """A BeCOTS slab from four corners (M(0,0)=A, M(0,1)=B, M(1,1)=C, M(1,0)=D, thesis
+        §4.2): sets U and V from the corner-operated field (see ``ple.becots``)."""
+        from .becots import set_becots
+
+        set_becots(self, a, b, c, d, counts, **options)
+
     def _check_size(self) -> None:
         if self.groups > MAX_GROUPS:
             raise PleError(f"{self.groups:.3g} node-groups is absurdly large (limit {MAX_GROUPS:.0e})")
