@@ -1,4 +1,4 @@
-"""Body-centred cubic: corner and centre balls, cube edges plus the 8 centre-to-corner struts (2 balls, 11 beam-patterns)."""
+"""Body-centred cubic: corner and centre balls, cube edges and 8 centre-to-corner struts (11 beam-patterns)."""
 
 
 def lattice(n: Range(1, 200) = 8, cell: Range(0.1, 10) = 1.0, radius: Range(0.01, 0.3) = 0.08):

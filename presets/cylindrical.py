@@ -1,4 +1,4 @@
-"""Cylindrical steady lattice: radial U (translation), angular V (rotation about z), axial W; 2 balls, 14 beam-patterns as in the thesis LiL."""
+"""Cylindrical steady lattice: radial U, angular V (rotation about z), axial W; 2 balls, 14 beam-patterns."""
 
 import math
 

@@ -102,7 +102,8 @@ def lattice_from_dict(data) -> Lattice:
             except PleError:
                 raise PleError(f"{where}.{key}: unknown node id {beam[key]!r}") from None
         offset = beam.get("offset", [0, 0, 0])
-        if not isinstance(offset, list) or len(offset) != 3 or any(isinstance(x, bool) or not isinstance(x, int) for x in offset):
+        if (not isinstance(offset, list) or len(offset) != 3
+                or any(isinstance(x, bool) or not isinstance(x, int) for x in offset)):
             raise PleError(f"{where}.offset: expected 3 integers, got {offset!r}")
         try:
             lat.add_beam(beam["from"], beam["to"], *offset)

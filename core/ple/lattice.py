@@ -9,8 +9,8 @@ region and costs memory proportional to what it returns.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
-from typing import Iterator
 
 import numpy as np
 
@@ -88,7 +88,7 @@ class Region:
         return f"{self.i0}:{self.i1},{self.j0}:{self.j1},{self.k0}:{self.k1}"
 
     @staticmethod
-    def parse(text: str) -> "Region":
+    def parse(text: str) -> Region:
         """Parse ``I0:I1,J0:J1,K0:K1`` (half-open; an empty bound means the lattice's)."""
         parts = text.split(",")
         if len(parts) != 3:
@@ -240,7 +240,7 @@ class Lattice:
         if self.groups > MAX_GROUPS:
             raise PleError(f"{self.groups:.3g} node-groups is absurdly large (limit {MAX_GROUPS:.0e})")
 
-    def copy(self) -> "Lattice":
+    def copy(self) -> Lattice:
         other = Lattice()
         other.nodes = [Node(n.center.copy(), n.radius, n.name) for n in self.nodes]
         other.beams = list(self.beams)
@@ -344,7 +344,8 @@ class Lattice:
         ii, jj, kk = np.arange(r.i0, r.i1), np.arange(r.j0, r.j1), np.arange(r.k0, r.k1)
         mu = self.U.power_matrices(ii)
         # G ∘ W^k ∘ V^j for all (j, k): small (nj * nk matrices)
-        mvw = self.placement.matrix[None, None] @ self.W.power_matrices(kk)[None, :] @ self.V.power_matrices(jj)[:, None]
+        mw, mv = self.W.power_matrices(kk), self.V.power_matrices(jj)
+        mvw = self.placement.matrix[None, None] @ mw[None, :] @ mv[:, None]
         c = self.template_centers
         a = np.einsum("iab,nb->ina", mu[:, :3, :3], c) + mu[:, None, :3, 3]  # (ni, nn, 3)
         ni, nn = a.shape[:2]
@@ -451,7 +452,7 @@ class Lattice:
              * mean_pow(self.W.factor, self.w.count))
         return float(self.placement.factor * f * self.template_radii.mean())
 
-    def with_counts(self, nu: int, nv: int, nw: int) -> "Lattice":
+    def with_counts(self, nu: int, nv: int, nw: int) -> Lattice:
         """A copy with other repetition counts and the same incremental similarities."""
         other = self.copy()
         other.u = replace(self.u, count=nu, similarity=self.U, cumulative=False)

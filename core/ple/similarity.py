@@ -78,16 +78,16 @@ class Similarity:
         return out
 
     # ----- algebra -------------------------------------------------------------------------
-    def __pow__(self, t: float) -> "Similarity":
+    def __pow__(self, t: float) -> Similarity:
         t = float(t)
         if not math.isfinite(t):
             raise PleError(f"similarity power must be finite, got {t}")
         return Similarity(self.factor ** t, self.angle * t, self.axis, self.point, self.distance * t)
 
-    def inverse(self) -> "Similarity":
+    def inverse(self) -> Similarity:
         return self ** -1.0
 
-    def __matmul__(self, other: "Similarity") -> "Similarity":
+    def __matmul__(self, other: Similarity) -> Similarity:
         """Composition ``self ∘ other`` (apply ``other`` first), canonicalized."""
         return Similarity.from_matrix(self.matrix @ other.matrix)
 
@@ -105,7 +105,7 @@ class Similarity:
         """Images of balls: (centres (..., 3), radii (...)); radii scale by the factor."""
         return self.apply_points(centers), np.asarray(radii, dtype=float) * self.factor
 
-    def allclose(self, other: "Similarity", tol: float = 1e-9) -> bool:
+    def allclose(self, other: Similarity, tol: float = 1e-9) -> bool:
         """Equal as transformations (matrices within ``tol``, relative to their size)."""
         a, b = self.matrix, other.matrix
         scale = max(1.0, float(np.abs(a).max()), float(np.abs(b).max()))
@@ -113,7 +113,7 @@ class Similarity:
 
     # ----- conversions -------------------------------------------------------------------
     @staticmethod
-    def from_matrix(matrix, what: str = "matrix") -> "Similarity":
+    def from_matrix(matrix, what: str = "matrix") -> Similarity:
         """Canonical screw or swirl of any orientation-preserving similarity matrix."""
         m = np.asarray(matrix, dtype=float)
         if m.shape != (4, 4):
@@ -140,7 +140,7 @@ class Similarity:
         return Similarity(s, angle, tuple(axis), tuple(fixed), 0.0)
 
     @staticmethod
-    def between_frames(frame_a, frame_b) -> "Similarity":
+    def between_frames(frame_a, frame_b) -> Similarity:
         """The similarity taking 3D frame A onto frame B (§2.5.5).
 
         A frame is a 4x4 matrix whose columns are X, Y, Z, O (|X| = |Y| = |Z|, orthogonal,
@@ -151,7 +151,7 @@ class Similarity:
         return Similarity.from_matrix(fb @ np.linalg.inv(fa), "similarity between frames")
 
     @staticmethod
-    def from_point_pairs(a, b, c, d) -> "Similarity":
+    def from_point_pairs(a, b, c, d) -> Similarity:
         """The planar similarity taking the pair {A, B} to {C, D} (§2.4.6, Eq. 2.5).
 
         Points are 2D (x, y) or 3D with equal z (the plane z = const); the result is a
@@ -271,7 +271,8 @@ def _frame_matrix(frame, what: str) -> np.ndarray:
     n = np.linalg.norm(lin, axis=0)
     if n.min() < 1e-12:
         raise PleError(f"{what}: axis vectors must be non-zero")
-    if np.abs(n / n[0] - 1).max() > SIMILARITY_TOL or np.abs((lin / n).T @ (lin / n) - np.eye(3)).max() > SIMILARITY_TOL:
+    ortho = np.abs((lin / n).T @ (lin / n) - np.eye(3)).max()
+    if np.abs(n / n[0] - 1).max() > SIMILARITY_TOL or ortho > SIMILARITY_TOL:
         raise PleError(f"{what}: X, Y, Z must be orthogonal and of equal length")
     if np.linalg.det(lin) <= 0:
         raise PleError(f"{what}: X, Y, Z must be right-handed")
