@@ -33,6 +33,9 @@ def main(argv: list[str] | None = None) -> int:
     except PleError as exc:
         print(f"ple {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # output piped into e.g. `head`
+        sys.stderr.close()
+        return 0
     except KeyboardInterrupt:
         print(f"ple {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -232,7 +232,7 @@ def _axis_angle(rot: np.ndarray) -> tuple[np.ndarray, float]:
     angle = math.atan2(sin_a, cos_a)
     if angle <= NEAR_ZERO_ANGLE:  # near-degenerate axis: no usable rotation
         return np.array([0.0, 0.0, 1.0]), 0.0
-    if sin_a > 1e-6:
+    if sin_a > 1e-6 or cos_a > 0:  # small or ordinary angles: the skew part gives the axis
         return w / sin_a, angle
     # half turn (sin ≈ 0, cos ≈ -1): R + I = 2 r r^T, read r off its largest column
     sym = (rot + np.eye(3)) / 2.0
@@ -248,11 +248,13 @@ def _screw_from(axis: np.ndarray, angle: float, b: np.ndarray) -> Similarity:
     """Canonical screw of x -> R x + b (s == 1), Eq. 2.6."""
     if angle == 0.0:  # pure translation (or identity)
         n = float(np.linalg.norm(b))
-        if n == 0.0:
+        if n <= 1e-15:
             return Similarity()
         return Similarity(1.0, 0.0, tuple(b / n), (0.0, 0.0, 0.0), n)
     d = float(b @ axis)
     b_perp = b - d * axis
+    if abs(d) <= NEAR_UNIT_FACTOR * max(1.0, float(np.linalg.norm(b))):  # round-off slide: a pure rotation
+        d = 0.0
     # the axis point closest to the origin: P = (b⊥ + cot(α/2) r × b⊥) / 2
     point = 0.5 * (b_perp + np.cross(axis, b_perp) / math.tan(angle / 2.0))
     return Similarity(1.0, angle, tuple(axis), tuple(point), d)
