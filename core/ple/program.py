@@ -163,7 +163,7 @@ def parse_params(program: Program, assignments: list[str]) -> dict:
 
 # ----- presets and sources ------------------------------------------------------------------
 def preset_dir():
-    return resources.files("ple.presets")
+    return resources.files(f"{__package__}.presets")  # also when vendored inside the Blender extension
 
 
 def preset_names() -> list[str]:
