@@ -9,7 +9,6 @@ import sys
 import numpy as np
 import pytest
 from conftest import reference_matrix
-
 from ple.cli import main
 from ple.ir import lattice_from_dict, lattice_to_dict
 from ple.program import load_lattice, preset_names
@@ -80,7 +79,7 @@ def test_eval_of_matrix_lattice_matches_matrix_powers(tmp_path, rng):
         assert np.abs(c - ref).max() <= 1e-9 * max(1, np.abs(ref).max())
         assert r == pytest.approx(data["nodes"][n]["radius"] * np.linalg.det(m[:3, :3]) ** (1 / 3), rel=1e-9)
     # beam rows point at the nodes their index names
-    for (i, j, k, p), (a, b) in zip(z["beam_index"], z["beam_nodes"]):
+    for (i, j, k, _p), (a, _b) in zip(z["beam_index"], z["beam_nodes"]):
         assert tuple(z["node_index"][a][:3]) == (i, j, k)
 
 

@@ -5,10 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import reference_matrix
-from scipy.spatial.transform import Rotation as SciRotation
-
 from ple import Lattice, PleError, Pt, Similarity, Translation, Vec, load_lattice
 from ple.program import preset_names
+from scipy.spatial.transform import Rotation as SciRotation
 
 
 def random_similarity_matrix(rng, scale_range=(0.85, 1.15)) -> np.ndarray:

@@ -9,7 +9,6 @@ import pytest
 from conftest import reference_matrix, similarities
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from ple import PleError, Pt, Rotation, Scaling, Screw, Similarity, Swirl, Translation, Vec
 from ple.similarity import similarity_from_dict
 
