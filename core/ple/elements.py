@@ -44,10 +44,10 @@ def beam_distance(p, a, ra, b, rb) -> np.ndarray:
     y = np.sqrt(np.maximum(np.sum(ap * ap, axis=-1) - x * x, 0.0))
     s = np.clip((ra - rb) / safe, -1.0, 1.0)
     c = np.sqrt(1.0 - s * s)
-    u = c * x + s * y  # position along the tangent direction; contact points at 0 and c·|ab|
+    u = c * x - s * y  # position along the tangent direction; contact points at 0 and c·|ab|
     da = np.sqrt(x * x + y * y) - ra
     db = np.sqrt((x - length) ** 2 + y * y) - rb
-    side = -s * x + c * y - ra
+    side = s * x + c * y - ra
     dist = np.where(u <= 0, da, np.where(u >= c * length, db, side))
     # special case: one ball contains the other (or zero length): the hull is the bigger ball
     a_big = length + rb <= ra
