@@ -1,0 +1,457 @@
+"""Filters for hierarchical lattices (thesis §9): index stencils, Lattice-in-Lattice, compounds.
+
+A filter decides per node (thesis §9: F(N) -> true/false) from the node's index (i, j, k, n)
+and its ball; a beam survives when both of its nodes survive. Filters compose with ``&``,
+``|`` and ``~`` and are applied lazily: ``FilteredLattice(lat, f).evaluate(region)`` evaluates
+only that region of the lattice. A Lattice-in-Lattice (LiL) filter keeps a fine node when
+its ball interferes with a coarse lattice (a ball or a cone-beam of it); the coarse lattice
+may itself be a ``FilteredLattice``, which gives the cascades of thesis Fig. 9.3.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .errors import PleError
+from .lattice import Evaluation, Lattice, Region
+
+MAX_COARSE_NODES = 20_000_000  # a coarse lattice is evaluated in full; beyond this it is not "coarse"
+QUERY_CHUNK = 1 << 18  # query balls per vectorized batch (bounds the candidate-pair memory)
+
+
+# ----- the filter model ------------------------------------------------------------------------
+class Filter:
+    """Decides per node. Subclasses implement ``node_mask``."""
+
+    def node_mask(self, lat: Lattice, node_index: np.ndarray, center: np.ndarray, radius: np.ndarray) -> np.ndarray:
+        """bool (N,): which nodes survive, given node_index (N, 4), centres (N, 3) and radii (N,)."""
+        raise NotImplementedError
+
+    def __and__(self, other: Filter) -> Filter:
+        return And(self, _as_filter(other))
+
+    def __or__(self, other: Filter) -> Filter:
+        return Or(self, _as_filter(other))
+
+    def __invert__(self) -> Filter:
+        return Not(self)
+
+    def apply(self, lat: Lattice, region=None) -> Evaluation:
+        """The surviving nodes and beams of a region of ``lat`` (default: the whole lattice)."""
+        return FilteredLattice(lat, self).evaluate(region)
+
+
+def _as_filter(f) -> Filter:
+    if not isinstance(f, Filter):
+        raise PleError(f"cannot combine a filter with {type(f).__name__}")
+    return f
+
+
+class And(Filter):
+    """A node survives when every part keeps it (evaluated left to right on the survivors)."""
+
+    def __init__(self, *parts: Filter) -> None:
+        self.parts = parts
+
+    def node_mask(self, lat, node_index, center, radius):
+        keep = np.ones(len(node_index), dtype=bool)
+        for part in self.parts:
+            rows = np.flatnonzero(keep)  # later parts only see nodes still alive (LiL is the costly one)
+            if rows.size == 0:
+                break
+            keep[rows] = part.node_mask(lat, node_index[rows], center[rows], radius[rows])
+        return keep
+
+
+class Or(Filter):
+    """A node survives when any part keeps it."""
+
+    def __init__(self, *parts: Filter) -> None:
+        self.parts = parts
+
+    def node_mask(self, lat, node_index, center, radius):
+        keep = np.zeros(len(node_index), dtype=bool)
+        for part in self.parts:
+            rows = np.flatnonzero(~keep)
+            if rows.size == 0:
+                break
+            keep[rows] = part.node_mask(lat, node_index[rows], center[rows], radius[rows])
+        return keep
+
+
+class Not(Filter):
+    def __init__(self, part: Filter) -> None:
+        self.part = part
+
+    def node_mask(self, lat, node_index, center, radius):
+        return ~self.part.node_mask(lat, node_index, center, radius)
+
+
+def select(ev: Evaluation, keep: np.ndarray) -> Evaluation:
+    """Keep the nodes flagged in ``keep`` (N,) and the beams whose two nodes are both kept;
+    beam_nodes are renumbered to rows of the kept nodes."""
+    keep = np.asarray(keep, dtype=bool)
+    new_row = np.cumsum(keep) - 1
+    beam_alive = keep[ev.beam_nodes[:, 0]] & keep[ev.beam_nodes[:, 1]] if len(ev.beam_nodes) else \
+        np.zeros(0, dtype=bool)
+    return Evaluation(ev.node_index[keep], ev.center[keep], ev.radius[keep], ev.beam_index[beam_alive],
+                      new_row[ev.beam_nodes[beam_alive]].reshape(-1, 2).astype(np.int64))
+
+
+class FilteredLattice:
+    """A lattice seen through a filter; evaluated lazily, region by region."""
+
+    def __init__(self, lattice: Lattice, filter: Filter) -> None:
+        if not isinstance(lattice, Lattice):
+            raise PleError(f"a filtered lattice needs a Lattice, got {type(lattice).__name__}")
+        self.lattice = lattice
+        self.filter = _as_filter(filter)
+
+    def node_mask(self, node_index, center, radius) -> np.ndarray:
+        return self.filter.node_mask(self.lattice, node_index, center, radius)
+
+    def region_rows(self, region) -> tuple[Evaluation, np.ndarray]:
+        """Surviving nodes of a region (an Evaluation without beams) and the region's row map:
+        int64 (ni, nj, nk, nn), the survivor's row or -1 for a removed node."""
+        lat = self.lattice
+        r = lat.region(region)
+        centers, radii = lat.region_balls(r)
+        index = region_node_index(r, len(lat.nodes))
+        keep = self.node_mask(index, centers.reshape(-1, 3), radii.reshape(-1))
+        rows = np.where(keep, np.cumsum(keep) - 1, -1).reshape(radii.shape)
+        nodes = Evaluation(index[keep], centers.reshape(-1, 3)[keep], radii.reshape(-1)[keep],
+                           np.zeros((0, 4), np.int64), np.zeros((0, 2), np.int64))
+        return nodes, rows
+
+    def evaluate(self, region=None) -> Evaluation:
+        """Surviving nodes and beams with both ends in ``region`` (arrays as ``ple eval``)."""
+        r = self.lattice.region(region)
+        ev, rows = self.region_rows(r)
+        ev.beam_index, ev.beam_nodes = beams_between(self.lattice, r, rows, r, rows)
+        return ev
+
+
+def region_node_index(r: Region, nn: int) -> np.ndarray:
+    """(i, j, k, n) of every node of a region, (N, 4) int64 in (i, j, k, n) order."""
+    ni, nj, nk = r.shape
+    out = np.empty((ni, nj, nk, nn, 4), dtype=np.int64)
+    out[..., 0] = np.arange(r.i0, r.i1)[:, None, None, None]
+    out[..., 1] = np.arange(r.j0, r.j1)[None, :, None, None]
+    out[..., 2] = np.arange(r.k0, r.k1)[None, None, :, None]
+    out[..., 3] = np.arange(nn)
+    return out.reshape(-1, 4)
+
+
+def beams_between(lat: Lattice, a: Region, rows_a: np.ndarray, b: Region, rows_b: np.ndarray):
+    """Beams whose from-group lies in box ``a`` and to-group in box ``b``, both nodes alive.
+
+    ``rows_a``/``rows_b`` (ni, nj, nk, nn) give each node's output row, -1 where removed.
+    Returns beam_index (M, 4) and beam_nodes (M, 2), sorted by (i, j, k, pattern)."""
+    parts_idx, parts_nodes = [], []
+    for p, bp in enumerate(lat.beams):
+        lo = [max(x, y - d) for x, y, d in zip((a.i0, a.j0, a.k0), (b.i0, b.j0, b.k0), bp.offset)]
+        hi = [min(x, y - d) for x, y, d in zip((a.i1, a.j1, a.k1), (b.i1, b.j1, b.k1), bp.offset)]
+        if any(h <= low for low, h in zip(lo, hi)):
+            continue
+        fa = rows_a[lo[0] - a.i0:hi[0] - a.i0, lo[1] - a.j0:hi[1] - a.j0, lo[2] - a.k0:hi[2] - a.k0, bp.n1]
+        d0, d1, d2 = (low + d - blo for low, d, blo in zip(lo, bp.offset, (b.i0, b.j0, b.k0)))
+        sh = fa.shape
+        tb = rows_b[d0:d0 + sh[0], d1:d1 + sh[1], d2:d2 + sh[2], bp.n2]
+        alive = (fa >= 0) & (tb >= 0)
+        ii, jj, kk = np.nonzero(alive)
+        parts_idx.append(np.stack([ii + lo[0], jj + lo[1], kk + lo[2], np.full_like(ii, p)], axis=1))
+        parts_nodes.append(np.stack([fa[alive], tb[alive]], axis=1))
+    if not parts_idx:
+        return np.zeros((0, 4), np.int64), np.zeros((0, 2), np.int64)
+    idx = np.concatenate(parts_idx).astype(np.int64)
+    nodes = np.concatenate(parts_nodes).astype(np.int64)
+    order = np.lexsort((idx[:, 3], idx[:, 2], idx[:, 1], idx[:, 0]))
+    return idx[order], nodes[order]
+
+
+# ----- index stencils (thesis §9: F(N) = S[i mod x, j mod y, k mod z]) ---------------------------
+STENCIL_NAMES = ("corners", "edges", "faces", "checker", "layers")
+
+
+class Stencil(Filter):
+    """Boolean stencil S of shape (x, y, z), or (x, y, z, nn) to decide per node id as well."""
+
+    def __init__(self, array) -> None:
+        s = np.asarray(array)
+        if s.dtype != bool:
+            if not np.issubdtype(s.dtype, np.number) or not np.isin(s, (0, 1)).all():
+                raise PleError("stencil must be a Boolean (or 0/1) array")
+            s = s.astype(bool)
+        if s.ndim not in (3, 4) or min(s.shape) < 1:
+            raise PleError(f"stencil must have shape (x, y, z) or (x, y, z, nodes), got {s.shape}")
+        self.array = s
+
+    def node_mask(self, lat, node_index, center, radius):
+        s = self.array
+        idx = np.asarray(node_index, dtype=np.int64)
+        key = (idx[:, 0] % s.shape[0], idx[:, 1] % s.shape[1], idx[:, 2] % s.shape[2])
+        if s.ndim == 4:
+            if s.shape[3] != len(lat.nodes):
+                raise PleError(f"stencil has {s.shape[3]} node columns but the lattice has {len(lat.nodes)} nodes")
+            key = key + (idx[:, 3],)
+        return s[key]
+
+    @staticmethod
+    def named(name: str, period=4, width: int = 1) -> Stencil:
+        """Common hierarchical patterns over a period box (x, y, z):
+        ``corners`` keeps groups with all three indices ≡ 0 (isolated clusters), ``edges`` those
+        with at least two ≡ 0 (a coarse cubic frame whose beams are made of fine beams),
+        ``faces`` those with at least one ≡ 0 (coarse cell walls), ``checker`` alternate blocks
+        of a 2x2x2 checkerboard, ``layers`` the first ``width`` k-layers of every period."""
+        per = (period,) * 3 if np.isscalar(period) else tuple(period)
+        if len(per) != 3 or any(int(p) != p or p < 1 for p in per):
+            raise PleError(f"stencil period must be a positive integer or three of them, got {period!r}")
+        if int(width) != width or width < 1:
+            raise PleError(f"stencil width must be a positive integer, got {width!r}")
+        x, y, z = (int(p) for p in per)
+        i, j, k = np.meshgrid(np.arange(x), np.arange(y), np.arange(z), indexing="ij")
+        on = [(i % x) < width, (j % y) < width, (k % z) < width]
+        hits = on[0].astype(int) + on[1] + on[2]
+        if name == "corners":
+            s = hits == 3
+        elif name == "edges":
+            s = hits >= 2
+        elif name == "faces":
+            s = hits >= 1
+        elif name == "checker":
+            s = ((2 * i // x) + (2 * j // y) + (2 * k // z)) % 2 == 0
+        elif name == "layers":
+            s = on[2]
+        else:
+            raise PleError(f"unknown stencil {name!r}; named stencils: {', '.join(STENCIL_NAMES)}")
+        return Stencil(s)
+
+    @staticmethod
+    def parse(text: str) -> Stencil:
+        """``NAME[:P|PxQxR][:W]`` (a named stencil) or a ``.npy`` file holding a Boolean array."""
+        if text.endswith(".npy"):
+            try:
+                return Stencil(np.load(text, allow_pickle=False))
+            except OSError as exc:
+                raise PleError(f"--stencil {text}: {exc.strerror or exc}") from None
+            except ValueError as exc:
+                raise PleError(f"--stencil {text}: {exc}") from None
+        parts = text.split(":")
+        try:
+            period = [int(p) for p in parts[1].split("x")] if len(parts) > 1 else [4]
+            width = int(parts[2]) if len(parts) > 2 else 1
+        except ValueError:
+            raise PleError(f"--stencil {text!r}: expected NAME[:PERIOD or PxQxR][:WIDTH]") from None
+        if len(period) not in (1, 3) or len(parts) > 3:
+            raise PleError(f"--stencil {text!r}: expected NAME[:PERIOD or PxQxR][:WIDTH]")
+        return Stencil.named(parts[0], period[0] if len(period) == 1 else period, width)
+
+
+# ----- exact interference of balls with balls and cone-beams -------------------------------------
+def ball_hits_ball(p, r, c, rc) -> np.ndarray:
+    """Balls (p, r) and (c, rc) intersect (touching counts); vectorized over rows."""
+    d = p - c
+    return np.einsum("ij,ij->i", d, d) <= (r + rc) ** 2
+
+
+def ball_hits_beam(p, r, c1, r1, c2, r2) -> np.ndarray:
+    """Ball (p, r) intersects the cone-beam hull(B(c1, r1), B(c2, r2)) (touching counts).
+
+    The hull is the union of the balls B(c1 + s (c2 - c1), r1 + s (r2 - r1)), s in [0, 1]
+    (a convex combination of balls is the interpolated ball), so the test is
+    min_s |p - c(s)| - r(s) <= r, a convex problem in s solved in closed form: in the plane of
+    the axis, the nearest interpolated ball lies where the axial offset over the distance equals
+    -(r2 - r1) / L (the tangent cone's half-angle)."""
+    axis = c2 - c1
+    length = np.sqrt(np.einsum("ij,ij->i", axis, axis))
+    dr = r2 - r1
+    rel = p - c1
+    # special case: one ball contains the other (|dr| >= L): the hull is the bigger ball
+    nested = length <= np.abs(dr)
+    safe_len = np.where(nested, 1.0, length)
+    t = np.einsum("ij,ij->i", rel, axis) / safe_len
+    q = np.sqrt(np.maximum(np.einsum("ij,ij->i", rel, rel) - t * t, 0.0))
+    sin_a = np.where(nested, 0.0, -dr / safe_len)
+    tan_a = sin_a / np.sqrt(1.0 - sin_a * sin_a)
+    s = np.clip((t - q * tan_a) / safe_len, 0.0, 1.0)
+    s = np.where(nested, np.where(dr > 0, 1.0, 0.0), s)
+    near = c1 + s[:, None] * axis
+    d = p - near
+    return np.einsum("ij,ij->i", d, d) <= (r + r1 + s * dr) ** 2
+
+
+# ----- spatial index over the elements of a (filtered) coarse lattice ---------------------------
+class ElementSet:
+    """Balls and cone-beams, indexed in a uniform grid for ``any_hit`` batch queries.
+
+    Each element is entered in the grid cells it may reach within ``reach`` (the largest query
+    radius to come); a query ball is tested exactly against the elements of its centre's cell."""
+
+    def __init__(self, center: np.ndarray, radius: np.ndarray, beam_nodes: np.ndarray, reach: float) -> None:
+        self.center = np.asarray(center, dtype=float).reshape(-1, 3)
+        self.radius = np.asarray(radius, dtype=float).reshape(-1)
+        self.beam_nodes = np.asarray(beam_nodes, dtype=np.int64).reshape(-1, 2)
+        self.reach = float(reach)
+        self._build()
+
+    @staticmethod
+    def from_evaluation(ev: Evaluation, reach: float) -> ElementSet:
+        return ElementSet(ev.center, ev.radius, ev.beam_nodes, reach)
+
+    def _element_bounds(self):
+        """Per element: lo (E, 3), hi (E, 3); balls first, then beams."""
+        c, r = self.center, self.radius
+        lo_b, hi_b = c - r[:, None], c + r[:, None]
+        a, b = self.beam_nodes[:, 0], self.beam_nodes[:, 1]
+        lo_e = np.minimum(lo_b[a], lo_b[b])
+        hi_e = np.maximum(hi_b[a], hi_b[b])
+        return np.concatenate([lo_b, lo_e]), np.concatenate([hi_b, hi_e])
+
+    def _build(self) -> None:
+        n_el = len(self.center) + len(self.beam_nodes)
+        self.empty = n_el == 0
+        if self.empty:
+            return
+        lo, hi = self._element_bounds()
+        lo, hi = lo - self.reach, hi + self.reach
+        self.origin = lo.min(axis=0)
+        top = hi.max(axis=0)
+        # cell size: about the typical element thickness, but never more than ~4M cells overall
+        thick = 2.0 * (np.median(self.radius) + self.reach)
+        h = max(thick, float(np.prod(top - self.origin) / 4e6) ** (1 / 3), 1e-12)
+        self.h = h
+        self.dims = np.maximum(np.ceil((top - self.origin) / h).astype(np.int64), 1)
+        c0 = np.floor((lo - self.origin) / h).astype(np.int64)
+        c1 = np.minimum(np.floor((hi - self.origin) / h).astype(np.int64), self.dims - 1)
+        span = c1 - c0 + 1
+        per = span.prod(axis=1)
+        elem = np.repeat(np.arange(n_el), per)
+        start = np.repeat(np.cumsum(per) - per, per)
+        local = np.arange(len(elem)) - start
+        sy, sz = span[elem, 1], span[elem, 2]
+        cell = c0[elem] + np.stack([local // (sy * sz), (local // sz) % sy, local % sz], axis=1)
+        # drop cells the element cannot reach: conservative test of the cell's bounding ball
+        centre = self.origin + (cell + 0.5) * h
+        keep = self._hits(elem, centre, np.full(len(elem), 0.5 * math.sqrt(3) * h + self.reach))
+        elem, cell = elem[keep], cell[keep]
+        key = (cell[:, 0] * self.dims[1] + cell[:, 1]) * self.dims[2] + cell[:, 2]
+        order = np.argsort(key, kind="stable")
+        self.cell_elem = elem[order]
+        self.keys, self.first = np.unique(key[order], return_index=True)
+        self.counts = np.diff(np.append(self.first, len(order)))
+
+    def _hits(self, elem: np.ndarray, p: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """Exact test of query balls (p, r) against elements ``elem`` (pairwise rows)."""
+        nb = len(self.center)
+        out = np.empty(len(elem), dtype=bool)
+        is_ball = elem < nb
+        rows = np.flatnonzero(is_ball)
+        e = elem[rows]
+        out[rows] = ball_hits_ball(p[rows], r[rows], self.center[e], self.radius[e])
+        rows = np.flatnonzero(~is_ball)
+        bn = self.beam_nodes[elem[rows] - nb]
+        a, b = bn[:, 0], bn[:, 1]
+        out[rows] = ball_hits_beam(p[rows], r[rows], self.center[a], self.radius[a], self.center[b], self.radius[b])
+        return out
+
+    def any_hit(self, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
+        """bool (q,): which query balls interfere with at least one element."""
+        centers = np.asarray(centers, dtype=float).reshape(-1, 3)
+        radii = np.asarray(radii, dtype=float).reshape(-1)
+        out = np.zeros(len(centers), dtype=bool)
+        if self.empty or len(centers) == 0:
+            return out
+        if radii.max() > self.reach * (1 + 1e-9):
+            raise PleError(f"query radius {radii.max():.6g} exceeds the element index reach {self.reach:.6g}")
+        for s in range(0, len(centers), QUERY_CHUNK):
+            out[s:s + QUERY_CHUNK] = self._any_hit_chunk(centers[s:s + QUERY_CHUNK], radii[s:s + QUERY_CHUNK])
+        return out
+
+    def _any_hit_chunk(self, p: np.ndarray, r: np.ndarray) -> np.ndarray:
+        cell = np.floor((p - self.origin) / self.h).astype(np.int64)
+        inside = np.all((cell >= 0) & (cell < self.dims), axis=1)
+        q = np.flatnonzero(inside)
+        c = cell[q]
+        key = (c[:, 0] * self.dims[1] + c[:, 1]) * self.dims[2] + c[:, 2]
+        pos = np.minimum(np.searchsorted(self.keys, key), len(self.keys) - 1)
+        found = self.keys[pos] == key
+        q, pos = q[found], pos[found]
+        cnt = self.counts[pos]
+        query = np.repeat(q, cnt)
+        start = np.repeat(self.first[pos] - (np.cumsum(cnt) - cnt), cnt)
+        elem = self.cell_elem[start + np.arange(len(query))]
+        hit = self._hits(elem, p[query], r[query])
+        return np.bincount(query[hit], minlength=len(p)) > 0
+
+
+# ----- Lattice-in-Lattice (thesis §9) ---------------------------------------------------------------
+def evaluate_all(coarse) -> Evaluation:
+    """All surviving elements of a (filtered) coarse lattice, with a size guard."""
+    lat = coarse.lattice if isinstance(coarse, FilteredLattice) else coarse
+    if lat.node_count() > MAX_COARSE_NODES:
+        raise PleError(f"coarse lattice has {lat.node_count():,} nodes (limit {MAX_COARSE_NODES:,}); "
+                       "a LiL coarse lattice is evaluated in full")
+    return coarse.evaluate()
+
+
+class LiL(Filter):
+    """Lattice-in-Lattice: a fine node survives when its ball interferes with a ball or a
+    cone-beam of ``coarse`` (a Lattice, or a FilteredLattice for cascades, thesis Fig. 9.3).
+
+    ``method``: ``elements`` evaluates the coarse lattice's (surviving) elements and queries a
+    grid over them; ``biq`` calls ``ple.biq.any_hit`` (RangeFinder BIQs against an unfiltered
+    coarse lattice); ``auto`` picks ``elements``, which measured faster (docs/filters.md)."""
+
+    def __init__(self, coarse, method: str = "auto") -> None:
+        if not isinstance(coarse, (Lattice, FilteredLattice)):
+            raise PleError(f"LiL coarse must be a Lattice or a FilteredLattice, got {type(coarse).__name__}")
+        if method not in ("auto", "elements", "biq"):
+            raise PleError(f"LiL method {method!r}: expected auto, elements or biq")
+        if method == "biq" and isinstance(coarse, FilteredLattice):
+            raise PleError("LiL method 'biq' needs an unfiltered coarse lattice (BIQ runs on the program)")
+        coarse_lat = coarse.lattice if isinstance(coarse, FilteredLattice) else coarse
+        coarse_lat.validate()
+        self.coarse = coarse
+        self.method = "elements" if method == "auto" else method
+        self._index: ElementSet | None = None
+
+    def element_index(self, reach: float) -> ElementSet:
+        """The grid over the coarse elements, built once for query radii up to ``reach``."""
+        if self._index is None or self._index.reach < reach:
+            self._index = ElementSet.from_evaluation(evaluate_all(self.coarse), reach)
+        return self._index
+
+    def node_mask(self, lat, node_index, center, radius):
+        if len(center) == 0:
+            return np.zeros(0, dtype=bool)
+        if self.method == "biq":
+            from . import biq
+
+            return np.asarray(biq.any_hit(self.coarse, center, radius), dtype=bool)
+        reach = max(float(np.max(radius)), max_radius(lat))
+        return self.element_index(reach).any_hit(center, radius)
+
+
+def max_radius(lat: Lattice) -> float:
+    """Largest ball radius of the lattice (closed form: the extreme group factors are at the
+    corners of the index box, since the factor is s_U**i s_V**j s_W**k)."""
+    nu, nv, nw = lat.counts
+    f = max(lat.U.factor ** i * lat.V.factor ** j * lat.W.factor ** k
+            for i in (0, nu - 1) for j in (0, nv - 1) for k in (0, nw - 1))
+    return float(lat.placement.factor * f * lat.template_radii.max())
+
+
+def lil(fine: Lattice, *coarse: Lattice, extra: Filter | None = None, method: str = "auto") -> FilteredLattice:
+    """Cascaded LiL: ``lil(F, M, C)`` is F filtered by (M filtered by C), finest to coarsest.
+    ``extra`` (e.g. a Stencil) is and-ed into the finest level."""
+    if not coarse:
+        raise PleError("LiL needs at least one coarse lattice")
+    current: Lattice | FilteredLattice = coarse[-1]
+    for medium in reversed(coarse[:-1]):
+        current = FilteredLattice(medium, LiL(current, method="elements"))
+    top: Filter = LiL(current, method=method if len(coarse) == 1 else "elements")
+    if extra is not None:
+        top = _as_filter(extra) & top
+    return FilteredLattice(fine, top)

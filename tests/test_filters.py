@@ -1,0 +1,245 @@
+"""Filters (thesis §9): stencils, LiL and cascades against brute force over every node and element."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from ple.errors import PleError
+from ple.filters import FilteredLattice, LiL, Stencil, ball_hits_beam, lil
+from ple.lattice import Lattice
+from ple.similarity import Rotation, Scaling, Screw, Swirl, Translation
+
+KINDS = ("translation", "rotation", "scaling", "screw", "swirl")
+
+
+def random_similarity(rng, kind: str, step: float):
+    axis = rng.normal(size=3)
+    point = rng.normal(size=3) * 3 * step
+    angle = rng.uniform(0.1, 0.35) * rng.choice([-1, 1])
+    factor = rng.uniform(0.88, 1.12)
+    if kind == "translation":
+        return Translation(rng.normal(size=3) * 0.3 * step + step * np.eye(3)[rng.integers(3)])
+    if kind == "rotation":
+        return Rotation(angle, axis, point)
+    if kind == "scaling":
+        return Scaling(factor, point)
+    if kind == "screw":
+        return Screw(angle, axis, point, step * rng.uniform(0.5, 1.0))
+    return Swirl(angle, axis, point, factor)
+
+
+def random_lattice(rng, kinds, counts, step: float, radius: float, nodes: int = 2) -> Lattice:
+    lat = Lattice()
+    for _ in range(nodes):
+        lat.add_node(rng.normal(size=3) * step * 0.4, radius * rng.uniform(0.6, 1.4))
+    offsets = [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, -1, 0), (0, 1, -1), (0, 0, 0)]
+    for off in offsets[: 3 + rng.integers(0, 4)]:
+        n1, n2 = rng.integers(0, nodes, 2)
+        if off == (0, 0, 0) and n1 == n2:
+            continue
+        lat.add_beam(int(n1), int(n2), *off)
+    lat.set_u(counts[0], random_similarity(rng, kinds[0], step))
+    lat.set_v(counts[1], random_similarity(rng, kinds[1], step))
+    lat.set_w(counts[2], random_similarity(rng, kinds[2], step))
+    return lat
+
+
+# ----- brute force: every query ball against every element, nearest point by ternary search --------
+def brute_beam_gap(p, r, c1, r1, c2, r2, iters: int = 200):
+    """min over s in [0, 1] of |p - c(s)| - r(s) - r, by ternary search on the convex function."""
+    lo, hi = np.zeros(len(p)), np.ones(len(p))
+
+    def f(s):
+        return np.linalg.norm(p - (c1 + s[:, None] * (c2 - c1)), axis=1) - (r1 + s * (r2 - r1)) - r
+
+    for _ in range(iters):
+        a, b = lo + (hi - lo) / 3, hi - (hi - lo) / 3
+        left = f(a) < f(b)
+        hi = np.where(left, b, hi)
+        lo = np.where(left, lo, a)
+    return np.minimum(f((lo + hi) / 2), np.minimum(f(np.zeros(len(p))), f(np.ones(len(p)))))
+
+
+def brute_hits(center, radius, el_center, el_radius, el_beams):
+    """bool (N,): does query ball n touch any ball or beam of the element arrays."""
+    hit = np.zeros(len(center), dtype=bool)
+    for c, r in zip(el_center, el_radius):
+        hit |= np.linalg.norm(center - c, axis=1) <= radius + r
+    for a, b in el_beams:
+        n = len(center)
+        gap = brute_beam_gap(center, radius, np.tile(el_center[a], (n, 1)), np.full(n, el_radius[a]),
+                             np.tile(el_center[b], (n, 1)), np.full(n, el_radius[b]))
+        hit |= gap <= 0
+    return hit
+
+
+def brute_select(lat: Lattice, keep):
+    """Sets of surviving node indices and beam indices, from the full evaluation and a node mask."""
+    ev = lat.evaluate()
+    nodes = {tuple(x) for x in ev.node_index[keep]}
+    alive = keep[ev.beam_nodes[:, 0]] & keep[ev.beam_nodes[:, 1]]
+    beams = {tuple(x) for x in ev.beam_index[alive]}
+    return nodes, beams
+
+
+def as_sets(ev):
+    nodes = {tuple(x) for x in ev.node_index}
+    beams = {tuple(x) for x in ev.beam_index}
+    # beam_nodes must point at the right surviving rows
+    assert len(beams) == len(ev.beam_index) and len(nodes) == len(ev.node_index)
+    return nodes, beams
+
+
+def check_beam_rows(lat: Lattice, ev):
+    for (i, j, k, p), (a, b) in zip(ev.beam_index, ev.beam_nodes):
+        bp = lat.beams[p]
+        assert tuple(ev.node_index[a]) == (i, j, k, bp.n1)
+        assert tuple(ev.node_index[b]) == (i + bp.di, j + bp.dj, k + bp.dk, bp.n2)
+
+
+def brute_lil_mask(fine: Lattice, coarse_ev):
+    ev = fine.evaluate()
+    return brute_hits(ev.center, ev.radius, coarse_ev.center, coarse_ev.radius, coarse_ev.beam_nodes)
+
+
+def brute_filtered(lat: Lattice, keep):
+    """An Evaluation-like of lat's surviving elements (from a brute mask) for cascades."""
+    from ple.filters import select
+
+    return select(lat.evaluate(), keep)
+
+
+def pair(seed: int, kind: str):
+    rng = np.random.default_rng(seed)
+    other = list(rng.choice(KINDS, 2))
+    fine = random_lattice(rng, [kind] + other, (5, 4, 4), step=1.0, radius=0.12)
+    other = list(rng.choice(KINDS, 2))
+    coarse = random_lattice(rng, other + [kind], (3, 3, 2), step=1.8, radius=0.3, nodes=1)
+    centre_on(coarse, fine)
+    return rng, fine, coarse
+
+
+def centre_on(lat: Lattice, target: Lattice) -> None:
+    """Place ``lat`` so that its mean node centre meets ``target``'s (both lattices then overlap)."""
+    shift = target.evaluate().center.mean(axis=0) - lat.evaluate().center.mean(axis=0)
+    lat.set_placement(Translation(shift))
+
+
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("seed", [1, 3, 4])
+def test_lil_matches_brute_force(kind, seed):
+    _, fine, coarse = pair(seed, kind)
+    ev = lil(fine, coarse).evaluate()
+    keep = brute_lil_mask(fine, coarse.evaluate())
+    assert as_sets(ev) == brute_select(fine, keep)
+    check_beam_rows(fine, ev)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_cascade_matches_brute_force(kind):
+    rng, fine, medium = pair(10 + KINDS.index(kind), kind)
+    coarse = random_lattice(rng, [kind, "translation", "rotation"], (2, 2, 2), step=2.5, radius=0.5, nodes=1)
+    centre_on(coarse, medium)
+    ev = lil(fine, medium, coarse).evaluate()
+    medium_keep = brute_lil_mask(medium, coarse.evaluate())
+    medium_ev = brute_filtered(medium, medium_keep)
+    keep = brute_lil_mask(fine, medium_ev)
+    assert as_sets(ev) == brute_select(fine, keep)
+    check_beam_rows(fine, ev)
+
+
+def brute_stencil(lat: Lattice, s):
+    ev = lat.evaluate()
+    return np.array([s[i % s.shape[0], j % s.shape[1], k % s.shape[2]] if s.ndim == 3
+                     else s[i % s.shape[0], j % s.shape[1], k % s.shape[2], n]
+                     for i, j, k, n in ev.node_index], dtype=bool)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_stencil_and_compounds_match_brute_force(kind):
+    rng, fine, coarse = pair(20 + KINDS.index(kind), kind)
+    s3 = rng.random((2, 3, 2)) < 0.6
+    s4 = rng.random((3, 2, 2, 2)) < 0.6
+    st3, st4 = Stencil(s3), Stencil(s4)
+    b3, b4 = brute_stencil(fine, s3), brute_stencil(fine, s4)
+    blil = brute_lil_mask(fine, coarse.evaluate())
+    lf = LiL(coarse)
+    cases = [(st3, b3), (st4, b4), (st3 & lf, b3 & blil), (st4 | lf, b4 | blil), (~st3 & lf, ~b3 & blil),
+             (~(st3 | st4), ~(b3 | b4))]
+    for flt, truth in cases:
+        ev = FilteredLattice(fine, flt).evaluate()
+        assert as_sets(ev) == brute_select(fine, truth)
+        check_beam_rows(fine, ev)
+    # stencil inside a cascade: the medium level is stencil-filtered
+    medium_f = FilteredLattice(coarse, Stencil(np.array([[[True, False]]])))
+    ev = FilteredLattice(fine, LiL(medium_f)).evaluate()
+    ckeep = brute_stencil(coarse, np.array([[[True, False]]]))
+    keep = brute_lil_mask(fine, brute_filtered(coarse, ckeep))
+    assert as_sets(ev) == brute_select(fine, keep)
+
+
+def test_region_is_lazy_and_consistent():
+    _, fine, coarse = pair(7, "swirl")
+    flt = Stencil.named("faces", 2) & LiL(coarse)
+    full = FilteredLattice(fine, flt).evaluate()
+    part = FilteredLattice(fine, flt).evaluate("1:4,0:3,1:4")
+    inside = lambda x: 1 <= x[0] < 4 and 0 <= x[1] < 3 and 1 <= x[2] < 4  # noqa: E731
+    assert {tuple(x) for x in part.node_index} == {tuple(x) for x in full.node_index if inside(x)}
+    for a, b in part.beam_nodes:
+        assert inside(part.node_index[a]) and inside(part.node_index[b])
+    check_beam_rows(fine, part)
+    full_beams = {tuple(x) for x in full.beam_index}
+    assert {tuple(x) for x in part.beam_index} <= full_beams
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.floats(-3, 3), min_size=10, max_size=10), st.floats(0.01, 1.5), st.floats(0.01, 1.5),
+       st.floats(0.01, 1.5))
+def test_ball_hits_beam_matches_ternary_search(xs, r, r1, r2):
+    p, c1, c2 = np.array([xs[0:3]]), np.array([xs[3:6]]), np.array([xs[6:9]])
+    gap = brute_beam_gap(p, np.array([r]), c1, np.array([r1]), c2, np.array([r2]))[0]
+    if abs(gap) < 1e-9:
+        return  # touching within rounding: either answer is right
+    got = ball_hits_beam(p, np.array([r]), c1, np.array([r1]), c2, np.array([r2]))[0]
+    assert got == (gap <= 0)
+
+
+def test_ball_hits_beam_nested_balls():
+    # special case: the small ball lies inside the big one, the hull is the big ball
+    c1, c2 = np.array([[0.0, 0, 0]]), np.array([[0.5, 0, 0]])
+    for x, expected in ((-2.9, True), (-3.1, False), (2.95, True), (3.2, False)):
+        got = ball_hits_beam(np.array([[x, 0, 0]]), np.array([1.0]), c1, np.array([2.0]), c2, np.array([0.2]))
+        assert got[0] == expected
+
+
+def test_named_stencils():
+    e = Stencil.named("edges", 3).array
+    assert e.shape == (3, 3, 3) and e.sum() == 7  # the three axes through the corner group
+    assert Stencil.named("faces", 3).array.sum() == 27 - 8
+    assert Stencil.named("corners", (2, 3, 4)).array.sum() == 1
+    c = Stencil.named("checker", 4).array
+    assert c.sum() == 32 and c[0, 0, 0] and not c[2, 0, 0]
+    assert Stencil.parse("layers:2x2x5:2").array.sum() == 2 * 2 * 2
+
+
+@pytest.mark.parametrize("bad", ["nope:4", "edges:0", "edges:a", "edges:2x2", "edges:2:0", "x.npy"])
+def test_bad_stencils(bad):
+    with pytest.raises(PleError):
+        Stencil.parse(bad)
+
+
+def test_bad_filter_inputs():
+    with pytest.raises(PleError):
+        Stencil(np.ones((2, 2)))
+    with pytest.raises(PleError):
+        Stencil(np.full((2, 2, 2), 3))
+    with pytest.raises(PleError):
+        LiL("coarse")
+    with pytest.raises(PleError):
+        lil(Lattice())
+    lat = Lattice()
+    lat.add_node([0, 0, 0], 0.1)
+    with pytest.raises(PleError, match="node columns"):
+        FilteredLattice(lat, Stencil(np.ones((1, 1, 1, 3), bool))).evaluate()
