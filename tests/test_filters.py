@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
 from ple.errors import PleError
-from ple.filters import FilteredLattice, LiL, Stencil, ball_hits_beam, lil
+from ple.filters import FilteredLattice, LiL, Stencil, lil
 from ple.lattice import Lattice
 from ple.similarity import Rotation, Scaling, Screw, Swirl, Translation
 
@@ -192,26 +190,6 @@ def test_region_is_lazy_and_consistent():
     check_beam_rows(fine, part)
     full_beams = {tuple(x) for x in full.beam_index}
     assert {tuple(x) for x in part.beam_index} <= full_beams
-
-
-@settings(max_examples=300, deadline=None)
-@given(st.lists(st.floats(-3, 3), min_size=10, max_size=10), st.floats(0.01, 1.5), st.floats(0.01, 1.5),
-       st.floats(0.01, 1.5))
-def test_ball_hits_beam_matches_ternary_search(xs, r, r1, r2):
-    p, c1, c2 = np.array([xs[0:3]]), np.array([xs[3:6]]), np.array([xs[6:9]])
-    gap = brute_beam_gap(p, np.array([r]), c1, np.array([r1]), c2, np.array([r2]))[0]
-    if abs(gap) < 1e-9:
-        return  # touching within rounding: either answer is right
-    got = ball_hits_beam(p, np.array([r]), c1, np.array([r1]), c2, np.array([r2]))[0]
-    assert got == (gap <= 0)
-
-
-def test_ball_hits_beam_nested_balls():
-    # special case: the small ball lies inside the big one, the hull is the big ball
-    c1, c2 = np.array([[0.0, 0, 0]]), np.array([[0.5, 0, 0]])
-    for x, expected in ((-2.9, True), (-3.1, False), (2.95, True), (3.2, False)):
-        got = ball_hits_beam(np.array([[x, 0, 0]]), np.array([1.0]), c1, np.array([2.0]), c2, np.array([0.2]))
-        assert got[0] == expected
 
 
 def test_named_stencils():

@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from .elements import ball_ball_interfere, ball_beam_interfere
 from .errors import PleError
 from .lattice import Evaluation, Lattice, Region
 
@@ -249,42 +250,10 @@ class Stencil(Filter):
         return Stencil.named(parts[0], period[0] if len(period) == 1 else period, width)
 
 
-# ----- exact interference of balls with balls and cone-beams -------------------------------------
-def ball_hits_ball(p, r, c, rc) -> np.ndarray:
-    """Balls (p, r) and (c, rc) intersect (touching counts); vectorized over rows."""
-    d = p - c
-    return np.einsum("ij,ij->i", d, d) <= (r + rc) ** 2
-
-
-def ball_hits_beam(p, r, c1, r1, c2, r2) -> np.ndarray:
-    """Ball (p, r) intersects the cone-beam hull(B(c1, r1), B(c2, r2)) (touching counts).
-
-    The hull is the union of the balls B(c1 + s (c2 - c1), r1 + s (r2 - r1)), s in [0, 1]
-    (a convex combination of balls is the interpolated ball), so the test is
-    min_s |p - c(s)| - r(s) <= r, a convex problem in s solved in closed form: in the plane of
-    the axis, the nearest interpolated ball lies where the axial offset over the distance equals
-    -(r2 - r1) / L (the tangent cone's half-angle)."""
-    axis = c2 - c1
-    length = np.sqrt(np.einsum("ij,ij->i", axis, axis))
-    dr = r2 - r1
-    rel = p - c1
-    # special case: one ball contains the other (|dr| >= L): the hull is the bigger ball
-    nested = length <= np.abs(dr)
-    safe_len = np.where(nested, 1.0, length)
-    t = np.einsum("ij,ij->i", rel, axis) / safe_len
-    q = np.sqrt(np.maximum(np.einsum("ij,ij->i", rel, rel) - t * t, 0.0))
-    sin_a = np.where(nested, 0.0, -dr / safe_len)
-    tan_a = sin_a / np.sqrt(1.0 - sin_a * sin_a)
-    s = np.clip((t - q * tan_a) / safe_len, 0.0, 1.0)
-    s = np.where(nested, np.where(dr > 0, 1.0, 0.0), s)
-    near = c1 + s[:, None] * axis
-    d = p - near
-    return np.einsum("ij,ij->i", d, d) <= (r + r1 + s * dr) ** 2
-
-
 # ----- spatial index over the elements of a (filtered) coarse lattice ---------------------------
 class ElementSet:
-    """Balls and cone-beams, indexed in a uniform grid for ``any_hit`` batch queries.
+    """Balls and cone-beams, indexed in a uniform grid for ``any_hit`` batch queries; the exact
+    ball–ball and ball–cone-beam tests are those of ``ple.elements`` (touching counts).
 
     Each element is entered in the grid cells it may reach within ``reach`` (the largest query
     radius to come); a query ball is tested exactly against the elements of its centre's cell."""
@@ -349,11 +318,12 @@ class ElementSet:
         is_ball = elem < nb
         rows = np.flatnonzero(is_ball)
         e = elem[rows]
-        out[rows] = ball_hits_ball(p[rows], r[rows], self.center[e], self.radius[e])
+        out[rows] = ball_ball_interfere(p[rows], r[rows], self.center[e], self.radius[e])
         rows = np.flatnonzero(~is_ball)
         bn = self.beam_nodes[elem[rows] - nb]
         a, b = bn[:, 0], bn[:, 1]
-        out[rows] = ball_hits_beam(p[rows], r[rows], self.center[a], self.radius[a], self.center[b], self.radius[b])
+        out[rows] = ball_beam_interfere(p[rows], r[rows], self.center[a], self.radius[a], self.center[b],
+                                        self.radius[b])
         return out
 
     def any_hit(self, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
