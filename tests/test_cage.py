@@ -111,3 +111,21 @@ def test_degenerate_frames_name_the_frame():
     with pytest.raises(PleError, match="frame W"):
         direction_from_frame(lat, "w", np.zeros((4, 4)))
     assert placement_from_frame(lat.placement.matrix).allclose(lat.placement)
+
+
+def test_float32_frames_snap_to_the_current_linear_part():
+    lat = load_lattice("fig6_3")
+    frame = direction_frame(lat, "u").astype(np.float32).astype(float)
+    assert direction_from_frame(lat, "u", frame) == lat.U  # untouched frame: exactly the current U
+    frame[:3, 3] += [0.25, 0, 0]  # dragged: same factor, new fixed point
+    got = direction_from_frame(lat, "u", frame)
+    assert got.kind == "scaling" and got.factor == lat.U.factor
+    assert np.allclose(got.apply_points(cage_point(lat)), frame[:3, 3], atol=1e-6)
+    cubic = load_lattice("cubic", {"n": 3})
+    moved = direction_frame(cubic, "v").astype(np.float32).astype(float)
+    moved[:3, 3] += [0.1, 0.2, 0.3]
+    got = direction_from_frame(cubic, "v", moved)
+    assert got.kind == "translation"
+    assert np.allclose(got.apply_vectors([0, 0, 0]) + got.apply_points([0, 0, 0]), [0.1, 1.2, 0.3], atol=1e-6)
+    turned = Rotation(0.3, Vec(0, 0, 1), Pt(0, 0, 0)).matrix @ direction_frame(cubic, "v")
+    assert direction_from_frame(cubic, "v", turned).kind != "translation"  # real rotations are kept

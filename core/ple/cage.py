@@ -18,7 +18,7 @@ import numpy as np
 
 from .errors import PleError
 from .lattice import Lattice
-from .similarity import Similarity
+from .similarity import Similarity, Translation
 
 AXES = ("u", "v", "w")
 
@@ -116,16 +116,40 @@ def direction_from_frame(lat: Lattice, axis: str, frame, cumulative: bool = Fals
 
     It is the incremental similarity, or the cumulative one if ``cumulative`` (and the
     count exceeds 1). Degenerate frames (sheared, unequal or zero axes, mirrored) raise
-    PleError naming the frame."""
+    PleError naming the frame. A linear part equal to the current one up to float32 noise
+    (a frame only dragged) keeps the current one exactly (``snap_linear``)."""
     try:
-        return Similarity.between_frames(base_frame(lat), np.asarray(frame, dtype=float))
+        new = Similarity.between_frames(base_frame(lat), np.asarray(frame, dtype=float))
     except PleError as exc:
         raise PleError(f"frame {axis.upper()}: {exc}") from None
+    return snap_linear(new, direction_similarity(lat, axis, cumulative), cage_point(lat))
 
 
-def placement_from_frame(frame) -> Similarity:
+def placement_from_frame(frame, previous: Similarity | None = None) -> Similarity:
     """The placement G of a frame given as a 4x4 matrix in the rig's coordinates."""
     try:
-        return Similarity.between_frames(np.eye(4), np.asarray(frame, dtype=float))
+        new = Similarity.between_frames(np.eye(4), np.asarray(frame, dtype=float))
     except PleError as exc:
         raise PleError(f"frame G: {exc}") from None
+    return new if previous is None else snap_linear(new, previous, np.zeros(3))
+
+
+FLOAT32_NOISE = 1e-6  # Blender stores object matrices in float32: relative noise ~1e-7
+
+
+def snap_linear(new: Similarity, previous: Similarity, point) -> Similarity:
+    """``new`` with the linear part (factor, rotation) of ``previous`` if the two differ by
+    float32 noise only, keeping where ``new`` takes ``point``; ``previous`` itself if the
+    translation agrees too. A dragged translation frame thus stays an exact translation."""
+    a, b = new.matrix, previous.matrix
+    scale = max(1.0, float(np.abs(b[:3, :3]).max()))
+    if np.abs(a[:3, :3] - b[:3, :3]).max() > FLOAT32_NOISE * scale:
+        return new
+    target = new.apply_points(point)
+    if np.abs(target - previous.apply_points(point)).max() <= FLOAT32_NOISE * max(1.0, float(np.abs(target).max())):
+        return previous
+    if previous.factor == 1.0 and previous.angle == 0.0:  # pure translation: no axis to re-derive
+        return Translation(target - np.asarray(point, dtype=float))
+    m = b.copy()
+    m[:3, 3] = target - b[:3, :3] @ np.asarray(point, dtype=float)
+    return Similarity.from_matrix(m, "frame")

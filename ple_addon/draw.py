@@ -1,0 +1,111 @@
+"""Writing core arrays into Blender data: the region mesh, the cage curve, frame matrices.
+
+Bulk data goes through ``foreach_set`` on float32/int32 arrays; datablocks are reused (resized
+only when the element counts change), so thousands of edits create no new datablocks.
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+from mathutils import Matrix
+
+RADIUS_ATTR = "ple_radius"
+NODE_GROUP = "PLE balls and beams"
+
+
+def set_matrix(obj, m) -> tuple:
+    """Set an object's local matrix if it differs; returns the stored (float32) values."""
+    new = Matrix(np.asarray(m, dtype=float).tolist())
+    cur = obj.matrix_basis
+    if max(abs(a - b) for ra, rb in zip(cur, new) for a, b in zip(ra, rb)) > 1e-7:
+        obj.matrix_basis = new
+    return tuple(float(x) for row in obj.matrix_basis for x in row)
+
+
+def new_region_mesh(name: str):
+    return bpy.data.meshes.new(name)
+
+
+def region_mesh(me, ev) -> None:
+    """Vertices at ball centres, one edge per beam, ball radii as the point attribute
+    ``ple_radius`` (the geometry-nodes modifier draws balls and cone-beams from them)."""
+    n = 0 if ev is None else len(ev.center)
+    m = 0 if ev is None else len(ev.beam_nodes)
+    if len(me.vertices) != n or len(me.edges) != m:
+        me.clear_geometry()
+        me.vertices.add(n)
+        me.edges.add(m)
+    if n:
+        me.attributes["position"].data.foreach_set("vector", ev.center.astype(np.float32).ravel())
+        attr = me.attributes.get(RADIUS_ATTR) or me.attributes.new(RADIUS_ATTR, "FLOAT", "POINT")
+        attr.data.foreach_set("value", ev.radius.astype(np.float32))
+    if m:
+        me.attributes[".edge_verts"].data.foreach_set("value", ev.beam_nodes.astype(np.int32).ravel())
+    me.update()
+
+
+def new_cage_curve(name: str):
+    cu = bpy.data.curves.new(name, "CURVE")
+    cu.dimensions = "3D"
+    cu.bevel_depth = 0.0
+    return cu
+
+
+def cage_curve(cu, curves) -> None:
+    """One poly spline per isocurve (arrays (s, 3)); reuses the splines if their sizes match."""
+    sizes = [len(c) for c in curves]
+    if [len(s.points) for s in cu.splines] != sizes:
+        cu.splines.clear()
+        for size in sizes:
+            sp = cu.splines.new("POLY")
+            sp.points.add(size - 1)
+    for sp, c in zip(cu.splines, curves):
+        co = np.ones((len(c), 4), dtype=np.float32)
+        co[:, :3] = c
+        sp.points.foreach_set("co", co.ravel())
+    cu.update_tag()
+
+
+def balls_beams_group():
+    """The shared geometry-nodes group: an icosphere instance per vertex scaled by its radius,
+    a circle swept along every edge scaled by the radii of its ends (a cone-beam preview)."""
+    ng = bpy.data.node_groups.get(NODE_GROUP)
+    if ng is not None:
+        return ng
+    ng = bpy.data.node_groups.new(NODE_GROUP, "GeometryNodeTree")
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, links = ng.nodes, ng.links
+    gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
+    radius = nodes.new("GeometryNodeInputNamedAttribute")
+    radius.data_type = "FLOAT"
+    radius.inputs["Name"].default_value = RADIUS_ATTR
+    points = nodes.new("GeometryNodeMeshToPoints")
+    sphere = nodes.new("GeometryNodeMeshIcoSphere")
+    sphere.inputs["Radius"].default_value = 1.0
+    sphere.inputs["Subdivisions"].default_value = 2
+    balls = nodes.new("GeometryNodeInstanceOnPoints")
+    curve = nodes.new("GeometryNodeMeshToCurve")
+    circle = nodes.new("GeometryNodeCurvePrimitiveCircle")
+    circle.inputs["Resolution"].default_value = 12
+    circle.inputs["Radius"].default_value = 1.0
+    beams = nodes.new("GeometryNodeCurveToMesh")
+    join = nodes.new("GeometryNodeJoinGeometry")
+    links.new(gin.outputs[0], points.inputs["Mesh"])
+    links.new(points.outputs["Points"], balls.inputs["Points"])
+    links.new(sphere.outputs["Mesh"], balls.inputs["Instance"])
+    links.new(radius.outputs["Attribute"], balls.inputs["Scale"])
+    links.new(gin.outputs[0], curve.inputs["Mesh"])
+    links.new(curve.outputs["Curve"], beams.inputs["Curve"])
+    links.new(circle.outputs["Curve"], beams.inputs["Profile Curve"])
+    links.new(radius.outputs["Attribute"], beams.inputs["Scale"])
+    links.new(balls.outputs["Instances"], join.inputs["Geometry"])
+    links.new(beams.outputs["Mesh"], join.inputs["Geometry"])
+    links.new(join.outputs["Geometry"], gout.inputs[0])
+    return ng
+
+
+def add_balls_beams_modifier(obj) -> None:
+    mod = obj.modifiers.new("PLE balls and beams", "NODES")
+    mod.node_group = balls_beams_group()

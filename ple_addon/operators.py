@@ -1,0 +1,484 @@
+"""Operators (idnames are public API, SPEC §7). Each one translates Blender state into core
+calls and core results into Blender data; bad input is reported, never raised."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import bpy
+import numpy as np
+from bpy.props import EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, IntVectorProperty, StringProperty
+
+from . import rig as rigmod
+from .corelink import PleError, core, ir, optional, program, snippets
+
+SNIPPET_TEXT = "PLE snippet"
+
+
+def _preset_items(self, context):
+    return [(n, n, program.preset_description(n)) for n in program.preset_names()]
+
+
+class RigOperator:
+    """Acts on the rig named by ``rig`` or on the rig of the active object."""
+
+    bl_options = {"REGISTER", "UNDO"}
+    rig: StringProperty(name="Rig", description="Lattice object to act on (default: the active one)")
+
+    def get_rig(self, context):
+        obj = bpy.data.objects.get(self.rig) if self.rig else context.active_object
+        found = rigmod.rig_of(obj)
+        if found is None:
+            raise PleError("select a PLE lattice object (or one of its frames)" if not self.rig
+                           else f"{self.rig!r} is not a PLE lattice object")
+        return found
+
+    @classmethod
+    def poll(cls, context):
+        return True
+
+    def run(self, context, rig) -> set:
+        raise NotImplementedError
+
+    def execute(self, context):
+        try:
+            return self.run(context, self.get_rig(context))
+        except PleError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+
+    def refreshed(self, rig) -> set:
+        err = rigmod.refresh(rig, force=True)
+        if err:
+            self.report({"ERROR"}, err)
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+
+class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Add a PLE lattice rig from a preset, a program (.py), an IR file (.json) or a text block"""
+
+    bl_idname = "ple.lattice_add"
+    bl_label = "Add PLE Lattice"
+    bl_options = {"REGISTER", "UNDO"}
+
+    source: EnumProperty(name="From", items=[
+        ("PRESET", "Preset", "a lattice program shipped with PLE"),
+        ("FILE", "File", "a lattice program .py or a data-only IR .json"),
+        ("TEXT", "Text Block", "a text block of this file holding a program or an IR")], default="PRESET")
+    preset: EnumProperty(name="Preset", items=_preset_items)
+    filepath: StringProperty(name="File", subtype="FILE_PATH")
+    text: StringProperty(name="Text Block")
+    name: StringProperty(name="Name", description="Name of the lattice object (default: the source's)")
+    region: IntVectorProperty(name="Region", size=3, min=1, default=(3, 3, 3),
+                              description="Node-groups per direction drawn in full")
+
+    def source_text(self):
+        """(Text datablock, kind, default name); a new Text for presets and files."""
+        if self.source == "TEXT":
+            text = bpy.data.texts.get(self.text)
+            if text is None:
+                raise PleError(f"no text block named {self.text!r}")
+            kind = "IR" if text.as_string().lstrip().startswith("{") else "PROGRAM"
+            return text, kind, Path(text.name).stem
+        if self.source == "PRESET":
+            path = program.preset_path(self.preset)
+            if path is None:
+                raise PleError(f"unknown preset {self.preset!r}")
+        else:
+            path = Path(bpy.path.abspath(self.filepath))
+            if path.suffix not in (".py", ".json") or not path.is_file():
+                raise PleError(f"{self.filepath!r}: expected an existing .py program or .json IR file")
+        try:
+            body = path.read_text()
+        except OSError as exc:
+            raise PleError(f"{path}: cannot read ({exc.strerror})") from None
+        text = bpy.data.texts.new(path.name)
+        text.from_string(body)
+        return text, ("IR" if path.suffix == ".json" else "PROGRAM"), path.stem
+
+    def execute(self, context):
+        try:
+            text, kind, default_name = self.source_text()
+        except PleError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        try:
+            rig = rigmod.create(context, self.name or default_name, text, kind, tuple(self.region))
+        except PleError as exc:
+            self.report({"ERROR"}, f"{exc} (the program is kept in text block {text.name!r})")
+            return {"CANCELLED"}
+        for obj in context.view_layer.objects:
+            obj.select_set(False)
+        context.view_layer.objects.active = rig
+        rig.select_set(True)
+        return {"FINISHED"}
+
+
+class PLE_OT_program_run(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Run the lattice program again (after editing its text or inputs); trusts it for this session"""
+
+    bl_idname = "ple.program_run"
+    bl_label = "Run Program"
+
+    def run(self, context, rig):
+        rigmod.trust(rig)
+        rigmod._state.pop(rig.name_full, None)
+        return self.refreshed(rig)
+
+
+class PLE_OT_snippet_copy(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Copy the code of the GUI edits (set_u/v/w, add_node, add_beam, ...) to the "PLE snippet"
+    text block and the clipboard (thesis §6.2.2, Fig. 6.3)"""
+
+    bl_idname = "ple.snippet_copy"
+    bl_label = "Copy Snippet"
+    bl_options = {"REGISTER"}
+
+    def run(self, context, rig):
+        lat = rigmod.lattice_of(rig)
+        code = snippets.snippet(rigmod.edits_of(rig), digits=rig.ple.snippet_digits, state=lat)
+        text = bpy.data.texts.get(SNIPPET_TEXT) or bpy.data.texts.new(SNIPPET_TEXT)
+        text.from_string(code + "\n" if code else "")
+        context.window_manager.clipboard = code
+        self.report({"INFO"}, f"{len(code.splitlines())} line(s) copied" if code else "no GUI edits to copy")
+        return {"FINISHED"}
+
+
+class PLE_OT_program_apply(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Write the GUI edits into the program text (syntax-tree rewrite keeping comments); re-running
+    the program then reproduces the lattice"""
+
+    bl_idname = "ple.program_apply"
+    bl_label = "Apply to Program"
+
+    def run(self, context, rig):
+        edits = rigmod.edits_of(rig)
+        if not edits:
+            self.report({"INFO"}, "no GUI edits to apply")
+            return {"CANCELLED"}
+        text = rig.ple.text
+        if rig.ple.source_kind == "IR":
+            lat = rigmod.lattice_of(rig)
+            new = json.dumps(ir.lattice_to_dict(lat, resolved=False), indent=1) + "\n"
+        else:
+            if not rigmod.trusted(rig):
+                raise PleError("the program is not trusted: press Run Program first")
+            new = snippets.apply_edits(text.as_string(), edits, rigmod.params_of(rig), name=text.name)
+        text.from_string(new)
+        rig.ple.edits = "[]"
+        self.report({"INFO"}, f"{len(edits)} edit(s) written into {text.name}")
+        return self.refreshed(rig)
+
+
+class PLE_OT_edits_clear(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Discard the GUI edits not yet applied: back to what the program gives"""
+
+    bl_idname = "ple.edits_clear"
+    bl_label = "Discard Edits"
+
+    def run(self, context, rig):
+        rig.ple.edits = "[]"
+        return self.refreshed(rig)
+
+
+class PLE_OT_node_add(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Add a node (ball) to the template node-group N[0,0,0]"""
+
+    bl_idname = "ple.node_add"
+    bl_label = "Add Template Node"
+
+    center: FloatVectorProperty(name="Centre", size=3, description="Centre in the placement frame")
+    radius: FloatProperty(name="Radius", min=1e-6, default=0.05, description="Ball radius")
+
+    def run(self, context, rig):
+        rigmod.add_edits(rig, [snippets.AddNode(tuple(self.center), self.radius)])
+        return self.refreshed(rig)
+
+
+def _selected_nodes(context, rig) -> list[int]:
+    sel = [o for o in context.selected_objects if o.ple.role == "NODE" and o.ple.rig == rig]
+    act = context.active_object
+    sel.sort(key=lambda o: o != act)  # the active node first
+    return [o.ple.node_index for o in sel]
+
+
+class PLE_OT_node_remove(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Remove a template node and every beam-pattern using it"""
+
+    bl_idname = "ple.node_remove"
+    bl_label = "Remove Template Node"
+
+    index: IntProperty(name="Node", default=-1, min=-1, description="Template node index (-1: the active node)")
+
+    def run(self, context, rig):
+        idx = self.index if self.index >= 0 else next(iter(_selected_nodes(context, rig)), -1)
+        if idx < 0:
+            raise PleError("select a template node (sphere empty) or give its index")
+        lat = rigmod.lattice_of(rig)
+        if len(lat.nodes) <= 1:
+            raise PleError("the template node-group needs at least one node")
+        snippets.apply_to_lattice(lat, [snippets.RemoveNode(idx)])  # validates before recording
+        rigmod.add_edits(rig, [snippets.RemoveNode(idx)])
+        return self.refreshed(rig)
+
+
+class PLE_OT_beam_add(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Add a beam-pattern joining node n1 of group (i, j, k) to node n2 of group (i+di, j+dj, k+dk)"""
+
+    bl_idname = "ple.beam_add"
+    bl_label = "Add Beam-Pattern"
+
+    n1: IntProperty(name="From node", default=-1, min=-1, description="-1: the active selected node")
+    n2: IntProperty(name="To node", default=-1, min=-1, description="-1: the other selected node")
+    offset: IntVectorProperty(name="Offset", size=3, default=(1, 0, 0), description="(di, dj, dk)")
+
+    def run(self, context, rig):
+        sel = _selected_nodes(context, rig)
+        n1 = self.n1 if self.n1 >= 0 else (sel[0] if sel else -1)
+        n2 = self.n2 if self.n2 >= 0 else (sel[1] if len(sel) > 1 else n1)
+        if n1 < 0:
+            raise PleError("pick two template nodes (or one, for a beam to its own copy) or give n1, n2")
+        edit = snippets.AddBeam(n1, n2, *self.offset)
+        snippets.apply_to_lattice(rigmod.lattice_of(rig), [edit])  # validates before recording
+        rigmod.add_edits(rig, [edit])
+        return self.refreshed(rig)
+
+
+class PLE_OT_beam_remove(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Remove beam-pattern number ``index``"""
+
+    bl_idname = "ple.beam_remove"
+    bl_label = "Remove Beam-Pattern"
+
+    index: IntProperty(name="Beam-pattern", min=0)
+
+    def run(self, context, rig):
+        edit = snippets.RemoveBeam(self.index)
+        snippets.apply_to_lattice(rigmod.lattice_of(rig), [edit])
+        rigmod.add_edits(rig, [edit])
+        return self.refreshed(rig)
+
+
+class PLE_OT_lil_filter(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Lattice-in-Lattice filter (thesis §9): draw only the nodes of the region whose balls
+    interfere with a coarse PLE lattice"""
+
+    bl_idname = "ple.lil_filter"
+    bl_label = "LiL Filter"
+
+    coarse: StringProperty(name="Coarse", description="Coarse PLE lattice object (default: another selected one)")
+
+    def run(self, context, rig):
+        if self.coarse:
+            coarse = bpy.data.objects.get(self.coarse)
+        else:
+            coarse = next((o for o in context.selected_objects if rigmod.is_rig(o) and o != rig), None)
+        if not rigmod.is_rig(coarse) or coarse == rig:
+            raise PleError("LiL filter: give (or select) another PLE lattice object as the coarse lattice")
+        if optional("filters") is None:
+            raise PleError("filters are not available in this version of the core")
+        rig.ple.coarse = coarse
+        rig.ple.filter_kind = "LIL"
+        return self.refreshed(rig)
+
+
+class PLE_OT_stencil_filter(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Index stencil filter (thesis §9): keep node-group (i, j, k) where the stencil at
+    (i, j, k) modulo its shape is 1"""
+
+    bl_idname = "ple.stencil_filter"
+    bl_label = "Stencil Filter"
+
+    shape: IntVectorProperty(name="Shape", size=3, min=1, max=16, default=(2, 2, 2))
+    bits: StringProperty(name="Stencil", default="10010110", description="0/1 per cell, (i, j, k) order, k fastest")
+    clear: bpy.props.BoolProperty(name="Clear", default=False, description="Remove the rig's filter")
+
+    def run(self, context, rig):
+        if self.clear:
+            rig.ple.filter_kind = "NONE"
+            return self.refreshed(rig)
+        if optional("filters") is None:
+            raise PleError("filters are not available in this version of the core")
+        n = int(np.prod(tuple(self.shape)))
+        if len(self.bits) != n or set(self.bits) - {"0", "1"}:
+            raise PleError(f"stencil: expected {n} characters 0/1 for shape {tuple(self.shape)}, got {self.bits!r}")
+        rig.ple.stencil_shape = tuple(self.shape)
+        rig.ple.stencil_bits = self.bits
+        rig.ple.filter_kind = "STENCIL"
+        return self.refreshed(rig)
+
+
+# ----- long operations: tessellate and export ---------------------------------------------------
+STYLES = [("CHOCC", "CHoCC", "convex hulls of cospherical circles per hub (CHoCC paper)"),
+          ("CNT", "CNT", "Crude Natural Tessellation"),
+          ("REFINED", "Refined", "CNT refined towards the exact hub surfaces")]
+EXPORT_STYLES = [("BALLS_BEAMS", "Balls and beams", "preview: an icosphere per ball, a frustum per beam"),
+                 *STYLES]
+
+
+def tessellation(lat, region, style: str):
+    """Vertices (V, 3) and triangles (F, 3) of a region from the core (``ple.tessellate``)."""
+    if style == "BALLS_BEAMS":
+        ev = lat.evaluate(region)
+        mesh = core("preview").balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
+    else:
+        tess = optional("tessellate")
+        if tess is None:
+            raise PleError("tessellation is not available in this version of the core (ple.tessellate is missing)")
+        mesh = tess.tessellate(lat, region, style.lower())
+    if hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
+        return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
+    verts, faces = mesh[0], mesh[1]
+    return np.asarray(verts, dtype=float), np.asarray(faces, dtype=np.int64)
+
+
+def mesh_from_arrays(name: str, verts, faces):
+    me = bpy.data.meshes.new(name)
+    me.vertices.add(len(verts))
+    me.loops.add(3 * len(faces))
+    me.polygons.add(len(faces))
+    me.attributes["position"].data.foreach_set("vector", verts.astype(np.float32).ravel())
+    me.attributes[".corner_vert"].data.foreach_set("value", faces.astype(np.int32).ravel())
+    me.polygons.foreach_set("loop_start", np.arange(0, 3 * len(faces), 3, dtype=np.int32))
+    me.update(calc_edges=True)
+    return me
+
+
+class SteppedOperator(RigOperator):
+    """Long work as steps: ``execute`` runs them all with progress; ``invoke`` (with a window)
+    runs one step per timer tick so that Esc cancels between steps."""
+
+    _steps = None
+    _timer = None
+
+    def steps(self, context, rig):
+        raise NotImplementedError
+
+    def execute(self, context):
+        wm = context.window_manager
+        try:
+            rig = self.get_rig(context)
+            gen = self.steps(context, rig)
+            wm.progress_begin(0, 100)
+            try:
+                for frac in gen:
+                    wm.progress_update(int(100 * frac))
+            finally:
+                wm.progress_end()
+        except PleError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if context.window is None or bpy.app.background:
+            return self.execute(context)
+        try:
+            self._steps = self.steps(context, self.get_rig(context))
+        except PleError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        wm = context.window_manager
+        wm.progress_begin(0, 100)
+        self._timer = wm.event_timer_add(0.01, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._steps.close()  # the generator cleans up what it started
+            self.finish(context)
+            self.report({"WARNING"}, "cancelled")
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        try:
+            context.window_manager.progress_update(int(100 * next(self._steps)))
+        except StopIteration:
+            self.finish(context)
+            return {"FINISHED"}
+        except PleError as exc:
+            self.finish(context)
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        return {"RUNNING_MODAL"}
+
+    def finish(self, context):
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+        wm.progress_end()
+
+
+class PLE_OT_tessellate(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Tessellate the drawn region into a new mesh object (CHoCC, CNT or refined, CHoCC paper)"""
+
+    bl_idname = "ple.tessellate"
+    bl_label = "Tessellate Region"
+
+    style: EnumProperty(name="Style", items=STYLES, default="CHOCC")
+
+    def steps(self, context, rig):
+        lat = rigmod.lattice_of(rig)
+        region = rigmod.region_of(rig, lat)
+        if region is None:
+            raise PleError("the region is empty: set Region from/to inside the repetition counts")
+        yield 0.0
+        verts, faces = tessellation(lat, region, self.style)
+        yield 0.8
+        me = mesh_from_arrays(f"{rig.name}.{self.style.lower()}", verts, faces)
+        obj = bpy.data.objects.new(me.name, me)
+        for coll in rig.users_collection:
+            coll.objects.link(obj)
+        obj.matrix_world = rig.matrix_world
+        self.report({"INFO"}, f"{len(faces)} triangles")
+        yield 1.0
+
+
+class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Export the drawn region as a mesh file (STL, 3MF, PLY, OBJ, GLB)"""
+
+    bl_idname = "ple.export"
+    bl_label = "Export Region"
+
+    filepath: StringProperty(name="File", subtype="FILE_PATH")
+    filter_glob: StringProperty(default="*.stl;*.3mf;*.ply;*.obj;*.glb", options={"HIDDEN"})
+    style: EnumProperty(name="Style", items=EXPORT_STYLES, default="BALLS_BEAMS")
+
+    def invoke(self, context, event):
+        if not self.filepath and context.window is not None and not bpy.app.background:
+            self.filepath = "lattice.stl"
+            context.window_manager.fileselect_add(self)
+            return {"RUNNING_MODAL"}
+        return super().invoke(context, event)
+
+    def steps(self, context, rig):
+        path = Path(bpy.path.abspath(self.filepath))
+        if path.suffix.lower() not in (".stl", ".3mf", ".ply", ".obj", ".glb"):
+            raise PleError(f"{self.filepath!r}: choose a .stl, .3mf, .ply, .obj or .glb file")
+        lat = rigmod.lattice_of(rig)
+        region = rigmod.region_of(rig, lat)
+        if region is None:
+            raise PleError("the region is empty: set Region from/to inside the repetition counts")
+        yield 0.0
+        verts, faces = tessellation(lat, region, self.style)
+        yield 0.7
+        write = getattr(optional("export"), "write_mesh", None)
+        if write is not None:
+            write(verts, faces, path)
+        else:
+            try:
+                import trimesh
+            except ImportError:
+                raise PleError("exporting needs trimesh (or the core's ple.export)") from None
+            with core("files").atomic_path(path) as tmp:
+                trimesh.Trimesh(verts, faces, process=False).export(tmp, file_type=path.suffix[1:].lower())
+        self.report({"INFO"}, f"{len(faces)} triangles written to {path}")
+        yield 1.0
+
+
+CLASSES = (PLE_OT_lattice_add, PLE_OT_program_run, PLE_OT_snippet_copy, PLE_OT_program_apply, PLE_OT_edits_clear,
+           PLE_OT_node_add, PLE_OT_node_remove, PLE_OT_beam_add, PLE_OT_beam_remove, PLE_OT_lil_filter,
+           PLE_OT_stencil_filter, PLE_OT_tessellate, PLE_OT_export)

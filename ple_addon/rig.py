@@ -1,0 +1,444 @@
+"""The rig: Blender objects that show and edit one lattice (thesis §6.2.2, Fig. 6.1–6.2).
+
+A rig is a collection holding the lattice object (an empty, ``obj.ple.role == "RIG"``, whose
+program lives in a Text datablock and whose inputs are custom properties ``ple:<name>``),
+the placement frame G (child of the rig), the frames U, V, W and the template nodes
+(children of G), the cage (curves) and the region (vertices at ball centres, edges for
+beams, drawn as balls and cone-beams by a geometry-nodes modifier). Everything geometric is
+computed by the core; this module only moves numbers between Blender and ``ple``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+from mathutils import Matrix
+
+from . import draw
+from .corelink import PleError, cage, ir, optional, program, snippets
+
+PARAM_PREFIX = "ple:"
+FRAME_NAMES = ("G", "u", "v", "w")
+MOVE_TOL = 1e-6  # a frame or node counts as moved by the user beyond this (float32 matrices)
+_trusted: set[str] = set()  # rigs whose program the user ran explicitly in this session
+_busy = False  # set while the add-on itself writes to the rig (update callbacks stay quiet)
+
+
+@dataclass
+class RigState:
+    """What the add-on last drew for a rig, to tell user moves from its own writes."""
+
+    program_key: tuple = ()
+    program: object = None
+    base: object = None
+    lattice: object = None
+    expected: dict = field(default_factory=dict)
+    signature: tuple = ()
+
+
+_state: dict[str, RigState] = {}
+
+
+def clear_state() -> None:
+    """Forget drawn state (after undo or file load: positions are then not user moves)."""
+    _state.clear()
+
+
+def is_rig(obj) -> bool:
+    return obj is not None and obj.ple.role == "RIG"
+
+
+def rig_of(obj):
+    """The rig an object belongs to (itself if it is one), or None."""
+    if obj is None:
+        return None
+    if obj.ple.role == "RIG":
+        return obj
+    return obj.ple.rig if obj.ple.rig is not None and obj.ple.rig.ple.role == "RIG" else None
+
+
+def parts(rig) -> dict:
+    """Parts of a rig by key: "G", "u", "v", "w", "cage", "region", ("node", n), ("corner", c)."""
+    out = {}
+    for obj in rig.children_recursive:
+        role = obj.ple.role
+        if role == "FRAME":
+            out[obj.ple.frame] = obj
+        elif role == "NODE":
+            out[("node", obj.ple.node_index)] = obj
+        elif role == "CORNER":
+            out[("corner", obj.ple.frame)] = obj
+        elif role in ("CAGE", "REGION"):
+            out[role.lower()] = obj
+    return out
+
+
+# ----- the lattice of a rig -------------------------------------------------------------------
+def params_of(rig) -> dict:
+    return {k[len(PARAM_PREFIX):]: (v.to_dict() if hasattr(v, "to_dict") else v)
+            for k, v in rig.items() if k.startswith(PARAM_PREFIX)}
+
+
+def trusted(rig) -> bool:
+    """Programs run only if Blender trusts scripts or the user ran this one explicitly (SPEC §9)."""
+    return (rig.ple.source_kind == "IR" or rig.name_full in _trusted
+            or bpy.context.preferences.filepaths.use_scripts_auto_execute)
+
+
+def trust(rig) -> None:
+    _trusted.add(rig.name_full)
+
+
+def base_lattice(rig, st: RigState):
+    """The lattice the program (or IR) gives, before GUI edits; cached per text and inputs."""
+    text = rig.ple.text
+    if text is None:
+        raise PleError(f"{rig.name}: the program text block is missing")
+    source = text.as_string()
+    params = params_of(rig)
+    key = (rig.ple.source_kind, source, tuple(sorted((k, repr(v)) for k, v in params.items())))
+    if key == st.program_key:
+        return st.base
+    if rig.ple.source_kind == "IR":
+        try:
+            data = json.loads(source)
+        except json.JSONDecodeError as exc:
+            raise PleError(f"{text.name}: malformed JSON at line {exc.lineno}: {exc.msg}") from None
+        base = ir.lattice_from_dict(data)
+        prog = None
+    else:
+        if not trusted(rig):
+            raise PleError(f"{text.name}: not run because Blender does not trust scripts "
+                           "(enable Auto Run Python Scripts, or press Run Program)")
+        prog = program.compile_program(source, text.name)
+        base = prog.run(**params)
+    st.program_key, st.program, st.base = key, prog, base
+    return base
+
+
+def edits_of(rig) -> list:
+    return snippets.edits_from_json(rig.ple.edits)
+
+
+def add_edits(rig, new) -> None:
+    if new:
+        rig.ple.edits = snippets.edits_to_json(snippets.coalesce(edits_of(rig) + list(new)))
+
+
+def lattice_of(rig, st: RigState | None = None):
+    """The rig's current lattice: program (or IR) with its inputs, then the GUI edits."""
+    st = st if st is not None else _state.setdefault(rig.name_full, RigState())
+    return snippets.apply_to_lattice(base_lattice(rig, st), edits_of(rig))
+
+
+def region_of(rig, lat):
+    """The drawn index box, clamped to the lattice; None if empty."""
+    lo = [min(a, c) for a, c in zip(rig.ple.region_min, lat.counts)]
+    hi = [min(b, c) for b, c in zip(rig.ple.region_max, lat.counts)]
+    if any(a >= b for a, b in zip(lo, hi)):
+        return None
+    return lat.region(f"{lo[0]}:{hi[0]},{lo[1]}:{hi[1]},{lo[2]}:{hi[2]}")
+
+
+def in_rig_space(rig, other_rig, lat):
+    """``lat`` of ``other_rig`` placed in the coordinates of ``rig`` (for LiL across rigs)."""
+    rel = np.array(rig.matrix_world.inverted() @ other_rig.matrix_world)
+    out = lat.copy()
+    out.set_placement(cage.placement_from_frame(rel) @ lat.placement)
+    return out
+
+
+def filtered(rig, lat):
+    """The core filter object of the rig's Filters panel, or None."""
+    kind = rig.ple.filter_kind
+    if kind == "NONE":
+        return None
+    filters = optional("filters")
+    if filters is None:
+        raise PleError("filters are not available in this version of the core")
+    if kind == "STENCIL":
+        shape = tuple(rig.ple.stencil_shape)
+        bits = rig.ple.stencil_bits.strip()
+        n = int(np.prod(shape))
+        if len(bits) != n or set(bits) - {"0", "1"}:
+            raise PleError(f"stencil: expected {n} characters 0/1 for shape {shape}, got {bits!r}")
+        return filters.Stencil(np.array([c == "1" for c in bits]).reshape(shape))
+    coarse = rig.ple.coarse
+    if not is_rig(coarse):
+        raise PleError("LiL filter: choose a coarse PLE lattice object")
+    coarse_lat = in_rig_space(rig, coarse, lattice_of(coarse))
+    return filters.LiL(coarse_lat)
+
+
+def evaluate_region(rig, lat):
+    """Evaluation of the drawn region, through the rig's filter if any (None if empty)."""
+    r = region_of(rig, lat)
+    if r is None:
+        return None
+    f = filtered(rig, lat)
+    if f is None:
+        return lat.evaluate(r)
+    return optional("filters").FilteredLattice(lat, f).evaluate(r)
+
+
+# ----- reading user moves ---------------------------------------------------------------------
+def _flat(m) -> tuple:
+    return tuple(float(x) for row in m for x in row)
+
+
+def _moved(obj, expected: dict, key) -> bool:
+    old = expected.get(key)
+    return old is not None and max(abs(a - b) for a, b in zip(_flat(obj.matrix_basis), old)) > MOVE_TOL
+
+
+def user_edits(rig, st: RigState) -> list:
+    """Edits for frames and template nodes the user moved since the last drawing (§6.2.2)."""
+    lat = st.lattice
+    if lat is None:
+        return []
+    p = parts(rig)
+    out = []
+    for key in FRAME_NAMES:
+        obj = p.get(key)
+        if obj is None or not _moved(obj, st.expected, key):
+            continue
+        m = np.array(obj.matrix_basis)
+        if key == "G":
+            out.append(snippets.SetPlacement(cage.placement_from_frame(m, lat.placement)))
+            continue
+        axis_n = "uvw".index(key)
+        cum = cage.shows_cumulative(lat, key, rig.ple.cumulative[axis_n])
+        out.append(snippets.SetDirection(key, None, cage.direction_from_frame(lat, key, m, cum), cum))
+    for n in range(len(lat.nodes)):
+        obj = p.get(("node", n))
+        if obj is None or not _moved(obj, st.expected, ("node", n)):
+            continue
+        loc, _rot, scale = obj.matrix_basis.decompose()
+        s = np.array(scale)
+        if np.abs(s - s.mean()).max() > 1e-4 * abs(s.mean()) or s.mean() <= 0:
+            raise PleError(f"template node {n}: scale it uniformly (the scale is the ball's radius)")
+        node = lat.nodes[n]
+        center = tuple(loc) if np.abs(np.array(loc) - node.center).max() > MOVE_TOL else None
+        radius = float(s.mean()) if abs(s.mean() - node.radius) > MOVE_TOL * max(1.0, node.radius) else None
+        if center is not None or radius is not None:
+            out.append(snippets.MoveNode(n, center, radius))
+    return out
+
+
+# ----- drawing --------------------------------------------------------------------------------
+def signature(rig) -> tuple:
+    p = rig.ple
+    text = p.text.as_string() if p.text is not None else None
+    coarse = p.coarse.name_full if p.coarse is not None else None
+    return (text, tuple(sorted((k, repr(v)) for k, v in params_of(rig).items())), p.edits, tuple(p.region_min),
+            tuple(p.region_max), tuple(p.cumulative), p.cage_interior, p.filter_kind, coarse,
+            tuple(p.stencil_shape), p.stencil_bits, p.show_template, p.source_kind)
+
+
+def refresh(rig, force: bool = False) -> str | None:
+    """Read user moves, re-evaluate and redraw if anything changed; returns an error or None.
+
+    Errors (bad program, degenerate frame) leave the program text, the edits and the last
+    good drawing untouched and are shown as the rig's status."""
+    global _busy
+    if _busy:
+        return None
+    st = _state.setdefault(rig.name_full, RigState())
+    _busy = True
+    try:
+        try:
+            add_edits(rig, user_edits(rig, st))
+            sig = signature(rig)
+            if not force and sig == st.signature and st.lattice is not None:
+                return None
+            lat = lattice_of(rig, st)
+            ev = evaluate_region(rig, lat)
+        except PleError as exc:
+            rig.ple.status = str(exc)
+            return str(exc)
+        st.lattice = lat
+        draw_rig(rig, lat, ev, st)
+        st.signature = signature(rig)
+        if rig.ple.status:
+            rig.ple.status = ""
+        return None
+    finally:
+        _busy = False
+
+
+def draw_rig(rig, lat, ev, st: RigState) -> None:
+    p = parts(rig)
+    if tuple(rig.ple.counts) != lat.counts:
+        rig.ple.counts = lat.counts
+    if "region" in p:
+        draw.region_mesh(p["region"].data, ev)
+    if "cage" in p:
+        draw.cage_curve(p["cage"].data, cage.cage_curves(lat, interior=rig.ple.cage_interior))
+    frames = {"G": lat.placement.matrix}
+    for n, axis in enumerate("uvw"):
+        frames[axis] = cage.direction_frame(lat, axis, rig.ple.cumulative[n])
+    for key, m in frames.items():
+        if key in p:
+            st.expected[key] = draw.set_matrix(p[key], m)
+    sync_nodes(rig, lat, p, st)
+    sync_corners(rig, lat, p)
+
+
+def sync_nodes(rig, lat, p: dict, st: RigState) -> None:
+    """One sphere empty per template node (child of G): location = centre, scale = radius."""
+    want = len(lat.nodes) if rig.ple.show_template else 0
+    stale = [obj for key, obj in p.items() if isinstance(key, tuple) and key[0] == "node" and key[1] >= want]
+    if stale:
+        bpy.data.batch_remove(stale)
+    for key in [k for k in st.expected if isinstance(k, tuple) and k[1] >= want]:
+        del st.expected[key]
+    for n in range(want):
+        obj = p.get(("node", n))
+        if obj is None:
+            obj = new_part(rig, f"{rig.name}.N{n}", None, "NODE", parent=p.get("G"))
+            obj.empty_display_type = "SPHERE"
+            obj.empty_display_size = 1.0
+            obj.ple.node_index = n
+        node = lat.nodes[n]
+        m = np.diag([node.radius, node.radius, node.radius, 1.0])
+        m[:3, 3] = node.center
+        st.expected[("node", n)] = draw.set_matrix(obj, m)
+
+
+def sync_corners(rig, lat, p: dict) -> None:
+    """Corner empties A, B, C, D of a BeCOTS slab (shown when the lattice has one)."""
+    becots = getattr(lat, "becots", None)
+    corners = becots.to_ir().get("corners", []) if becots is not None else []
+    for label, c in zip("ABCD", corners):
+        obj = p.get(("corner", label))
+        if obj is None:
+            obj = new_part(rig, f"{rig.name}.{label}", None, "CORNER", parent=p.get("G"))
+            obj.empty_display_type = "CUBE"
+            obj.ple.frame = label
+        arr = np.asarray(c.get("matrix", c) if isinstance(c, dict) else c, dtype=float)
+        m = arr if arr.shape == (4, 4) else np.eye(4)
+        if arr.shape == (3,):
+            m[:3, 3] = arr
+        draw.set_matrix(obj, m)
+
+
+# ----- building a rig -------------------------------------------------------------------------
+def new_part(rig, name: str, data, role: str, parent=None):
+    obj = bpy.data.objects.new(name, data)
+    for coll in rig.users_collection:
+        coll.objects.link(obj)
+    obj.parent = parent if parent is not None else rig
+    obj.matrix_parent_inverse = Matrix.Identity(4)
+    obj.ple.role = role
+    obj.ple.rig = rig
+    return obj
+
+
+def set_params(rig, prog) -> None:
+    """Program inputs as custom properties with slider ranges (``Range(lo, hi)``)."""
+    for prm in prog.parameters():
+        key = PARAM_PREFIX + prm.name
+        if key not in rig:
+            rig[key] = prm.default
+        if isinstance(prm.default, (int, float)) and not isinstance(prm.default, bool):
+            ui = rig.id_properties_ui(key)
+            opts = {"description": f"program input {prm.name} of lattice()"}
+            if prm.range is not None:
+                opts.update(min=prm.range.lo, max=prm.range.hi, soft_min=prm.range.lo, soft_max=prm.range.hi)
+            ui.update(**opts)
+
+
+def create(context, name: str, text, source_kind: str = "PROGRAM", region=(3, 3, 3)):
+    """Build a rig for ``text`` (a Text datablock); raises PleError before creating anything
+    if the program or IR is bad."""
+    st = RigState()
+    probe = bpy.data.objects.new("~ple probe", None)  # evaluate before building anything
+    try:
+        probe.ple.text, probe.ple.source_kind = text, source_kind
+        _trusted.add(probe.name_full)
+        base = base_lattice(probe, st)
+        prog = st.program
+    finally:
+        _trusted.discard(probe.name_full)
+        bpy.data.objects.remove(probe)
+    coll = bpy.data.collections.new(f"PLE {name}")
+    context.scene.collection.children.link(coll)
+    rig = bpy.data.objects.new(name, None)
+    coll.objects.link(rig)
+    rig.empty_display_type = "PLAIN_AXES"
+    rig.empty_display_size = 0.25
+    rig.ple.role = "RIG"
+    rig.ple.text, rig.ple.source_kind = text, source_kind
+    rig.ple.region_max = tuple(min(r, c) for r, c in zip(region, base.counts))
+    trust(rig)
+    if prog is not None:
+        set_params(rig, prog)
+    g = new_part(rig, f"{name}.G", None, "FRAME")
+    g.ple.frame, g.empty_display_type = "G", "ARROWS"
+    size = max(0.2, 2.0 * float(base.template_radii.mean()))
+    for axis in "uvw":
+        f = new_part(rig, f"{name}.{axis.upper()}", None, "FRAME", parent=g)
+        f.ple.frame, f.empty_display_type, f.empty_display_size = axis, "ARROWS", size
+    g.empty_display_size = size * 1.5
+    cage_obj = new_part(rig, f"{name}.cage", draw.new_cage_curve(f"{name}.cage"), "CAGE")
+    region_obj = new_part(rig, f"{name}.region", draw.new_region_mesh(f"{name}.region"), "REGION")
+    for obj in (cage_obj, region_obj):
+        obj.hide_select = True
+    draw.add_balls_beams_modifier(region_obj)
+    _state[rig.name_full] = st
+    err = refresh(rig, force=True)
+    if err:
+        raise PleError(err)
+    return rig
+
+
+def remove(rig) -> None:
+    """Delete a rig's objects and its own datablocks (meshes, curves), keeping the program text."""
+    objs = [rig, *rig.children_recursive]
+    data = [o.data for o in objs if o.data is not None]
+    colls = [c for c in rig.users_collection if c.name.startswith("PLE ")]
+    _state.pop(rig.name_full, None)
+    bpy.data.batch_remove(objs + data)
+    for c in colls:
+        if not c.objects:
+            bpy.data.collections.remove(c)
+
+
+# ----- update callbacks and handlers ----------------------------------------------------------
+def on_settings_changed(rig) -> None:
+    if not _busy and is_rig(rig):
+        refresh(rig)
+
+
+def on_counts_changed(rig) -> None:
+    """The counts slider: a count-only set_u/v/w edit per changed direction."""
+    st = _state.get(rig.name_full)
+    if _busy or not is_rig(rig) or st is None or st.lattice is None:
+        return
+    edits = [snippets.SetDirection(axis, int(c)) for axis, c, old in zip("uvw", rig.ple.counts, st.lattice.counts)
+             if int(c) != old]
+    try:
+        add_edits(rig, edits)
+    except PleError as exc:
+        rig.ple.status = str(exc)
+        return
+    refresh(rig)
+
+
+def rigs_in_updates(depsgraph) -> list:
+    found = {}
+    for u in depsgraph.updates:
+        obj = u.id.original if isinstance(u.id, bpy.types.Object) else None
+        if obj is None or obj.ple.role not in ("RIG", "FRAME", "NODE"):
+            continue
+        rig = rig_of(obj)
+        if rig is not None:
+            found[rig.name_full] = rig
+    return list(found.values())
+
+
+def all_rigs() -> list:
+    return [o for o in bpy.data.objects if o.ple.role == "RIG"]

@@ -1,0 +1,135 @@
+"""The "PLE" sidebar tab of the 3D viewport: Program, Frames, Region, Template, Filters,
+Tessellate & Export (thesis §6.2.2)."""
+
+from __future__ import annotations
+
+import bpy
+
+from . import rig as rigmod
+from .corelink import PleError, snippets
+
+
+class PLE_PT_base:  # noqa: N801 - Blender naming
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "PLE"
+
+    @classmethod
+    def poll(cls, context):
+        return rigmod.rig_of(context.active_object) is not None
+
+    def rig(self, context):
+        return rigmod.rig_of(context.active_object)
+
+
+class PLE_PT_program(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender naming
+    bl_label = "Program"
+
+    @classmethod
+    def poll(cls, context):
+        return True
+
+    def draw(self, context):
+        layout = self.layout
+        layout.operator("ple.lattice_add", icon="ADD")
+        rig = self.rig(context)
+        if rig is None:
+            return
+        p = rig.ple
+        layout.prop(p, "text")
+        for key in [k for k in rig.keys() if k.startswith(rigmod.PARAM_PREFIX)]:
+            layout.prop(rig, f'["{key}"]', text=key[len(rigmod.PARAM_PREFIX):], slider=True)
+        row = layout.row(align=True)
+        row.operator("ple.program_run", icon="PLAY")
+        row.operator("ple.program_apply", icon="FILE_REFRESH")
+        row = layout.row(align=True)
+        row.operator("ple.snippet_copy", icon="COPYDOWN")
+        row.prop(p, "snippet_digits")
+        try:
+            n = len(snippets.coalesce(rigmod.edits_of(rig)))
+        except PleError:
+            n = 0
+        row = layout.row()
+        row.label(text=f"{n} GUI edit(s) not in the program")
+        row.operator("ple.edits_clear", text="", icon="X")
+        if p.status:
+            layout.label(text=p.status, icon="ERROR")
+
+
+class PLE_PT_frames(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender naming
+    bl_label = "Frames"
+
+    def draw(self, context):
+        rig = self.rig(context)
+        layout = self.layout
+        layout.label(text="Drag, rotate or scale a frame: G places the lattice,")
+        layout.label(text="U, V, W are the similarities of the steady rows.")
+        parts = rigmod.parts(rig)
+        col = layout.column(align=True)
+        for n, axis in enumerate("uvw"):
+            row = col.row(align=True)
+            frame = parts.get(axis)
+            row.label(text=f"{axis.upper()}: {frame.name if frame else '-'}")
+            row.prop(rig.ple, "cumulative", index=n, text="Cumulative", toggle=True)
+        layout.prop(rig.ple, "counts")
+
+
+class PLE_PT_region(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender naming
+    bl_label = "Region"
+
+    def draw(self, context):
+        p = self.rig(context).ple
+        layout = self.layout
+        layout.prop(p, "region_min")
+        layout.prop(p, "region_max")
+        layout.prop(p, "cage_interior")
+
+
+class PLE_PT_template(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender naming
+    bl_label = "Template"
+
+    def draw(self, context):
+        rig = self.rig(context)
+        layout = self.layout
+        layout.prop(rig.ple, "show_template")
+        row = layout.row(align=True)
+        row.operator("ple.node_add", icon="ADD")
+        row.operator("ple.node_remove", icon="REMOVE")
+        layout.operator("ple.beam_add", icon="ADD")
+        st = rigmod._state.get(rig.name_full)
+        if st is not None and st.lattice is not None:
+            for b, beam in enumerate(st.lattice.beams):
+                row = layout.row()
+                row.label(text=f"{b}: node {beam.n1} -> node {beam.n2} at ({beam.di}, {beam.dj}, {beam.dk})")
+                row.operator("ple.beam_remove", text="", icon="X").index = b
+
+
+class PLE_PT_filters(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender naming
+    bl_label = "Filters"
+
+    def draw(self, context):
+        p = self.rig(context).ple
+        layout = self.layout
+        layout.prop(p, "filter_kind")
+        if p.filter_kind == "LIL":
+            layout.prop(p, "coarse")
+        elif p.filter_kind == "STENCIL":
+            layout.prop(p, "stencil_shape")
+            layout.prop(p, "stencil_bits")
+        row = layout.row(align=True)
+        row.operator("ple.lil_filter")
+        row.operator("ple.stencil_filter")
+
+
+class PLE_PT_output(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender naming
+    bl_label = "Tessellate & Export"
+
+    def draw(self, context):
+        layout = self.layout
+        row = layout.row(align=True)
+        for style in ("CHOCC", "CNT", "REFINED"):
+            row.operator("ple.tessellate", text=style.title() if style != "CHOCC" else "CHoCC").style = style
+        layout.operator("ple.export", icon="EXPORT")
+
+
+CLASSES = (PLE_PT_program, PLE_PT_frames, PLE_PT_region, PLE_PT_template, PLE_PT_filters, PLE_PT_output)
