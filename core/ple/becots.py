@@ -399,16 +399,14 @@ class BeCOTSField:
             return None
         if self.kind == "translation":
             return (0, 0)
-        ks = []
-        for mine, theirs in ((self.u, base.u), (self.v, base.v)):
-            k = round((mine[1] - theirs[1]) / TWO_PI)
-            ks.append(k)
+        sign = 1.0 if base.axis @ self.axis > 0 else -1.0  # the rebuilt axis may point the other way
+        ks = tuple(round((sign * mine[1] - theirs[1]) / TWO_PI)
+                   for mine, theirs in ((self.u, base.u), (self.v, base.v)))
         try:
-            again = BeCOTSField.from_corners(*self.corners, branch=tuple(ks))
+            again = BeCOTSField.from_corners(*self.corners, branch=ks)
         except PleError:
             return None
-        same = (np.allclose(again.u, self.u, atol=1e-9) and np.allclose(again.v, self.v, atol=1e-9)
-                and again.similarity(0.5, 0.5).allclose(self.similarity(0.5, 0.5), 1e-8))
+        same = all(again.similarity(x, y).allclose(self.similarity(x, y), 1e-8) for x, y in ((0.5, 0.5), (0.3, 0.9)))
         return tuple(ks) if same else None
 
 
@@ -694,8 +692,8 @@ def becots_lattice(fld: BeCOTSField, counts, connectivity: str = "triangle", rad
     cell size. ``period`` p > 1 builds the filtered multi-level variant (§4.5.1): the
     template node-group is a p × p block of cells (counts are in fine cells and must be
     multiples of p) and ``keep(a, b, n1, n2, da, db)`` — fine cell (a, b) in the block, fine
-    offset (da, db) — decides which fine beams stay (default: drop the diagonal beams of
-    the triangle connectivity inside each block, keeping the block's outline)."""
+    offset (da, db) — decides which fine beams stay (default: keep one diagonal beam
+    (da = db = 1) per p × p block, the one of its last cell, and every other beam)."""
     if connectivity not in CONNECTIVITIES:
         raise PleError(f"connectivity {connectivity!r}: expected one of {', '.join(CONNECTIVITIES)}")
     nu, nv = _counts(counts)
