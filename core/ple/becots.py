@@ -898,7 +898,7 @@ def constant_radius_connectors(lat: Lattice, radius: float, beam_radius: float |
             gen.append(connector_points(centers[row], dirs, radius, beam_radius, grow))
         template = gen[0]
         motions = np.array([kabsch(template, g) for g in gen])
-        mesh = trimesh.convex_hull(template)
+        mesh = trimesh.convex.convex_hull(template)
         out.append(ConnectorClass(key, template, mesh, motions, ev.node_index[rows]))
     beams = {"start": centers[ev.beam_nodes[:, 0]], "end": centers[ev.beam_nodes[:, 1]], "radius": beam_radius}
     return out, beams
