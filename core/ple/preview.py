@@ -28,6 +28,8 @@ def balls_beams_mesh(center: np.ndarray, radius: np.ndarray, beam_nodes: np.ndar
     verts = (sv[None] * radius[:, None, None] + center[:, None]).reshape(-1, 3)
     faces = (sf[None] + (np.arange(len(center)) * len(sv))[:, None, None]).reshape(-1, 3)
     parts_v, parts_f, offset = [verts], [faces], len(verts)
+    # a beam between coincident balls has no direction (and nothing to draw)
+    beam_nodes = beam_nodes[np.linalg.norm(center[beam_nodes[:, 1]] - center[beam_nodes[:, 0]], axis=1) > 0]
     if len(beam_nodes):
         a, b = center[beam_nodes[:, 0]], center[beam_nodes[:, 1]]
         ra, rb = radius[beam_nodes[:, 0]] * beam_scale, radius[beam_nodes[:, 1]] * beam_scale

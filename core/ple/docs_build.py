@@ -1,0 +1,166 @@
+"""``make docs``: the API reference from docstrings, the preset gallery with rendered
+thumbnails, and the concept pictures — all produced by the project itself.
+
+Pictures are rendered by ``docs/tools/render_mesh.py`` (headless Blender Workbench) in a
+subprocess; the meshes and curves it draws come from the core. A picture is re-rendered
+only when its source (preset file) is newer than it.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .files import atomic_write_text
+from .preview import balls_beams_mesh
+from .program import load_lattice, preset_description, preset_names, preset_path
+
+ROOT = Path(__file__).resolve().parents[2]
+DOCS = ROOT / "docs"
+RENDER = DOCS / "tools" / "render_mesh.py"
+THUMBS = ROOT / "presets" / "thumbnails"
+API_MODULES = ["similarity", "geometry", "lattice", "program", "ir", "elements", "rangefinder", "biq", "measure",
+               "filters", "implicit", "stream", "chocc", "achocc", "tessellate", "export", "becots",
+               "becots_rangefinder", "cage", "snippets", "batch", "preview"]
+THUMB_MAX_GROUPS = 12  # per axis: a thumbnail shows a corner region of very large lattices
+
+
+def api_reference() -> str:
+    """Markdown reference of the public classes and functions of the core modules."""
+    out = ["# Program API reference", "",
+           "Generated from the docstrings by `make docs` (`python -m ple.docs_build`).", ""]
+    for name in API_MODULES:
+        try:
+            mod = importlib.import_module(f"ple.{name}")
+        except ImportError:
+            continue
+        out += [f"## `ple.{name}`", "", inspect.cleandoc(mod.__doc__ or "").split("\n\n")[0], ""]
+        for attr, obj in vars(mod).items():
+            if attr.startswith("_") or getattr(obj, "__module__", None) != mod.__name__:
+                continue
+            if inspect.isclass(obj) or inspect.isfunction(obj):
+                out += _entry(attr, obj)
+    return "\n".join(out) + "\n"
+
+
+def _entry(name: str, obj) -> list[str]:
+    try:
+        sig = str(inspect.signature(obj)).replace("'", "")
+    except (TypeError, ValueError):
+        sig = "(…)"
+    kind = "class" if inspect.isclass(obj) else "def"
+    doc = inspect.cleandoc(obj.__doc__ or "")
+    lines = [f"### {kind} `{name}{sig}`", ""]
+    if doc:
+        lines += [doc, ""]
+    if inspect.isclass(obj):
+        for attr, member in vars(obj).items():
+            if attr.startswith("_") or not (inspect.isfunction(member) or isinstance(member, (property, staticmethod))):
+                continue
+            fn = member.fget if isinstance(member, property) else getattr(member, "__func__", member)
+            mdoc = inspect.cleandoc(fn.__doc__ or "").split("\n\n")[0]
+            try:
+                msig = "" if isinstance(member, property) else str(inspect.signature(fn)).replace("'", "")
+            except (TypeError, ValueError):
+                msig = "(…)"
+            lines.append(f"- `{attr}{msig}` — {mdoc}" if mdoc else f"- `{attr}{msig}`")
+        lines.append("")
+    return lines
+
+
+def render(out_png: Path, meshes: list, size: str = "640x480", curves: np.ndarray | None = None,
+           view: str = "iso") -> None:
+    """Render trimesh meshes (and polylines (L, P, 3)) to ``out_png`` in a subprocess."""
+    out_png.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="ple-render-") as tmp:
+        args = [sys.executable, str(RENDER), str(out_png)]
+        for n, m in enumerate(meshes):
+            p = Path(tmp) / f"m{n}.ply"
+            m.export(p)
+            args.append(str(p))
+        args += ["--size", size, "--view", view]
+        if curves is not None:
+            cpath = Path(tmp) / "curves.npz"
+            np.savez(cpath, lines=curves)
+            args += ["--curves", str(cpath)]
+        env = dict(os.environ, BLENDER_USER_RESOURCES=tmp)
+        proc = subprocess.run(args, capture_output=True, text=True, env=env)
+        if proc.returncode != 0 or not out_png.is_file():
+            raise RuntimeError(f"render of {out_png.name} failed: {proc.stderr.strip()[-400:]}")
+    _shrink(out_png)
+
+
+def _shrink(png: Path) -> None:
+    """Palette-quantize a rendered PNG (docs pictures stay small in the repository)."""
+    from PIL import Image
+    with Image.open(png) as im:
+        small = im.convert("RGB").quantize(colors=128, method=Image.Quantize.MEDIANCUT)
+    small.save(png, optimize=True)
+
+
+def thumbnail_region(lat) -> str:
+    return ",".join(f"0:{min(c, THUMB_MAX_GROUPS)}" for c in lat.counts)
+
+
+def preset_preview(name: str):
+    """The preview mesh of a preset's thumbnail (its filter applied where it has one)."""
+    lat = load_lattice(name)
+    region = thumbnail_region(lat)
+    flt = getattr(lat, "filter", None)
+    if flt is not None:
+        from .filters import FilteredLattice
+        ev = FilteredLattice(lat, flt).evaluate(region)
+    else:
+        ev = lat.evaluate(region)
+    return balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes, beam_scale=0.6), region
+
+
+def build_thumbnails(force: bool = False) -> list[str]:
+    """Render stale preset thumbnails into ``presets/thumbnails``; returns the names rendered."""
+    done = []
+    for name in preset_names():
+        png = THUMBS / f"{name}.png"
+        src = preset_path(name)
+        if not force and png.is_file() and png.stat().st_mtime >= src.stat().st_mtime:
+            continue
+        mesh, _ = preset_preview(name)
+        render(png, [mesh], size="360x270")
+        done.append(name)
+        print(f"  thumbnail {png.relative_to(ROOT)}", flush=True)
+    return done
+
+
+def presets_page() -> str:
+    out = ["# Preset library", "", "`ple presets` lists them; load one by name anywhere a LATTICE is expected.",
+           "Thumbnails show at most the first 12 groups per direction.", "",
+           "| preset | purpose | counts | picture |", "|---|---|---|---|"]
+    for name in preset_names():
+        lat = load_lattice(name)
+        counts = " × ".join(str(c) for c in lat.counts)
+        pic = f"![{name}](../presets/thumbnails/{name}.png)" if (THUMBS / f"{name}.png").is_file() else ""
+        out.append(f"| `{name}` | {preset_description(name)} | {counts} | {pic} |")
+    return "\n".join(out) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    atomic_write_text(DOCS / "api.md", api_reference())
+    print(f"wrote {DOCS / 'api.md'}")
+    if "--no-render" not in argv:
+        build_thumbnails(force="--force" in argv)
+        from .docs_pictures import build_pictures
+        build_pictures(force="--force" in argv)
+    atomic_write_text(DOCS / "presets.md", presets_page())
+    print(f"wrote {DOCS / 'presets.md'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
