@@ -93,8 +93,7 @@ class BeCOTSField:
             if (ku, kv) != (0, 0):
                 raise PleError("branch: a translation field (parallelogram corners) has no rotation to wrap")
             return BeCOTSField("translation", A, tu=D - A, tv=B - A)
-        axis, apex_hint = _axis_from_corners(A, B, C, D, sv)
-        fld = _field_with_axis(A, B, C, D, axis, apex_hint, ku, kv)
+        fld = _field_with_axis(A, B, C, D, _axis_from_corners(A, B, C, D, sv), ku, kv)
         miss = np.abs(fld.points(np.array([0.0, 0.0, 1.0, 1.0]), np.array([0.0, 1.0, 1.0, 0.0])) - np.array(pts))
         worst = float(np.linalg.norm(miss, axis=1).max())
         if not worst <= CORNER_TOL * scale:
@@ -420,41 +419,26 @@ def _branch(branch) -> tuple[int, int]:
     return int(ku), int(kv)
 
 
-def _axis_from_corners(A, B, C, D, sv) -> tuple[np.ndarray, np.ndarray | None]:
-    """The common rotation axis direction T of U and V (Eq. 4.8), with a fixed point when a
-    special case needs it first."""
+def _axis_from_corners(A, B, C, D, sv) -> np.ndarray:
+    """The common rotation axis direction T of U and V (Eq. 4.8)."""
     if sv[2] <= 1e-12 * sv[0]:  # special case: coplanar corners -> planar COTS, T = plane normal
         normal = np.cross(B - A, D - A)
         if np.linalg.norm(normal) < 1e-12 * sv[0] ** 2:
             normal = np.cross(B - A, C - A)
-        return _unit(normal), None
+        return _unit(normal)
     du = _unit(B - A) - _unit(C - D)  # U turns edge AB into DC: du ⟂ T
     dv = _unit(D - A) - _unit(C - B)  # V turns edge AD into BC: dv ⟂ T
     n = np.cross(du, dv)
     if np.linalg.norm(n) > PARALLEL_TOL:
-        return _unit(n), None
-    # special case "pure dilation": one of U, V has parallel edges (no rotation) and fixes F;
-    # the other rotates A onto its corner about an axis through F
-    if np.linalg.norm(du) <= PARALLEL_TOL < np.linalg.norm(dv):  # U: A -> D, B -> C by dilation
-        dilate, rotate_to, d_rot = (A, B, D, C), B, dv
-    elif np.linalg.norm(dv) <= PARALLEL_TOL < np.linalg.norm(du):  # V: A -> B, D -> C by dilation
-        dilate, rotate_to, d_rot = (A, D, B, C), D, du
-    else:
-        dilate = None
-    if dilate is not None:
-        p, q, r, s = dilate
-        m = np.linalg.norm(s - r) / np.linalg.norm(q - p)
-        if abs(m - 1.0) > NEAR_UNIT_FACTOR:
-            apex = (r - m * p) / (1.0 - m)
-            n2 = np.cross(d_rot, _unit(A - apex) - _unit(rotate_to - apex))
-            if np.linalg.norm(n2) > PARALLEL_TOL:
-                return _unit(n2), apex
+        return _unit(n)
+    # (one of du, dv zero — a "pure dilation" U or V — puts F, A and the corners on one plane, so
+    # that case was already taken by the coplanar special case above)
     if min(np.linalg.norm(du), np.linalg.norm(dv)) > PARALLEL_TOL:
         # special case "cylinder": du ∥ dv (e.g. two screws about one axis) leave a one-parameter
         # family of axes T ⟂ du; pick the one where U's and V's planar fixed points coincide
         axis = _axis_by_common_centre(A, B, C, D, _unit(du))
         if axis is not None:
-            return axis, None
+            return axis
     raise PleError("corners A, B, C, D: the rotation axis of U and V is undetermined (parallel edges)")
 
 
@@ -490,7 +474,7 @@ def _axis_by_common_centre(A, B, C, D, du) -> np.ndarray | None:
     return np.cos(res.x) * p + np.sin(res.x) * q
 
 
-def _field_with_axis(A, B, C, D, axis, apex_hint, ku: int, kv: int) -> BeCOTSField:
+def _field_with_axis(A, B, C, D, axis, ku: int, kv: int) -> BeCOTSField:
     """U, V about axis T through a common fixed point, from the corners projected onto the
     plane through A normal to T (Eq. 4.9, planar spiral similarities of §2.4.6)."""
     e1 = _unit(np.cross(axis, [1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.cross(axis, [0.0, 1.0, 0.0]))
@@ -504,9 +488,7 @@ def _field_with_axis(A, B, C, D, axis, apex_hint, ku: int, kv: int) -> BeCOTSFie
     lu, lv = math.log(abs(qu)), math.log(abs(qv))
     wu = math.atan2(qu.imag, qu.real) + TWO_PI * ku
     wv = math.atan2(qv.imag, qv.real) + TWO_PI * kv
-    if apex_hint is not None:
-        f = complex((apex_hint - A) @ e1, (apex_hint - A) @ e2)
-    elif abs(qu - 1) >= abs(qv - 1) and abs(qu - 1) > 1e-12:
+    if abs(qu - 1) >= abs(qv - 1) and abs(qu - 1) > 1e-12:
         f = (z["D"] - qu * z["A"]) / (1 - qu)  # fixed point of U: F' = (D' - q A') / (1 - q)
     elif abs(qv - 1) > 1e-12:
         f = (z["B"] - qv * z["A"]) / (1 - qv)
