@@ -30,7 +30,7 @@ RangeFinder ranges of their bounding balls.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -44,6 +44,7 @@ INVARIANCE_TOL = 1e-9  # normalized units, for the §7.3.1 conditions
 MAX_WRAP_STEPS = 64
 BLOCK = 8  # W-rows per block side in the "uv" path's culling level
 QUERY_BATCH = 1 << 15
+MAX_VW_TABLE = 1 << 18  # largest V×W table of the O(ū) path kept per lattice
 
 
 # ----- normalized maps of one incremental similarity -----------------------------------------
@@ -243,6 +244,7 @@ class _Plan:
     path: str
     maps: tuple  # RowMaps of U, V, W
     elements: int
+    tables: dict = field(default_factory=dict)  # template extents, filled on first use
 
 
 def _active(lat: Lattice) -> list[bool]:
@@ -358,39 +360,104 @@ def _expand(lo: np.ndarray, hi: np.ndarray):
 
 
 # ----- candidate generation per path ------------------------------------------------------------
-def _candidates(lat: Lattice, pl: _Plan, qc: np.ndarray, qr: np.ndarray) -> np.ndarray:
-    """Candidate (qid, i, j, k, element) rows (int64 (N, 5)) for queries in the lattice frame."""
+def _group_ball(bc: np.ndarray, br: np.ndarray):
+    """A ball enclosing element balls (..., E, 3), (..., E): centre the mean of their centres."""
+    gc = bc.mean(axis=-2)
+    return gc, (np.linalg.norm(bc - gc[..., None, :], axis=-1) + br).max(axis=-1)
+
+
+def _templates(lat: Lattice, pl: _Plan) -> dict:
+    """Template extents of the plan's path, computed once per lattice (cached on the plan)."""
+    if pl.tables:
+        return pl.tables
     mu, mv, mw = pl.maps
-    nq, ne = len(qc), pl.elements
-    qe = [ball_extents(m, qc, qr) for m in pl.maps]
+    nu, nv, _ = lat.counts
+    t = pl.tables
     if pl.path == "1":
         z = np.zeros(1, np.int64)
+        t["ext"] = [_element_extents(lat, m, z, z, z)[0] for m in pl.maps]
+    elif pl.path == "u":
+        gi, z = np.arange(nu), np.zeros(nu, np.int64)
+        t["ext_v"], bc, br = _element_extents(lat, mv, gi, z, z)  # (nu, E)
+        t["ext_w"] = _element_extents(lat, mw, gi, z, z)[0]
+        t["gc"], t["gr"] = _group_ball(bc, br)
+        t["gext_v"], t["gext_w"] = ball_extents(mv, t["gc"], t["gr"]), ball_extents(mw, t["gc"], t["gr"])
+        nw = lat.counts[2]
+        if nv * nw <= MAX_VW_TABLE:  # W**k V**j (they commute), as 3x4 rows indexed j * nw + k
+            vw = lat.W.power_matrices(np.arange(nw))[None, :, :3] @ lat.V.power_matrices(np.arange(nv))[:, None]
+            t["vw"] = np.ascontiguousarray(vw[:, :, :3].reshape(nv * nw, 3, 4))
+    else:
+        gi, gj = (x.reshape(-1) for x in np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij"))
+        t["ext"], bc, br = _element_extents(lat, mw, gi, gj, np.zeros_like(gi))  # (nu*nv, E)
+        t["gc"], t["gr"] = _group_ball(bc, br)
+        t["gext"] = ball_extents(mw, t["gc"], t["gr"])
+        # blocks of BLOCK × BLOCK W-rows, each with a ball enclosing its group balls
+        nbj = (nv + BLOCK - 1) // BLOCK
+        block = (gi // BLOCK) * nbj + gj // BLOCK
+        nb = int(block.max()) + 1
+        cnt = np.bincount(block, minlength=nb)
+        kc = np.stack([np.bincount(block, t["gc"][:, d], minlength=nb) for d in range(3)], axis=1) / cnt[:, None]
+        kr = np.zeros(nb)
+        np.maximum.at(kr, block, np.linalg.norm(t["gc"] - kc[block], axis=1) + t["gr"])
+        t.update(kc=kc, kr=kr, kext=ball_extents(mw, kc, kr), order=np.argsort(block, kind="stable"),
+                 starts=np.concatenate([[0], np.cumsum(cnt)]))
+    return t
+
+
+def _q(ext: dict, idx=None, expand: int = 0) -> dict:
+    """Select query extents (by index array) and/or add trailing axes for broadcasting."""
+    out = {}
+    for key, (s, e) in ext.items():
+        if idx is not None:
+            s, e = s[idx], e[idx]
+        out[key] = (s.reshape(s.shape + (1,) * expand), e.reshape(e.shape + (1,) * expand))
+    return out
+
+
+def _candidates(lat: Lattice, pl: _Plan, qc: np.ndarray, qr: np.ndarray) -> np.ndarray:
+    """Candidate (qid, i, j, k, element) rows (int64 (N, 5)) for queries in the lattice frame."""
+    t = _templates(lat, pl)
+    mu, mv, mw = pl.maps
+    nq, ne = len(qc), pl.elements
+    if pl.path == "1":  # §7.3.1 O(1): one range per direction from the template group
         ranges = []
         for d, m in enumerate(pl.maps):
-            ext, _, _ = _element_extents(lat, m, z, z, z)
-            tm = {key: (s[0][None], e[0][None]) for key, (s, e) in ext.items()}  # (1, E)
-            qq = {key: (s[:, None], e[:, None]) for key, (s, e) in qe[d].items()}  # (q, 1)
-            lo, hi = candidate_range(m, tm, qq, (nq, ne))
-            ranges.append((np.broadcast_to(lo, (nq, ne)).reshape(-1), np.broadcast_to(hi, (nq, ne)).reshape(-1)))
+            lo, hi = candidate_range(m, t["ext"][d], _q(ball_extents(m, qc, qr), expand=1), (nq, ne))
+            ranges.append((lo.reshape(-1), hi.reshape(-1)))
         return _boxes(ranges, np.repeat(np.arange(nq), ne), np.tile(np.arange(ne), nq))
     if pl.path == "u":
-        nu = lat.counts[0]
-        gi = np.arange(nu)
-        z = np.zeros(nu, np.int64)
-        rs = []
-        for d, m in ((1, mv), (2, mw)):
-            ext, _, _ = _element_extents(lat, m, gi, z, z)  # (nu, E)
-            tm = {key: (s[None], e[None]) for key, (s, e) in ext.items()}
-            qq = {key: (s[:, None, None], e[:, None, None]) for key, (s, e) in qe[d].items()}
-            lo, hi = candidate_range(m, tm, qq, (nq, nu, ne))
-            rs.append((np.broadcast_to(lo, (nq, nu, ne)).reshape(-1), np.broadcast_to(hi, (nq, nu, ne)).reshape(-1)))
-        qid = np.repeat(np.arange(nq), nu * ne)
-        ii = np.tile(np.repeat(np.arange(nu), ne), nq)
-        el = np.tile(np.arange(ne), nq * nu)
-        keep = (rs[0][1] >= rs[0][0]) & (rs[1][1] >= rs[1][0])
-        ranges = [(ii[keep], ii[keep]), (rs[0][0][keep], rs[0][1][keep]), (rs[1][0][keep], rs[1][1][keep])]
-        return _boxes(ranges, qid[keep], el[keep])
-    return _uv_candidates(lat, pl, qc, qr, qe[2])
+        return _u_candidates(lat, t, pl, qc, qr)
+    return _uv_candidates(lat, t, pl, qc, qr)
+
+
+def _u_candidates(lat: Lattice, t: dict, pl: _Plan, qc, qr) -> np.ndarray:
+    """§7.3.1 O(ū): per U index i, a V-range and a W-range of the group ball of (i, 0, 0);
+    the group ball moved by V**j W**k is tested, then each element's own ranges."""
+    _, mv, mw = pl.maps
+    nq, nu, ne = len(qc), lat.counts[0], pl.elements
+    qv, qw = ball_extents(mv, qc, qr), ball_extents(mw, qc, qr)
+    jlo, jhi = candidate_range(mv, t["gext_v"], _q(qv, expand=1), (nq, nu))
+    klo, khi = candidate_range(mw, t["gext_w"], _q(qw, expand=1), (nq, nu))
+    ii = np.tile(np.arange(nu), nq)
+    g = _boxes([(ii, ii), (jlo.reshape(-1), jhi.reshape(-1)), (klo.reshape(-1), khi.reshape(-1))],
+               np.repeat(np.arange(nq), nu), np.zeros(nq * nu, np.int64))
+    gc, gr = t["gc"][g[:, 1]], t["gr"][g[:, 1]]
+    if "vw" in t:
+        m = t["vw"][g[:, 2] * lat.counts[2] + g[:, 3]]
+        moved = (m[:, :, :3] @ gc[:, :, None])[:, :, 0] + m[:, :, 3]
+        scale = lat.V.factor ** g[:, 2].astype(float) * lat.W.factor ** g[:, 3].astype(float)
+        hit = ball_ball_interfere(moved, gr * scale * (1 + 1e-9) + 1e-12, qc[g[:, 0]], qr[g[:, 0]])
+    else:
+        hit = _moved_ball_hits([(lat.V, g[:, 2]), (lat.W, g[:, 3])], gc, gr, qc[g[:, 0]], qr[g[:, 0]])
+    g = g[hit]
+    el = np.tile(np.arange(ne), len(g))
+    g = np.repeat(g, ne, axis=0)
+    g[:, 4] = el
+    for m, qe, col, key in ((mv, qv, 2, "ext_v"), (mw, qw, 3, "ext_w")):
+        lo, hi = candidate_range(m, _take(t[key], g[:, 1], el), _q(qe, g[:, 0]), (len(g),))
+        keep = (g[:, col] >= lo) & (g[:, col] <= hi)
+        g, el = g[keep], el[keep]
+    return g
 
 
 def _boxes(ranges, qid, el) -> np.ndarray:
@@ -406,89 +473,47 @@ def _boxes(ranges, qid, el) -> np.ndarray:
     return np.stack([qid[r1], i, j, k, el[r1]], axis=1)
 
 
-_UV_CACHE: dict = {}
-
-
-def _uv_tables(lat: Lattice, mw: RowMap):
-    """Per W-row (i, j): element W-extents (nu*nv, E), group bounding balls, block balls."""
-    key = _fingerprint(lat)
-    if key in _UV_CACHE:
-        return _UV_CACHE[key]
-    nu, nv, _ = lat.counts
-    gi, gj = (x.reshape(-1) for x in np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij"))
-    ext, bc, br = _element_extents(lat, mw, gi, gj, np.zeros_like(gi))
-    # group ball: encloses every element ball of the group (centre: mean of element centres)
-    gc = bc.mean(axis=1)
-    gr = (np.linalg.norm(bc - gc[:, None], axis=2) + br).max(axis=1)
-    gext = ball_extents(mw, gc, gr)
-    # blocks of BLOCK × BLOCK rows, each with a ball enclosing its group balls
-    bi, bj = gi // BLOCK, gj // BLOCK
-    nbj = (nv + BLOCK - 1) // BLOCK
-    block = bi * nbj + bj
-    nb = int(block.max()) + 1
-    cnt = np.bincount(block, minlength=nb)
-    kc = np.stack([np.bincount(block, gc[:, d], minlength=nb) for d in range(3)], axis=1) / cnt[:, None]
-    kr = np.zeros(nb)
-    np.maximum.at(kr, block, np.linalg.norm(gc - kc[block], axis=1) + gr)
-    tables = dict(ext=ext, gc=gc, gr=gr, gext=gext, block=block, kc=kc, kr=kr, kext=ball_extents(mw, kc, kr),
-                  order=np.argsort(block, kind="stable"), starts=np.concatenate([[0], np.cumsum(cnt)]))
-    if len(_UV_CACHE) > 8:
-        _UV_CACHE.clear()
-    _UV_CACHE[key] = tables
-    return tables
-
-
-def _uv_candidates(lat: Lattice, pl: _Plan, qc, qr, qext) -> np.ndarray:
-    """The general algorithm over W-rows (§7.3), with a culling level over blocks of rows:
-    a block survives if some W**k of its bounding ball, k in the block's RangeFinder range,
-    meets the query; then each W-row of a surviving block gets its own range per element."""
+def _uv_candidates(lat: Lattice, t: dict, pl: _Plan, qc, qr) -> np.ndarray:
+    """The general algorithm over W-rows (§7.3), with culling levels: a block of W-rows
+    survives if W**k of its bounding ball meets the query for some k in the block's range;
+    then each W-row's group ball, then each element's own RangeFinder range."""
     mw = pl.maps[2]
-    t = _uv_tables(lat, mw)
-    nq = len(qc)
-    nb = len(t["kr"])
-    w = lat.W
-    qq = {key: (s[:, None], e[:, None]) for key, (s, e) in qext.items()}
-    lo, hi = candidate_range(mw, {key: (s[None], e[None]) for key, (s, e) in t["kext"].items()}, qq, (nq, nb))
-    qid_b = np.repeat(np.arange(nq), nb)
-    blk = np.tile(np.arange(nb), nq)
+    nq, nb, ne, nv = len(qc), len(t["kr"]), pl.elements, lat.counts[1]
+    qext = ball_extents(mw, qc, qr)
+    lo, hi = candidate_range(mw, t["kext"], _q(qext, expand=1), (nq, nb))
     rows, k = _expand(lo.reshape(-1), hi.reshape(-1))
-    qb, bb = qid_b[rows], blk[rows]
-    hit = _ball_power_hits(w, k, t["kc"][bb], t["kr"][bb], qc[qb], qr[qb])
-    pairs = np.unique(np.stack([qb[hit], bb[hit]], axis=1), axis=0)
-    if len(pairs) == 0:
-        return np.zeros((0, 5), np.int64)
-    # rows (i, j) of surviving blocks
-    n_in = t["starts"][pairs[:, 1] + 1] - t["starts"][pairs[:, 1]]
-    pr, off = _expand(np.zeros(len(pairs), np.int64), n_in - 1)
-    row = t["order"][t["starts"][pairs[pr, 1]] + off]
-    qid = pairs[pr, 0]
-    # the row's group-ball range first (cheap), then per element
-    glo, ghi = candidate_range(mw, _take(t["gext"], row), {key: (s[qid], e[qid]) for key, (s, e) in qext.items()},
-                               row.shape)
-    keep = ghi >= glo
-    row, qid = row[keep], qid[keep]
-    ne = pl.elements
-    row_e = np.repeat(row, ne)
-    qid_e = np.repeat(qid, ne)
-    el = np.tile(np.arange(ne), len(row))
-    lo, hi = candidate_range(mw, _take(t["ext"], row_e, el),
-                             {key: (s[qid_e], e[qid_e]) for key, (s, e) in qext.items()}, row_e.shape)
+    qb, bb = rows // nb, rows % nb
+    hit = _moved_ball_hits([(lat.W, k)], t["kc"][bb], t["kr"][bb], qc[qb], qr[qb])
+    pairs = np.unique(qb[hit] * nb + bb[hit])
+    qb, bb = pairs // nb, pairs % nb
+    # W-rows (i, j) of the surviving blocks, their group ranges and moved group balls
+    pr, off = _expand(np.zeros(len(pairs), np.int64), t["starts"][bb + 1] - t["starts"][bb] - 1)
+    row, qid = t["order"][t["starts"][bb[pr]] + off], qb[pr]
+    lo, hi = candidate_range(mw, _take(t["gext"], row), _q(qext, qid), row.shape)
     r, k = _expand(lo, hi)
-    nv = lat.counts[1]
-    rr = row_e[r]
-    return np.stack([qid_e[r], rr // nv, rr % nv, k, el[r]], axis=1)
+    row, qid = row[r], qid[r]
+    hit = _moved_ball_hits([(lat.W, k)], t["gc"][row], t["gr"][row], qc[qid], qr[qid])
+    row, qid, k = row[hit], qid[hit], k[hit]
+    el = np.tile(np.arange(ne), len(row))
+    row, qid, k = np.repeat(row, ne), np.repeat(qid, ne), np.repeat(k, ne)
+    lo, hi = candidate_range(mw, _take(t["ext"], row, el), _q(qext, qid), row.shape)
+    keep = (k >= lo) & (k <= hi)
+    row, qid, k, el = row[keep], qid[keep], k[keep], el[keep]
+    return np.stack([qid, row // nv, row % nv, k, el], axis=1)
 
 
-def _ball_power_hits(s: Similarity, k, c, r, qc, qr) -> np.ndarray:
-    """Does ball S**k (c, r) meet query ball (qc, qr)? (vectorized over rows)."""
-    if len(k) == 0:
+def _moved_ball_hits(moves, c, r, qc, qr) -> np.ndarray:
+    """Does ball S_m**p_m ∘ … ∘ S_1**p_1 (c, r) meet query ball (qc, qr)? ``moves`` lists
+    (similarity, integer powers (N,)) in the order applied; vectorized over N."""
+    if len(c) == 0:
         return np.zeros(0, bool)
-    lo = int(k.min())
-    table = s.power_matrices(np.arange(lo, int(k.max()) + 1))
-    m = table[k - lo]
-    cc = np.einsum("nab,nb->na", m[:, :3, :3], c) + m[:, :3, 3]
-    rr = r * s.factor ** k.astype(float)
-    return ball_ball_interfere(cc, rr * (1 + 1e-9), qc, qr)
+    c, r = c.copy(), r.astype(float).copy()
+    for s, p in moves:
+        lo = int(p.min())
+        m = np.ascontiguousarray(s.power_matrices(np.arange(lo, int(p.max()) + 1))[:, :3])[p - lo]
+        c = (m[:, :, :3] @ c[:, :, None])[:, :, 0] + m[:, :, 3]
+        r = r * s.factor ** p.astype(float)
+    return ball_ball_interfere(c, r * (1 + 1e-9) + 1e-12, qc, qr)
 
 
 def _fingerprint(lat: Lattice) -> tuple:
