@@ -8,9 +8,11 @@ similarity constructors), so thesis Fig. 6.3 reads verbatim.
 
 from __future__ import annotations
 
+import builtins
 import inspect
 import json
 import math
+import sys
 import traceback
 from dataclasses import dataclass
 from importlib import resources
@@ -106,6 +108,24 @@ def _program_line(exc: BaseException, filename: str) -> str:
     return ""
 
 
+def _program_builtins() -> dict:
+    """Builtins for programs. When this core is vendored under another package name (inside
+    the Blender extension), ``import ple...`` in a program resolves to this very package."""
+    names = dict(vars(builtins))
+    if __package__ == "ple":
+        return names
+    real = builtins.__import__
+
+    def vendored_import(name, globals=None, locals=None, fromlist=(), level=0):
+        if level == 0 and (name == "ple" or name.startswith("ple.")):
+            module = real(__package__ + name[3:], globals, locals, fromlist, level)
+            return module if fromlist else sys.modules[__package__]
+        return real(name, globals, locals, fromlist, level)
+
+    names["__import__"] = vendored_import
+    return names
+
+
 def compile_program(source: str, name: str = "<program>") -> Program:
     """Compile program text; a syntax error or a missing ``lattice`` names the problem."""
     try:
@@ -113,6 +133,7 @@ def compile_program(source: str, name: str = "<program>") -> Program:
     except SyntaxError as exc:
         raise PleError(f"{name}:{exc.lineno}: syntax error: {exc.msg}") from None
     ns: dict = dict(API)
+    ns["__builtins__"] = _program_builtins()
     ns["__name__"] = "ple_program"
     try:
         exec(code, ns)  # noqa: S102 - programs are trusted code by design (SPEC §9)
