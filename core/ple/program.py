@@ -129,7 +129,7 @@ def _program_builtins() -> dict:
 def compile_program(source: str, name: str = "<program>") -> Program:
     """Compile program text; a syntax error or a missing ``lattice`` names the problem."""
     try:
-        code = compile(source, name, "exec")
+        code = compile(source, name, "exec", dont_inherit=True)  # not this module's future annotations
     except SyntaxError as exc:
         raise PleError(f"{name}:{exc.lineno}: syntax error: {exc.msg}") from None
     ns: dict = dict(API)
