@@ -1,0 +1,214 @@
+"""ACHoCC: a lattice as an assembly of CHoCCs (CHoCC paper, 001_ §5–6).
+
+Each ball gets an inflated sphere S⁺ (same centre, radius r⁺) beyond which its incident
+beams no longer interfere; each beam meets S⁺ in a contact circle bounding a disk; the
+ball's *junction* (hub) is the CHoCC of its contact circles and each beam element is the
+frustum of the beam's cone between its two disks. Beams are cone-beams: the convex hull of
+their two balls.
+
+Everything here is per hub, in the hub's own frame: centre at the origin, hub ball radius
+``radius``, incident beams given by the unit direction ``dirs`` (S, 3) to the other ball,
+its radius ``other_radii`` (S,) and the centre distance ``lengths`` (S,).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .chocc import Chocc, chocc
+from .errors import PleError
+
+INFLATE = 1e-6  # r⁺ "slightly larger than" the largest pairwise candidate (§5), relative
+CENTRE_MARGIN = 1e-3  # the hub's CNT must contain its centre by this much (unit sphere) for central projection
+MAX_FIX_CIRCLES = 8
+
+
+def beam_profile(radius, other_radii, lengths):
+    """sin and cos of the half-angle phi of each beam's cone (positive: narrowing away from
+    the hub): sin phi = (r − r_other) / L (the cone tangent to both balls)."""
+    s = (radius - other_radii) / lengths
+    if np.any(np.abs(s) >= 1):
+        raise PleError("lattice is not clean: a ball lies inside a beam's other ball (cone-beam undefined)")
+    return s, np.sqrt(1 - s * s)
+
+
+def inflated_radius(radius: float, dirs: np.ndarray, other_radii: np.ndarray, lengths: np.ndarray) -> float:
+    """r⁺ of §5: the largest distance from the centre at which the profiles of two incident
+    beams intersect, in the plane of their axes (line-line intersection), or ``radius``."""
+    s = len(dirs)
+    if s < 2:
+        return float(radius)
+    sphi, cphi = beam_profile(radius, other_radii, lengths)
+    i, j = np.triu_indices(s, 1)
+    d1, d2 = dirs[i], dirs[j]
+    cos_t = np.clip(np.einsum("mi,mi->m", d1, d2), -1, 1)
+    sin_t = np.sqrt(1 - cos_t**2)
+    if np.any(sin_t < 1e-9) and np.any(cos_t[sin_t < 1e-9] > 0):
+        raise PleError("lattice is not clean: two beams of one ball point the same way")
+    # 2D frame (x along d1, y towards d2); profile k: n_k·p = r, n_k = sin(phi_k) d_k + cos(phi_k) w_k,
+    # w_1 = (0, 1), w_2 = the normal of d2 towards d1 = (sin t, -cos t)
+    n1 = np.stack([sphi[i], cphi[i]], axis=1)
+    d2xy = np.stack([cos_t, sin_t], axis=1)
+    w2 = np.stack([sin_t, -cos_t], axis=1)
+    n2 = sphi[j, None] * d2xy + cphi[j, None] * w2
+    det = n1[:, 0] * n2[:, 1] - n1[:, 1] * n2[:, 0]
+    safe = np.abs(det) > 1e-12
+    det = np.where(safe, det, 1.0)
+    px = radius * (n2[:, 1] - n1[:, 1]) / det
+    py = radius * (n1[:, 0] - n2[:, 0]) / det
+    forward = safe & (px > 0) & (px * d2xy[:, 0] + py * d2xy[:, 1] > 0)
+    cand = np.where(forward, np.hypot(px, py), radius)
+    return float(max(radius, cand.max()))
+
+
+def contact_circles(radius, r_plus, dirs, other_radii, lengths):
+    """Half-angles (S,) of the contact circles of the beams on S⁺ (unit-sphere cone angles),
+    and the axial position (S,) and radius (S,) of each contact disk (in world units)."""
+    sphi, cphi = beam_profile(radius, other_radii, lengths)
+    s = np.sqrt(max(r_plus**2 - radius**2, 0.0))
+    x = radius * sphi + s * cphi  # tangent point r n plus s along the profile line
+    y = radius * cphi - s * sphi
+    if np.any(y <= 0) or np.any(x >= lengths):
+        raise PleError("lattice is not clean: a beam is too short for its junction (r+ passes its far end)")
+    return np.arctan2(y, x), x, y
+
+
+@dataclass
+class HubGeometry:
+    """A junction of the ACHoCC on its unit sphere (scale by ``r_plus``).
+
+    ``chocc`` holds the S real contact circles first, then point circles added so that the
+    hub has triangles (n ≤ 2) and contains its centre (the off-centre fix of §6)."""
+
+    radius: float
+    r_plus: float
+    dirs: np.ndarray
+    other_radii: np.ndarray
+    lengths: np.ndarray
+    chocc: Chocc
+    slots: int
+
+    def exit_distance(self, u: np.ndarray, iterations: int = 60) -> np.ndarray:
+        """Distance (V,) from the centre along unit rays ``u`` (V, 3) to the boundary of the
+        exact lattice near this ball: the union of its incident cone-beams (or the ball).
+        Each contains the centre and is convex, so the union is star-shaped from it and one
+        bisection on the union's signed distance finds the exit."""
+        lo = np.zeros(len(u))
+        hi = np.full(len(u), 2.0 * self.r_plus + 2.0 * (self.lengths.max() if len(self.lengths) else 0.0))
+        for _ in range(iterations):
+            mid = 0.5 * (lo + hi)
+            inside = self.signed_distance(u * mid[:, None]) <= 0
+            lo = np.where(inside, mid, lo)
+            hi = np.where(inside, hi, mid)
+        return 0.5 * (lo + hi)
+
+    def signed_distance(self, p: np.ndarray) -> np.ndarray:
+        """Signed distance (V,) from points (V, 3) to the union of the ball and its beams."""
+        d = np.linalg.norm(p, axis=1) - self.radius
+        for k in range(len(self.dirs)):
+            d = np.minimum(d, round_cone_distance(p, np.zeros(3), self.dirs[k] * self.lengths[k],
+                                                  self.radius, self.other_radii[k]))
+        return d
+
+
+def round_cone_distance(p, a, b, ra, rb) -> np.ndarray:
+    """Exact signed distance from points p (V, 3) to the cone-beam hull of balls (a, ra), (b, rb)."""
+    ba = b - a
+    l2 = ba @ ba
+    rr = ra - rb
+    a2 = l2 - rr * rr
+    pa = p - a
+    y = pa @ ba
+    z = y - l2
+    x2 = np.einsum("vi,vi->v", pa * l2 - np.outer(y, ba), pa * l2 - np.outer(y, ba))
+    y2, z2 = y * y * l2, z * z * l2
+    k = np.sign(rr) * rr * rr * x2
+    far = np.sign(z) * a2 * z2 > k
+    near = np.sign(y) * a2 * y2 < k
+    side = (np.sqrt(np.maximum(x2 * a2 / l2, 0)) + y * rr) / l2 - ra
+    return np.where(far, np.sqrt(x2 + z2) / l2 - rb, np.where(near, np.sqrt(x2 + y2) / l2 - ra, side))
+
+
+def _perpendicular(d: np.ndarray) -> np.ndarray:
+    helper = np.array([1.0, 0, 0]) if abs(d[0]) < 0.9 else np.array([0, 1.0, 0])
+    e = np.cross(d, helper)
+    return e / np.linalg.norm(e)
+
+
+def _seed_points(dirs: np.ndarray) -> np.ndarray:
+    """Point circles for hubs with fewer than three beams (CHoCC cases n = 0, 1, 2)."""
+    if len(dirs) == 0:  # an isolated ball: the octahedron
+        return np.concatenate([np.eye(3), -np.eye(3)])
+    if len(dirs) == 1:  # a beam end: a tripod on the far hemisphere
+        d = dirs[0]
+        e1 = _perpendicular(d)
+        e2 = np.cross(d, e1)
+        ang = np.arange(3) * 2 * np.pi / 3
+        return -0.5 * d + 0.866 * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2)
+    if len(dirs) == 2:  # two beams: near the poles of their great circle, tilted away from the
+        # beams (exact poles would put the centre on the face through both)
+        m = np.cross(dirs[0], dirs[1])
+        m = m / np.linalg.norm(m) if np.linalg.norm(m) > 1e-9 else _perpendicular(dirs[0])
+        b = dirs[0] + dirs[1]
+        b = b / np.linalg.norm(b) if np.linalg.norm(b) > 1e-6 else np.cross(dirs[0], m)
+        p = np.stack([m - 0.3 * b, -m - 0.3 * b])
+        return p / np.linalg.norm(p, axis=1, keepdims=True)
+    return np.zeros((0, 3))
+
+
+def _visible_face(c: Chocc) -> tuple[float, np.ndarray, np.ndarray]:
+    """Smallest signed distance of the centre below the planes of the CNT faces (triangles and
+    planar corridor quads), and the centroid and outward normal of the face achieving it."""
+    h = np.cos(c.plane_alphas)
+    i = int(np.argmin(h))
+    best, centroid, normal = float(h[i]), c.points[i].mean(axis=0), c.plane_normals[i]
+    for a, b, t1, t2 in c.corridors:
+        k = [int(np.flatnonzero(c.triangles[t] == x)[0]) for t, x in ((t1, a), (t2, a), (t2, b), (t1, b))]
+        q = np.array([c.points[t1, k[0]], c.points[t2, k[1]], c.points[t2, k[2]], c.points[t1, k[3]]])
+        nrm = np.cross(q[1] - q[3], q[2] - q[0])  # outward: the CCW quad (b0, a0, a1, b1)'s diagonals
+        ln = np.linalg.norm(nrm)
+        if ln < 1e-12:
+            continue
+        nrm = nrm / ln
+        hq = float(nrm @ q[0])
+        if hq < best:
+            best, centroid, normal = hq, q.mean(axis=0), nrm
+    return best, centroid, normal
+
+
+def hub_geometry(radius: float, dirs, other_radii, lengths) -> HubGeometry:
+    """The junction of one ball: r⁺, contact circles, CHoCC with the off-centre fix (§5–6)."""
+    dirs = np.asarray(dirs, float).reshape(-1, 3)
+    other_radii = np.asarray(other_radii, float).reshape(-1)
+    lengths = np.asarray(lengths, float).reshape(-1)
+    r_plus = inflated_radius(radius, dirs, other_radii, lengths) * (1 + INFLATE)
+    alphas, _, _ = contact_circles(radius, r_plus, dirs, other_radii, lengths)
+    gap = np.arccos(np.clip(dirs @ dirs.T, -1, 1)) - (alphas[:, None] + alphas[None, :])
+    np.fill_diagonal(gap, np.inf)
+    while len(dirs) > 1 and gap.min() <= 1e-9:  # caps still touching at r⁺: inflate a little more
+        r_plus *= 1.001
+        alphas, _, _ = contact_circles(radius, r_plus, dirs, other_radii, lengths)
+        gap = np.arccos(np.clip(dirs @ dirs.T, -1, 1)) - (alphas[:, None] + alphas[None, :])
+        np.fill_diagonal(gap, np.inf)
+    normals = np.concatenate([dirs, _seed_points(dirs)])
+    alist = np.concatenate([alphas, np.zeros(len(normals) - len(dirs))])
+    c = chocc(normals, alist)
+    # off-centre fix (§6): while the centre is outside the CNT, add a point circle where the
+    # ray from the centroid of a face visible from the centre, through the centre, meets S⁺
+    for _ in range(MAX_FIX_CIRCLES):
+        h, g, nrm = _visible_face(c)
+        if h > CENTRE_MARGIN:
+            break
+        p = -g / np.linalg.norm(g)
+        if np.any(np.arccos(np.clip(normals @ p, -1, 1)) <= alist + 1e-6):
+            # the ray's exit lies in a cap: use the face's outward normal instead (its cap of
+            # half-angle acos(h) ≥ 90° holds no circle, so the point is free and lifts the face)
+            p = nrm
+        if np.any(np.arccos(np.clip(normals @ p, -1, 1)) <= alist + 1e-6):
+            break
+        normals = np.concatenate([normals, p[None]])
+        alist = np.concatenate([alist, [0.0]])
+        c = chocc(normals, alist)
+    return HubGeometry(float(radius), float(r_plus), dirs, other_radii, lengths, c, len(dirs))
