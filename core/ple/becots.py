@@ -47,7 +47,9 @@ def _unit(v: np.ndarray) -> np.ndarray:
 def _rotate(v: np.ndarray, axis: np.ndarray, angles: np.ndarray) -> np.ndarray:
     """Rodrigues: rotate vectors v (n, 3) about unit ``axis`` by ``angles`` (n,)."""
     c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
-    return v * c + np.cross(axis, v) * s + axis * (v @ axis)[:, None] * (1.0 - c)
+    x, y, z = axis
+    cross = np.stack([y * v[:, 2] - z * v[:, 1], z * v[:, 0] - x * v[:, 2], x * v[:, 1] - y * v[:, 0]], axis=1)
+    return v * c + cross * s + axis * (v @ axis)[:, None] * (1.0 - c)
 
 
 # ===== fields ===================================================================================

@@ -43,8 +43,6 @@ def query(lat: Lattice, centers, radii) -> list:
 
 def query_subset(lat: Lattice, c: np.ndarray, r: np.ndarray, nodes=None, beams=None) -> list:
     """BIQ restricted to template nodes ``nodes`` and beam-patterns ``beams`` (None: all)."""
-    from .biq import _split
-
     info = becots_of(lat)
     lat.validate()
     node_ids = np.arange(len(lat.nodes)) if nodes is None else np.asarray(nodes, dtype=np.int64)
@@ -60,7 +58,24 @@ def query_subset(lat: Lattice, c: np.ndarray, r: np.ndarray, nodes=None, beams=N
         nh[:, 3] = bh[:, 3] = k
         node_hits.append(nh)
         beam_hits.append(bh)
-    return _split(len(c), np.concatenate(node_hits), np.concatenate(beam_hits), "becots")
+    return _split(len(c), np.concatenate(node_hits), np.concatenate(beam_hits))
+
+
+def _split(q: int, node_hits: np.ndarray, beam_hits: np.ndarray) -> list:
+    """Per-query sorted, de-duplicated BIQResults from hit rows (qid, i, j, k, x)."""
+    from .biq import BIQResult
+
+    parts = []
+    for hits in (node_hits, beam_hits):
+        if len(hits):
+            order = np.lexsort(hits.T[::-1])
+            hits = hits[order]
+            keep = np.ones(len(hits), dtype=bool)
+            keep[1:] = np.any(hits[1:] != hits[:-1], axis=1)  # branches may find a shape twice
+            hits = hits[keep]
+        parts.append((hits[:, 1:], np.searchsorted(hits[:, 0], np.arange(q + 1))))
+    (nh, nb), (bh, bb) = parts
+    return [BIQResult(nh[nb[t]:nb[t + 1]], bh[bb[t]:bb[t + 1]], "becots") for t in range(q)]
 
 
 # ----- bounds ---------------------------------------------------------------------------------------
@@ -75,8 +90,11 @@ class _Coords:
             basis = np.stack([fld.tu / nu, fld.tv / nv], axis=1)  # (3, 2): one index step each
             self.dual = np.linalg.pinv(basis)  # (2, 3): index coordinates of P - A
             self.dual_norm = np.linalg.norm(self.dual, axis=1)
+            self.normal = np.cross(fld.tu, fld.tv) / np.linalg.norm(np.cross(fld.tu, fld.tv))
         else:
-            self.k = np.diag([nu, nv]) @ np.linalg.inv(fld.jacobian)  # (rho, theta) -> index space
+            (a, b), (c, d) = fld.jacobian
+            inv = np.array([[d, -b], [-c, a]]) / (a * d - b * c)  # 2x2 inverse of J, Eq. 4.12
+            self.k = np.array([[nu], [nv]]) * inv  # (rho, theta) -> index space
             self.e1, self.e2 = fld.frame
             self.ref = np.linalg.norm(fld.a - fld.apex)
 
@@ -126,6 +144,53 @@ class _Coords:
             rho0 = np.minimum(a0, b0)
         return rho0, np.maximum(a1, b1), mid, half
 
+    def ball_shell(self, c: np.ndarray, r: np.ndarray):
+        """Interval of the *shell coordinate* that every node-group step preserves — the angle
+        from the axis (cone), the distance to the axis (cylinder), the offset from the plane
+        (translation) — over balls: the conical shell test of §8.2."""
+        fld = self.fld
+        if fld.kind == "translation":
+            n = (c - fld.a) @ self.normal
+            return n - r, n + r
+        rel = c - fld.apex
+        h = rel @ fld.axis
+        d = np.linalg.norm(rel, axis=1)
+        if fld.kind == "cylinder":
+            radial = np.sqrt(np.maximum(d * d - h * h, 0.0))
+            return radial - r, radial + r
+        phi = np.arccos(np.clip(h / np.where(d > 0, d, 1.0), -1.0, 1.0))
+        spread = np.where(d > r, np.arcsin(np.minimum(r / np.where(d > 0, d, 1.0), 1.0)), np.inf)
+        return phi - spread, phi + spread
+
+    def beam_shell(self, a, ra, b, rb):
+        """Shell-coordinate interval of cone-beams: the segment's extreme values (the angle
+        from the axis along a segment peaks at one interior t, found in closed form) widened
+        by the larger radius."""
+        fld = self.fld
+        rmax = np.maximum(ra, rb)
+        if fld.kind == "translation":
+            na, nb = (a - fld.a) @ self.normal, (b - fld.a) @ self.normal
+            return np.minimum(na, nb) - rmax, np.maximum(na, nb) + rmax
+        pa, pb = a - fld.apex, b - fld.apex
+        if fld.kind == "cylinder":
+            ra_, rb_ = (np.linalg.norm(p - np.outer(p @ fld.axis, fld.axis), axis=1) for p in (pa, pb))
+            proj_a, proj_b = (p - np.outer(p @ fld.axis, fld.axis) for p in (pa, pb))
+            near = _point_segment_distance(np.zeros_like(proj_a), proj_a, proj_b)
+            return near - rmax, np.maximum(ra_, rb_) + rmax
+        # cos φ(t) = (α + β t) / sqrt(γ + 2 δ t + ε t²) has one critical t* = (αδ - βγ) / (βδ - αε)
+        ab = pb - pa
+        al, be = pa @ fld.axis, ab @ fld.axis
+        ga, de, ep = np.einsum("ij,ij->i", pa, pa), np.einsum("ij,ij->i", pa, ab), np.einsum("ij,ij->i", ab, ab)
+        den = be * de - al * ep
+        tstar = np.clip((al * de - be * ga) / np.where(den != 0, den, 1.0), 0.0, 1.0)
+        ts = np.stack([np.zeros_like(al), np.ones_like(al), np.where(den != 0, tstar, 0.0)])  # (3, n)
+        p = pa[None] + ts[..., None] * ab[None]
+        norm = np.linalg.norm(p, axis=2)
+        phi = np.arccos(np.clip((p @ fld.axis) / np.where(norm > 0, norm, 1.0), -1.0, 1.0))
+        dmin = _point_segment_distance(np.zeros_like(pa), pa, pb)
+        spread = np.where(dmin > rmax, np.arcsin(np.minimum(rmax / np.where(dmin > 0, dmin, 1.0), 1.0)), np.inf)
+        return phi.min(0) - spread, phi.max(0) + spread
+
     def index_box(self, rho0, rho1, lo, hi):
         """Axis-aligned index-space box (n, 4: i0, i1, j0, j1) of log-polar boxes."""
         corners = np.stack([np.stack([rho0, lo]), np.stack([rho0, hi]), np.stack([rho1, lo]),
@@ -166,6 +231,11 @@ def _hits(fld: BeCOTSField, counts, group_counts, tc, tr, node_ids, beams, c, r)
     if len(lim) == 0 or len(c) == 0:
         return np.zeros((0, 5), np.int64), np.zeros((0, 5), np.int64)
     nc, nr = tc[node_ids], tr[node_ids]
+    shells = [co.ball_shell(nc, nr)]
+    if beams:
+        shells.append(co.beam_shell(*_stack(bstart), *_stack(bend)))
+    s_lo, s_hi = (np.concatenate(x) for x in zip(*shells))
+    q_lo, q_hi = co.ball_shell(c, r)
     if fld.kind == "translation":
         boxes = [co.affine_box(nc, nr)]
         if beams:
@@ -200,7 +270,9 @@ def _hits(fld: BeCOTSField, counts, group_counts, tc, tr, node_ids, beams, c, r)
     i1 = np.minimum(lim[None, :, 1], np.floor(qbox[:, None, 1] - shape_box[None, :, 0] + INDEX_SLACK))
     j0 = np.maximum(lim[None, :, 2], np.ceil(qbox[:, None, 2] - shape_box[None, :, 3] - INDEX_SLACK))
     j1 = np.minimum(lim[None, :, 3], np.floor(qbox[:, None, 3] - shape_box[None, :, 2] + INDEX_SLACK))
-    ni = np.maximum(i1 - i0 + 1, 0).astype(np.int64)
+    # conical shell test: a query outside a shape's shell interval meets none of its copies
+    apart = (q_hi[rows][:, None] < s_lo[None]) | (s_hi[None] < q_lo[rows][:, None])
+    ni = np.where(apart, 0, np.maximum(i1 - i0 + 1, 0)).astype(np.int64)
     nj = np.maximum(j1 - j0 + 1, 0).astype(np.int64)
     cnt = (ni * nj).reshape(-1)
     flat = np.repeat(np.arange(cnt.size), cnt)
