@@ -779,16 +779,19 @@ def stack_pmc(lat: Lattice, pts) -> np.ndarray:
     q = np.asarray(pts, float).reshape(-1, 3)
     t = stack_layer_coordinate(lat, q)
     st = info.stack
-    out = np.zeros(len(q), dtype=bool)
-    for n in range(len(q)):
-        lo = int(np.clip(math.floor(t[n]), 0, st.layers - 1))
+    lower = np.clip(np.floor(np.nan_to_num(t)), 0, max(st.layers - 2, 0)).astype(np.int64)
+    per, nn = st.nodes_per_layer, len(lat.nodes)
+    # per pair (lo, lo + 1) of nearest layers: its nodes and the beam-patterns among them, as
+    # positions in the shape list (nodes, then beams); short lists are padded by repetition
+    lists = []
+    for lo in range(max(st.layers - 1, 1)):
         near = {lo, min(lo + 1, st.layers - 1)}
-        nodes = [k * st.nodes_per_layer + x for k in near for x in range(st.nodes_per_layer)]
-        beams = [p for p, b in enumerate(lat.beams)
-                 if b.n1 // st.nodes_per_layer in near and b.n2 // st.nodes_per_layer in near]
-        res = query_subset(lat, q[n:n + 1], np.zeros(1), nodes, beams)[0]
-        out[n] = len(res.nodes) > 0 or len(res.beams) > 0
-    return out
+        lists.append([k * per + x for k in sorted(near) for x in range(per)]
+                     + [nn + p for p, b in enumerate(lat.beams) if b.n1 // per in near and b.n2 // per in near])
+    width = max(len(x) for x in lists)
+    table = np.array([x + [x[0]] * (width - len(x)) for x in lists], dtype=np.int64)
+    res = query_subset(lat, q, np.zeros(len(q)), select=table[lower])
+    return np.array([len(x.nodes) > 0 or len(x.beams) > 0 for x in res], dtype=bool)
 
 
 # ===== constant-radius lattices and connectors (§4.5.3) ==========================================

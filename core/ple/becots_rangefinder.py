@@ -41,8 +41,10 @@ def query(lat: Lattice, centers, radii) -> list:
     return query_subset(lat, c, r, None, None)
 
 
-def query_subset(lat: Lattice, c: np.ndarray, r: np.ndarray, nodes=None, beams=None) -> list:
-    """BIQ restricted to template nodes ``nodes`` and beam-patterns ``beams`` (None: all)."""
+def query_subset(lat: Lattice, c: np.ndarray, r: np.ndarray, nodes=None, beams=None, select=None) -> list:
+    """BIQ restricted to template nodes ``nodes`` and beam-patterns ``beams`` (None: all);
+    ``select`` (q, m) optionally picks, per query, m of those shapes (positions in the list
+    nodes + beams) so that each query costs O(m) whatever the template size."""
     info = becots_of(lat)
     lat.validate()
     node_ids = np.arange(len(lat.nodes)) if nodes is None else np.asarray(nodes, dtype=np.int64)
@@ -54,7 +56,7 @@ def query_subset(lat: Lattice, c: np.ndarray, r: np.ndarray, nodes=None, beams=N
         tc = g.apply_points(lat.template_centers)
         tr = lat.template_radii * g.factor
         nh, bh = _hits(fld, info.counts, info.group_counts, tc, tr, node_ids,
-                       [(p, lat.beams[p]) for p in beam_ids], c, r)
+                       [(p, lat.beams[p]) for p in beam_ids], c, r, select)
         nh[:, 3] = bh[:, 3] = k
         node_hits.append(nh)
         beam_hits.append(bh)
@@ -213,7 +215,7 @@ def _point_segment_distance(p, a, b) -> np.ndarray:
 
 
 # ----- the query ------------------------------------------------------------------------------------
-def _hits(fld: BeCOTSField, counts, group_counts, tc, tr, node_ids, beams, c, r):
+def _hits(fld: BeCOTSField, counts, group_counts, tc, tr, node_ids, beams, c, r, select=None):
     """Hit arrays (qid, i, j, k, x) for one placed field (k is filled in by the caller)."""
     nu, nv = counts
     gu, gv = group_counts
@@ -265,13 +267,16 @@ def _hits(fld: BeCOTSField, counts, group_counts, tc, tr, node_ids, beams, c, r)
         kk = kmin[rows] + (np.arange(len(rows)) - np.repeat(np.cumsum(nk) - nk, nk))
         lift = qmid[rows] + TWO_PI * kk
         qbox = co.index_box(q0[rows], q1[rows], lift - qhalf[rows], lift + qhalf[rows])
+    # the shapes each row tests: all of them, or the query's own selection
+    pick = np.arange(len(lim))[None] if select is None else np.asarray(select, dtype=np.int64)[rows]
+    sb, sl = shape_box[pick], lim[pick]
     # translation RangeFinder per (row, shape): I = [ceil(c - b), floor(d - a)] ∩ limits
-    i0 = np.maximum(lim[None, :, 0], np.ceil(qbox[:, None, 0] - shape_box[None, :, 1] - INDEX_SLACK))
-    i1 = np.minimum(lim[None, :, 1], np.floor(qbox[:, None, 1] - shape_box[None, :, 0] + INDEX_SLACK))
-    j0 = np.maximum(lim[None, :, 2], np.ceil(qbox[:, None, 2] - shape_box[None, :, 3] - INDEX_SLACK))
-    j1 = np.minimum(lim[None, :, 3], np.floor(qbox[:, None, 3] - shape_box[None, :, 2] + INDEX_SLACK))
+    i0 = np.maximum(sl[..., 0], np.ceil(qbox[:, None, 0] - sb[..., 1] - INDEX_SLACK))
+    i1 = np.minimum(sl[..., 1], np.floor(qbox[:, None, 1] - sb[..., 0] + INDEX_SLACK))
+    j0 = np.maximum(sl[..., 2], np.ceil(qbox[:, None, 2] - sb[..., 3] - INDEX_SLACK))
+    j1 = np.minimum(sl[..., 3], np.floor(qbox[:, None, 3] - sb[..., 2] + INDEX_SLACK))
     # conical shell test: a query outside a shape's shell interval meets none of its copies
-    apart = (q_hi[rows][:, None] < s_lo[None]) | (s_hi[None] < q_lo[rows][:, None])
+    apart = (q_hi[rows][:, None] < s_lo[pick]) | (s_hi[pick] < q_lo[rows][:, None])
     ni = np.where(apart, 0, np.maximum(i1 - i0 + 1, 0)).astype(np.int64)
     nj = np.maximum(j1 - j0 + 1, 0).astype(np.int64)
     cnt = (ni * nj).reshape(-1)
@@ -280,7 +285,8 @@ def _hits(fld: BeCOTSField, counts, group_counts, tc, tr, node_ids, beams, c, r)
     njf = nj.reshape(-1)[flat]
     ci = i0.reshape(-1)[flat].astype(np.int64) + off // np.maximum(njf, 1)
     cj = j0.reshape(-1)[flat].astype(np.int64) + off % np.maximum(njf, 1)
-    row, shape = np.divmod(flat, len(lim))
+    row, col = np.divmod(flat, ni.shape[1])
+    shape = np.broadcast_to(pick, ni.shape)[row, col]
     qid = rows[row]
     x, y = ci / nu, cj / nv
     # exact tests: nodes

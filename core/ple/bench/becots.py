@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from ..becots import BeCOTSField, becots_lattice
+from ..becots import BeCOTSField, becots_lattice, stack_lattice, stack_pmc
 from ..becots_rangefinder import query
 from ._timing import best_of
 
@@ -14,6 +14,7 @@ from ._timing import best_of
 def add_arguments(p) -> None:
     p.add_argument("--n", type=int, default=1000, help="nu = nv (default 1000: 10^6 node-groups)")
     p.add_argument("--queries", type=int, default=1000, help="number of BIQs (default 1000)")
+    p.add_argument("--layers", type=int, default=20, help="layers of the stack PMC benchmark (default 20)")
     p.add_argument("--baseline-queries", type=int, default=20,
                    help="queries timed on the general path (it is slow; its time is scaled per query)")
 
@@ -40,7 +41,7 @@ def run(args) -> dict:
     rows = []
     for near in (False, True):
         c, r = _queries(lat, rng, args.queries, near)
-        t_becots = best_of(lambda: query(lat, c, r))
+        t_becots = best_of(lambda c=c, r=r: query(lat, c, r))
         res = query(lat, c, r)
         hits = sum(len(x.nodes) + len(x.beams) for x in res)
         nb = max(1, min(args.baseline_queries, args.queries))
@@ -57,4 +58,22 @@ def run(args) -> dict:
                      "baseline_queries_timed": nb, "baseline_s_scaled_to_all_queries": t_base,
                      "speedup": t_base / t_becots, "baseline_agrees": bool(agree)})
     return {"benchmark": "becots", "groups": lat.groups, "nodes": lat.node_count(), "beams": lat.beam_count(),
-            "machine": "2 shared cores", "rows": rows}
+            "machine": "2 shared cores", "rows": rows, "stack_pmc": _stack_row(fld, args, rng)}
+
+
+def _stack_row(fld, args, rng) -> dict:
+    """PMC on a BeCOTS stack: two nearest layers (§6.3) vs the RangeFinder over every layer."""
+    n = max(2, args.n // 4)
+    lat = stack_lattice(fld, (n, n), args.layers, 0.3, "normal", "triangle", 0.1, links=((0, 0, 0, 0),))
+    nu, nv, _ = lat.counts
+    q = args.queries
+    idx = np.stack([rng.integers(0, nu, q), rng.integers(0, nv, q), np.zeros(q, int),
+                    rng.integers(0, len(lat.nodes), q)], axis=1)
+    c, rad = lat.node_balls(idx)
+    pts = c + rng.normal(size=(q, 3)) * rad[:, None]
+    t_two = best_of(lambda: stack_pmc(lat, pts))
+    t_all = best_of(lambda: query(lat, pts, np.zeros(q)))
+    same = bool(np.array_equal(stack_pmc(lat, pts), np.array([len(x.nodes) + len(x.beams) > 0
+                                                              for x in query(lat, pts, np.zeros(q))])))
+    return {"groups": lat.groups, "layers": args.layers, "points": q, "two_nearest_layers_s": t_two,
+            "all_layers_rangefinder_s": t_all, "speedup": t_all / t_two, "agree": same}
