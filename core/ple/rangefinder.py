@@ -382,6 +382,10 @@ def _templates(lat: Lattice, pl: _Plan) -> dict:
         t["ext_w"] = _element_extents(lat, mw, gi, z, z)[0]
         t["gc"], t["gr"] = _group_ball(bc, br)
         t["gext_v"], t["gext_w"] = ball_extents(mv, t["gc"], t["gr"]), ball_extents(mw, t["gc"], t["gr"])
+        axis = _invariant_axis(lat, pl)
+        if axis is not None:  # distance to the axis is kept by V and W: bound each i-sheet
+            rho = _axis_distance(axis, t["gc"])
+            t["axis"], t["rho"] = axis, (np.maximum(rho - t["gr"], 0.0), rho + t["gr"])
         nw = lat.counts[2]
         if nv * nw <= MAX_VW_TABLE:  # W**k V**j (they commute), as 3x4 rows indexed j * nw + k
             vw = lat.W.power_matrices(np.arange(nw))[None, :, :3] @ lat.V.power_matrices(np.arange(nv))[:, None]
@@ -438,6 +442,10 @@ def _u_candidates(lat: Lattice, t: dict, pl: _Plan, qc, qr) -> np.ndarray:
     qv, qw = ball_extents(mv, qc, qr), ball_extents(mw, qc, qr)
     jlo, jhi = candidate_range(mv, t["gext_v"], _q(qv, expand=1), (nq, nu))
     klo, khi = candidate_range(mw, t["gext_w"], _q(qw, expand=1), (nq, nu))
+    if "axis" in t:  # i-sheets whose distance band to the common axis misses the query's
+        rho, qrr = _axis_distance(t["axis"], qc)[:, None], qr[:, None] * (1 + 1e-9) + 1e-12
+        miss = (rho + qrr < t["rho"][0][None] * (1 - 1e-9)) | (rho - qrr > t["rho"][1][None] * (1 + 1e-9))
+        jhi = np.where(miss, -1, jhi)
     ii = np.tile(np.arange(nu), nq)
     g = _boxes([(ii, ii), (jlo.reshape(-1), jhi.reshape(-1)), (klo.reshape(-1), khi.reshape(-1))],
                np.repeat(np.arange(nq), nu), np.zeros(nq * nu, np.int64))
@@ -458,6 +466,28 @@ def _u_candidates(lat: Lattice, t: dict, pl: _Plan, qc, qr) -> np.ndarray:
         keep = (g[:, col] >= lo) & (g[:, col] <= hi)
         g, el = g[keep], el[keep]
     return g
+
+
+def _axis_distance(axis, x: np.ndarray) -> np.ndarray:
+    point, direction = axis
+    rel = x - point
+    return np.linalg.norm(rel - (rel @ direction)[..., None] * direction, axis=-1)
+
+
+def _invariant_axis(lat: Lattice, pl: _Plan):
+    """A line whose distance function both V and W preserve (e.g. V turns about it and W
+    slides along it), or None; checked on sample points. Used to cull U indices in the
+    O(ū) path: every element of sheet i stays within its group ball's distance band."""
+    pts = _sample_points(lat)
+    for m in pl.maps[1:]:
+        if m.theta is None:
+            continue
+        axis = (m.point, m.axis)
+        before = _axis_distance(axis, pts)
+        if all(np.allclose(_axis_distance(axis, s.apply_points(pts)), before, rtol=1e-9, atol=1e-9 * (1 + before.max()))
+               for s, c in ((lat.V, lat.counts[1]), (lat.W, lat.counts[2])) if c > 1):
+            return axis
+    return None
 
 
 def _boxes(ranges, qid, el) -> np.ndarray:
