@@ -95,7 +95,10 @@ class BeCOTSField:
             if (ku, kv) != (0, 0):
                 raise PleError("branch: a translation field (parallelogram corners) has no rotation to wrap")
             return BeCOTSField("translation", A, tu=D - A, tv=B - A)
-        fld = _field_with_axis(A, B, C, D, _axis_from_corners(A, B, C, D, sv), ku, kv)
+        axis = _axis_from_corners(A, B, C, D, sv)
+        if axis @ np.cross(D - A, B - A) < 0:  # orient T with the u × v normal at A: Raise(z > 0) goes that way
+            axis = -axis
+        fld = _field_with_axis(A, B, C, D, axis, ku, kv)
         miss = np.abs(fld.points(np.array([0.0, 0.0, 1.0, 1.0]), np.array([0.0, 1.0, 1.0, 0.0])) - np.array(pts))
         worst = float(np.linalg.norm(miss, axis=1).max())
         if not worst <= CORNER_TOL * scale:
