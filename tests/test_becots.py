@@ -384,3 +384,16 @@ def test_cli_eval_map_inverse(tmp_path: Path):
                cwd=tmp_path)
     assert bad.returncode == 2 and "coincide" in bad.stderr and "Traceback" not in bad.stderr
     assert not (tmp_path / "q.npy").exists()
+
+
+def test_biq_queries_on_the_axis_and_around_the_apex(rng):
+    # special cases of the log-polar bound: balls touching the axis (full circle of angles) and
+    # balls containing the apex F (unbounded rho); the lattice wraps around its cone
+    f = BeCOTSField.from_controls((0.5, 4.0, 0.4, 2.0), beta=0.3)
+    lat = becots_lattice(f, (10, 8), "kagome", 0.2)
+    t = rng.uniform(-3, 3, 120)
+    c = f.apex + t[:, None] * f.axis + rng.normal(size=(120, 3)) * 0.3
+    r = rng.uniform(0.1, 3, 120)
+    got, ref = biq.query(lat, c, r), biq.query(lat, c, r, method="naive")
+    assert all(np.array_equal(g.nodes, e.nodes) and np.array_equal(g.beams, e.beams) for g, e in zip(got, ref))
+    assert sum(len(e.nodes) for e in ref) > 100
