@@ -184,3 +184,21 @@ def test_every_preset_builds_and_evaluates(name):
     ev = lat.evaluate(small)
     assert len(ev.center) == small.groups * len(lat.nodes)
     assert np.isfinite(ev.center).all() and (ev.radius > 0).all()
+
+
+def test_program_filters_apply_in_eval(tmp_path):
+    """A program may attach a filter (thesis §9); ple eval keeps exactly the accepted nodes."""
+    from ple.cli import main
+    from ple.filters import Stencil
+    lat = load_lattice("hier_stencil", {"n": 8, "period": 3})
+    keep = Stencil.named("edges", 3, 1).node_mask(lat, lat.evaluate().node_index, None, None)
+    out = tmp_path / "e.npz"
+    assert main(["eval", "hier_stencil", "--param", "n=8", "--param", "period=3", "--out", str(out)]) == 0
+    z = np.load(out)
+    full = lat.evaluate()
+    assert sorted(map(tuple, z["node_index"])) == sorted(map(tuple, full.node_index[keep]))
+    kept = {tuple(x) for x in z["node_index"]}
+    for a, b in z["beam_nodes"]:
+        assert tuple(z["node_index"][a]) in kept and tuple(z["node_index"][b]) in kept
+    with pytest.raises(PleError, match="filter"):
+        lat.set_filter(42)

@@ -29,7 +29,7 @@ THUMBS = ROOT / "presets" / "thumbnails"
 API_MODULES = ["similarity", "geometry", "lattice", "program", "ir", "elements", "rangefinder", "biq", "measure",
                "filters", "implicit", "stream", "chocc", "achocc", "tessellate", "export", "becots",
                "becots_rangefinder", "cage", "snippets", "batch", "preview"]
-THUMB_MAX_GROUPS = 12  # per axis: a thumbnail shows a corner region of very large lattices
+THUMB_MAX_GROUPS = 64_000  # a thumbnail of a larger lattice shows a corner region of it
 
 
 def api_reference() -> str:
@@ -106,7 +106,13 @@ def _shrink(png: Path) -> None:
 
 
 def thumbnail_region(lat) -> str:
-    return ",".join(f"0:{min(c, THUMB_MAX_GROUPS)}" for c in lat.counts)
+    """The whole lattice, or a corner of it with at most THUMB_MAX_GROUPS groups (the
+    largest direction is cut first)."""
+    counts = list(lat.counts)
+    while counts[0] * counts[1] * counts[2] > THUMB_MAX_GROUPS:
+        big = counts.index(max(counts))
+        counts[big] = max(1, int(counts[big] * 0.9))
+    return ",".join(f"0:{c}" for c in counts)
 
 
 def preset_preview(name: str):
@@ -139,7 +145,7 @@ def build_thumbnails(force: bool = False) -> list[str]:
 
 def presets_page() -> str:
     out = ["# Preset library", "", "`ple presets` lists them; load one by name anywhere a LATTICE is expected.",
-           "Thumbnails show at most the first 12 groups per direction.", "",
+           "Thumbnails of lattices beyond 64,000 node-groups show a corner region.", "",
            "| preset | purpose | counts | picture |", "|---|---|---|---|"]
     for name in preset_names():
         lat = load_lattice(name)

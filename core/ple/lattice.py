@@ -147,6 +147,7 @@ class Lattice:
         self.w = Direction()
         self.placement = Similarity()
         self.becots = None  # set by ple.becots for corner-operated slabs
+        self.filter = None  # an optional ple.filters.Filter deciding which nodes survive (thesis §9)
         self.meta: dict = {}
 
     # ----- building -----------------------------------------------------------------------
@@ -236,6 +237,15 @@ class Lattice:
 
         set_becots(self, a, b, c, d, counts, **options)
 
+    def set_filter(self, node_filter) -> None:
+        """Keep only the nodes a filter accepts (stencil, LiL, implicit field; thesis §9); beams
+        survive where both nodes do. Evaluation of the raw program is unchanged: commands
+        apply the filter (``ple.filters.FilteredLattice``)."""
+        if node_filter is not None and not callable(getattr(node_filter, "node_mask", None)):
+            raise PleError(f"filter must be a ple filter (Stencil, LiL, ImplicitFilter, …), "
+                           f"got {type(node_filter).__name__}")
+        self.filter = node_filter
+
     def _check_size(self) -> None:
         if self.groups > MAX_GROUPS:
             raise PleError(f"{self.groups:.3g} node-groups is absurdly large (limit {MAX_GROUPS:.0e})")
@@ -245,7 +255,7 @@ class Lattice:
         other.nodes = [Node(n.center.copy(), n.radius, n.name) for n in self.nodes]
         other.beams = list(self.beams)
         other.u, other.v, other.w, other.placement = self.u, self.v, self.w, self.placement
-        other.becots, other.meta = self.becots, dict(self.meta)
+        other.becots, other.filter, other.meta = self.becots, self.filter, dict(self.meta)
         return other
 
     # ----- shape ----------------------------------------------------------------------------

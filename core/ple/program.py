@@ -54,6 +54,14 @@ API = {
 }
 
 
+def _filter_api() -> dict:
+    """Filter constructors for programs (thesis §9): stencils, LiL, implicit fields."""
+    from . import filters, implicit
+    return {"Stencil": filters.Stencil, "LiL": filters.LiL, "FilteredLattice": filters.FilteredLattice,
+            "ImplicitFilter": implicit.ImplicitFilter, "TPMSField": implicit.TPMSField,
+            "FourierField": implicit.FourierField}
+
+
 @dataclass
 class Program:
     """A compiled program: its source, the ``lattice`` function and its parameters."""
@@ -132,8 +140,8 @@ def compile_program(source: str, name: str = "<program>") -> Program:
         code = compile(source, name, "exec", dont_inherit=True)  # not this module's future annotations
     except SyntaxError as exc:
         raise PleError(f"{name}:{exc.lineno}: syntax error: {exc.msg}") from None
-    ns: dict = dict(API)
-    ns["__builtins__"] = _program_builtins()
+    ns: dict = {**API, **_filter_api()}
+    ns["__builtins__"] = _program_builtins()  # vendored core: "import ple" means this package
     ns["__name__"] = "ple_program"
     try:
         exec(code, ns)  # noqa: S102 - programs are trusted code by design (SPEC §9)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..errors import PleError
-from .common import add_lattice_args, lattice_from_args, save_npz
+from .common import add_lattice_args, evaluate_lattice, lattice_from_args, save_npz
 
 MAX_EVAL_GROUPS = 50_000_000
 
@@ -24,7 +24,7 @@ def run(args) -> int:
     if region.groups * len(lat.nodes) > MAX_EVAL_GROUPS:
         raise PleError(f"region {region} has {region.groups * len(lat.nodes):,} nodes; "
                        "choose a smaller --region (or stream with ple filter)")
-    ev = lat.evaluate(region)
+    ev = evaluate_lattice(lat, region)
     save_npz(args.out, ev.arrays())
     print(f"wrote {args.out}: {len(ev.center):,} nodes, {len(ev.beam_nodes):,} beams")
     return 0
