@@ -118,7 +118,8 @@ def ball_extents(rm: RowMap, c, r) -> dict:
     c, r = np.asarray(c, float), np.asarray(r, float)
     out = {}
     if rm.a is not None:
-        m = (c - rm.origin) @ rm.a
+        m = c @ rm.a
+        m -= rm.origin @ rm.a
         w = r * np.linalg.norm(rm.a)
         out["t"] = (m - w, m + w)
     if rm.log_d is not None:
@@ -178,16 +179,21 @@ def candidate_range(rm: RowMap, tmpl: dict, q: dict, shape: tuple = ()):
     shape = np.broadcast_shapes(shape, *[np.shape(x[0]) for x in list(tmpl.values()) + list(q.values())])
     lo = np.zeros(shape)
     hi = np.full(shape, float(rm.count - 1))
+    # fmax/fmin ignore NaN (no information from that map: the range stays as it was)
     with np.errstate(invalid="ignore"):
         for key in ("t", "d"):
             if key in tmpl:
-                lo = np.maximum(lo, np.ceil(q[key][0] - tmpl[key][1] - RANGE_SLACK))
-                hi = np.minimum(hi, np.floor(q[key][1] - tmpl[key][0] + RANGE_SLACK))
+                x = np.subtract(q[key][0], tmpl[key][1])
+                x -= RANGE_SLACK
+                np.fmax(lo, np.ceil(x, out=x), out=lo)
+                x = np.subtract(q[key][1], tmpl[key][0])
+                x += RANGE_SLACK
+                np.fmin(hi, np.floor(x, out=x), out=hi)
         if "r" in tmpl:
             lo, hi = _rotation_range(rm, q["r"][0] - tmpl["r"][1] - RANGE_SLACK,
                                      q["r"][1] - tmpl["r"][0] + RANGE_SLACK, lo, hi)
-    lo = np.clip(np.where(np.isnan(lo), 0, lo), 0, rm.count)
-    hi = np.clip(np.where(np.isnan(hi), rm.count - 1, hi), -1, rm.count - 1)
+    np.fmin(lo, rm.count, out=lo)
+    np.fmax(hi, -1, out=hi)
     return lo.astype(np.int64), hi.astype(np.int64)
 
 
