@@ -20,7 +20,7 @@ import numpy as np
 from .chocc import Chocc, chocc
 from .errors import PleError
 
-INFLATE = 1e-6  # r⁺ "slightly larger than" the largest pairwise candidate (§5), relative
+INFLATE = 1e-4  # r⁺ "slightly larger than" the largest pairwise candidate (§5), relative
 CENTRE_MARGIN = 1e-3  # the hub's CNT must contain its centre by this much (unit sphere) for central projection
 MAX_FIX_CIRCLES = 8
 

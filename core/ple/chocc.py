@@ -26,9 +26,10 @@ from .errors import PleError
 
 # Tie-breaking perturbation of the cone half-angles during plane rolling: four circles
 # tangent to one plane (common in symmetric lattices) make the rolling choice ambiguous;
-# a deterministic 1e-9 perturbation makes it a strict choice. Geometry uses exact angles.
-TIE_PERTURBATION = 1e-9
+# a deterministic 1e-6 perturbation makes it a strict choice. Geometry uses exact angles.
+TIE_PERTURBATION = 1e-6
 SUPPORT_TOL = 1e-10  # a supporting plane may cut a circle's cone by at most this (cosine units)
+ROLL_SLACK = 1e-9  # turns down to -1e-9 rad count as rolling forward (coplanar neighbours)
 NEAR_COPLANAR = 1e-3  # |N1·(N2×N3)| below this: Appendix A divides by ~0, use Eq. A.3's case
 
 
@@ -142,11 +143,16 @@ def roll_planes(normals: np.ndarray, alphas: np.ndarray) -> tuple[np.ndarray, np
     (an oriented triple names one plane), not by the circle pair alone: two circles can share
     two corridors when a small circle sits in the gap between them."""
     n = len(normals)
-    alphas = alphas + TIE_PERTURBATION * (np.arange(n) + 1) / n
+    gap = np.arccos(np.clip(normals @ normals.T, -1, 1)) - (alphas[:, None] + alphas[None, :])
+    np.fill_diagonal(gap, np.inf)
+    # the perturbation must stay well below the narrowest gap between caps (near-tangent circles)
+    # pseudo-random, not affine in the index: an affine perturbation keeps symmetric ties
+    wiggle = 0.5 + 0.5 * ((np.sin(np.arange(1, n + 1) * 12.9898) * 43758.5453) % 1.0)
+    alphas = alphas + min(TIE_PERTURBATION, 0.01 * gap.min()) * wiggle
     others = np.arange(1, n)
     jj, kk = np.triu_indices(len(others), 1)
     triples = np.stack([np.zeros(len(jj), int), others[jj], others[kk]], axis=1)
-    pn, pa, _, ccw = _candidates(normals, alphas, triples)
+    pn, pa, pts, ccw = _candidates(normals, alphas, triples)
     viol = _support_violation(pn, pa, normals, alphas)
     score = np.where((viol <= SUPPORT_TOL) & np.isfinite(pa), pn @ normals[0], -np.inf)
     best = np.unravel_index(np.argmax(score), score.shape)
@@ -156,6 +162,8 @@ def roll_planes(normals: np.ndarray, alphas: np.ndarray) -> tuple[np.ndarray, np
     tri0 = (int(t0[0]), int(t0[1]), int(t0[2])) if ccw[best] > 0 else (int(t0[0]), int(t0[2]), int(t0[1]))
     triangles = [tri0]
     planes = [pn[best]]
+    p0 = pts[best]
+    points = [p0 if ccw[best] > 0 else p0[[0, 2, 1]]]
     index = {_cyclic_key(tri0): 0}
     twin: dict[tuple[int, int], tuple[int, int]] = {}
     stack = [(0, 2), (0, 1), (0, 0)]
@@ -168,10 +176,18 @@ def roll_planes(normals: np.ndarray, alphas: np.ndarray) -> tuple[np.ndarray, np
         a, b = triangles[ti][k], triangles[ti][(k + 1) % 3]
         ls = np.array([x for x in range(n) if x != a and x != b])
         tr = np.stack([np.full(len(ls), b), np.full(len(ls), a), ls], axis=1)
-        pn, pa, _, ccw = _candidates(normals, alphas, tr)
+        pn, pa, pts, ccw = _candidates(normals, alphas, tr)
         viol = _support_violation(pn, pa, normals, alphas)
         ok = (ccw > 0) & (viol <= SUPPORT_TOL) & np.isfinite(pa)
-        score = np.where(ok, pn @ planes[ti], -np.inf)
+        # roll over the edge: the normal turns from n_T towards o = e × n_T (away from the
+        # triangle's interior); take the least positive turn. Measuring the signed turn (not
+        # the unsigned angle between normals) separates the two ways around a symmetric hinge.
+        nt = planes[ti]
+        e = points[ti][(k + 1) % 3] - points[ti][k]
+        o = np.cross(e, nt)
+        o /= max(np.linalg.norm(o), 1e-300)
+        turn = (np.arctan2(pn @ o, pn @ nt) + ROLL_SLACK) % (2 * np.pi)
+        score = np.where(ok, -turn, -np.inf)
         best = np.unravel_index(np.argmax(score), score.shape)
         if not np.isfinite(score[best]):
             raise PleError("CHoCC: plane rolling found no next triangle (degenerate circles?)")
@@ -183,6 +199,7 @@ def roll_planes(normals: np.ndarray, alphas: np.ndarray) -> tuple[np.ndarray, np
             index[key] = len(triangles)
             triangles.append(new)
             planes.append(pn[best])
+            points.append(pts[best])
             stack += [(index[key], 2), (index[key], 1)]
         t2 = index[key]
         k2 = next(c for c in range(3) if triangles[t2][c] == b and triangles[t2][(c + 1) % 3] == a)
