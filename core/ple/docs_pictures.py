@@ -37,13 +37,57 @@ def steady_rows():
 def cage():
     from .cage import cage_curves
     lat = load_lattice("fig6_3")
-    curves = cage_curves(lat, interior=2)
+    return [_lattice_mesh(lat, "0:3,0:4,0:5")], _padded(cage_curves(lat, interior=2))
+
+
+def _padded(curves: list) -> np.ndarray:
     width = max(len(c) for c in curves)
-    padded = np.stack([np.vstack([c, np.repeat(c[-1:], width - len(c), 0)]) for c in curves])
-    return [_lattice_mesh(lat, "0:3,0:4,0:5")], padded
+    return np.stack([np.vstack([c, np.repeat(c[-1:], width - len(c), 0)]) for c in curves])
 
 
-PICTURES = {"steady_rows": steady_rows, "cage": cage}
+def _arrows(frames: list[np.ndarray], scale: float):
+    """Frames (4x4, columns X, Y, Z, O) drawn as three thin beams each (a ball at the origin)."""
+    centers, radii, beams = [], [], []
+    for m in frames:
+        o = m[:3, 3]
+        base = len(centers)
+        centers.append(o)
+        radii.append(0.08 * scale)
+        for axis in range(3):
+            centers.append(o + m[:3, axis] / np.linalg.norm(m[:3, axis]) * scale)
+            radii.append(0.03 * scale)
+            beams.append((base, base + axis + 1))
+    return balls_beams_mesh(np.array(centers), np.array(radii), np.array(beams), beam_scale=0.5)
+
+
+def frames():
+    """The handles of the GUI: placement G and the U, V, W frames (cumulative) over the cage."""
+    from .cage import base_frame, cage_curves, direction_frame
+    lat = load_lattice("warped")
+    g = lat.placement.matrix
+    handles = [g @ base_frame(lat)] + [g @ direction_frame(lat, a, cumulative=True) for a in "uvw"]
+    return [_lattice_mesh(lat, "0:4,0:4,0:4"), _arrows(handles, 3.0)], _padded(cage_curves(lat, interior=0))
+
+
+def becots_corners():
+    """A BeCOTS slab and its four corners A, B, C, D (thesis §4.2) as large balls."""
+    lat = load_lattice("becots_triangle")
+    corners = lat.becots.field.corners + lat.template_centers[0]
+    return [_lattice_mesh(lat), balls_beams_mesh(corners, np.full(4, 0.3), np.zeros((0, 2), int))], None
+
+
+def lil():
+    """Lattice-in-Lattice: the fine nodes kept (orange) where they meet the coarse lattice (blue)."""
+    from .filters import FilteredLattice
+    lat = load_lattice("hier_lil2", {"n": 20, "coarse_cells": 2})
+    kept = FilteredLattice(lat, lat.filter).evaluate()
+    coarse = lat.filter.coarse.evaluate()
+    return [balls_beams_mesh(kept.center, kept.radius, kept.beam_nodes, beam_scale=0.6),
+            balls_beams_mesh(coarse.center, coarse.radius * 0.25, coarse.beam_nodes)], None
+
+
+PICTURES = {"steady_rows": steady_rows, "cage": cage, "frames": frames, "becots_corners": becots_corners,
+            "lil": lil}
 
 
 def build_pictures(force: bool = False) -> list[str]:
