@@ -90,19 +90,28 @@ class HubGeometry:
     chocc: Chocc
     slots: int
 
-    def exit_distance(self, u: np.ndarray, iterations: int = 60) -> np.ndarray:
+    def exit_distance(self, u: np.ndarray) -> np.ndarray:
         """Distance (V,) from the centre along unit rays ``u`` (V, 3) to the boundary of the
         exact lattice near this ball: the union of its incident cone-beams (or the ball).
-        Each contains the centre and is convex, so the union is star-shaped from it and one
-        bisection on the union's signed distance finds the exit."""
-        lo = np.zeros(len(u))
-        hi = np.full(len(u), 2.0 * self.r_plus + 2.0 * (self.lengths.max() if len(self.lengths) else 0.0))
-        for _ in range(iterations):
-            mid = 0.5 * (lo + hi)
-            inside = self.signed_distance(u * mid[:, None]) <= 0
-            lo = np.where(inside, mid, lo)
-            hi = np.where(inside, hi, mid)
-        return 0.5 * (lo + hi)
+        Each cone-beam contains the centre and is convex, so the union is star-shaped from
+        it and the exit is the largest of the per-beam exits, each in closed form: on the
+        hub ball's cap (cos < sin phi), on the cone (up to the far tangent circle), or on
+        the far ball."""
+        t = np.full(len(u), self.radius)
+        if not len(self.dirs):
+            return t
+        r = self.radius
+        sphi, cphi = beam_profile(r, self.other_radii, self.lengths)
+        cu = np.clip(u @ self.dirs.T, -1, 1)  # (V, S)
+        su = np.sqrt(1 - cu**2)
+        den = sphi * cu + cphi * su
+        t_cone = r / np.where(den > 0, den, np.inf)
+        x_far = self.lengths + self.other_radii * sphi  # axial end of the cone part
+        ln = self.lengths
+        disc = np.maximum(ln**2 * cu**2 - ln**2 + self.other_radii**2, 0)
+        t_ball = ln * cu + np.sqrt(disc)
+        t_k = np.where(cu <= sphi, r, np.where(t_cone * cu <= x_far, t_cone, t_ball))
+        return np.maximum(t, t_k.max(axis=1))
 
     def signed_distance(self, p: np.ndarray) -> np.ndarray:
         """Signed distance (V,) from points (V, 3) to the union of the ball and its beams."""
@@ -184,6 +193,9 @@ def hub_geometry(radius: float, dirs, other_radii, lengths) -> HubGeometry:
     other_radii = np.asarray(other_radii, float).reshape(-1)
     lengths = np.asarray(lengths, float).reshape(-1)
     r_plus = inflated_radius(radius, dirs, other_radii, lengths) * (1 + INFLATE)
+    if len(dirs):  # a beam widening away from the ball meets S⁺ in front of the centre only beyond r / cos(phi)
+        _, cphi = beam_profile(radius, other_radii, lengths)
+        r_plus = max(r_plus, radius / cphi.min() * (1 + 1e-2))
     alphas, _, _ = contact_circles(radius, r_plus, dirs, other_radii, lengths)
     gap = np.arccos(np.clip(dirs @ dirs.T, -1, 1)) - (alphas[:, None] + alphas[None, :])
     np.fill_diagonal(gap, np.inf)

@@ -71,28 +71,26 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
     rings = [r.copy() for r in mesh.rings]
     frames = _frames(c.normals)
     for _ in range(levels):
-        arc = {}
-        for ci in range(real):
-            ring = rings[ci]
-            for a, b in zip(ring, np.roll(ring, -1)):
-                arc[(int(a), int(b))] = ci
-        e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-        key = np.sort(e, axis=1)
-        uniq, inv = np.unique(key, axis=0, return_inverse=True)
-        inv = inv.reshape(-1)
         nv = len(verts)
-        mids = 0.5 * (verts[uniq[:, 0]] + verts[uniq[:, 1]])
+        e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+        ekey = np.minimum(e[:, 0], e[:, 1]) * nv + np.maximum(e[:, 0], e[:, 1])
+        uniq, inv = np.unique(ekey, return_inverse=True)
+        inv = inv.reshape(-1)
+        ua, ub = uniq // nv, uniq % nv
+        mids = 0.5 * (verts[ua] + verts[ub])
         new_ids = nv + np.arange(len(uniq))
         is_arc = np.zeros(len(uniq), bool)
-        ring_insert = {}
-        for q, (a, b) in enumerate(uniq):
-            a, b = int(a), int(b)
-            for x, y in ((a, b), (b, a)):
-                ci = arc.get((x, y))
-                if ci is not None:
-                    is_arc[q] = True
-                    mids[q] = _arc_mid(verts[x], verts[y], c.normals[ci], c.alphas[ci], r_plus, frames, ci)
-                    ring_insert[(ci, x)] = new_ids[q]
+        for ci in range(real):
+            ring = rings[ci]
+            if len(ring) < 2:
+                continue
+            x, y = ring, np.roll(ring, -1)
+            q = np.searchsorted(uniq, np.minimum(x, y) * nv + np.maximum(x, y))
+            is_arc[q] = True
+            mids[q] = _arc_mids(verts[x], verts[y], c.normals[ci], c.alphas[ci], r_plus, frames, ci)
+            out = np.empty(2 * len(ring), np.int64)
+            out[0::2], out[1::2] = ring, new_ids[q]
+            rings[ci] = out
         proj = ~is_arc
         if proj.any():
             u = mids[proj] / np.linalg.norm(mids[proj], axis=1, keepdims=True)
@@ -102,13 +100,6 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
         v0, v1, v2 = faces.T
         faces = np.concatenate([np.stack([v0, m[:, 0], m[:, 2]], 1), np.stack([m[:, 0], v1, m[:, 1]], 1),
                                 np.stack([m[:, 2], m[:, 1], v2], 1), m])
-        for ci in range(real):
-            out = []
-            for a in rings[ci]:
-                out.append(a)
-                if (ci, int(a)) in ring_insert:
-                    out.append(ring_insert[(ci, int(a))])
-            rings[ci] = np.array(out, dtype=np.int64)
     return verts, faces, rings
 
 
@@ -119,15 +110,14 @@ def _frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return e1, np.cross(normals, e1)
 
 
-def _arc_mid(pa, pb, n, alpha, r_plus, frames, ci) -> np.ndarray:
-    """Midpoint of the clockwise arc (about n) from pa to pb on the circle (n, alpha) of S⁺."""
+def _arc_mids(pa, pb, n, alpha, r_plus, frames, ci) -> np.ndarray:
+    """Midpoints of the clockwise arcs (about n) from pa (k, 3) to pb on circle (n, alpha) of S⁺."""
     e1, e2 = frames[0][ci], frames[1][ci]
     ta, tb = np.arctan2(pa @ e2, pa @ e1), np.arctan2(pb @ e2, pb @ e1)
     d = (ta - tb) % (2 * np.pi)
-    if d > 2 * np.pi - 1e-9:
-        d = 0.0
+    d[d > 2 * np.pi - 1e-9] = 0.0
     t = ta - d / 2
-    return r_plus * (np.cos(alpha) * n + np.sin(alpha) * (np.cos(t) * e1 + np.sin(t) * e2))
+    return r_plus * (np.cos(alpha) * n + np.sin(alpha) * (np.cos(t)[:, None] * e1 + np.sin(t)[:, None] * e2))
 
 
 def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, levels: int,
