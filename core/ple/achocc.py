@@ -105,7 +105,7 @@ class HubGeometry:
         cu = np.clip(u @ self.dirs.T, -1, 1)  # (V, S)
         su = np.sqrt(1 - cu**2)
         den = sphi * cu + cphi * su
-        t_cone = r / np.where(den > 0, den, np.inf)
+        t_cone = np.where(den > 0, r / np.where(den > 0, den, 1.0), np.inf)
         x_far = self.lengths + self.other_radii * sphi  # axial end of the cone part
         ln = self.lengths
         disc = np.maximum(ln**2 * cu**2 - ln**2 + self.other_radii**2, 0)
