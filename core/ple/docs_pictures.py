@@ -86,8 +86,20 @@ def lil():
             balls_beams_mesh(coarse.center, coarse.radius * 0.25, coarse.beam_nodes)], None
 
 
+def chocc():
+    """CNT, CHoCC and refined tessellations of the same octet cell, side by side."""
+    from .tessellate import tessellate
+    lat = load_lattice("octet", {"n": 1, "radius": 0.08})
+    meshes = []
+    for n, style in enumerate(("cnt", "chocc", "refined")):
+        m = tessellate(lat, style=style)
+        m.apply_translation([1.6 * n, 0, 0])
+        meshes.append(m)
+    return meshes, None
+
+
 PICTURES = {"steady_rows": steady_rows, "cage": cage, "frames": frames, "becots_corners": becots_corners,
-            "lil": lil}
+            "lil": lil, "chocc": chocc}
 
 
 def build_pictures(force: bool = False) -> list[str]:
