@@ -397,3 +397,11 @@ def test_biq_queries_on_the_axis_and_around_the_apex(rng):
     got, ref = biq.query(lat, c, r), biq.query(lat, c, r, method="naive")
     assert all(np.array_equal(g.nodes, e.nodes) and np.array_equal(g.beams, e.beams) for g, e in zip(got, ref))
     assert sum(len(e.nodes) for e in ref) > 100
+
+
+def test_stale_becots_falls_back_to_the_general_path(rng):
+    lat = becots_lattice(BeCOTSField.from_corners(*CORNERS), (6, 5), "triangle", 0.1).with_counts(4, 4, 1)
+    c, r = rng.uniform(*lat.bounds(), (40, 3)), np.full(40, 0.5)
+    got, ref = biq.query(lat, c, r), biq.query(lat, c, r, method="naive")
+    assert all(g.path != "becots" for g in got)
+    assert all(np.array_equal(g.nodes, e.nodes) and np.array_equal(g.beams, e.beams) for g, e in zip(got, ref))

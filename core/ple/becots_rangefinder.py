@@ -26,6 +26,7 @@ import numpy as np
 
 from .becots import TWO_PI, BeCOTSField, becots_of
 from .elements import ball_ball_interfere, ball_beam_interfere
+from .errors import PleError
 from .lattice import Lattice
 from .similarity import Similarity
 
@@ -38,7 +39,22 @@ def query(lat: Lattice, centers, radii) -> list:
     from .biq import check_queries
 
     c, r = check_queries(centers, radii)
+    if not is_becots(lat):  # U or V changed after set_becots (e.g. with_counts): the general path
+        from .biq import _split as split_general
+        from .rangefinder import lattice_hits
+
+        nh, bh, path = lattice_hits(lat, c, r)
+        return split_general(len(c), nh, bh, path)
     return query_subset(lat, c, r, None, None)
+
+
+def is_becots(lat: Lattice) -> bool:
+    """Is ``lat`` still the BeCOTS slab that ``lat.becots`` describes?"""
+    try:
+        becots_of(lat)
+    except PleError:
+        return False
+    return True
 
 
 def query_subset(lat: Lattice, c: np.ndarray, r: np.ndarray, nodes=None, beams=None, select=None) -> list:
