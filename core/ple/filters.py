@@ -150,26 +150,31 @@ def beams_between(lat: Lattice, a: Region, rows_a: np.ndarray, b: Region, rows_b
 
     ``rows_a``/``rows_b`` (ni, nj, nk, nn) give each node's output row, -1 where removed.
     Returns beam_index (M, 4) and beam_nodes (M, 2), sorted by (i, j, k, pattern)."""
-    parts_idx, parts_nodes = [], []
+    lo_all, hi_all, boxes = np.full(3, np.iinfo(np.int64).max), np.full(3, np.iinfo(np.int64).min), []
     for p, bp in enumerate(lat.beams):
-        lo = [max(x, y - d) for x, y, d in zip((a.i0, a.j0, a.k0), (b.i0, b.j0, b.k0), bp.offset)]
-        hi = [min(x, y - d) for x, y, d in zip((a.i1, a.j1, a.k1), (b.i1, b.j1, b.k1), bp.offset)]
-        if any(h <= low for low, h in zip(lo, hi)):
-            continue
-        fa = rows_a[lo[0] - a.i0:hi[0] - a.i0, lo[1] - a.j0:hi[1] - a.j0, lo[2] - a.k0:hi[2] - a.k0, bp.n1]
-        d0, d1, d2 = (low + d - blo for low, d, blo in zip(lo, bp.offset, (b.i0, b.j0, b.k0)))
-        sh = fa.shape
-        tb = rows_b[d0:d0 + sh[0], d1:d1 + sh[1], d2:d2 + sh[2], bp.n2]
-        alive = (fa >= 0) & (tb >= 0)
-        ii, jj, kk = np.nonzero(alive)
-        parts_idx.append(np.stack([ii + lo[0], jj + lo[1], kk + lo[2], np.full_like(ii, p)], axis=1))
-        parts_nodes.append(np.stack([fa[alive], tb[alive]], axis=1))
-    if not parts_idx:
+        lo = np.maximum((a.i0, a.j0, a.k0), np.subtract((b.i0, b.j0, b.k0), bp.offset))
+        hi = np.minimum((a.i1, a.j1, a.k1), np.subtract((b.i1, b.j1, b.k1), bp.offset))
+        if np.all(hi > lo):
+            boxes.append((p, bp, lo, hi))
+            lo_all, hi_all = np.minimum(lo_all, lo), np.maximum(hi_all, hi)
+    if not boxes:
         return np.zeros((0, 4), np.int64), np.zeros((0, 2), np.int64)
-    idx = np.concatenate(parts_idx).astype(np.int64)
-    nodes = np.concatenate(parts_nodes).astype(np.int64)
-    order = np.lexsort((idx[:, 3], idx[:, 2], idx[:, 1], idx[:, 0]))
-    return idx[order], nodes[order]
+    # one Boolean array over (i, j, k, pattern): np.nonzero then lists beams already sorted
+    alive = np.zeros((*(hi_all - lo_all), len(lat.beams)), dtype=bool)
+    a0, b0 = np.array((a.i0, a.j0, a.k0)), np.array((b.i0, b.j0, b.k0))
+    for p, bp, lo, hi in boxes:
+        fa = rows_a[tuple(slice(x, y) for x, y in zip(lo - a0, hi - a0)) + (bp.n1,)]
+        tb = rows_b[tuple(slice(x, y) for x, y in zip(lo + bp.offset - b0, hi + bp.offset - b0)) + (bp.n2,)]
+        alive[tuple(slice(x, y) for x, y in zip(lo - lo_all, hi - lo_all)) + (p,)] = (fa >= 0) & (tb >= 0)
+    ii, jj, kk, pp = np.nonzero(alive)
+    ii, jj, kk = ii + lo_all[0], jj + lo_all[1], kk + lo_all[2]
+    n1 = np.array([bp.n1 for bp in lat.beams])[pp]
+    n2 = np.array([bp.n2 for bp in lat.beams])[pp]
+    off = np.array([bp.offset for bp in lat.beams], dtype=np.int64)[pp]
+    start = rows_a[ii - a.i0, jj - a.j0, kk - a.k0, n1]
+    end = rows_b[ii + off[:, 0] - b.i0, jj + off[:, 1] - b.j0, kk + off[:, 2] - b.k0, n2]
+    index = np.stack([ii, jj, kk, pp], axis=1).astype(np.int64)
+    return index, np.stack([start, end], axis=1).astype(np.int64)
 
 
 # ----- index stencils (thesis §9: F(N) = S[i mod x, j mod y, k mod z]) ---------------------------
@@ -287,8 +292,9 @@ class ElementSet:
         lo, hi = lo - self.reach, hi + self.reach
         self.origin = lo.min(axis=0)
         top = hi.max(axis=0)
-        # cell size: about the typical element thickness, but never more than ~4M cells overall
-        thick = 2.0 * (np.median(self.radius) + self.reach)
+        # cell size: about the typical element radius (measured best: docs/filters.md), but never
+        # more than ~4M cells overall
+        thick = np.median(self.radius) + self.reach
         h = max(thick, float(np.prod(top - self.origin) / 4e6) ** (1 / 3), 1e-12)
         self.h = h
         self.dims = np.maximum(np.ceil((top - self.origin) / h).astype(np.int64), 1)
@@ -350,10 +356,18 @@ class ElementSet:
         q, pos = q[found], pos[found]
         cnt = self.counts[pos]
         query = np.repeat(q, cnt)
-        start = np.repeat(self.first[pos] - (np.cumsum(cnt) - cnt), cnt)
-        elem = self.cell_elem[start + np.arange(len(query))]
-        hit = self._hits(elem, p[query], r[query])
-        return np.bincount(query[hit], minlength=len(p)) > 0
+        first = np.cumsum(cnt) - cnt
+        elem = self.cell_elem[np.repeat(self.first[pos] - first, cnt) + np.arange(len(query))]
+        # two passes: each query's first candidate, then the others only for queries not yet hit
+        hit = np.zeros(len(p), dtype=bool)
+        hit[q] = self._hits(elem[first], p[q], r[q])
+        rest = np.ones(len(query), dtype=bool)
+        rest[first] = False
+        rest &= ~hit[query]
+        query, elem = query[rest], elem[rest]
+        more = self._hits(elem, p[query], r[query])
+        hit[query[more]] = True
+        return hit
 
 
 # ----- Lattice-in-Lattice (thesis §9) ---------------------------------------------------------------
