@@ -212,10 +212,14 @@ class BeCOTSField:
             return p + x[:, None] * self.tu + y[:, None] * self.tv
         (ru, wu), (rv, wv) = self.u, self.v
         rho, theta = x * ru + y * rv, x * wu + y * wv
-        rel = _rotate(p - self.apex, self.axis, theta)
+        frame = np.stack([*self.frame, self.axis])  # rows e1, e2, T
+        loc = (p - self.apex) @ frame.T  # coordinates about F: rotation about T turns (e1, e2)
+        c, s = np.cos(theta), np.sin(theta)
+        turned = np.stack([loc[:, 0] * c - loc[:, 1] * s, loc[:, 0] * s + loc[:, 1] * c, loc[:, 2]], axis=1)
         if self.kind == "cone":
-            return self.apex + np.exp(rho)[:, None] * rel
-        return self.apex + rel + rho[:, None] * self.axis
+            return self.apex + np.exp(rho)[:, None] * (turned @ frame)
+        turned[:, 2] += rho  # cylinder: slide along T
+        return self.apex + turned @ frame
 
     def points(self, x, y) -> np.ndarray:
         """The map ``M(x, y) = S(x, y) ∘ A`` for arrays x, y (n,): points (n, 3)."""
