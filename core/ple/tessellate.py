@@ -34,7 +34,7 @@ from .errors import PleError
 from .lattice import Lattice, Region
 
 STYLES = ("refined", "chocc", "cnt", "balls-beams")
-DEFAULT_LEVELS = 3
+DEFAULT_LEVELS = 4
 DEFAULT_SEGMENTS = 16
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
 MAX_LEVELS = 6
@@ -410,7 +410,7 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
                segments: int | None = None) -> trimesh.Trimesh:
     """The mesh of a region (default: the whole lattice) as one trimesh.
 
-    ``levels``: refinement levels of ``refined`` (default 3); ``segments``: generators per full
+    ``levels``: refinement levels of ``refined`` (default 4); ``segments``: generators per full
     circle of ``chocc`` corridors (default 16). Watertight and consistently oriented for
     chocc, cnt and refined; ``balls-beams`` is a preview."""
     levels, segments = _check_style(style, levels, segments)
@@ -439,3 +439,17 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
     for box in lat.iter_slabs(max_groups=max_groups, region=r):
         verts, faces = tess.build(box)
         yield verts.astype(np.float32)[faces]
+
+
+def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: int | None = None,
+               segments: int | None = None, max_groups: int = 1 << 14) -> int:
+    """Tessellate a region straight to ``path`` (format from the suffix); returns the number of
+    triangles. Binary STL streams box by box (memory bounded by ``max_groups`` groups); the
+    other formats build the mesh in memory and go through trimesh."""
+    from .export import export_mesh, mesh_format, write_stl
+
+    if mesh_format(path) == "stl":
+        return write_stl(path, iter_triangles(lat, region, style, levels, segments, max_groups))
+    mesh = tessellate(lat, region, style, levels, segments)
+    export_mesh(mesh, path)
+    return len(mesh.faces)
