@@ -30,6 +30,7 @@ from ple.ir import lattice_from_dict, lattice_to_dict, save_ir
 from ple.lattice import Lattice
 from ple.program import load_lattice
 from ple.similarity import Rotation, Screw, Translation
+from scipy.spatial import cKDTree
 
 CORNERS = [[0, 0, 0], [0, 3, 0.5], [3.5, 3.2, 1.5], [3, 0, 0.2]]
 coord = st.floats(-3, 3, allow_nan=False, allow_infinity=False)
@@ -312,11 +313,18 @@ def test_constant_radius_connectors_are_congruent_per_class():
             aligned = cls.points @ m[:3, :3].T + m[:3, 3]
             assert np.linalg.norm(aligned - mine, axis=1).max() <= 1e-9 * size
             assert np.allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3), atol=1e-12)
+        # the Boolean connector meshes too: rebuild two instances and compare vertex sets
+        for row in cls.nodes[:2]:
+            mesh = _connector_of(lat, evc, row, 0.15, 0.06, mesh=True)
+            m = kabsch(cls.points, _connector_of(lat, evc, row, 0.15, 0.06))
+            moved = cls.mesh.vertices @ m[:3, :3].T + m[:3, 3]
+            assert len(mesh.vertices) == len(cls.mesh.vertices) and mesh.is_watertight
+            assert cKDTree(mesh.vertices).query(moved)[0].max() <= 1e-9 * size
     assert np.allclose(np.linalg.norm(beams["end"] - beams["start"], axis=1) > 0, True)
 
 
-def _connector_of(lat, centers, row, radius, beam_radius):
-    from ple.becots import connector_points
+def _connector_of(lat, centers, row, radius, beam_radius, mesh=False):
+    from ple.becots import connector_mesh, connector_points
 
     ev = lat.evaluate()
     me = int(np.nonzero((ev.node_index == row).all(axis=1))[0][0])
@@ -328,6 +336,8 @@ def _connector_of(lat, centers, row, radius, beam_radius):
             inc.append((bi[3], 1, s))
     inc.sort()
     dirs = np.array([(centers[o] - centers[me]) / np.linalg.norm(centers[o] - centers[me]) for _, _, o in inc])
+    if mesh:
+        return connector_mesh(centers[me], dirs, radius, beam_radius)
     return connector_points(centers[me], dirs, radius, beam_radius)
 
 
