@@ -134,7 +134,6 @@ class PLE_OT_snippet_copy(RigOperator, bpy.types.Operator):  # noqa: N801 - Blen
 
     bl_idname = "ple.snippet_copy"
     bl_label = "Copy Snippet"
-    bl_options = {"REGISTER"}
 
     def run(self, context, rig):
         lat = rigmod.lattice_of(rig)

@@ -253,6 +253,8 @@ def refresh(rig, force: bool = False) -> str | None:
             add_edits(rig, user_edits(rig, st))
             sig = signature(rig)
             if not force and sig == st.signature and st.lattice is not None:
+                if rig.ple.status:  # e.g. a degenerate frame was put back: nothing is wrong now
+                    rig.ple.status = ""
                 return None
             lat = lattice_of(rig, st)
             ev = evaluate_region(rig, lat)

@@ -129,3 +129,11 @@ def test_float32_frames_snap_to_the_current_linear_part():
     assert np.allclose(got.apply_vectors([0, 0, 0]) + got.apply_points([0, 0, 0]), [0.1, 1.2, 0.3], atol=1e-6)
     turned = Rotation(0.3, Vec(0, 0, 1), Pt(0, 0, 0)).matrix @ direction_frame(cubic, "v")
     assert direction_from_frame(cubic, "v", turned).kind != "translation"  # real rotations are kept
+
+
+def test_float32_screw_frame_stays_a_screw():
+    g = Screw(0.3, Vec(0, 0, 1), Pt(1, 0, 0), 0.5)
+    m32 = g.matrix.astype(np.float32).astype(float)
+    got = placement_from_frame(m32)
+    assert got.kind == "screw" and got.allclose(g, 1e-6)
+    assert placement_from_frame(m32, previous=g) == g

@@ -119,7 +119,7 @@ def direction_from_frame(lat: Lattice, axis: str, frame, cumulative: bool = Fals
     PleError naming the frame. A linear part equal to the current one up to float32 noise
     (a frame only dragged) keeps the current one exactly (``snap_linear``)."""
     try:
-        new = Similarity.between_frames(base_frame(lat), np.asarray(frame, dtype=float))
+        new = Similarity.between_frames(base_frame(lat), clean_frame(frame))
     except PleError as exc:
         raise PleError(f"frame {axis.upper()}: {exc}") from None
     return snap_linear(new, direction_similarity(lat, axis, cumulative), cage_point(lat))
@@ -128,13 +128,31 @@ def direction_from_frame(lat: Lattice, axis: str, frame, cumulative: bool = Fals
 def placement_from_frame(frame, previous: Similarity | None = None) -> Similarity:
     """The placement G of a frame given as a 4x4 matrix in the rig's coordinates."""
     try:
-        new = Similarity.between_frames(np.eye(4), np.asarray(frame, dtype=float))
+        new = Similarity.between_frames(np.eye(4), clean_frame(frame))
     except PleError as exc:
         raise PleError(f"frame G: {exc}") from None
     return new if previous is None else snap_linear(new, previous, np.zeros(3))
 
 
 FLOAT32_NOISE = 1e-6  # Blender stores object matrices in float32: relative noise ~1e-7
+
+
+def clean_frame(frame) -> np.ndarray:
+    """A float32 frame made an exact similarity frame: its linear part replaced by the nearest
+    scaled rotation (polar decomposition), the factor rounded to 1 within float32 noise (else
+    a screw frame would read as a swirl about a far-away, ill-conditioned fixed point).
+    Frames that are not similarities up to noise are returned as they are, to be rejected."""
+    m = np.array(frame, dtype=float)
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        return m
+    u, sig, vt = np.linalg.svd(m[:3, :3])
+    s = float(sig.mean())
+    if s <= 0 or np.abs(sig - s).max() > 1e3 * FLOAT32_NOISE * s or np.linalg.det(u @ vt) < 0:
+        return m
+    if abs(s - 1.0) <= FLOAT32_NOISE:
+        s = 1.0
+    m[:3, :3] = s * (u @ vt)
+    return m
 
 
 def snap_linear(new: Similarity, previous: Similarity, point) -> Similarity:
