@@ -107,8 +107,9 @@ def test_special_case_cylinder_screws():
     assert f.kind == "cylinder"
     assert np.abs(f.corners - g.corners).max() < 1e-9
     assert np.abs((f.U @ f.V).matrix - (f.V @ f.U).matrix).max() < 1e-9
-    # the axis comes from a 1-D search and is ill-conditioned: close, not exact, inside the square
-    assert np.abs(f.points([0.3], [0.8]) - g.points([0.3], [0.8])).max() < 0.05
+    # equal opposite edges leave a family of screw pairs through the corners: the least-rotation
+    # one is taken, so its total turn is at most the generating field's
+    assert abs(f.u[1]) + abs(f.v[1]) <= abs(g.u[1]) + abs(g.v[1]) + 1e-9
 
 
 @pytest.mark.parametrize("corners, words", [

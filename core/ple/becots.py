@@ -464,23 +464,39 @@ def _planar_centres(A, B, C, D, axis) -> tuple[complex, complex] | None:
 
 
 def _axis_by_common_centre(A, B, C, D, du) -> np.ndarray | None:
+    """Axis T ⟂ du where U's and V's planar fixed points coincide. With equal opposite edges
+    (|AB| = |DC|, |AD| = |BC|: two screws) a whole interval of axes fits the corners exactly;
+    we then pick the one with the least total rotation |w_u| + |w_v| (the corners do not
+    determine the field there)."""
     from scipy.optimize import minimize_scalar
 
     p = _unit(np.cross(du, [1.0, 0.0, 0.0]) if abs(du[0]) < 0.9 else np.cross(du, [0.0, 1.0, 0.0]))
     q = np.cross(du, p)
     scale = max(np.linalg.norm(x - A) for x in (B, C, D))
+    axis_of = lambda phi: np.cos(phi) * p + np.sin(phi) * q  # noqa: E731
 
     def miss(phi: float) -> float:
-        c = _planar_centres(A, B, C, D, np.cos(phi) * p + np.sin(phi) * q)
+        c = _planar_centres(A, B, C, D, axis_of(phi))
         return np.inf if c is None else abs(c[0] - c[1]) / scale
 
     grid = np.linspace(0.0, math.pi, 361)
-    best = grid[int(np.argmin([miss(g) for g in grid]))]
+    misses = np.array([miss(g) for g in grid])
+    fits = []
+    for phi in grid[misses <= 1e-9]:
+        try:
+            fld = _field_with_axis(A, B, C, D, axis_of(phi), 0, 0)
+        except PleError:
+            continue
+        if np.abs(fld.corners - np.array([A, B, C, D])).max() <= 1e-9 * scale:
+            fits.append((abs(fld.u[1]) + abs(fld.v[1]), phi))
+    if len(fits) > 1:  # special case: a family of fields fits; least rotation
+        return axis_of(min(fits)[1])
+    best = grid[int(np.argmin(misses))]
     res = minimize_scalar(miss, bounds=(best - math.pi / 360, best + math.pi / 360), method="bounded",
                           options={"xatol": 1e-14})
     if not res.fun <= 1e-9:
         return None
-    return np.cos(res.x) * p + np.sin(res.x) * q
+    return axis_of(res.x)
 
 
 def _field_with_axis(A, B, C, D, axis, ku: int, kv: int) -> BeCOTSField:
