@@ -11,6 +11,8 @@ may itself be a ``FilteredLattice``, which gives the cascades of thesis Fig. 9.3
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -19,7 +21,8 @@ from .errors import PleError
 from .lattice import Evaluation, Lattice, Region
 
 MAX_COARSE_NODES = 20_000_000  # a coarse lattice is evaluated in full; beyond this it is not "coarse"
-QUERY_CHUNK = 1 << 18  # query balls per vectorized batch (bounds the candidate-pair memory)
+QUERY_CHUNK = 1 << 17  # query balls per vectorized batch (bounds the candidate-pair memory)
+THREADS = min(4, os.cpu_count() or 1)
 
 
 # ----- the filter model ------------------------------------------------------------------------
@@ -341,8 +344,16 @@ class ElementSet:
             return out
         if radii.max() > self.reach * (1 + 1e-9):
             raise PleError(f"query radius {radii.max():.6g} exceeds the element index reach {self.reach:.6g}")
-        for s in range(0, len(centers), QUERY_CHUNK):
+        starts = range(0, len(centers), QUERY_CHUNK)
+
+        def work(s: int) -> None:
             out[s:s + QUERY_CHUNK] = self._any_hit_chunk(centers[s:s + QUERY_CHUNK], radii[s:s + QUERY_CHUNK])
+
+        if len(starts) == 1:
+            work(0)
+        else:  # numpy releases the GIL in the heavy array operations: chunks run on THREADS threads
+            with ThreadPoolExecutor(THREADS) as pool:
+                list(pool.map(work, starts))
         return out
 
     def _any_hit_chunk(self, p: np.ndarray, r: np.ndarray) -> np.ndarray:

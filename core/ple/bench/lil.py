@@ -1,0 +1,148 @@
+"""LiL benchmark: the thesis examples (Fig. 7.9, Table 7.1) with a KD-tree and a naive baseline.
+
+Cases (fine: 2 balls, 14 beam-patterns; coarse: 1 ball, 3 beam-patterns):
+regular 75³ vs regular 9³, cylindrical 32×128×128 vs 5×17×9, regular 64³ vs semi-regular 8³.
+``--big`` also streams a LiL over a fine lattice of at least 10⁸ beams in a subprocess and
+reports its peak memory (resource.getrusage of the child).
+"""
+
+from __future__ import annotations
+
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..elements import ball_ball_interfere, ball_beam_interfere, enclosing_ball
+from ..filters import lil, select
+from ..program import load_lattice
+from ._timing import best_of
+
+CASES = [
+    # name, fine preset, fine params, coarse preset, thesis seconds (8 threads, Table 7.1 best)
+    ("regular", "thesis_regular", {}, "lil_regular_coarse", 3.44),
+    ("cylindrical", "thesis_cylindrical", {}, "lil_cylindrical_coarse", 22.3),
+    ("semiregular", "thesis_regular", {"n": 64}, "lil_semiregular_coarse", 266.0),
+]
+
+BIG_SCRIPT = """
+import json, resource, sys, time
+from ple.filters import lil
+from ple.program import load_lattice
+from ple.stream import stream_filter
+n, out = int(sys.argv[1]), sys.argv[2]
+fine = load_lattice("thesis_regular", {"n": n})
+coarse = load_lattice("lil_regular_coarse", {"span": n - 1.0})
+t0 = time.perf_counter()
+m = stream_filter(lil(fine, coarse), out, progress=False)
+print(json.dumps({"seconds": time.perf_counter() - t0, "nodes_kept": m["nodes"], "beams_kept": m["beams"],
+                  "chunks": len(m["chunks"]), "fine_nodes": fine.node_count(), "fine_beams": fine.beam_count(),
+                  "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+"""
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--repeat", type=int, default=3, help="best of this many runs (default 3)")
+    p.add_argument("--big", action="store_true", help="also stream a LiL over a >= 1e8-beam fine lattice")
+    p.add_argument("--biq", action="store_true", help="also time LiL through ple.biq.any_hit (slow)")
+
+
+def kdtree_mask(fine_centers, fine_radii, coarse_ev):
+    """Baseline: KD-tree over fine centres, one ball query per coarse element's enclosing ball."""
+    tree = cKDTree(fine_centers)
+    rmax = fine_radii.max()
+    keep = np.zeros(len(fine_centers), dtype=bool)
+    for c, r in zip(coarse_ev.center, coarse_ev.radius):
+        cand = np.asarray(tree.query_ball_point(c, r + rmax), dtype=np.int64)
+        keep[cand[ball_ball_interfere(fine_centers[cand], fine_radii[cand], c, r)]] = True
+    for a, b in coarse_ev.beam_nodes:
+        ca, ra, cb, rb = coarse_ev.center[a], coarse_ev.radius[a], coarse_ev.center[b], coarse_ev.radius[b]
+        ec, er = enclosing_ball(ca, ra, cb, rb)
+        cand = np.asarray(tree.query_ball_point(ec, float(er) + rmax), dtype=np.int64)
+        keep[cand[ball_beam_interfere(fine_centers[cand], fine_radii[cand], ca, ra, cb, rb)]] = True
+    return keep
+
+
+def naive_mask(fine_centers, fine_radii, coarse_ev):
+    """Baseline: every fine ball against every coarse element (vectorized per element)."""
+    keep = np.zeros(len(fine_centers), dtype=bool)
+    for c, r in zip(coarse_ev.center, coarse_ev.radius):
+        keep |= ball_ball_interfere(fine_centers, fine_radii, c, r)
+    for a, b in coarse_ev.beam_nodes:
+        keep |= ball_beam_interfere(fine_centers, fine_radii, coarse_ev.center[a], coarse_ev.radius[a],
+                                    coarse_ev.center[b], coarse_ev.radius[b])
+    return keep
+
+
+def run_case(name, fine_name, fine_params, coarse_name, thesis_s, repeat, with_biq) -> dict:
+    fine = load_lattice(fine_name, fine_params)
+    coarse = load_lattice(coarse_name)
+    result = {}
+    seconds = best_of(lambda: result.__setitem__("ev", lil(fine, coarse).evaluate()), repeat)
+    ev = result["ev"]
+    row = {"case": name, "fine": f"{fine_name} {'x'.join(map(str, fine.counts))}",
+           "coarse": f"{coarse_name} {'x'.join(map(str, coarse.counts))}", "seconds": seconds,
+           "thesis_seconds_8_threads": thesis_s, "speedup_vs_thesis": thesis_s / seconds,
+           "nodes_kept": len(ev.node_index), "fine_nodes": fine.node_count(),
+           "beams_kept": len(ev.beam_index), "fine_beams": fine.beam_count()}
+    # baseline in the same run: KD-tree over the fine centres, whole lattice, same coarse elements
+    full_c, full_r = fine.region_balls()
+    full_c, full_r = full_c.reshape(-1, 3), full_r.reshape(-1)
+    t0 = time.perf_counter()
+    keep = kdtree_mask(full_c, full_r, coarse.evaluate())
+    row["kdtree_baseline_seconds"] = time.perf_counter() - t0
+    row["kdtree_agrees"] = int(keep.sum()) == len(ev.node_index)
+    row["speedup_vs_kdtree"] = row["kdtree_baseline_seconds"] / seconds
+    if with_biq:
+        t0 = time.perf_counter()
+        evb = lil(fine, coarse, method="biq").evaluate()
+        row["biq_method_seconds"] = time.perf_counter() - t0
+        row["biq_agrees"] = len(evb.node_index) == len(ev.node_index) and len(evb.beam_index) == len(ev.beam_index)
+    return row
+
+
+def naive_row(repeat) -> dict:
+    """Naive all-pairs baseline on a 25³ corner of the regular case, against ours on the same."""
+    fine = load_lattice("thesis_regular", {"n": 25})
+    coarse = load_lattice("lil_regular_coarse")
+    cev = coarse.evaluate()
+    c, r = fine.region_balls()
+    c, r = c.reshape(-1, 3), r.reshape(-1)
+    t_naive = best_of(lambda: naive_mask(c, r, cev), 1)
+    ours = {}
+    t_ours = best_of(lambda: ours.__setitem__("ev", lil(fine, coarse).evaluate()), repeat)
+    keep = naive_mask(c, r, cev)
+    same = select(fine.evaluate(), keep)
+    return {"case": "naive baseline, regular 25^3 vs 9^3", "naive_seconds": t_naive, "seconds": t_ours,
+            "speedup_vs_naive": t_naive / t_ours,
+            "agrees": bool(np.array_equal(same.beam_index, ours["ev"].beam_index))}
+
+
+def big_row() -> dict:
+    """A streamed LiL over >= 1e8 fine beams in a child process; peak RSS of the child."""
+    n = 2
+    while load_lattice("thesis_regular", {"n": n}).beam_count() < 10**8:
+        n += 1
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        proc = subprocess.run([sys.executable, "-c", BIG_SCRIPT, str(n), f"{tmp}/chunks"], capture_output=True,
+                              text=True, check=True)
+        wall = time.perf_counter() - t0
+    row = json.loads(proc.stdout)
+    row["case"] = f"big: thesis_regular {n}^3 vs lil_regular_coarse 9^3, streamed"
+    row["wall_seconds_with_startup"] = wall
+    row["children_peak_rss_mb"] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+    return row
+
+
+def run(args) -> dict:
+    rows = [run_case(*case, args.repeat, args.biq) for case in CASES]
+    rows.append(naive_row(args.repeat))
+    if args.big:
+        rows.append(big_row())
+    return {"benchmark": "lil", "machine": "2 shared cores", "rows": rows}
