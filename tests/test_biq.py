@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from ple import biq
 from ple.cli import main
 from ple.elements import beam_distance
