@@ -249,24 +249,20 @@ class BeCOTSField:
         if self.kind == "translation":
             basis = np.stack([self.tu, self.tv], axis=1)
             xy = np.linalg.lstsq(basis, (q - self.a).T, rcond=None)[0].T
-            cand = [(n, xy[n, 0], xy[n, 1]) for n in range(len(q))]
+            idx = np.arange(len(q))
         else:
             rho, theta = self.log_polar(q)
             jinv = np.linalg.inv(self.jacobian)
             corners_xy = np.array([[x0, y0], [x0, y1], [x1, y0], [x1, y1]])
             w = corners_xy @ self.jacobian[1]
             wmin, wmax = w.min() - 1e-9, w.max() + 1e-9  # Eq. 4.11, on the (given) domain
-            kmin = np.ceil((wmin - theta) / TWO_PI).astype(int)
-            kmax = np.floor((wmax - theta) / TWO_PI).astype(int)
-            cand = []
-            for n in range(len(q)):
-                for k in range(kmin[n], kmax[n] + 1):  # Eq. 4.12 for each branching option k
-                    x, y = jinv @ np.array([rho[n], theta[n] + TWO_PI * k])
-                    cand.append((n, x, y))
-        if not cand:
+            kmin = np.ceil((wmin - theta) / TWO_PI).astype(np.int64)
+            nk = np.maximum(np.floor((wmax - theta) / TWO_PI).astype(np.int64) - kmin + 1, 0)
+            idx = np.repeat(np.arange(len(q)), nk)  # one row per point and branching option k
+            k = kmin[idx] + np.arange(len(idx)) - np.repeat(np.cumsum(nk) - nk, nk)
+            xy = np.stack([rho[idx], theta[idx] + TWO_PI * k], axis=1) @ jinv.T  # Eq. 4.12
+        if len(idx) == 0:
             return out
-        idx = np.array([c[0] for c in cand])
-        xy = np.array([[c[1], c[2]] for c in cand])
         inside = ((xy[:, 0] >= x0 - DOMAIN_TOL) & (xy[:, 0] <= x1 + DOMAIN_TOL)
                   & (xy[:, 1] >= y0 - DOMAIN_TOL) & (xy[:, 1] <= y1 + DOMAIN_TOL))
         xy = np.clip(xy, [x0, y0], [x1, y1])
