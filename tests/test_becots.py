@@ -416,3 +416,12 @@ def test_stale_becots_falls_back_to_the_general_path(rng):
     got, ref = biq.query(lat, c, r), biq.query(lat, c, r, method="naive")
     assert all(g.path != "becots" for g in got)
     assert all(np.array_equal(g.nodes, e.nodes) and np.array_equal(g.beams, e.beams) for g, e in zip(got, ref))
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.tuples(point, point, point, point), st.sampled_from(["triangle", "kagome", "honeycomb"]),
+       st.integers(0, 2**31))
+def test_biq_matches_brute_force_on_random_corners(pts, conn, seed):
+    f = _field_or_skip(pts)
+    lat = becots_lattice(f, (5, 4), conn, 0.1)
+    _same_biq(lat, np.random.default_rng(seed), 30, scale=2.0)
