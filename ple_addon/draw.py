@@ -84,11 +84,11 @@ def balls_beams_group():
     points = nodes.new("GeometryNodeMeshToPoints")
     sphere = nodes.new("GeometryNodeMeshIcoSphere")
     sphere.inputs["Radius"].default_value = 1.0
-    sphere.inputs["Subdivisions"].default_value = 2
+    sphere.inputs["Subdivisions"].default_value = 1
     balls = nodes.new("GeometryNodeInstanceOnPoints")
     curve = nodes.new("GeometryNodeMeshToCurve")
     circle = nodes.new("GeometryNodeCurvePrimitiveCircle")
-    circle.inputs["Resolution"].default_value = 12
+    circle.inputs["Resolution"].default_value = 8
     circle.inputs["Radius"].default_value = 1.0
     beams = nodes.new("GeometryNodeCurveToMesh")
     join = nodes.new("GeometryNodeJoinGeometry")

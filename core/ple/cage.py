@@ -74,8 +74,12 @@ def cage_curves(lat: Lattice, interior: int = 1, samples_per_group: int = 4,
                 uvw = np.zeros((n, 3))
                 uvw[:, a], uvw[:, b], uvw[:, c] = t, x, y
                 on_edge = x in (0.0, spans[b]) and y in (0.0, spans[c])
-                (edges if on_edge else inner_lines).append(map_points(lat, uvw))
-    return edges + inner_lines
+                (edges if on_edge else inner_lines).append(uvw)
+    params = edges + inner_lines
+    if not params:  # a single node-group: no isocurves
+        return []
+    points = map_points(lat, np.concatenate(params))  # one vectorized evaluation for all curves
+    return np.split(points, np.cumsum([len(p) for p in params])[:-1])
 
 
 # ----- frames (§6.2.2, Fig. 6.1–6.2) ----------------------------------------------------------
