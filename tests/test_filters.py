@@ -221,3 +221,56 @@ def test_bad_filter_inputs():
     lat.add_node([0, 0, 0], 0.1)
     with pytest.raises(PleError, match="node columns"):
         FilteredLattice(lat, Stencil(np.ones((1, 1, 1, 3), bool))).evaluate()
+
+
+# ----- command line --------------------------------------------------------------------------------
+def test_cli_lil_cascade_matches_api(tmp_path, capsys):
+    from ple.cli import main
+    from ple.program import load_lattice
+
+    out = tmp_path / "lil.npz"
+    argv = ["lil", "thesis_regular", "--param", "n=12", "--coarse", "lil_regular_coarse:n=4,span=11",
+            "--coarse", "cubic:n=2,cell=11,radius=0.15", "--out", str(out)]
+    assert main(argv) == 0
+    fine = load_lattice("thesis_regular", {"n": 12})
+    medium = load_lattice("lil_regular_coarse", {"n": 4, "span": 11.0})
+    coarse = load_lattice("cubic", {"n": 2, "cell": 11.0, "radius": 0.15})
+    ev = lil(fine, medium, coarse).evaluate()
+    with np.load(out) as z:
+        for key, value in ev.arrays().items():
+            assert np.array_equal(z[key], value), key
+    assert 0 < len(ev.beam_index) < len(lil(fine, medium).evaluate().beam_index)
+    assert "nodes" in capsys.readouterr().out
+
+
+def test_cli_lil_with_stencil_and_region(tmp_path):
+    from ple.cli import main
+    from ple.program import load_lattice
+
+    out = tmp_path / "s.npz"
+    assert main(["lil", "bcc", "--param", "n=10", "--coarse", "cubic:n=3,cell=4.5,radius=0.1",
+                 "--stencil", "faces:2", "--region", "0:8,2:10,0:10", "--out", str(out)]) == 0
+    fine = load_lattice("bcc", {"n": 10})
+    coarse = load_lattice("cubic", {"n": 3, "cell": 4.5, "radius": 0.1})
+    ev = FilteredLattice(fine, Stencil.named("faces", 2) & LiL(coarse)).evaluate("0:8,2:10,0:10")
+    with np.load(out) as z:
+        assert np.array_equal(z["beam_index"], ev.beam_index) and np.array_equal(z["node_index"], ev.node_index)
+
+
+@pytest.mark.parametrize("argv", [
+    ["lil", "bcc", "--out", "X"],
+    ["lil", "bcc", "--coarse", "nosuch", "--out", "X"],
+    ["lil", "bcc", "--coarse", "cubic", "--stencil", "nope", "--out", "X"],
+    ["lil", "bcc", "--coarse", "cubic:n=0", "--out", "X"],
+    ["lil", "bcc", "--coarse", "cubic", "--region", "0:99,0:1,0:1", "--out", "X"],
+    ["filter", "bcc", "--out", "X"],
+    ["filter", "bcc", "--implicit", "blob", "--out", "X"],
+])
+def test_cli_bad_input(tmp_path, capsys, argv):
+    from ple.cli import main
+
+    argv = [str(tmp_path / "o.npz") if a == "X" else a for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "error" in err
+    assert list(tmp_path.iterdir()) == []

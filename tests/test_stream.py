@@ -118,3 +118,20 @@ def test_progress_bar_writes_to_a_terminal_only():
         bar.update(10, "done")
         bar.close()
     assert "100.0%" in term.text and pipe.text == ""
+
+
+def test_cli_filter_streams_chunks(tmp_path):
+    from ple.cli import main
+    from ple.program import load_lattice
+
+    out = tmp_path / "chunks"
+    argv = ["filter", "bcc", "--param", "n=9", "--implicit", "gyroid:cell=4,level=0.6,sheet", "--stencil", "edges:3",
+            "--out", str(out), "--slab-groups", "50"]
+    assert main(argv) == 0
+    flat = FilteredLattice(load_lattice("bcc", {"n": 9}),
+                           Stencil.named("edges", 3) & ImplicitFilter(TPMSField("gyroid", 4.0), 0.6, "sheet"))
+    assert_same(load_chunks(out), flat.evaluate())
+    assert len(read_manifest(out)["chunks"]) > 5
+    assert main(argv[:-2] + ["--out", str(tmp_path / "one.npz")]) == 0
+    with np.load(tmp_path / "one.npz") as z:
+        assert np.array_equal(z["beam_nodes"], flat.evaluate().beam_nodes)
