@@ -2,8 +2,6 @@
 
 A ring-closing beam-pattern joins the seam."""
 
-from ple.becots import BeCOTSField, set_field
-
 
 def lattice(nu: Range(2, 200) = 8, nv: Range(3, 400) = 36, radius: Range(0.01, 0.3) = 0.12,
             growth: Range(0.1, 2.0) = 0.9, twist: Range(-2.0, 2.0) = 0.5, beta: Range(0.2, 1.5707963) = 1.2):

@@ -1,7 +1,5 @@
 """BeCOTS honeycomb (Fig. 4.13a): 2 node-patterns, 3 beam-patterns, bent onto a cone of half-angle beta."""
 
-from ple.becots import BeCOTSField, becots_lattice
-
 
 def lattice(nu: Range(2, 400) = 12, nv: Range(2, 400) = 16, radius: Range(0.01, 0.3) = 0.06,
             beta: Range(0.2, 1.5707963) = 0.9, growth: Range(-1.0, 1.0) = 0.6, turn: Range(0.0, 3.0) = 1.6):

@@ -1,7 +1,5 @@
 """BeCOTS Kagome (Fig. 4.12): a planar COTS Kagome raised off its plane, 4 beams per inner hub."""
 
-from ple.becots import BeCOTSField, becots_lattice
-
 
 def lattice(nu: Range(2, 400) = 10, nv: Range(2, 400) = 10, radius: Range(0.01, 0.3) = 0.06,
             height: Range(-3.0, 3.0) = 1.5):

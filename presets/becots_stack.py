@@ -1,7 +1,5 @@
 """BeCOTS stack (§6.3): bent triangle layers by constant-distance raise or normal offset, joined by beams."""
 
-from ple.becots import BeCOTSField, stack_lattice
-
 
 def lattice(nu: Range(2, 200) = 10, nv: Range(2, 200) = 10, layers: Range(1, 50) = 4,
             spacing: Range(0.05, 2.0) = 0.5, mode: str = "raise", radius: Range(0.01, 0.3) = 0.07):

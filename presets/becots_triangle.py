@@ -1,7 +1,5 @@
 """BeCOTS triangle lattice (Fig. 4.13c): 6 beams per inner hub; levels > 1 filters it into a multi-level structure."""
 
-from ple.becots import BeCOTSField, becots_lattice
-
 
 def lattice(nu: Range(2, 400) = 12, nv: Range(2, 400) = 12, radius: Range(0.01, 0.3) = 0.08,
             lift: Range(-2.0, 2.0) = 0.8, levels: Range(1, 4) = 1):

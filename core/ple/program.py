@@ -54,12 +54,16 @@ API = {
 }
 
 
-def _filter_api() -> dict:
-    """Filter constructors for programs (thesis §9): stencils, LiL, implicit fields."""
-    from . import filters, implicit
+def _extra_api() -> dict:
+    """More of the API in a program's scope, so programs need no imports (and run unchanged
+    inside the Blender extension, where the core is vendored): filters (thesis §9) and
+    BeCOTS fields, lattices and stacks (§4, §6.3)."""
+    from . import becots, filters, implicit
     return {"Stencil": filters.Stencil, "LiL": filters.LiL, "FilteredLattice": filters.FilteredLattice,
             "ImplicitFilter": implicit.ImplicitFilter, "TPMSField": implicit.TPMSField,
-            "FourierField": implicit.FourierField}
+            "FourierField": implicit.FourierField, "BeCOTSField": becots.BeCOTSField,
+            "becots_lattice": becots.becots_lattice, "stack_lattice": becots.stack_lattice,
+            "set_field": becots.set_field}
 
 
 @dataclass
@@ -140,7 +144,7 @@ def compile_program(source: str, name: str = "<program>") -> Program:
         code = compile(source, name, "exec", dont_inherit=True)  # not this module's future annotations
     except SyntaxError as exc:
         raise PleError(f"{name}:{exc.lineno}: syntax error: {exc.msg}") from None
-    ns: dict = {**API, **_filter_api()}
+    ns: dict = {**API, **_extra_api()}
     ns["__builtins__"] = _program_builtins()  # vendored core: "import ple" means this package
     ns["__name__"] = "ple_program"
     try:
