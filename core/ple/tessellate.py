@@ -222,49 +222,54 @@ class _Tessellator:
 
     def instances(self, idx: np.ndarray):
         """Hub templates for nodes idx (N, 4): template ids (N,), group matrices (N, 4, 4),
-        inverse matrices, neighbour info."""
+        inverse matrices, and per template node (rows, neighbour index, exists, in region).
+
+        Steady copies: the neighbourhood seen from a hub's own frame does not depend on k, so
+        signatures are computed for one representative per (i, j, n, set of existing beams)
+        and every other hub of that column is a copy along W."""
         lat = self.lat
         m = lat.group_matrices(idx[:, 0], idx[:, 1], idx[:, 2])
-        minv = np.linalg.inv(m)
+        minv = _similarity_inverse(m)
         tids = np.zeros(len(idx), np.int64)
         info = {}
+        nv = lat.counts[1]
         for n in range(len(lat.nodes)):
             sel = np.flatnonzero(idx[:, 3] == n)
             if len(sel) == 0:
                 continue
             nb, exists, inside = self._neighbors(idx[sel], n)
+            info[n] = (sel, nb, exists, inside)
             s = nb.shape[1]
-            local = np.full((len(sel), s, 4), np.nan)
+            bits = (exists.astype(np.int64) << np.arange(s, dtype=np.int64)).sum(axis=1) if s else 0
+            col = idx[sel, 0] * nv + idx[sel, 1]
+            _, rep, inv = np.unique(col * (1 << s) + bits, return_index=True, return_inverse=True)
+            reps = sel[rep]
+            local = np.full((len(reps), s, 4), np.nan)
             if s:
-                flat_nb = nb.reshape(-1, 4)
-                ok = exists.reshape(-1)
+                ex = exists[rep]
+                flat_nb = nb[rep].reshape(-1, 4)
+                ok = ex.reshape(-1)
                 c = np.zeros((len(flat_nb), 3))
                 rad = np.zeros(len(flat_nb))
                 if ok.any():
                     c[ok], rad[ok] = lat.node_balls(flat_nb[ok])
-                c = c.reshape(len(sel), s, 3)
-                rad = rad.reshape(len(sel), s)
-                f = lat.group_factors(idx[sel, 0], idx[sel, 1], idx[sel, 2])
-                lc = np.einsum("nab,nsb->nsa", minv[sel, :3, :3], c) + minv[sel, None, :3, 3]
-                local[..., :3] = lc
-                local[..., 3] = rad / f[:, None]
-                local[~exists] = np.nan
+                c = c.reshape(len(reps), s, 3)
+                f = lat.group_factors(idx[reps, 0], idx[reps, 1], idx[reps, 2])
+                local[..., :3] = np.einsum("nab,nsb->nsa", minv[reps, :3, :3], c) + minv[reps, None, :3, 3]
+                local[..., 3] = rad.reshape(len(reps), s) / f[:, None]
+                local[~ex] = np.nan
             q = np.where(np.isnan(local), -(2**62), np.round(local / self.scale[n])).astype(np.int64)
-            keys, first, inv = np.unique(q.reshape(len(sel), -1), axis=0, return_index=True, return_inverse=True)
-            inv = inv.reshape(-1)
-            ids = np.zeros(len(keys), np.int64)
-            for u in range(len(keys)):
-                key = (n, keys[u].tobytes())
+            rep_tid = np.zeros(len(reps), np.int64)
+            for u in range(len(reps)):
+                key = (n, q[u].tobytes())
                 if key not in self.templates:
-                    row = first[u]
-                    have = exists[row]
-                    tpl = hub_template(lat.template_centers[n], lat.template_radii[n], local[row, have, :3],
-                                       local[row, have, 3], self.style, self.levels, self.segments)
+                    have = ~np.isnan(local[u, :, 3])
+                    tpl = hub_template(lat.template_centers[n], lat.template_radii[n], local[u, have, :3],
+                                       local[u, have, 3], self.style, self.levels, self.segments)
                     slot_of = np.cumsum(have) - 1
                     self.templates[key] = (len(self.templates), tpl, np.where(have, slot_of, -1))
-                ids[u] = self.templates[key][0]
-            tids[sel] = ids[inv]
-            info[n] = (sel, nb, exists, inside)
+                rep_tid[u] = self.templates[key][0]
+            tids[sel] = rep_tid[inv.reshape(-1)]
         return tids, m, minv, info
 
     # ----- assembly ---------------------------------------------------------------------
@@ -288,16 +293,17 @@ class _Tessellator:
         tpl_list = {v[0]: (v[1], v[2]) for v in self.templates.values()}
         sizes = np.array([len(tpl_list[t][0].vertices) for t in range(len(tpl_list))])
         order = np.argsort(tids, kind="stable")
+        starts = np.concatenate([[0], np.cumsum(sizes[tids[order]])])
         offsets = np.zeros(len(idx), np.int64)
-        offsets[order] = np.concatenate([[0], np.cumsum(sizes[tids[order]])[:-1]])
-        verts = np.zeros((int(sizes[tids].sum()), 3))
+        offsets[order] = starts[:-1]
+        verts = np.empty((int(starts[-1]), 3))
         faces = []
-        for t in np.unique(tids):
-            inst = np.flatnonzero(tids == t)
+        ut, first = np.unique(tids[order], return_index=True)
+        for t, lo, hi in zip(ut, first, np.append(first[1:], len(order))):
+            inst = order[lo:hi]
             tpl = tpl_list[t][0]
             v = np.einsum("nab,mb->nma", m[inst, :3, :3], tpl.vertices) + m[inst, None, :3, 3]
-            rows = offsets[inst][:, None] + np.arange(len(tpl.vertices))
-            verts[rows.reshape(-1)] = v.reshape(-1, 3)
+            verts[starts[lo]:starts[hi]] = v.reshape(-1, 3)  # the block of template t is contiguous
             mine = inst[inst < n_own]
             if len(mine):
                 faces.append((tpl.faces[None] + offsets[mine][:, None, None]).reshape(-1, 3))
@@ -305,9 +311,9 @@ class _Tessellator:
         for sel, nb, exists, inside in info.values():
             own_sel = sel < n_own
             for s in range(nb.shape[1]):
-                cut = np.flatnonzero(own_sel & exists[:, s] & ~inside[:, s])
-                for t in np.unique(tids[sel[cut]]):
-                    inst = sel[cut][tids[sel[cut]] == t]
+                cut = sel[own_sel & exists[:, s] & ~inside[:, s]]
+                for t in np.unique(tids[cut]):
+                    inst = cut[tids[cut] == t]
                     tpl, slot_of = tpl_list[t]
                     cap = tpl.caps[slot_of[s]]
                     faces.append((cap[None] + offsets[inst][:, None, None]).reshape(-1, 3))
@@ -316,11 +322,14 @@ class _Tessellator:
         return verts, faces
 
     def _beams(self, idx, n_own, tids, m, minv, offsets, tpl_list) -> list:
+        """Strips of the beams leaving the box's hubs; one zipper per (pattern, hub templates,
+        relative similarity of the two frames) — the latter depends on (i, j) only."""
         lat = self.lat
         nu, nv, nw = lat.counts
         nn = len(lat.nodes)
         lin = ((idx[:, 0] * nv + idx[:, 1]) * nw + idx[:, 2]) * nn + idx[:, 3]
         srt = np.argsort(lin)
+        n_tpl = max(len(tpl_list), 1)
         out = []
         for p, b in enumerate(lat.beams):
             src = np.flatnonzero(idx[:n_own, 3] == b.n1)
@@ -333,28 +342,29 @@ class _Tessellator:
             dst = srt[np.searchsorted(lin[srt], dl)]
             slot_a = self.slots[b.n1].index((p, 1))
             slot_b = self.slots[b.n2].index((p, -1))
-            rel = minv[src] @ m[dst]
-            qr = np.round(rel[:, :3, :] / 1e-9).astype(np.int64).reshape(len(src), -1)
-            keys = np.concatenate([tids[src, None], tids[dst, None], qr], axis=1)
-            uk, first, inv = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+            col = idx[src, 0] * nv + idx[src, 1]
+            gkey = (tids[src] * n_tpl + tids[dst]) * (nu * nv) + col
+            _, first, inv = np.unique(gkey, return_index=True, return_inverse=True)
             inv = inv.reshape(-1)
-            for u in range(len(uk)):
-                sel = np.flatnonzero(inv == u)
+            order = np.argsort(inv, kind="stable")
+            bounds = np.searchsorted(inv[order], np.arange(len(first) + 1))
+            for u in range(len(first)):
+                sel = order[bounds[u]:bounds[u + 1]]
                 a0, b0 = src[first[u]], dst[first[u]]
                 ta, sa_map = tpl_list[tids[a0]]
                 tb, sb_map = tpl_list[tids[b0]]
                 ring_a = ta.rings[sa_map[slot_a]]
                 ring_b = tb.rings[sb_map[slot_b]]
-                key = (p, tuple(uk[u]))
+                rel = minv[a0] @ m[b0]
+                key = (p, int(tids[a0]), int(tids[b0]), np.round(rel[:3] / 1e-9).astype(np.int64).tobytes())
                 if key not in self.strips:
-                    self.strips[key] = _strip(ta, ring_a, tb, ring_b, rel[first[u]],
+                    self.strips[key] = _strip(ta, ring_a, tb, ring_b, rel,
                                               lat.template_centers[b.n1], lat.template_centers[b.n2])
                 f = self.strips[key]
                 which, li = f[..., 1], f[..., 0]
                 va = ring_a[np.where(which == 0, li, 0)][None] + offsets[src[sel]][:, None, None]
                 vb = ring_b[np.where(which == 1, li, 0)][None] + offsets[dst[sel]][:, None, None]
-                g = np.where(which[None] == 0, va, vb)
-                out.append(g.reshape(-1, 3))
+                out.append(np.where(which[None] == 0, va, vb).reshape(-1, 3))
         return out
 
 
@@ -381,6 +391,17 @@ def _strip(ta: HubTemplate, ring_a, tb: HubTemplate, ring_b, rel, ca, cb) -> np.
     out[..., 1] = f[..., 0]
     out[..., 0] = np.where(f[..., 0] == 0, a_ccw[np.where(f[..., 0] == 0, f[..., 1], 0)], f[..., 1])
     return out
+
+
+def _similarity_inverse(m: np.ndarray) -> np.ndarray:
+    """Inverses of similarity matrices (N, 4, 4): (sR)^-1 = (sR)^T / s²."""
+    lin = m[:, :3, :3]
+    s2 = np.einsum("nij,nij->n", lin, lin) / 3.0
+    inv = np.zeros_like(m)
+    inv[:, :3, :3] = lin.transpose(0, 2, 1) / s2[:, None, None]
+    inv[:, :3, 3] = -np.einsum("nij,nj->ni", inv[:, :3, :3], m[:, :3, 3])
+    inv[:, 3, 3] = 1.0
+    return inv
 
 
 def _box_index(box: Region, nn: int) -> np.ndarray:
