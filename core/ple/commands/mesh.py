@@ -73,10 +73,12 @@ def check_report(lat, region, mesh) -> dict:
         try:
             from ..measure import lattice_volume  # written in parallel by the queries engineer
 
-            exact = float(lattice_volume(lat))
-            rep["lattice_volume"], rep["lattice_volume_source"] = exact, "ple.measure.lattice_volume"
-        except (ImportError, AttributeError):
+            exact = lattice_volume(lat)
+        except (ImportError, AttributeError, PleError):
             exact = None
+        if exact is not None:
+            exact = float(exact)
+            rep["lattice_volume"], rep["lattice_volume_source"] = exact, "ple.measure.lattice_volume"
     if exact is None:
         est, err = monte_carlo_volume(lat, region)
         rep["lattice_volume"], rep["lattice_volume_source"] = est, f"monte carlo ±{err:.2g}"
