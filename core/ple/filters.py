@@ -23,6 +23,7 @@ from .lattice import Evaluation, Lattice, Region
 MAX_COARSE_NODES = 20_000_000  # a coarse lattice is evaluated in full; beyond this it is not "coarse"
 QUERY_CHUNK = 1 << 17  # query balls per vectorized batch (bounds the candidate-pair memory)
 THREADS = min(4, os.cpu_count() or 1)
+MAX_CELL_ENTRIES = 4_000_000  # (grid cell, element) candidates before the exact reach test
 
 
 # ----- the filter model ------------------------------------------------------------------------
@@ -297,14 +298,17 @@ class ElementSet:
         top = hi.max(axis=0)
         # cell size: about the typical element radius (measured best: docs/filters.md), but never
         # more than ~4M cells overall
-        thick = np.median(self.radius) + self.reach
-        h = max(thick, float(np.prod(top - self.origin) / 4e6) ** (1 / 3), 1e-12)
-        self.h = h
-        self.dims = np.maximum(np.ceil((top - self.origin) / h).astype(np.int64), 1)
-        c0 = np.floor((lo - self.origin) / h).astype(np.int64)
-        c1 = np.minimum(np.floor((hi - self.origin) / h).astype(np.int64), self.dims - 1)
-        span = c1 - c0 + 1
-        per = span.prod(axis=1)
+        h = max(np.median(self.radius) + self.reach, float(np.prod(top - self.origin) / 4e6) ** (1 / 3), 1e-12)
+        while True:  # long thin diagonal beams fill big boxes: coarsen until the candidate cells fit
+            dims = np.maximum(np.ceil((top - self.origin) / h).astype(np.int64), 1)
+            c0 = np.floor((lo - self.origin) / h).astype(np.int64)
+            c1 = np.minimum(np.floor((hi - self.origin) / h).astype(np.int64), dims - 1)
+            span = c1 - c0 + 1
+            per = span.prod(axis=1)
+            if per.sum() <= MAX_CELL_ENTRIES:
+                break
+            h *= 1.01 * (per.sum() / MAX_CELL_ENTRIES) ** (1 / 3)
+        self.h, self.dims = h, dims
         elem = np.repeat(np.arange(n_el), per)
         start = np.repeat(np.cumsum(per) - per, per)
         local = np.arange(len(elem)) - start
