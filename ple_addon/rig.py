@@ -212,6 +212,11 @@ def user_edits(rig, st: RigState) -> list:
         axis_n = "uvw".index(key)
         cum = cage.shows_cumulative(lat, key, rig.ple.cumulative[axis_n])
         out.append(snippets.SetDirection(key, None, cage.direction_from_frame(lat, key, m, cum), cum))
+    corners = becots_corners(lat)
+    if corners and any(p.get(("corner", c)) is not None and _moved(p[("corner", c)], st.expected, ("corner", c))
+                       for c in "ABCD"):
+        moved = [tuple(p[("corner", c)].matrix_basis.translation) for c in "ABCD"]
+        out.append(snippets.SetBecots(tuple(moved), tuple(lat.becots.counts)))
     for n in range(len(lat.nodes)):
         obj = p.get(("node", n))
         if obj is None or not _moved(obj, st.expected, ("node", n)):
@@ -286,7 +291,7 @@ def draw_rig(rig, lat, ev, st: RigState) -> None:
         if key in p:
             st.expected[key] = draw.set_matrix(p[key], m)
     sync_nodes(rig, lat, p, st)
-    sync_corners(rig, lat, p)
+    sync_corners(rig, lat, p, st)
 
 
 def sync_nodes(rig, lat, p: dict, st: RigState) -> None:
@@ -310,21 +315,35 @@ def sync_nodes(rig, lat, p: dict, st: RigState) -> None:
         st.expected[("node", n)] = draw.set_matrix(obj, m)
 
 
-def sync_corners(rig, lat, p: dict) -> None:
-    """Corner empties A, B, C, D of a BeCOTS slab (shown when the lattice has one)."""
+def becots_corners(lat) -> list:
+    """Corners A, B, C, D (points) of the lattice's BeCOTS slab; [] if it has none or its
+    field is not given by plain corners (branches, closed or stacked slabs: not editable)."""
     becots = getattr(lat, "becots", None)
-    corners = becots.to_ir().get("corners", []) if becots is not None else []
+    if becots is None:
+        return []
+    data = becots.to_ir()
+    if set(data) != {"corners", "counts"}:
+        return []
+    return [np.asarray(c, dtype=float) for c in data["corners"]]
+
+
+def sync_corners(rig, lat, p: dict, st: RigState) -> None:
+    """Corner empties A, B, C, D of a BeCOTS slab (children of G); moving one re-makes the
+    slab from the four corners (``set_becots``, thesis §4.2)."""
+    corners = becots_corners(lat)
+    stale = [obj for key, obj in p.items() if isinstance(key, tuple) and key[0] == "corner" and not corners]
+    if stale:
+        bpy.data.batch_remove(stale)
     for label, c in zip("ABCD", corners):
         obj = p.get(("corner", label))
         if obj is None:
             obj = new_part(rig, f"{rig.name}.{label}", None, "CORNER", parent=p.get("G"))
             obj.empty_display_type = "CUBE"
+            obj.empty_display_size = 0.1
             obj.ple.frame = label
-        arr = np.asarray(c.get("matrix", c) if isinstance(c, dict) else c, dtype=float)
-        m = arr if arr.shape == (4, 4) else np.eye(4)
-        if arr.shape == (3,):
-            m[:3, 3] = arr
-        draw.set_matrix(obj, m)
+        m = np.eye(4)
+        m[:3, 3] = c
+        st.expected[("corner", label)] = draw.set_matrix(obj, m)
 
 
 # ----- building a rig -------------------------------------------------------------------------

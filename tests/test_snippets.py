@@ -12,6 +12,7 @@ from ple.snippets import (
     MoveNode,
     RemoveBeam,
     RemoveNode,
+    SetBecots,
     SetDirection,
     SetPlacement,
     apply_edits,
@@ -161,3 +162,20 @@ def test_round_trip_apply_rerun_same_lattice(preset, edits):
     # and the evaluated balls agree (independent of how the lattice was built)
     r = "0:1,0:1,0:1"
     assert np.allclose(got.evaluate(r).center, want.evaluate(r).center, atol=1e-9)
+
+
+def test_becots_corner_edit_round_trip():
+    src = '''def lattice(nu=4):
+    lat = Lattice()
+    a = lat.add_node(Pt(0, 0, 0), 0.05)
+    lat.add_beam(a, a, 1, 0, 0)
+    lat.add_beam(a, a, 0, 1, 0)
+    # the slab's corners
+    lat.set_becots(Pt(0, 0, 0), Pt(0, 4, 0), Pt(4.5, 5, 0), Pt(4, 0, 0), counts=(nu, 4))
+    return lat
+'''
+    edit = SetBecots(((0, 0, 0), (-0.5, 4, 0), (4.5, 6, 0), (5, 0.5, 0)), (4, 4))
+    new = apply_edits(src, [edit])
+    assert new.count("set_becots(") == 1 and "# the slab's corners" in new
+    assert lattices_close(_run(new), apply_to_lattice(_run(src), [edit]))
+    assert edits_from_json(edits_to_json([edit])) == [edit]

@@ -2,11 +2,12 @@
 
 Every GUI manipulation is an *edit*: ``SetDirection`` (a frame moved or a repetition count
 changed: ``set_u/set_v/set_w``), ``SetPlacement``, ``AddNode``, ``MoveNode``, ``RemoveNode``,
-``AddBeam``, ``RemoveBeam``. Edits apply to a Lattice (``apply_to_lattice``), print as
-program lines (``snippet``) and rewrite a program's text (``apply_edits``): calls the edit
-replaces are rewritten in place through the syntax tree's positions where that is safe, the
-rest become lines inserted before ``return lat``; comments and unrelated code are kept, and
-re-running the new program reproduces the GUI state (checked before the text is returned).
+``AddBeam``, ``RemoveBeam``, ``SetBecots`` (moved BeCOTS corners). Edits apply to a Lattice
+(``apply_to_lattice``), print as program lines (``snippet``) and rewrite a program's text
+(``apply_edits``): calls an edit replaces are rewritten in place through the syntax tree's
+positions where that is safe, the rest become lines inserted before ``return lat``; comments
+and unrelated code are kept, and re-running the new program reproduces the GUI state
+(checked before the text is returned).
 """
 
 from __future__ import annotations
@@ -158,8 +159,24 @@ class RemoveBeam:
         return f"{var}.remove_beam({self.index})"
 
 
-EDIT_TYPES = {c.__name__: c for c in (SetDirection, SetPlacement, AddNode, MoveNode, RemoveNode, AddBeam, RemoveBeam)}
-Edit = SetDirection | SetPlacement | AddNode | MoveNode | RemoveNode | AddBeam | RemoveBeam
+@dataclass(frozen=True)
+class SetBecots:
+    """``set_becots(A, B, C, D, counts=(nu, nv))``: a BeCOTS slab from moved corners (§4.2)."""
+
+    corners: tuple
+    counts: tuple
+
+    def apply(self, lat: Lattice) -> None:
+        lat.set_becots(*(Pt(c) for c in self.corners), counts=tuple(int(n) for n in self.counts))
+
+    def code(self, var: str, digits: int, state: Lattice | None = None) -> str:
+        pts = ", ".join(_pt(c, digits) for c in self.corners)
+        return f"{var}.set_becots({pts}, counts=({int(self.counts[0])}, {int(self.counts[1])}))"
+
+
+EDIT_TYPES = {c.__name__: c for c in (SetDirection, SetPlacement, AddNode, MoveNode, RemoveNode, AddBeam, RemoveBeam,
+                                      SetBecots)}
+Edit = SetDirection | SetPlacement | AddNode | MoveNode | RemoveNode | AddBeam | RemoveBeam | SetBecots
 
 
 def _node_index(lat: Lattice, index: int) -> int:
@@ -191,8 +208,8 @@ def coalesce(edits) -> list:
             elif e.count is None and prev and prev[-1].count is not None:
                 e = SetDirection(e.axis, prev[-1].count, e.similarity, e.cumulative)
             out = [x for x in out if x not in prev]
-        elif isinstance(e, SetPlacement):
-            out = [x for x in out if not isinstance(x, SetPlacement)]
+        elif isinstance(e, (SetPlacement, SetBecots)):
+            out = [x for x in out if not isinstance(x, type(e))]
         elif isinstance(e, MoveNode) and out and isinstance(out[-1], MoveNode) and out[-1].index == e.index:
             last = out.pop()
             e = MoveNode(e.index, e.center if e.center is not None else last.center,
@@ -213,8 +230,10 @@ def edits_to_json(edits) -> str:
         for key, val in list(d.items()):
             if isinstance(getattr(e, key), Similarity):
                 d[key] = getattr(e, key).to_dict()
+            elif key == "corners":
+                d[key] = [[float(x) for x in c] for c in val]
             elif isinstance(val, tuple):
-                d[key] = [float(x) for x in val]
+                d[key] = [float(x) for x in val] if key != "counts" else [int(x) for x in val]
         out.append({"type": type(e).__name__, **d})
     return json.dumps(out)
 
@@ -235,6 +254,9 @@ def edits_from_json(text: str) -> list:
                 args[key] = similarity_from_dict(args[key], f"edit list[{n}].{key}")
         if args.get("center") is not None:
             args["center"] = tuple(args["center"])
+        if "corners" in args:
+            args["corners"] = tuple(tuple(c) for c in args["corners"])
+            args["counts"] = tuple(args["counts"])
         out.append(cls(**args))
     return out
 
@@ -319,6 +341,11 @@ def _rewrite(source: str, edits, digits: int, in_place: bool) -> str:
             call = only_top_call(f"set_{e.axis}")
         elif in_place and isinstance(e, SetPlacement):
             call = only_top_call("set_placement")
+        elif in_place and isinstance(e, SetBecots):
+            call = only_top_call("set_becots")
+            if call is not None:
+                replacements[src.span(call)] = e.code(var, digits)
+                continue
         if call is not None and not call.keywords and len(call.args) == 1 and isinstance(e, SetPlacement):
             replacements[src.span(call.args[0])] = e.similarity.to_code(digits)
             continue
