@@ -450,6 +450,46 @@ def case_ui():
     assert all(c.bl_space_type == "VIEW_3D" and c.bl_region_type == "UI" for c in panels)
     desc = bpy.types.PLE_OT_stencil_filter.__doc__ + bpy.types.PLE_OT_beam_add.__doc__
     assert "stencil" in desc and "beam-pattern" in desc
+    rig = new_rig("fig6_3")  # draw every panel into a recording layout that checks each reference
+    rig.ple.filter_kind = "STENCIL"
+    seen = []
+    for cls in panels:
+        if cls.poll(bpy.context):
+            cls.draw(type("P", (), {"layout": CheckedLayout(seen), "rig": cls.rig})(), bpy.context)
+    assert {"ple.lattice_add", "ple.program_run", "ple.program_apply", "ple.snippet_copy", "ple.node_add",
+            "ple.beam_add", "ple.beam_remove", "ple.lil_filter", "ple.stencil_filter", "ple.tessellate",
+            "ple.export"} <= set(seen)
+    assert "ple:thickness" in seen and "stencil_bits" in seen
+
+
+class CheckedLayout:
+    """A stand-in for bpy's UILayout (headless bpy cannot draw): checks that every property
+    and operator a panel references exists, and records them."""
+
+    def __init__(self, seen):
+        self.seen = seen
+
+    def row(self, **kw):
+        return self
+
+    column = row
+
+    def label(self, **kw):
+        assert isinstance(kw.get("text", ""), str)
+
+    def prop(self, data, name, **kw):
+        if name.startswith('["'):
+            assert name[2:-2] in data.keys(), name
+            name = name[2:-2]
+        else:
+            assert name in data.bl_rna.properties, name
+        self.seen.append(name)
+
+    def operator(self, idname, **kw):
+        mod, op = idname.split(".")
+        assert hasattr(getattr(bpy.ops, mod), op), idname
+        self.seen.append(idname)
+        return type("OpProps", (), {})()
 
 
 def case_becots_corners():
