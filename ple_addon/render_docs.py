@@ -76,8 +76,20 @@ def main(argv: list[str] | None = None) -> int:
     if res.returncode != 0 or not out.is_file():
         sys.stderr.write(res.stdout[-2000:] + res.stderr[-2000:])
         return 1
+    _quantize(out)
     print(out)
     return 0
+
+
+def _quantize(png: Path) -> None:
+    """Palette-quantize the picture so the repository stays small (skipped without Pillow)."""
+    try:
+        from PIL import Image
+    except ImportError:
+        return
+    with Image.open(png) as img:
+        small = img.convert("RGB").quantize(colors=64)
+    small.save(png, optimize=True)
 
 
 if __name__ == "__main__":
