@@ -23,6 +23,9 @@ from .errors import PleError
 INFLATE = 1e-4  # r⁺ "slightly larger than" the largest pairwise candidate (§5), relative
 CENTRE_MARGIN = 1e-3  # the hub's CNT must contain its centre by this much (unit sphere) for central projection
 MAX_FIX_CIRCLES = 8
+MAX_DISK_REACH = 0.45  # a contact disk may sit at most this far along its beam (two ends never cross)
+MIN_DISK_RADIUS = 0.25  # nor shrink below this fraction of the thinner ball
+UNCLEAN_GAP = 1e-3  # radians between shrunk caps of an unclean junction
 
 
 def beam_profile(radius, other_radii, lengths):
@@ -63,16 +66,28 @@ def inflated_radius(radius: float, dirs: np.ndarray, other_radii: np.ndarray, le
     return float(max(radius, cand.max()))
 
 
-def contact_circles(radius, r_plus, dirs, other_radii, lengths):
+def contact_circles(radius, r_plus, dirs, other_radii, lengths, strict: bool = True):
     """Half-angles (S,) of the contact circles of the beams on S⁺ (unit-sphere cone angles),
     and the axial position (S,) and radius (S,) of each contact disk (in world units)."""
     sphi, cphi = beam_profile(radius, other_radii, lengths)
     s = np.sqrt(max(r_plus**2 - radius**2, 0.0))
     x = radius * sphi + s * cphi  # tangent point r n plus s along the profile line
     y = radius * cphi - s * sphi
-    if np.any(y <= 0) or np.any(x >= lengths):
+    if strict and (np.any(y <= 0) or np.any(x >= lengths)):
         raise PleError("lattice is not clean: a beam is too short for its junction (r+ passes its far end)")
-    return np.arctan2(y, x), x, y
+    return np.arctan2(np.maximum(y, 0.0), x), x, y
+
+
+def _max_inflation(radius, other_radii, lengths) -> float:
+    """The largest r⁺ for which every contact disk stays in the first MAX_DISK_REACH of its beam
+    and keeps at least MIN_DISK_RADIUS of the thinner ball's radius (beyond: unclean)."""
+    sphi, cphi = beam_profile(radius, other_radii, lengths)
+    # axial x = r sin(phi) + s cos(phi) ≤ reach·L, radius y = r cos(phi) − s sin(phi) ≥ m·min(r, r_o)
+    s_max = (MAX_DISK_REACH * lengths - radius * sphi) / cphi
+    y_min = MIN_DISK_RADIUS * np.minimum(radius, other_radii)
+    s_y = np.where(sphi > 0, (radius * cphi - y_min) / np.where(sphi > 0, sphi, 1.0), np.inf)
+    s = np.clip(np.minimum(s_max, s_y).min(), 0.0, None)
+    return float(np.sqrt(radius**2 + s**2))
 
 
 @dataclass
@@ -80,7 +95,10 @@ class HubGeometry:
     """A junction of the ACHoCC on its unit sphere (scale by ``r_plus``).
 
     ``chocc`` holds the S real contact circles first, then point circles added so that the
-    hub has triangles (n ≤ 2) and contains its centre (the off-centre fix of §6)."""
+    hub has triangles (n ≤ 2) and contains its centre (the off-centre fix of §6). ``clean`` is
+    False when the lattice violates the ACHoCC assumption (junctions of neighbouring balls
+    would overlap): r⁺ is then capped inside the beams and the caps shrunk to stay disjoint, so
+    the mesh stays closed but its contact rings lie inside the beams, not on them."""
 
     radius: float
     r_plus: float
@@ -89,6 +107,8 @@ class HubGeometry:
     lengths: np.ndarray
     chocc: Chocc
     slots: int
+    clean: bool = True
+    alphas: np.ndarray | None = None
 
     def exit_distance(self, u: np.ndarray) -> np.ndarray:
         """Distance (V,) from the centre along unit rays ``u`` (V, 3) to the boundary of the
@@ -196,14 +216,27 @@ def hub_geometry(radius: float, dirs, other_radii, lengths) -> HubGeometry:
     if len(dirs):  # a beam widening away from the ball meets S⁺ in front of the centre only beyond r / cos(phi)
         _, cphi = beam_profile(radius, other_radii, lengths)
         r_plus = max(r_plus, radius / cphi.min() * (1 + 1e-2))
-    alphas, _, _ = contact_circles(radius, r_plus, dirs, other_radii, lengths)
-    gap = np.arccos(np.clip(dirs @ dirs.T, -1, 1)) - (alphas[:, None] + alphas[None, :])
-    np.fill_diagonal(gap, np.inf)
-    while len(dirs) > 1 and gap.min() <= 1e-9:  # caps still touching at r⁺: inflate a little more
-        r_plus *= 1.001
-        alphas, _, _ = contact_circles(radius, r_plus, dirs, other_radii, lengths)
-        gap = np.arccos(np.clip(dirs @ dirs.T, -1, 1)) - (alphas[:, None] + alphas[None, :])
-        np.fill_diagonal(gap, np.inf)
+    clean = True
+    if len(dirs):
+        limit = _max_inflation(radius, other_radii, lengths)
+        if r_plus > limit:  # unclean: neighbouring junctions would overlap; stay inside the beams
+            r_plus, clean = max(limit, radius), False
+    alphas, _, _ = contact_circles(radius, r_plus, dirs, other_radii, lengths, strict=clean)
+    if len(dirs) > 1:
+        theta = np.arccos(np.clip(dirs @ dirs.T, -1, 1))
+        np.fill_diagonal(theta, np.inf)
+        gap = theta - (alphas[:, None] + alphas[None, :])
+        while clean and gap.min() <= 1e-9:  # caps still touching at r⁺ (round-off): inflate a little more
+            if r_plus * 1.001 > limit:
+                clean = False
+                break
+            r_plus *= 1.001
+            alphas, _, _ = contact_circles(radius, r_plus, dirs, other_radii, lengths)
+            gap = theta - (alphas[:, None] + alphas[None, :])
+        if gap.min() <= 1e-9:  # caps overlap at the allowed r⁺: shrink each to its share
+            share = (theta - UNCLEAN_GAP) * alphas[:, None] / np.maximum(alphas[:, None] + alphas[None, :], 1e-300)
+            alphas = np.clip(np.minimum(alphas, share.min(axis=1)), 0.0, None)
+            clean = False
     normals = np.concatenate([dirs, _seed_points(dirs)])
     alist = np.concatenate([alphas, np.zeros(len(normals) - len(dirs))])
     c = chocc(normals, alist)
@@ -223,4 +256,4 @@ def hub_geometry(radius: float, dirs, other_radii, lengths) -> HubGeometry:
         normals = np.concatenate([normals, p[None]])
         alist = np.concatenate([alist, [0.0]])
         c = chocc(normals, alist)
-    return HubGeometry(float(radius), float(r_plus), dirs, other_radii, lengths, c, len(dirs))
+    return HubGeometry(float(radius), float(r_plus), dirs, other_radii, lengths, c, len(dirs), clean, alphas)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from .achocc import HubGeometry, contact_circles, hub_geometry
+from .achocc import HubGeometry, hub_geometry
 from .chocc import ChoccMesh, cnt_segments, corridor_mesh, sampled_segments
 from .errors import PleError
 from .lattice import Lattice, Region
@@ -137,7 +137,7 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
     else:
         base = corridor_mesh(hub.chocc, cnt_segments if style == "cnt" else sampled_segments(segments))
         verts, faces, rings = base.vertices * hub.r_plus, base.faces, base.rings
-    _, axial, _ = contact_circles(radius, hub.r_plus, dirs, hub.other_radii, lengths)
+    axial = hub.r_plus * np.cos(hub.alphas)
     caps = []
     all_verts = [verts]
     nv = len(verts)
