@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from .becots import TWO_PI, BeCOTSField, becots_of
-from .elements import ball_ball_interfere, ball_beam_interfere
+from .elements import TOUCH_TOL
 from .errors import PleError
 from .lattice import Lattice
 from .similarity import Similarity
@@ -39,13 +39,18 @@ def query(lat: Lattice, centers, radii) -> list:
     from .biq import check_queries
 
     c, r = check_queries(centers, radii)
-    if not is_becots(lat):  # U or V changed after set_becots (e.g. with_counts): the general path
+    try:
+        plan = _plan(lat)
+    except PleError:  # U or V changed after set_becots (e.g. with_counts): the general path
+        plan = None
+    if plan is None:
         from .biq import _split as split_general
         from .rangefinder import lattice_hits
 
+        lat.validate()
         nh, bh, path = lattice_hits(lat, c, r)
         return split_general(len(c), nh, bh, path)
-    return query_subset(lat, c, r, None, None)
+    return plan.query(c, r)
 
 
 def is_becots(lat: Lattice) -> bool:
@@ -61,39 +66,90 @@ def query_subset(lat: Lattice, c: np.ndarray, r: np.ndarray, nodes=None, beams=N
     """BIQ restricted to template nodes ``nodes`` and beam-patterns ``beams`` (None: all);
     ``select`` (q, m) optionally picks, per query, m of those shapes (positions in the list
     nodes + beams) so that each query costs O(m) whatever the template size."""
+    plan = _plan(lat)
+    if plan is None:
+        becots_of(lat)  # raises the PleError that says why the lattice is not a BeCOTS slab
+        raise PleError("beam-patterns with dk != 0 on a BeCOTS slab with W count > 1: use the general BIQ path")
+    ids = None
+    if nodes is not None or beams is not None or select is not None:
+        nid = np.arange(plan.nn) if nodes is None else np.asarray(nodes, dtype=np.int64).reshape(-1)
+        bid = np.arange(plan.nb) if beams is None else np.asarray(beams, dtype=np.int64).reshape(-1)
+        ids = np.concatenate([nid, plan.nn + bid])[None]
+        if select is not None:
+            ids = ids[0][np.asarray(select, dtype=np.int64).reshape(len(c), -1)]
+    return plan.query(np.asarray(c, float), np.asarray(r, float), ids)
+
+
+# ----- the per-lattice plan ---------------------------------------------------------------------------
+PLAN_ATTR = "_becots_rangefinder_plan"  # cache slot on the Lattice object: (key, _Plan or None)
+
+
+def _plan_key(lat: Lattice) -> tuple:
+    """Everything the plan depends on; cheap to build and compare on every query call."""
+    info = lat.becots
+    return (id(info), id(getattr(info, "field", None)), getattr(info, "counts", None), getattr(info, "closed", None),
+            id(getattr(info, "stack", None)), lat.u, lat.v, lat.w, lat.placement, tuple(lat.beams),
+            tuple((np.asarray(n.center, float).tobytes(), n.radius) for n in lat.nodes))
+
+
+def _plan(lat: Lattice):
+    """The cached per-lattice constants (a ``_Plan``), rebuilt when the lattice changed; None if
+    the lattice cannot use this RangeFinder (special case: beam-patterns with dk != 0 and W
+    count > 1 are not regular in index space). Raises PleError if ``lat.becots`` is stale."""
+    key = _plan_key(lat)
+    cached = lat.__dict__.get(PLAN_ATTR)
+    if cached is not None and cached[0] == key:
+        return cached[1]
     info = becots_of(lat)
     lat.validate()
-    node_ids = np.arange(len(lat.nodes)) if nodes is None else np.asarray(nodes, dtype=np.int64)
-    beam_ids = np.arange(len(lat.beams)) if beams is None else np.asarray(beams, dtype=np.int64)
-    node_hits, beam_hits = [], []
-    for k in range(lat.w.count):
-        g = lat.placement if k == 0 else Similarity.from_matrix(lat.placement.matrix @ (lat.W ** k).matrix)
-        fld = info.field.placed(g)
-        tc = g.apply_points(lat.template_centers)
-        tr = lat.template_radii * g.factor
-        nh, bh = _hits(fld, info.counts, info.group_counts, tc, tr, node_ids,
-                       [(p, lat.beams[p]) for p in beam_ids], c, r, select)
-        nh[:, 3] = bh[:, 3] = k
-        node_hits.append(nh)
-        beam_hits.append(bh)
-    return _split(len(c), np.concatenate(node_hits), np.concatenate(beam_hits))
+    plan = None if lat.w.count > 1 and any(b.dk for b in lat.beams) else _Plan(lat, info)
+    lat.__dict__[PLAN_ATTR] = (key, plan, info)  # info kept alive so that its id stays unique
+    return plan
 
 
-def _split(q: int, node_hits: np.ndarray, beam_hits: np.ndarray) -> list:
-    """Per-query sorted, de-duplicated BIQResults from hit rows (qid, i, j, k, x)."""
-    from .biq import BIQResult
+class _Plan:
+    """Per-lattice constants: one ``_Layer`` per W copy (field moved by ``G ∘ W**k``)."""
 
-    parts = []
-    for hits in (node_hits, beam_hits):
-        if len(hits):
-            order = np.lexsort(hits.T[::-1])
-            hits = hits[order]
-            keep = np.ones(len(hits), dtype=bool)
-            keep[1:] = np.any(hits[1:] != hits[:-1], axis=1)  # branches may find a shape twice
-            hits = hits[keep]
-        parts.append((hits[:, 1:], np.searchsorted(hits[:, 0], np.arange(q + 1))))
-    (nh, nb), (bh, bb) = parts
-    return [BIQResult(nh[nb[t]:nb[t + 1]], bh[bb[t]:bb[t + 1]], "becots") for t in range(q)]
+    def __init__(self, lat: Lattice, info):
+        self.nn, self.nb = len(lat.nodes), len(lat.beams)
+        self.gu, self.gv = info.group_counts
+        self.nw = lat.w.count
+        self.layers = []
+        for k in range(self.nw):
+            g = lat.placement if k == 0 else Similarity.from_matrix(lat.placement.matrix @ (lat.W ** k).matrix)
+            tc = g.apply_points(lat.template_centers)
+            tr = lat.template_radii * g.factor
+            self.layers.append(_Layer(info.field.placed(g), info.counts, info.group_counts, tc, tr, lat.beams))
+
+    def query(self, c: np.ndarray, r: np.ndarray, ids=None) -> list:
+        parts = [layer.hits(c, r, ids, k) for k, layer in enumerate(self.layers)]
+        qid, isbeam, ci, cj, kk, x = (np.concatenate(p) for p in zip(*parts)) if len(parts) > 1 else parts[0]
+        return self._split(len(c), qid, isbeam, ci, cj, kk, x)
+
+    def _split(self, q: int, qid, isbeam, ci, cj, kk, x) -> list:
+        """Per-query sorted, de-duplicated BIQResults (branches and padded selections may find a
+        shape twice): one integer key per hit, one sort, one pass of divisions to decode."""
+        from .biq import BIQResult
+
+        nx = max(self.nn, self.nb, 1)
+        if 2 * q * self.gu * self.gv * self.nw * nx < 2 ** 62:
+            key = ((((qid * 2 + isbeam) * self.gu + ci) * self.gv + cj) * self.nw + kk) * nx + x
+            key.sort()
+            if len(key) > 1:
+                key = key[np.concatenate([[True], key[1:] != key[:-1]])]
+            rest, x = np.divmod(key, nx)
+            rest, kk = np.divmod(rest, self.nw)
+            rest, cj = np.divmod(rest, self.gv)
+            grp, ci = np.divmod(rest, self.gu)
+            rows = np.stack([ci, cj, kk, x], axis=1)
+        else:  # special case: keys would overflow int64, sort the columns instead
+            rows = np.stack([qid * 2 + isbeam, ci, cj, kk, x], axis=1)
+            rows = rows[np.lexsort(rows.T[::-1])]
+            if len(rows) > 1:
+                rows = rows[np.concatenate([[True], np.any(rows[1:] != rows[:-1], axis=1)])]
+            grp, rows = rows[:, 0], rows[:, 1:]
+        b = np.searchsorted(grp, np.arange(2 * q + 1)).tolist()
+        return [BIQResult(rows[b[2 * t]:b[2 * t + 1]], rows[b[2 * t + 1]:b[2 * t + 2]], "becots") for t in range(q)]
 
 
 # ----- bounds ---------------------------------------------------------------------------------------
@@ -230,110 +286,213 @@ def _point_segment_distance(p, a, b) -> np.ndarray:
     return np.linalg.norm(a + t[:, None] * ab - p, axis=1)
 
 
+
+
 # ----- the query ------------------------------------------------------------------------------------
-def _hits(fld: BeCOTSField, counts, group_counts, tc, tr, node_ids, beams, c, r, select=None):
-    """Hit arrays (qid, i, j, k, x) for one placed field (k is filled in by the caller)."""
-    nu, nv = counts
-    gu, gv = group_counts
-    co = _Coords(fld, counts)
-    # template shapes: nodes first, then beams (from-group (0, 0) to (di, dj))
-    n_nodes = len(node_ids)
-    shape_lim = [(0, gu - 1, 0, gv - 1)] * n_nodes
-    bstart, bend = [], []
-    for _, b in beams:
-        shape_lim.append((max(0, -b.di), min(gu, gu - b.di) - 1, max(0, -b.dj), min(gv, gv - b.dj) - 1))
-        bstart.append((tc[b.n1], tr[b.n1]))
-        end = fld.apply([b.di / nu], [b.dj / nv], tc[b.n2])[0]
-        bend.append((end, tr[b.n2] * _factor(fld, b.di / nu, b.dj / nv)))
-    lim = np.array(shape_lim, dtype=np.int64).reshape(-1, 4)
-    if len(lim) == 0 or len(c) == 0:
-        return np.zeros((0, 5), np.int64), np.zeros((0, 5), np.int64)
-    nc, nr = tc[node_ids], tr[node_ids]
-    shells = [co.ball_shell(nc, nr)]
-    if beams:
-        shells.append(co.beam_shell(*_stack(bstart), *_stack(bend)))
-    s_lo, s_hi = (np.concatenate(x) for x in zip(*shells))
-    q_lo, q_hi = co.ball_shell(c, r)
-    if fld.kind == "translation":
-        boxes = [co.affine_box(nc, nr)]
-        if beams:
-            sa, sb = co.affine_box(*_stack(bstart)), co.affine_box(*_stack(bend))
-            boxes.append(np.stack([np.minimum(sa[:, 0], sb[:, 0]), np.maximum(sa[:, 1], sb[:, 1]),
-                                   np.minimum(sa[:, 2], sb[:, 2]), np.maximum(sa[:, 3], sb[:, 3])], axis=1))
-        shape_box = np.concatenate(boxes)
-        qbox = co.affine_box(c, r)
-        rows = np.arange(len(c))
-    else:
-        parts = [co.ball_polar(nc, nr)]
-        if beams:
-            (ca, ra), (cb, rb) = _stack(bstart), _stack(bend)
-            parts.append(co.beam_polar(ca, ra, cb, rb))
-        rho0, rho1, mid, half = (np.concatenate(x) for x in zip(*parts))
-        shape_box = co.index_box(rho0, rho1, mid - half, mid + half)
-        # the lattice's angle range: template shapes shifted by every group's angle step
-        (_, wu), (_, wv) = fld.u, fld.v
-        steps_u, steps_v = (gu - 1) * wu / nu, (gv - 1) * wv / nv
-        th_lo = float((mid - half).min()) + min(0.0, steps_u) + min(0.0, steps_v)
-        th_hi = float((mid + half).max()) + max(0.0, steps_u) + max(0.0, steps_v)
-        q0, q1, qmid, qhalf = co.ball_polar(c, r)
-        kmin = np.ceil((th_lo - (qmid + qhalf)) / TWO_PI).astype(np.int64)
-        kmax = np.floor((th_hi - (qmid - qhalf)) / TWO_PI).astype(np.int64)
-        nk = np.maximum(kmax - kmin + 1, 0)
-        rows = np.repeat(np.arange(len(c)), nk)
-        kk = kmin[rows] + (np.arange(len(rows)) - np.repeat(np.cumsum(nk) - nk, nk))
-        lift = qmid[rows] + TWO_PI * kk
-        qbox = co.index_box(q0[rows], q1[rows], lift - qhalf[rows], lift + qhalf[rows])
-    # the shapes each row tests: all of them, or the query's own selection
-    pick = np.arange(len(lim))[None] if select is None else np.asarray(select, dtype=np.int64)[rows]
-    sb, sl = shape_box[pick], lim[pick]
-    # translation RangeFinder per (row, shape): I = [ceil(c - b), floor(d - a)] ∩ limits
-    i0 = np.maximum(sl[..., 0], np.ceil(qbox[:, None, 0] - sb[..., 1] - INDEX_SLACK))
-    i1 = np.minimum(sl[..., 1], np.floor(qbox[:, None, 1] - sb[..., 0] + INDEX_SLACK))
-    j0 = np.maximum(sl[..., 2], np.ceil(qbox[:, None, 2] - sb[..., 3] - INDEX_SLACK))
-    j1 = np.minimum(sl[..., 3], np.floor(qbox[:, None, 3] - sb[..., 2] + INDEX_SLACK))
-    # conical shell test: a query outside a shape's shell interval meets none of its copies
-    apart = (q_hi[rows][:, None] < s_lo[pick]) | (s_hi[pick] < q_lo[rows][:, None])
-    ni = np.where(apart, 0, np.maximum(i1 - i0 + 1, 0)).astype(np.int64)
-    nj = np.maximum(j1 - j0 + 1, 0).astype(np.int64)
-    cnt = (ni * nj).reshape(-1)
-    flat = np.repeat(np.arange(cnt.size), cnt)
-    off = np.arange(flat.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-    njf = nj.reshape(-1)[flat]
-    ci = i0.reshape(-1)[flat].astype(np.int64) + off // np.maximum(njf, 1)
-    cj = j0.reshape(-1)[flat].astype(np.int64) + off % np.maximum(njf, 1)
-    row, col = np.divmod(flat, ni.shape[1])
-    shape = np.broadcast_to(pick, ni.shape)[row, col]
-    qid = rows[row]
-    x, y = ci / nu, cj / nv
-    # exact tests: nodes
-    is_node = shape < n_nodes
-    sel = np.nonzero(is_node)[0]
-    n_of = node_ids[shape[sel]]
-    centers = fld.apply(x[sel], y[sel], tc[n_of])
-    hit = ball_ball_interfere(centers, tr[n_of] * _factor(fld, x[sel], y[sel]), c[qid[sel]], r[qid[sel]])
-    s = sel[hit]
-    node_hits = np.stack([qid[s], ci[s], cj[s], np.zeros_like(s), node_ids[shape[s]]], axis=1)
-    # exact tests: beams
-    sel = np.nonzero(~is_node)[0]
-    p_local = shape[sel] - n_nodes
-    pats = np.array([(p, b.n1, b.n2, b.di, b.dj) for p, b in beams], dtype=np.int64).reshape(-1, 5)[p_local]
-    xa, ya = x[sel], y[sel]
-    xb, yb = (ci[sel] + pats[:, 3]) / nu, (cj[sel] + pats[:, 4]) / nv
-    ca = fld.apply(xa, ya, tc[pats[:, 1]])
-    cb = fld.apply(xb, yb, tc[pats[:, 2]])
-    ra = tr[pats[:, 1]] * _factor(fld, xa, ya)
-    rb = tr[pats[:, 2]] * _factor(fld, xb, yb)
-    hit = ball_beam_interfere(c[qid[sel]], r[qid[sel]], ca, ra, cb, rb)
-    s = sel[hit]
-    beam_hits = np.stack([qid[s], ci[s], cj[s], np.zeros_like(s), pats[hit, 0]], axis=1)
-    return node_hits.astype(np.int64).reshape(-1, 5), beam_hits.astype(np.int64).reshape(-1, 5)
+class _Layer:
+    """Constants of one placed field, computed once per lattice: the template shapes' index-space
+    boxes (§8.1–8.2), limits and shell intervals, the lattice's angle range, and the template
+    shapes in the field's local frame (origin F, rows e1, e2, T) for the exact tests."""
+
+    def __init__(self, fld: BeCOTSField, counts, group_counts, tc, tr, beams):
+        nu, nv = counts
+        gu, gv = group_counts
+        self.kind = fld.kind
+        co = _Coords(fld, counts)
+        nn = len(tc)
+        # template shapes: nodes first, then beams (from-group (0, 0) to (di, dj)); a beam-pattern
+        # with dk != 0 has no instance when W count is 1 (special case: empty limits)
+        lim = [(0, gu - 1, 0, gv - 1)] * nn
+        ends = []
+        for b in beams:
+            lim.append((max(0, -b.di), min(gu, gu - b.di) - 1, max(0, -b.dj), min(gv, gv - b.dj) - 1)
+                       if b.dk == 0 else (0, -1, 0, -1))
+            end = fld.apply([b.di / nu], [b.dj / nv], tc[b.n2])[0]
+            ends.append((tc[b.n1], tr[b.n1], end, tr[b.n2] * float(_factor(fld, b.di / nu, b.dj / nv))))
+        self.lim = np.array(lim, dtype=float).reshape(-1, 4)
+        ca = np.concatenate([tc, np.array([e[0] for e in ends]).reshape(-1, 3)])
+        ra = np.concatenate([tr, np.array([e[1] for e in ends], dtype=float)])
+        cb = np.concatenate([tc, np.array([e[2] for e in ends]).reshape(-1, 3)])
+        rb = np.concatenate([tr, np.array([e[3] for e in ends], dtype=float)])
+        self.is_node = np.arange(len(ra)) < nn
+        self.pattern = np.concatenate([np.arange(nn), np.arange(len(beams))]).astype(np.int64)
+        nb = len(beams)
+        shells = [co.ball_shell(tc, tr)] + ([co.beam_shell(ca[nn:], ra[nn:], cb[nn:], rb[nn:])] if nb else [])
+        self.s_lo, self.s_hi = (np.concatenate(x) for x in zip(*shells))
+        if fld.kind == "translation":
+            boxes = [co.affine_box(tc, tr)]
+            if nb:
+                sa, sb = co.affine_box(ca[nn:], ra[nn:]), co.affine_box(cb[nn:], rb[nn:])
+                boxes.append(np.stack([np.minimum(sa[:, 0], sb[:, 0]), np.maximum(sa[:, 1], sb[:, 1]),
+                                       np.minimum(sa[:, 2], sb[:, 2]), np.maximum(sa[:, 3], sb[:, 3])], axis=1))
+            self.box = np.concatenate(boxes)
+            self.origin, self.frame = fld.a.copy(), np.eye(3)
+            self.dual, self.dual_norm, self.normal = co.dual, co.dual_norm, co.normal
+            self.step_u, self.step_v = fld.tu / nu, fld.tv / nv
+        else:
+            parts = [co.ball_polar(tc, tr)] + ([co.beam_polar(ca[nn:], ra[nn:], cb[nn:], rb[nn:])] if nb else [])
+            rho0, rho1, mid, half = (np.concatenate(x) for x in zip(*parts))
+            self.box = co.index_box(rho0, rho1, mid - half, mid + half)
+            # the lattice's angle range: template shapes shifted by every group's angle step
+            (ru, wu), (rv, wv) = fld.u, fld.v
+            steps_u, steps_v = (gu - 1) * wu / nu, (gv - 1) * wv / nv
+            self.th_lo = float((mid - half).min()) + min(0.0, steps_u) + min(0.0, steps_v)
+            self.th_hi = float((mid + half).max()) + max(0.0, steps_u) + max(0.0, steps_v)
+            self.k = co.k
+            self.origin, self.frame = fld.apex.copy(), np.stack([co.e1, co.e2, fld.axis])
+            self.ref = co.ref
+            self.h0 = float((fld.a - fld.apex) @ fld.axis)
+            self.step_u, self.step_v = (ru / nu, wu / nu), (rv / nv, wv / nv)
+        # exact tests happen in the template's frame: the shapes of group (0, 0), local coordinates
+        a_loc = (ca - self.origin) @ self.frame.T
+        ab = (cb - self.origin) @ self.frame.T - a_loc
+        self.ra, self.rb = ra, rb
+        self.length = np.sqrt(np.einsum("ij,ij->i", ab, ab))
+        safe = np.where(self.length > 0, self.length, 1.0)
+        self.a = np.ascontiguousarray(a_loc.T)  # (3, S) columns
+        self.e = np.ascontiguousarray((ab / safe[:, None]).T)
+        self.sn = np.clip((ra - rb) / safe, -1.0, 1.0)  # tangent slope of the cone-beam (seed 002 §2.1)
+        self.cs = np.sqrt(1.0 - self.sn * self.sn)
+        self.a_big = self.length + rb <= ra  # special case: one ball contains the other
+        self.b_big = self.length + ra <= rb
+        self.big = np.maximum(ra, rb)
+
+    def query_bounds(self, c: np.ndarray, r: np.ndarray):
+        """Local coordinates of the queries and their index-space boxes, one row per branch:
+        (loc (q, 3), rows (n,) query ids, box (n, 4), shell (q,), (q,))."""
+        loc = (c - self.origin) @ self.frame.T
+        if self.kind == "translation":
+            x = loc @ self.dual.T  # (q, 2) exact affine index coordinates
+            ext = r[:, None] * self.dual_norm[None]
+            n = loc @ self.normal
+            box = np.stack([x[:, 0] - ext[:, 0], x[:, 0] + ext[:, 0], x[:, 1] - ext[:, 1], x[:, 1] + ext[:, 1]], axis=1)
+            return loc, None, box, n - r, n + r
+        x, y, h = loc[:, 0], loc[:, 1], loc[:, 2]
+        rad2 = x * x + y * y
+        radial = np.sqrt(rad2)
+        theta = np.arctan2(y, x)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            half = np.arcsin(np.minimum(r / radial, 1.0))
+        half[~(r < radial)] = np.pi  # special case: the ball touches the axis, every angle
+        if self.kind == "cone":
+            d = np.sqrt(rad2 + h * h)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                rho0 = np.log(np.maximum(d - r, 1e-300) / self.ref)
+                rho1 = np.maximum(np.log((d + r) / self.ref), TINY_LOG)
+                rho0[~(d > r)] = TINY_LOG  # special case: the ball contains F, unbounded rho
+                phi = np.arccos(np.clip(h / d, -1.0, 1.0))
+                spread = np.arcsin(np.minimum(r / d, 1.0))
+            phi[~(d > 0)] = 0.0
+            spread[~(d > r)] = np.inf
+            s_lo, s_hi = phi - spread, phi + spread
+        else:  # special case cylinder: rho is the height along T, the shell the distance to T
+            rho0, rho1 = h - self.h0 - r, h - self.h0 + r
+            s_lo, s_hi = radial - r, radial + r
+        # branches: lift the query's angle interval by every 2π k meeting the lattice's angle range
+        kmin = np.ceil((self.th_lo - (theta + half)) / TWO_PI)
+        kmax = np.floor((self.th_hi - (theta - half)) / TWO_PI)
+        nk = np.maximum(kmax - kmin + 1, 0).astype(np.int64)
+        if np.all(nk == 1):  # the common case: one branch per query
+            rows = None
+            lift = theta + TWO_PI * kmin
+        else:
+            rows = np.repeat(np.arange(len(c)), nk)
+            kk = kmin[rows] + (np.arange(len(rows)) - np.repeat(np.cumsum(nk) - nk, nk))
+            lift = theta[rows] + TWO_PI * kk
+            rho0, rho1, half = rho0[rows], rho1[rows], half[rows]
+        lo, hi = lift - half, lift + half
+        # index-space box of the log-polar box: K is linear, so each bound takes one corner
+        (k00, k01), (k10, k11) = self.k
+        box = np.stack([k00 * (rho0 if k00 >= 0 else rho1) + k01 * (lo if k01 >= 0 else hi),
+                        k00 * (rho1 if k00 >= 0 else rho0) + k01 * (hi if k01 >= 0 else lo),
+                        k10 * (rho0 if k10 >= 0 else rho1) + k11 * (lo if k11 >= 0 else hi),
+                        k10 * (rho1 if k10 >= 0 else rho0) + k11 * (hi if k11 >= 0 else lo)], axis=1)
+        return loc, rows, box, s_lo, s_hi
+
+    def candidates(self, rows, box, s_lo, s_hi, ids):
+        """Flat candidate arrays (row, shape, i, j) of every (query row, shape) pair: the
+        translation RangeFinder I = [ceil(c - b), floor(d - a)] ∩ limits, and likewise J (§7.1.3),
+        after the conical shell test (§8.2)."""
+        if rows is not None:
+            s_lo, s_hi = s_lo[rows], s_hi[rows]
+        if ids is None:  # every template shape
+            sid = None
+            sb, sl, lo_, hi_ = self.box[None], self.lim[None], self.s_lo[None], self.s_hi[None]
+        else:  # (1, m) the same shapes for every query, or (q, m) a selection per query
+            sid = ids[rows] if rows is not None and len(ids) > 1 else ids
+            sb, sl, lo_, hi_ = self.box[sid], self.lim[sid], self.s_lo[sid], self.s_hi[sid]
+        i0 = np.maximum(sl[..., 0], np.ceil(box[:, None, 0] - sb[..., 1] - INDEX_SLACK))
+        i1 = np.minimum(sl[..., 1], np.floor(box[:, None, 1] - sb[..., 0] + INDEX_SLACK))
+        j0 = np.maximum(sl[..., 2], np.ceil(box[:, None, 2] - sb[..., 3] - INDEX_SLACK))
+        j1 = np.minimum(sl[..., 3], np.floor(box[:, None, 3] - sb[..., 2] + INDEX_SLACK))
+        ni, nj = i1 - i0 + 1, j1 - j0 + 1
+        ok = (ni > 0) & (nj > 0) & (s_hi[:, None] >= lo_) & (hi_ >= s_lo[:, None])
+        nz = np.flatnonzero(ok)
+        width = ok.shape[1]
+        if len(nz) == 0:
+            e = np.zeros(0, np.int64)
+            return e, e, e, e
+        nj = nj.reshape(-1)[nz].astype(np.int64)
+        cnt = ni.reshape(-1)[nz].astype(np.int64) * nj
+        pair = np.repeat(np.arange(len(nz)), cnt)
+        off = np.arange(len(pair)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        di, dj = np.divmod(off, nj[pair])
+        ci = i0.reshape(-1)[nz].astype(np.int64)[pair] + di
+        cj = j0.reshape(-1)[nz].astype(np.int64)[pair] + dj
+        row, col = np.divmod(nz, width)
+        shape = (col if sid is None else np.broadcast_to(sid, ok.shape).reshape(-1)[nz])[pair]
+        return row[pair], shape, ci, cj
+
+    def hits(self, c: np.ndarray, r: np.ndarray, ids, k: int):
+        """Hit arrays (qid, is_beam, i, j, k, node id or pattern) of this placed field."""
+        loc, rows, box, s_lo, s_hi = self.query_bounds(c, r)
+        row, shape, ci, cj = self.candidates(rows, box, s_lo, s_hi, ids)
+        loc = loc.T  # columns x, y, z
+        qid = row if rows is None else rows[row]
+        if len(qid) == 0:
+            e = np.zeros(0, np.int64)
+            return e, e, e, e, e, e
+        # move each query into the template's frame by S(i/nu, j/nv)⁻¹ (so shapes are constants)
+        x, y, z, rq = self._to_template(loc, r, qid, ci, cj)
+        # exact tests in one pass over columns: ball–ball for nodes, ball–cone-beam for beams
+        # (the formulas of ple.elements; a node is its own degenerate beam, a_big, so dist = da)
+        dx, dy, dz = x - self.a[0][shape], y - self.a[1][shape], z - self.a[2][shape]
+        ap2 = dx * dx + dy * dy + dz * dz
+        ra = self.ra[shape]
+        rr = rq + ra
+        node_hit = ap2 <= rr * rr * (1 + TOUCH_TOL) + TOUCH_TOL * TOUCH_TOL
+        t = dx * self.e[0][shape] + dy * self.e[1][shape] + dz * self.e[2][shape]  # along the axis a→b
+        y2 = np.maximum(ap2 - t * t, 0.0)
+        yy = np.sqrt(y2)
+        sn, cs, length = self.sn[shape], self.cs[shape], self.length[shape]
+        u = cs * t - sn * yy  # position along the tangent direction (seed 002 §2.1)
+        da = np.sqrt(t * t + y2) - ra
+        db = np.sqrt((t - length) ** 2 + y2) - self.rb[shape]
+        dist = np.where(u <= 0, da, np.where(u >= cs * length, db, sn * t + cs * yy - ra))
+        dist = np.where(self.a_big[shape], da, np.where(self.b_big[shape], db, dist))
+        beam_hit = dist <= rq + TOUCH_TOL * np.maximum(self.big[shape], rq)
+        is_node = self.is_node[shape]
+        s = np.flatnonzero(np.where(is_node, node_hit, beam_hit))
+        return (qid[s], (~is_node[s]).astype(np.int64), ci[s], cj[s], np.full(len(s), k, np.int64),
+                self.pattern[shape[s]])
+
+    def _to_template(self, loc, r, qid, ci, cj):
+        """Columns x, y, z and radius of each candidate's query ball moved by S(i/nu, j/nv)⁻¹."""
+        x, y, z, rq = loc[0][qid], loc[1][qid], loc[2][qid], r[qid]
+        if self.kind == "translation":
+            (ux, uy, uz), (vx, vy, vz) = self.step_u, self.step_v
+            return x - ci * ux - cj * vx, y - ci * uy - cj * vy, z - ci * uz - cj * vz, rq
+        (ru, wu), (rv, wv) = self.step_u, self.step_v
+        th = ci * wu + cj * wv
+        cth, sth = np.cos(th), np.sin(th)
+        xr, yr = x * cth + y * sth, y * cth - x * sth
+        if self.kind == "cylinder":  # slide back along T
+            return xr, yr, z - (ci * ru + cj * rv), rq
+        s = np.exp(-(ci * ru + cj * rv))
+        return xr * s, yr * s, z * s, rq * s
 
 
 def _factor(fld: BeCOTSField, x, y):
     if fld.kind != "cone":
         return np.ones_like(np.asarray(x, float))
     return np.exp(np.asarray(x, float) * fld.u[0] + np.asarray(y, float) * fld.v[0])
-
-
-def _stack(pairs):
-    return np.array([p[0] for p in pairs]).reshape(-1, 3), np.array([p[1] for p in pairs], dtype=float)
