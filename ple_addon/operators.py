@@ -48,6 +48,21 @@ class RigOperator:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
 
+    def set_filter(self, rig, **settings) -> set:
+        """Set filter settings and redraw; on error the previous settings come back."""
+        old = {k: getattr(rig.ple, k) for k in settings}
+        old = {k: tuple(v) if k == "stencil_shape" else v for k, v in old.items()}
+        for k, v in settings.items():
+            setattr(rig.ple, k, v)
+        err = rigmod.refresh(rig, force=True)
+        if err:
+            for k, v in old.items():
+                setattr(rig.ple, k, v)
+            rigmod.refresh(rig, force=True)
+            self.report({"ERROR"}, err)
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
     def refreshed(self, rig) -> set:
         err = rigmod.refresh(rig, force=True)
         if err:
@@ -278,9 +293,7 @@ class PLE_OT_lil_filter(RigOperator, bpy.types.Operator):  # noqa: N801 - Blende
             raise PleError("LiL filter: give (or select) another PLE lattice object as the coarse lattice")
         if optional("filters") is None:
             raise PleError("filters are not available in this version of the core")
-        rig.ple.coarse = coarse
-        rig.ple.filter_kind = "LIL"
-        return self.refreshed(rig)
+        return self.set_filter(rig, filter_kind="LIL", coarse=coarse)
 
 
 class PLE_OT_stencil_filter(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
@@ -303,10 +316,7 @@ class PLE_OT_stencil_filter(RigOperator, bpy.types.Operator):  # noqa: N801 - Bl
         n = int(np.prod(tuple(self.shape)))
         if len(self.bits) != n or set(self.bits) - {"0", "1"}:
             raise PleError(f"stencil: expected {n} characters 0/1 for shape {tuple(self.shape)}, got {self.bits!r}")
-        rig.ple.stencil_shape = tuple(self.shape)
-        rig.ple.stencil_bits = self.bits
-        rig.ple.filter_kind = "STENCIL"
-        return self.refreshed(rig)
+        return self.set_filter(rig, stencil_shape=tuple(self.shape), stencil_bits=self.bits, filter_kind="STENCIL")
 
 
 # ----- long operations: tessellate and export ---------------------------------------------------

@@ -151,8 +151,10 @@ def in_rig_space(rig, other_rig, lat):
     return out
 
 
-def filtered(rig, lat):
-    """The core filter object of the rig's Filters panel, or None."""
+def filtered(rig, lat, space=None, _seen=()):
+    """The core filter of the rig's Filters panel (None for none), in the coordinates of the
+    rig ``space`` (default: ``rig``). A coarse lattice that is itself LiL-filtered makes a
+    cascade (thesis Fig. 9.3): its own filter is built recursively; cycles are an error."""
     kind = rig.ple.filter_kind
     if kind == "NONE":
         return None
@@ -169,7 +171,13 @@ def filtered(rig, lat):
     coarse = rig.ple.coarse
     if not is_rig(coarse):
         raise PleError("LiL filter: choose a coarse PLE lattice object")
-    coarse_lat = in_rig_space(rig, coarse, lattice_of(coarse))
+    if coarse.name_full in _seen or coarse == rig:
+        raise PleError(f"LiL filter: {coarse.name} is coarse for itself through a cycle of LiL filters")
+    space = rig if space is None else space
+    coarse_lat = in_rig_space(space, coarse, lattice_of(coarse))
+    inner = filtered(coarse, coarse_lat, space, (*_seen, rig.name_full))
+    if inner is not None:
+        coarse_lat = filters.FilteredLattice(coarse_lat, inner)
     return filters.LiL(coarse_lat)
 
 

@@ -409,6 +409,20 @@ def case_filters():
     co, _, ed = region_arrays(fine)
     assert len(co) == len(want.center) and 0 < len(co) < 1000
     assert np.allclose(co, want.center, atol=1e-5) and np.array_equal(ed, want.beam_nodes)
+    medium = new_rig("cubic")  # a cascade: fine in (medium in coarse), thesis Fig. 9.3
+    medium["ple:cell"] = 0.5
+    medium.location = (1, 1, 0)
+    medium.update_tag()
+    update()
+    assert bpy.ops.ple.lil_filter(rig=medium.name, coarse=coarse.name) == {"FINISHED"}
+    assert bpy.ops.ple.lil_filter(rig=fine.name, coarse=medium.name) == {"FINISHED"}
+    lat_m = core.program.load_lattice("cubic", {"cell": 0.5})
+    lat_m.set_placement(core.Translation(core.Vec(1, 1, 0)))
+    want = core.filters.lil(lat_f, lat_m, placed).evaluate("0:10,0:10,0:10")
+    co, _, _ = region_arrays(fine)
+    assert len(co) == len(want.center) and np.allclose(co, want.center, atol=1e-5)
+    fails(bpy.ops.ple.lil_filter, "cycle", rig=coarse.name, coarse=fine.name)
+    assert coarse.ple.filter_kind == "NONE" and coarse.ple.status == ""  # the bad filter was not kept
     assert bpy.ops.ple.stencil_filter(rig=fine.name, shape=(2, 1, 1), bits="10") == {"FINISHED"}
     co, _, _ = region_arrays(fine)
     assert len(co) == 500 and np.allclose(np.round(co[:, 0]) % 2, 0)
