@@ -33,14 +33,26 @@ def mesh_format(path) -> str:
     return suffix
 
 
-def stl_records(triangles: np.ndarray) -> np.ndarray:
-    """Binary STL records for triangles (k, 3, 3): unit normals (zero for degenerate faces)."""
-    tri = np.asarray(triangles, np.float32).reshape(-1, 3, 3)
-    rec = np.zeros(len(tri), STL_RECORD)
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    ln = np.linalg.norm(n, axis=1, keepdims=True)
-    rec["normal"] = n / np.where(ln > 0, ln, 1)
+def stl_records(triangles: np.ndarray, faces: np.ndarray | None = None) -> np.ndarray:
+    """Binary STL records for triangles (k, 3, 3), or for ``vertices[faces]`` when ``faces``
+    (k, 3) is given: unit normals (zero for degenerate faces), computed in float32."""
+    if faces is None:
+        tri = np.asarray(triangles, np.float32).reshape(-1, 3, 3)
+    else:
+        tri = np.asarray(triangles, np.float32)[faces]
+    rec = np.empty(len(tri), STL_RECORD)
     rec["vertices"] = tri
+    rec["attr"] = 0
+    a = tri[:, 1] - tri[:, 0]
+    b = tri[:, 2] - tri[:, 0]
+    n = np.empty_like(a)
+    n[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    n[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    n[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    ln = np.sqrt(np.einsum("ij,ij->i", n, n))
+    ln[ln == 0] = 1
+    n /= ln[:, None]
+    rec["normal"] = n
     return rec
 
 
@@ -56,8 +68,9 @@ class StlWriter:
         fh.write(header[:80].ljust(80, b" "))
         fh.write(struct.pack("<I", 0))
 
-    def write(self, triangles: np.ndarray) -> None:
-        rec = stl_records(triangles)
+    def write(self, triangles: np.ndarray, faces: np.ndarray | None = None) -> None:
+        """Append triangles (k, 3, 3), or ``vertices[faces]`` for vertices (V, 3), faces (k, 3)."""
+        rec = stl_records(triangles, faces)
         self.count += len(rec)
         if self.count > STL_MAX_TRIANGLES:
             raise PleError(f"binary STL holds at most {STL_MAX_TRIANGLES} triangles; use a smaller --region")
@@ -69,12 +82,16 @@ class StlWriter:
         self.fh.seek(0, 2)
 
 
-def write_stl(path, chunks: Iterable[np.ndarray]) -> int:
-    """Write triangle chunks (each (k, 3, 3)) to binary STL atomically; returns the count."""
+def write_stl(path, chunks: Iterable) -> int:
+    """Write chunks to binary STL atomically; a chunk is triangles (k, 3, 3) or a pair
+    (vertices (V, 3), faces (k, 3)). Returns the number of triangles."""
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         w = StlWriter(fh)
-        for tri in chunks:
-            w.write(tri)
+        for chunk in chunks:
+            if isinstance(chunk, tuple):
+                w.write(*chunk)
+            else:
+                w.write(chunk)
         w.close()
     return w.count
 

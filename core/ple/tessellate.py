@@ -449,17 +449,17 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
 
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
                    segments: int | None = None, max_groups: int = 1 << 14):
-    """Stream the region's triangles as float32 arrays (k, 3, 3), box by box (bounded memory)."""
+    """Stream the region's mesh box by box (bounded memory) as pairs (vertices (V, 3), faces
+    (k, 3)); hubs next to a box boundary are repeated in both boxes (their vertices, not faces)."""
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
     if style == "balls-beams":
         mesh = tessellate(lat, r, style)
-        yield np.asarray(mesh.triangles, np.float32)
+        yield np.asarray(mesh.vertices), np.asarray(mesh.faces)
         return
     tess = _Tessellator(lat, r, style, levels, segments)
     for box in lat.iter_slabs(max_groups=max_groups, region=r):
-        verts, faces = tess.build(box)
-        yield verts.astype(np.float32)[faces]
+        yield tess.build(box)
 
 
 def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: int | None = None,

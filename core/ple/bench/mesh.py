@@ -1,0 +1,107 @@
+"""Meshing throughput: triangles per second to binary STL, a 10⁶-beam lattice meshed in a
+subprocess (wall time, peak memory), and the same lattice's 10³-group region against the
+alternative a user would pick — a union of ball and beam meshes with manifold3d."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from ..export import write_stl
+from ..program import load_lattice
+from ..tessellate import tessellate
+from ._timing import best_of
+
+CHILD = """
+import json, resource, sys, time
+from ple.program import load_lattice
+from ple.tessellate import write_mesh
+lat = load_lattice(sys.argv[1]).with_counts(*[int(x) for x in sys.argv[2].split(",")])
+t0 = time.perf_counter()
+n = write_mesh(lat, sys.argv[3], style=sys.argv[4])
+dt = time.perf_counter() - t0
+print(json.dumps({"beams": lat.beam_count(), "groups": lat.groups, "triangles": n, "seconds": dt,
+                  "peak_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6}))
+"""
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--lattice", default="cubic", help="preset or file (default: cubic)")
+    p.add_argument("--big", type=int, default=70, help="n for the n³ lattice of the 10⁶-beam run (default 70)")
+    p.add_argument("--style", default="cnt", help="style of the big run (default cnt)")
+    p.add_argument("--region", type=int, default=10, help="n for the n³-group manifold3d comparison (default 10)")
+
+
+def _stl_rate(lat) -> dict:
+    mesh = tessellate(lat.with_counts(30, 30, 30), style="cnt")
+    tri = np.asarray(mesh.triangles)
+    with tempfile.TemporaryDirectory() as d:
+        ours = best_of(lambda: write_stl(os.path.join(d, "a.stl"), [tri]), repeat=2)
+
+        def trimesh_stl():
+            with open(os.path.join(d, "b.stl"), "wb") as fh:
+                fh.write(mesh.export(file_type="stl"))
+
+        base = best_of(trimesh_stl, repeat=2)
+    return {"triangles": len(tri), "ple_s": ours, "ple_triangles_per_s": len(tri) / ours,
+            "baseline_trimesh_export_s": base, "baseline_triangles_per_s": len(tri) / base}
+
+
+def _big(name: str, n: int, style: str) -> dict:
+    with tempfile.TemporaryDirectory() as d:
+        out = subprocess.run([sys.executable, "-c", CHILD, name, f"{n},{n},{n}", os.path.join(d, "big.stl"), style],
+                             capture_output=True, text=True, check=True)
+    row = json.loads(out.stdout.strip().splitlines()[-1])
+    row["style"] = style
+    row["triangles_per_s"] = row["triangles"] / row["seconds"]
+    return row
+
+
+def _manifold_union(lat, segments: int = 16) -> tuple[float, float, int]:
+    """Time of the user's alternative: a sphere per ball and a frustum per beam, unioned."""
+    import manifold3d as m3d
+
+    ev = lat.evaluate()
+    t0 = time.perf_counter()
+    parts = [m3d.Manifold.sphere(float(r), segments).translate(tuple(c)) for c, r in zip(ev.center, ev.radius)]
+    for i, j in ev.beam_nodes:
+        a, b = ev.center[i], ev.center[j]
+        d = b - a
+        length = float(np.linalg.norm(d))
+        z = d / length
+        x = np.cross(z, [1.0, 0, 0] if abs(z[0]) < 0.9 else [0, 1.0, 0])
+        x /= np.linalg.norm(x)
+        frame = np.column_stack([x, np.cross(z, x), z, a])
+        cyl = m3d.Manifold.cylinder(length, float(ev.radius[i]), float(ev.radius[j]), segments)
+        parts.append(cyl.transform(frame.tolist()))
+    union = m3d.Manifold.batch_boolean(parts, m3d.OpType.Add)
+    mesh = union.to_mesh()
+    return time.perf_counter() - t0, float(union.volume()), len(mesh.tri_verts)
+
+
+def run(args) -> dict:
+    lat = load_lattice(args.lattice)
+    big = _big(args.lattice, args.big, args.style)  # first: a forked child starts with its parent's RSS
+    region = lat.with_counts(args.region, args.region, args.region)
+    ours = {}
+    for style in ("cnt", "chocc", "refined"):
+        t0 = time.perf_counter()
+        mesh = tessellate(region, style=style)
+        ours[style] = {"seconds": time.perf_counter() - t0, "triangles": len(mesh.faces),
+                       "volume": float(mesh.volume), "watertight": bool(mesh.is_watertight)}
+    m_time, m_vol, m_tri = _manifold_union(region)
+    return {"benchmark": "mesh", "lattice": args.lattice, "machine": f"{os.cpu_count()} cores",
+            "stl_write": _stl_rate(lat),
+            "big_lattice": big,
+            "region_vs_manifold3d": {"groups": region.groups, "beams": region.beam_count(), "ple": ours,
+                                     "baseline_manifold3d_union": {"seconds": m_time, "volume": m_vol,
+                                                                   "triangles": m_tri},
+                                     "speedup_cnt": m_time / ours["cnt"]["seconds"],
+                                     "speedup_chocc": m_time / ours["chocc"]["seconds"],
+                                     "speedup_refined": m_time / ours["refined"]["seconds"]}}
