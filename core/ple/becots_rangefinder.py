@@ -31,6 +31,7 @@ from .lattice import Lattice
 from .similarity import Similarity
 
 INDEX_SLACK = 1e-7  # index-space slack on candidate ranges (conservative rounding)
+TABLE_LIMIT = 1 << 22  # largest gu + gv for per-index cos/sin/scale tables (else trig per candidate)
 TINY_LOG = -700.0  # ln of a distance that is zero for all purposes (a ball containing F)
 
 
@@ -123,25 +124,25 @@ class _Plan:
 
     def query(self, c: np.ndarray, r: np.ndarray, ids=None) -> list:
         parts = [layer.hits(c, r, ids, k) for k, layer in enumerate(self.layers)]
-        qid, isbeam, ci, cj, kk, x = (np.concatenate(p) for p in zip(*parts)) if len(parts) > 1 else parts[0]
-        return self._split(len(c), qid, isbeam, ci, cj, kk, x)
+        qid, isbeam, ci, cj, kk, x = (np.concatenate(p) for p in zip(*parts)) if len(parts) > 1 else parts[0][:6]
+        # a hit can repeat only across branches, W copies or a padded selection
+        unique = len(parts) == 1 and parts[0][6] and ids is None
+        return self._split(len(c), qid, isbeam, ci, cj, kk, x, unique)
 
-    def _split(self, q: int, qid, isbeam, ci, cj, kk, x) -> list:
-        """Per-query sorted, de-duplicated BIQResults (branches and padded selections may find a
-        shape twice): one integer key per hit, one sort, one pass of divisions to decode."""
+    def _split(self, q: int, qid, isbeam, ci, cj, kk, x, unique: bool = False) -> list:
+        """Per-query sorted, de-duplicated BIQResults: one integer key per hit (query, node or
+        beam, i, j, k, id), one sort, then views of one (n, 4) array."""
         from .biq import BIQResult
 
         nx = max(self.nn, self.nb, 1)
         if 2 * q * self.gu * self.gv * self.nw * nx < 2 ** 62:
             key = ((((qid * 2 + isbeam) * self.gu + ci) * self.gv + cj) * self.nw + kk) * nx + x
-            key.sort()
-            if len(key) > 1:
-                key = key[np.concatenate([[True], key[1:] != key[:-1]])]
-            rest, x = np.divmod(key, nx)
-            rest, kk = np.divmod(rest, self.nw)
-            rest, cj = np.divmod(rest, self.gv)
-            grp, ci = np.divmod(rest, self.gu)
-            rows = np.stack([ci, cj, kk, x], axis=1)
+            order = np.argsort(key, kind="stable")
+            if not unique and len(key) > 1:
+                ks = key[order]
+                order = order[np.concatenate([[True], ks[1:] != ks[:-1]])]
+            rows = np.stack([ci, cj, kk, x], axis=1)[order]
+            grp = (qid * 2 + isbeam)[order]
         else:  # special case: keys would overflow int64, sort the columns instead
             rows = np.stack([qid * 2 + isbeam, ci, cj, kk, x], axis=1)
             rows = rows[np.lexsort(rows.T[::-1])]
@@ -149,7 +150,9 @@ class _Plan:
                 rows = rows[np.concatenate([[True], np.any(rows[1:] != rows[:-1], axis=1)])]
             grp, rows = rows[:, 0], rows[:, 1:]
         b = np.searchsorted(grp, np.arange(2 * q + 1)).tolist()
-        return [BIQResult(rows[b[2 * t]:b[2 * t + 1]], rows[b[2 * t + 1]:b[2 * t + 2]], "becots") for t in range(q)]
+        empty = rows[:0]  # shared by the queries without hits (no view to build)
+        return [BIQResult(rows[b0:b1] if b1 > b0 else empty, rows[b1:b2] if b2 > b1 else empty, "becots")
+                for b0, b1, b2 in zip(b[0:-1:2], b[1::2], b[2::2])]
 
 
 # ----- bounds ---------------------------------------------------------------------------------------
@@ -343,6 +346,14 @@ class _Layer:
             self.ref = co.ref
             self.h0 = float((fld.a - fld.apex) @ fld.axis)
             self.step_u, self.step_v = (ru / nu, wu / nu), (rv / nv, wv / nv)
+        # per-index tables (cos, sin, scale) of S(i/nu, 0)⁻¹ and S(0, j/nv)⁻¹: (3, gu), (3, gv)
+        self.tables = None
+        if fld.kind != "translation" and gu + gv <= TABLE_LIMIT:
+            (ru, wu), (rv, wv) = self.step_u, self.step_v
+            iu, jv = np.arange(gu, dtype=float), np.arange(gv, dtype=float)
+            scale = (lambda t: np.exp(-t)) if fld.kind == "cone" else (lambda t: t)  # cylinder: the slide
+            self.tables = (np.stack([np.cos(iu * wu), np.sin(iu * wu), scale(iu * ru)]),
+                           np.stack([np.cos(jv * wv), np.sin(jv * wv), scale(jv * rv)]))
         # exact tests happen in the template's frame: the shapes of group (0, 0), local coordinates
         a_loc = (ca - self.origin) @ self.frame.T
         ab = (cb - self.origin) @ self.frame.T - a_loc
@@ -353,9 +364,14 @@ class _Layer:
         self.e = np.ascontiguousarray((ab / safe[:, None]).T)
         self.sn = np.clip((ra - rb) / safe, -1.0, 1.0)  # tangent slope of the cone-beam (seed 002 §2.1)
         self.cs = np.sqrt(1.0 - self.sn * self.sn)
-        self.a_big = self.length + rb <= ra  # special case: one ball contains the other
-        self.b_big = self.length + ra <= rb
-        self.big = np.maximum(ra, rb)
+        # dist = da where u <= lo, db where u >= hi, else the tangent line; special cases: one
+        # ball contains the other (the hull is that ball: always da, or always db)
+        a_big = self.length + rb <= ra
+        b_big = (self.length + ra <= rb) & ~a_big
+        lo_thr = np.where(a_big, np.inf, np.where(b_big, -np.inf, 0.0))
+        hi_thr = np.where(b_big, -np.inf, self.cs * self.length)
+        self.table = np.concatenate([self.a, self.e, np.stack([ra, rb, self.sn, self.cs, self.length,
+                                                              np.maximum(ra, rb), lo_thr, hi_thr])])  # (14, S)
 
     def query_bounds(self, c: np.ndarray, r: np.ndarray):
         """Local coordinates of the queries and their index-space boxes, one row per branch:
@@ -447,38 +463,45 @@ class _Layer:
         """Hit arrays (qid, is_beam, i, j, k, node id or pattern) of this placed field."""
         loc, rows, box, s_lo, s_hi = self.query_bounds(c, r)
         row, shape, ci, cj = self.candidates(rows, box, s_lo, s_hi, ids)
-        loc = loc.T  # columns x, y, z
         qid = row if rows is None else rows[row]
         if len(qid) == 0:
             e = np.zeros(0, np.int64)
-            return e, e, e, e, e, e
+            return e, e, e, e, e, e, True
         # move each query into the template's frame by S(i/nu, j/nv)⁻¹ (so shapes are constants)
         x, y, z, rq = self._to_template(loc, r, qid, ci, cj)
         # exact tests in one pass over columns: ball–ball for nodes, ball–cone-beam for beams
-        # (the formulas of ple.elements; a node is its own degenerate beam, a_big, so dist = da)
-        dx, dy, dz = x - self.a[0][shape], y - self.a[1][shape], z - self.a[2][shape]
+        # (the formulas of ple.elements.beam_distance, thresholds precomputed per shape)
+        ax, ay, az, ex, ey, ez, ra, rb, sn, cs, length, big, lo_thr, hi_thr = self.table.take(shape, axis=1)
+        dx, dy, dz = x - ax, y - ay, z - az
         ap2 = dx * dx + dy * dy + dz * dz
-        ra = self.ra[shape]
         rr = rq + ra
         node_hit = ap2 <= rr * rr * (1 + TOUCH_TOL) + TOUCH_TOL * TOUCH_TOL
-        t = dx * self.e[0][shape] + dy * self.e[1][shape] + dz * self.e[2][shape]  # along the axis a→b
+        t = dx * ex + dy * ey + dz * ez  # along the axis a→b
         y2 = np.maximum(ap2 - t * t, 0.0)
         yy = np.sqrt(y2)
-        sn, cs, length = self.sn[shape], self.cs[shape], self.length[shape]
         u = cs * t - sn * yy  # position along the tangent direction (seed 002 §2.1)
         da = np.sqrt(t * t + y2) - ra
-        db = np.sqrt((t - length) ** 2 + y2) - self.rb[shape]
-        dist = np.where(u <= 0, da, np.where(u >= cs * length, db, sn * t + cs * yy - ra))
-        dist = np.where(self.a_big[shape], da, np.where(self.b_big[shape], db, dist))
-        beam_hit = dist <= rq + TOUCH_TOL * np.maximum(self.big[shape], rq)
+        db = np.sqrt((t - length) ** 2 + y2) - rb
+        dist = np.where(u <= lo_thr, da, np.where(u >= hi_thr, db, sn * t + cs * yy - ra))
+        beam_hit = dist <= rq + TOUCH_TOL * np.maximum(big, rq)
         is_node = self.is_node[shape]
         s = np.flatnonzero(np.where(is_node, node_hit, beam_hit))
         return (qid[s], (~is_node[s]).astype(np.int64), ci[s], cj[s], np.full(len(s), k, np.int64),
-                self.pattern[shape[s]])
+                self.pattern[shape[s]], rows is None)
 
     def _to_template(self, loc, r, qid, ci, cj):
         """Columns x, y, z and radius of each candidate's query ball moved by S(i/nu, j/nv)⁻¹."""
-        x, y, z, rq = loc[0][qid], loc[1][qid], loc[2][qid], r[qid]
+        x, y, z, rq = np.concatenate([loc, r[:, None]], axis=1).T.take(qid, axis=1)
+        if self.tables is not None:  # angle addition over per-index tables: no trig per candidate
+            cu, su, eu = self.tables[0].take(ci, axis=1)
+            cv, sv, ev = self.tables[1].take(cj, axis=1)
+            cth, sth = cu * cv - su * sv, su * cv + cu * sv
+            xr, yr = x * cth + y * sth, y * cth - x * sth
+            if self.kind == "cylinder":
+                return xr, yr, z - (eu + ev), rq
+            s = eu * ev
+            return xr * s, yr * s, z * s, rq * s
+        ci, cj = ci.astype(float), cj.astype(float)
         if self.kind == "translation":
             (ux, uy, uz), (vx, vy, vz) = self.step_u, self.step_v
             return x - ci * ux - cj * vx, y - ci * uy - cj * vy, z - ci * uz - cj * vz, rq
