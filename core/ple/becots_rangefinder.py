@@ -124,7 +124,8 @@ class _Plan:
 
     def query(self, c: np.ndarray, r: np.ndarray, ids=None) -> list:
         parts = [layer.hits(c, r, ids, k) for k, layer in enumerate(self.layers)]
-        qid, isbeam, ci, cj, kk, x = (np.concatenate(p) for p in zip(*parts)) if len(parts) > 1 else parts[0][:6]
+        cols = zip(*(part[:6] for part in parts))
+        qid, isbeam, ci, cj, kk, x = (np.concatenate(col) for col in cols) if len(parts) > 1 else parts[0][:6]
         # a hit can repeat only across branches, W copies or a padded selection
         unique = len(parts) == 1 and parts[0][6] and ids is None
         return self._split(len(c), qid, isbeam, ci, cj, kk, x, unique)
