@@ -347,6 +347,12 @@ class _Layer:
             self.ref = co.ref
             self.h0 = float((fld.a - fld.apex) @ fld.axis)
             self.step_u, self.step_v = (ru / nu, wu / nu), (rv / nv, wv / nv)
+        # the translation RangeFinder's subtrahends, in the query box's column order (i_lo, j_lo,
+        # i_hi, j_hi): lower = ceil(c - b - slack), upper = floor(d - a + slack); limits likewise
+        b4 = self.box
+        self.sbox = np.stack([b4[:, 1] + INDEX_SLACK, b4[:, 3] + INDEX_SLACK, b4[:, 0] - INDEX_SLACK,
+                              b4[:, 2] - INDEX_SLACK], axis=1)
+        self.slim = self.lim[:, [0, 2, 1, 3]]
         # per-index tables (cos, sin, scale) of S(i/nu, 0)⁻¹ and S(0, j/nv)⁻¹: (3, gu), (3, gv)
         self.tables = None
         if fld.kind != "translation" and gu + gv <= TABLE_LIMIT:
@@ -382,7 +388,7 @@ class _Layer:
             x = loc @ self.dual.T  # (q, 2) exact affine index coordinates
             ext = r[:, None] * self.dual_norm[None]
             n = loc @ self.normal
-            box = np.stack([x[:, 0] - ext[:, 0], x[:, 0] + ext[:, 0], x[:, 1] - ext[:, 1], x[:, 1] + ext[:, 1]], axis=1)
+            box = np.concatenate([x - ext, x + ext], axis=1)  # i_lo, j_lo, i_hi, j_hi
             return loc, None, box, n - r, n + r
         x, y, h = loc[:, 0], loc[:, 1], loc[:, 2]
         rad2 = x * x + y * y
@@ -421,8 +427,8 @@ class _Layer:
         # index-space box of the log-polar box: K is linear, so each bound takes one corner
         (k00, k01), (k10, k11) = self.k
         box = np.stack([k00 * (rho0 if k00 >= 0 else rho1) + k01 * (lo if k01 >= 0 else hi),
-                        k00 * (rho1 if k00 >= 0 else rho0) + k01 * (hi if k01 >= 0 else lo),
                         k10 * (rho0 if k10 >= 0 else rho1) + k11 * (lo if k11 >= 0 else hi),
+                        k00 * (rho1 if k00 >= 0 else rho0) + k01 * (hi if k01 >= 0 else lo),
                         k10 * (rho1 if k10 >= 0 else rho0) + k11 * (hi if k11 >= 0 else lo)], axis=1)
         return loc, rows, box, s_lo, s_hi
 
@@ -434,15 +440,14 @@ class _Layer:
             s_lo, s_hi = s_lo[rows], s_hi[rows]
         if ids is None:  # every template shape
             sid = None
-            sb, sl, lo_, hi_ = self.box[None], self.lim[None], self.s_lo[None], self.s_hi[None]
+            sb, sl, lo_, hi_ = self.sbox[None], self.slim[None], self.s_lo[None], self.s_hi[None]
         else:  # (1, m) the same shapes for every query, or (q, m) a selection per query
             sid = ids[rows] if rows is not None and len(ids) > 1 else ids
-            sb, sl, lo_, hi_ = self.box[sid], self.lim[sid], self.s_lo[sid], self.s_hi[sid]
-        i0 = np.maximum(sl[..., 0], np.ceil(box[:, None, 0] - sb[..., 1] - INDEX_SLACK))
-        i1 = np.minimum(sl[..., 1], np.floor(box[:, None, 1] - sb[..., 0] + INDEX_SLACK))
-        j0 = np.maximum(sl[..., 2], np.ceil(box[:, None, 2] - sb[..., 3] - INDEX_SLACK))
-        j1 = np.minimum(sl[..., 3], np.floor(box[:, None, 3] - sb[..., 2] + INDEX_SLACK))
-        ni, nj = i1 - i0 + 1, j1 - j0 + 1
+            sb, sl, lo_, hi_ = self.sbox[sid], self.slim[sid], self.s_lo[sid], self.s_hi[sid]
+        i0 = np.maximum(sl[..., 0], np.ceil(box[:, None, 0] - sb[..., 0]))
+        j0 = np.maximum(sl[..., 1], np.ceil(box[:, None, 1] - sb[..., 1]))
+        ni = np.minimum(sl[..., 2], np.floor(box[:, None, 2] - sb[..., 2])) - i0 + 1
+        nj = np.minimum(sl[..., 3], np.floor(box[:, None, 3] - sb[..., 3])) - j0 + 1
         ok = (ni > 0) & (nj > 0) & (s_hi[:, None] >= lo_) & (hi_ >= s_lo[:, None])
         nz = np.flatnonzero(ok)
         width = ok.shape[1]
@@ -478,11 +483,13 @@ class _Layer:
         rr = rq + ra
         node_hit = ap2 <= rr * rr * (1 + TOUCH_TOL) + TOUCH_TOL * TOUCH_TOL
         t = dx * ex + dy * ey + dz * ez  # along the axis a→b
-        y2 = np.maximum(ap2 - t * t, 0.0)
+        t2 = t * t
+        y2 = np.maximum(ap2 - t2, 0.0)
         yy = np.sqrt(y2)
         u = cs * t - sn * yy  # position along the tangent direction (seed 002 §2.1)
-        da = np.sqrt(t * t + y2) - ra
-        db = np.sqrt((t - length) ** 2 + y2) - rb
+        da = np.sqrt(t2 + y2) - ra
+        tb = t - length
+        db = np.sqrt(tb * tb + y2) - rb
         dist = np.where(u <= lo_thr, da, np.where(u >= hi_thr, db, sn * t + cs * yy - ra))
         beam_hit = dist <= rq + TOUCH_TOL * np.maximum(big, rq)
         is_node = self.is_node[shape]
