@@ -31,6 +31,7 @@ from .lattice import Lattice
 from .similarity import Similarity
 
 INDEX_SLACK = 1e-7  # index-space slack on candidate ranges (conservative rounding)
+KEY_LIMIT = 2 ** 62  # hit keys (query, kind, i, j, k, id) packed into one int64 below this bound
 TABLE_LIMIT = 1 << 22  # largest gu + gv for per-index cos/sin/scale tables (else trig per candidate)
 TINY_LOG = -700.0  # ln of a distance that is zero for all purposes (a ball containing F)
 
@@ -136,7 +137,7 @@ class _Plan:
         from .biq import BIQResult
 
         nx = max(self.nn, self.nb, 1)
-        if 2 * q * self.gu * self.gv * self.nw * nx < 2 ** 62:
+        if 2 * q * self.gu * self.gv * self.nw * nx < KEY_LIMIT:
             key = ((((qid * 2 + isbeam) * self.gu + ci) * self.gv + cj) * self.nw + kk) * nx + x
             order = np.argsort(key, kind="stable")
             if not unique and len(key) > 1:
