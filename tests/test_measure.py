@@ -1,0 +1,171 @@
+"""Hub quadrature vs analytic solids of revolution; closed-form series vs the plain sum over
+hubs (1e-9); lattice area and volume vs independent Monte Carlo estimates."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from ple.elements import beam_distance, enclosing_ball
+from ple.lattice import Lattice
+from ple.measure import HalfBeam, hub_measures, lattice_measures, lattice_volume
+from ple.similarity import Rotation, Scaling, Screw, Swirl, Translation
+
+
+def revolution_measures(ra, rb, length, n=400001):
+    """Area and volume of the half-beam hub of one beam along x, by 1D integration of its
+    radius profile: the ball up to the contact circle x = ra s, then the cone, to the cut."""
+    s = (ra - rb) / length
+    c = math.sqrt(1 - s * s)
+    x_cut = (length**2 + ra**2 - rb**2) / (2 * length)
+    x = np.linspace(-ra, x_cut, n)
+    y = np.where(x < ra * s, np.sqrt(np.maximum(ra * ra - x * x, 0)), (ra - s * x) / c)
+    dy = np.gradient(y, x)
+    area = np.trapz(2 * math.pi * y * np.sqrt(1 + dy * dy), x)
+    return area, np.trapz(math.pi * y * y, x)
+
+
+@pytest.mark.parametrize("ra,rb,length", [(0.3, 0.3, 2.0), (0.3, 0.15, 2.0), (0.1, 0.25, 1.0)])
+def test_hub_quadrature_matches_revolution(ra, rb, length):
+    area, volume = revolution_measures(ra, rb, length)
+    rng = np.random.default_rng(0)
+    for _ in range(2):
+        axis = rng.normal(size=3)
+        axis *= length / np.linalg.norm(axis)
+        a, v = hub_measures(ra, [HalfBeam(axis, ra, rb)])
+        assert abs(a / area - 1) < 1e-4
+        assert abs(v / volume - 1) < 1e-4
+
+
+def test_two_opposite_capsules_make_a_cylinder():
+    r, length = 0.2, 3.0
+    a, v = hub_measures(r, [HalfBeam(np.array([0, 0, length]), r, r), HalfBeam(np.array([0, 0, -length]), r, r)])
+    assert abs(v / (math.pi * r * r * length) - 1) < 1e-4
+    assert abs(a / (2 * math.pi * r * length) - 1) < 1e-4
+
+
+def _lattice(kind: str) -> Lattice:
+    lat = Lattice()
+    a = lat.add_node([1.0, 0, 0], 0.1)
+    b = lat.add_node([1.4, 0.3, 0.35], 0.07)
+    for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1)]:
+        lat.add_beam(a, a, *off)
+    lat.add_beam(a, b, 0, 0, 0)
+    lat.add_beam(b, a, 1, 1, 1)
+    if kind == "1":  # commuting, all similar: closed form in U, V and W (§3.7)
+        lat.set_u(5, Scaling(1.15, [0, 0, 0]))
+        lat.set_v(6, Rotation(0.6, [0, 0, 1], [0, 0, 0]))
+        lat.set_w(5, Swirl(0.3, [0, 0, 1], [0, 0, 0], 1.1))
+    elif kind == "u":  # V, W commute (rotation and screw about z): series in V and W (§3.6)
+        lat.set_u(3, Translation([0.9, 0, 0.1]))
+        lat.set_v(7, Rotation(0.6, [0, 0, 1], [0, 0, 0]))
+        lat.set_w(6, Screw(0.2, [0, 0, 1], [0, 0, 0], 0.9))
+    else:  # general: series in W only (§6.1.4)
+        lat.set_u(3, Rotation(0.3, [0, 1, 0], [0, 0, 4]))
+        lat.set_v(3, Screw(0.2, [0, 1, 0], [1, 0, 1], 1.0))
+        lat.set_w(6, Scaling(0.93, [1, 1, 8]))
+    return lat
+
+
+@pytest.mark.parametrize("kind,label", [("1", "O(1)"), ("u", "O(ū)"), ("uv", "O(ūv̄)")])
+def test_closed_form_equals_plain_sum(kind, label):
+    lat = _lattice(kind)
+    closed = lattice_measures(lat, grid=8, max_shapes=10**4)
+    plain = lattice_measures(lat, method="sum", grid=8, max_shapes=10**4)
+    assert label in closed["area_method"]
+    assert plain["area_method"] == "sum over hubs"
+    assert abs(closed["area"] / plain["area"] - 1) < 1e-9
+    assert abs(closed["volume"] / plain["volume"] - 1) < 1e-9
+
+
+def _elements(lat: Lattice):
+    ev = lat.evaluate()
+    a, b = ev.beam_nodes[:, 0], ev.beam_nodes[:, 1]
+    return ev.center, ev.radius, ev.center[a], ev.radius[a], ev.center[b], ev.radius[b]
+
+
+def _inside(p, elements, tol=0.0):
+    """Is each point strictly inside (distance < -tol) some element? Also the min distance."""
+    nc, nr, ca, ra, cb, rb = elements
+    d = np.full(len(p), np.inf)
+    for lo in range(0, len(p), 20000):
+        q = p[lo:lo + 20000]
+        dn = (np.linalg.norm(q[:, None] - nc[None], axis=2) - nr[None]).min(axis=1)
+        db = beam_distance(q[:, None], ca[None], ra[None], cb[None], rb[None]).min(axis=1)
+        d[lo:lo + 20000] = np.minimum(dn, db)
+    return d < -tol, d
+
+
+def _clean_lattice() -> Lattice:
+    lat = Lattice()
+    c = lat.add_node([0, 0, 0], 0.1)
+    m = lat.add_node([0.5, 0.5, 0.5], 0.06)
+    for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1)]:
+        lat.add_beam(c, c, *off)
+    for di in (0, 1):
+        for dj in (0, 1):
+            for dk in (0, 1):
+                lat.add_beam(m, c, di, dj, dk)
+    lat.set_u(3, Translation([1, 0, 0]))
+    lat.set_v(2, Translation([0, 1, 0]))
+    lat.set_w(2, Scaling(1.1, [0.7, 0.6, -9]))
+    return lat
+
+
+def test_volume_and_area_vs_monte_carlo():
+    lat = _clean_lattice()
+    m = lattice_measures(lat)
+    assert np.isclose(lattice_volume(lat), m["volume"])
+    elements = _elements(lat)
+    nc, nr, ca, ra, cb, rb = elements
+    rng = np.random.default_rng(2024)
+    # volume: sample each element's enclosing ball uniformly, weight 1 / (balls covering the point)
+    bc, br = enclosing_ball(ca, ra, cb, rb)
+    balls_c, balls_r = np.concatenate([nc, bc]), np.concatenate([nr, br])
+    per = 3000
+    u = rng.normal(size=(len(balls_r), per, 3))
+    u *= (rng.random((len(balls_r), per, 1)) ** (1 / 3)) / np.linalg.norm(u, axis=2, keepdims=True)
+    pts = (balls_c[:, None] + u * balls_r[:, None, None]).reshape(-1, 3)
+    cover = np.zeros(len(pts))
+    for lo in range(0, len(pts), 20000):
+        q = pts[lo:lo + 20000]
+        cover[lo:lo + 20000] = (np.linalg.norm(q[:, None] - balls_c[None], axis=2) <= balls_r[None]).sum(axis=1)
+    inside = _inside(pts, elements)[1] <= 0
+    contrib = (inside / cover).reshape(len(balls_r), per) * (4 / 3 * math.pi * balls_r[:, None] ** 3)
+    v_mc = contrib.mean(axis=1).sum()
+    v_err = math.sqrt((contrib.var(axis=1) / per).sum())
+    assert abs(m["volume"] - v_mc) < 4 * v_err + 1e-4 * v_mc
+    # area: uniform points on every sphere and cone surface, kept unless strictly inside another element
+    parts, areas = [], []
+    for c0, r0 in zip(nc, nr):
+        g = rng.normal(size=(per, 3))
+        parts.append(c0 + r0 * g / np.linalg.norm(g, axis=1, keepdims=True))
+        areas.append(4 * math.pi * r0 * r0)
+    for a, r1, b, r2 in zip(ca, ra, cb, rb):
+        length = np.linalg.norm(b - a)
+        e = (b - a) / length
+        s = (r1 - r2) / length
+        c = math.sqrt(1 - s * s)
+        p1, p2 = r1 * c, r2 * c
+        w = rng.random(per)
+        t = w if abs(p2 - p1) < 1e-15 else (np.sqrt(p1 * p1 + w * (p2 * p2 - p1 * p1)) - p1) / (p2 - p1)
+        x = r1 * s + t * (length + r2 * s - r1 * s)
+        rho = p1 + t * (p2 - p1)
+        e1 = np.cross(e, [1.0, 0, 0] if abs(e[0]) < 0.9 else [0, 1.0, 0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(e, e1)
+        phi = rng.random(per) * 2 * math.pi
+        parts.append(a + x[:, None] * e + rho[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2))
+        areas.append(math.pi * c * c * length * (r1 + r2))
+    frac = np.array([1 - _inside(p, elements, 1e-9)[0].mean() for p in parts])
+    areas = np.array(areas)
+    a_mc = float((frac * areas).sum())
+    a_err = math.sqrt(float((areas**2 * frac * (1 - frac) / per).sum()))
+    assert abs(m["area"] - a_mc) < 4 * a_err + 1e-4 * a_mc
+
+
+def test_too_many_hub_classes_are_skipped_quickly():
+    lat = _lattice("uv").with_counts(60, 60, 5)
+    m = lattice_measures(lat)
+    assert "area" not in m and m["area_method"].startswith("skipped")
