@@ -19,7 +19,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..elements import ball_ball_interfere, ball_beam_interfere, enclosing_ball
-from ..filters import lil, select
+from ..filters import FilteredLattice, lil, select
+from ..implicit import FourierField, ImplicitFilter, TPMSField, sample_grid
 from ..program import load_lattice
 from ._timing import best_of
 
@@ -123,6 +124,36 @@ def naive_row(repeat) -> dict:
             "agrees": bool(np.array_equal(same.beam_index, ours["ev"].beam_index))}
 
 
+def implicit_rows(repeat) -> list[dict]:
+    """Implicit-field filters over the regular 75³ fine lattice: a TPMS sheet, and a T_d-symmetric
+    Fourier fit of a sphere's signed distance (004_), against a direct complex-exponential sum."""
+    fine = load_lattice("thesis_regular")
+    gyroid = ImplicitFilter(TPMSField("gyroid", 12.0), 0.3, "sheet")
+    out = {}
+    t_gyroid = best_of(lambda: out.__setitem__("ev", FilteredLattice(fine, gyroid).evaluate()), repeat)
+    rows = [{"case": "gyroid sheet filter, regular 75^3", "seconds": t_gyroid,
+             "nodes_kept": len(out["ev"].node_index), "beams_kept": len(out["ev"].beam_index)}]
+    t0 = time.perf_counter()
+    sdf = sample_grid(lambda p: np.linalg.norm(p - [0.12, 0.05, 0.0], axis=1) - 0.3, 32)
+    field = FourierField.fit(sdf, max_terms=400, cell=15.0)
+    t_fit = time.perf_counter() - t0
+    pts = fine.region_balls()[0].reshape(-1, 3)
+    t_eval = best_of(lambda: field(pts), repeat)
+    x = field.local(pts[:100_000])
+    t_direct = best_of(lambda: np.real(np.exp(2j * np.pi * (x @ field.freqs.T)) @ field.coeffs), 1)
+    rows.append({"case": "Fourier T_d fit (N=32, sphere SDF) and evaluation at 843,750 node centres",
+                 "fit_seconds": t_fit, "terms": len(field.freqs), "eval_seconds": t_eval,
+                 "points_per_second": len(pts) / t_eval,
+                 "direct_complex_sum_seconds_estimated": t_direct * len(pts) / 100_000,
+                 "speedup_vs_direct": t_direct * len(pts) / 100_000 / t_eval})
+    gyroid_fit = FourierField.fit(sample_grid(lambda p: TPMSField("gyroid")(p), 8), symmetric=False, cell=12.0)
+    t_small = best_of(lambda: gyroid_fit(pts), repeat)
+    rows.append({"case": "Fourier fit of a gyroid (12 terms) evaluated at 843,750 node centres",
+                 "eval_seconds": t_small, "points_per_second": len(pts) / t_small,
+                 "tpms_formula_seconds": best_of(lambda: TPMSField("gyroid", 12.0)(pts), repeat)})
+    return rows
+
+
 def big_row() -> dict:
     """A streamed LiL over >= 1e8 fine beams in a child process; peak RSS of the child."""
     n = 2
@@ -143,6 +174,7 @@ def big_row() -> dict:
 def run(args) -> dict:
     rows = [run_case(*case, args.repeat, args.biq) for case in CASES]
     rows.append(naive_row(args.repeat))
+    rows += implicit_rows(args.repeat)
     if args.big:
         rows.append(big_row())
     return {"benchmark": "lil", "machine": "2 shared cores", "rows": rows}
