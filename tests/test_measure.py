@@ -34,15 +34,15 @@ def test_hub_quadrature_matches_revolution(ra, rb, length):
         axis = rng.normal(size=3)
         axis *= length / np.linalg.norm(axis)
         a, v = hub_measures(ra, [HalfBeam(axis, ra, rb)])
-        assert abs(a / area - 1) < 1e-4
-        assert abs(v / volume - 1) < 1e-4
+        assert abs(a / area - 1) < 5e-4
+        assert abs(v / volume - 1) < 5e-4
 
 
 def test_two_opposite_capsules_make_a_cylinder():
     r, length = 0.2, 3.0
     a, v = hub_measures(r, [HalfBeam(np.array([0, 0, length]), r, r), HalfBeam(np.array([0, 0, -length]), r, r)])
-    assert abs(v / (math.pi * r * r * length) - 1) < 1e-4
-    assert abs(a / (2 * math.pi * r * length) - 1) < 1e-4
+    assert abs(v / (math.pi * r * r * length) - 1) < 5e-4
+    assert abs(a / (2 * math.pi * r * length) - 1) < 5e-4
 
 
 def _lattice(kind: str) -> Lattice:
