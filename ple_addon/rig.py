@@ -376,7 +376,9 @@ def set_params(rig, prog) -> None:
             ui = rig.id_properties_ui(key)
             opts = {"description": f"program input {prm.name} of lattice()"}
             if prm.range is not None:
-                opts.update(min=prm.range.lo, max=prm.range.hi, soft_min=prm.range.lo, soft_max=prm.range.hi)
+                kind = type(prm.default)  # an int input gets int limits
+                lo, hi = kind(prm.range.lo), kind(prm.range.hi)
+                opts.update(min=lo, max=hi, soft_min=lo, soft_max=hi)
             ui.update(**opts)
 
 
