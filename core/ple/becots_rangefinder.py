@@ -143,15 +143,17 @@ class _Plan:
             if not unique and len(key) > 1:
                 ks = key[order]
                 order = order[np.concatenate([[True], ks[1:] != ks[:-1]])]
-            rows = np.stack([ci, cj, kk, x], axis=1)[order]
-            grp = (qid * 2 + isbeam)[order]
+            rows = np.empty((len(order), 4), np.int64)
+            for col, arr in enumerate((ci, cj, kk, x)):
+                rows[:, col] = arr.take(order)
+            grp = (qid * 2 + isbeam).take(order)
         else:  # special case: keys would overflow int64, sort the columns instead
             rows = np.stack([qid * 2 + isbeam, ci, cj, kk, x], axis=1)
             rows = rows[np.lexsort(rows.T[::-1])]
             if len(rows) > 1:
                 rows = rows[np.concatenate([[True], np.any(rows[1:] != rows[:-1], axis=1)])]
             grp, rows = rows[:, 0], rows[:, 1:]
-        b = np.searchsorted(grp, np.arange(2 * q + 1)).tolist()
+        b = np.concatenate([[0], np.cumsum(np.bincount(grp, minlength=2 * q))]).tolist()
         empty = rows[:0]  # shared by the queries without hits (no view to build)
         return [BIQResult(rows[b0:b1] if b1 > b0 else empty, rows[b1:b2] if b2 > b1 else empty, "becots")
                 for b0, b1, b2 in zip(b[0:-1:2], b[1::2], b[2::2])]
@@ -359,9 +361,11 @@ class _Layer:
         if fld.kind != "translation" and gu + gv <= TABLE_LIMIT:
             (ru, wu), (rv, wv) = self.step_u, self.step_v
             iu, jv = np.arange(gu, dtype=float), np.arange(gv, dtype=float)
-            scale = (lambda t: np.exp(-t)) if fld.kind == "cone" else (lambda t: t)  # cylinder: the slide
-            self.tables = (np.stack([np.cos(iu * wu), np.sin(iu * wu), scale(iu * ru)]),
-                           np.stack([np.cos(jv * wv), np.sin(jv * wv), scale(jv * rv)]))
+            if fld.kind == "cone":  # (e cos, e sin, e) with e = exp(-rho): S⁻¹ scales by e
+                tab = lambda n, w, rr: np.exp(-n * rr) * np.stack([np.cos(n * w), np.sin(n * w), np.ones_like(n)])  # noqa: E731
+            else:  # cylinder: (cos, sin, slide)
+                tab = lambda n, w, rr: np.stack([np.cos(n * w), np.sin(n * w), n * rr])  # noqa: E731
+            self.tables = (tab(iu, wu, ru), tab(jv, wv, rv))
         # exact tests happen in the template's frame: the shapes of group (0, 0), local coordinates
         a_loc = (ca - self.origin) @ self.frame.T
         ab = (cb - self.origin) @ self.frame.T - a_loc
@@ -397,21 +401,20 @@ class _Layer:
         theta = np.arctan2(y, x)
         with np.errstate(invalid="ignore", divide="ignore"):
             half = np.arcsin(np.minimum(r / radial, 1.0))
-        half[~(r < radial)] = np.pi  # special case: the ball touches the axis, every angle
-        if self.kind == "cone":
-            d = np.sqrt(rad2 + h * h)
-            with np.errstate(invalid="ignore", divide="ignore"):
+            half[~(r < radial)] = np.pi  # special case: the ball touches the axis, every angle
+            if self.kind == "cone":
+                d = np.sqrt(rad2 + h * h)
                 rho0 = np.log(np.maximum(d - r, 1e-300) / self.ref)
                 rho1 = np.maximum(np.log((d + r) / self.ref), TINY_LOG)
                 rho0[~(d > r)] = TINY_LOG  # special case: the ball contains F, unbounded rho
                 phi = np.arccos(np.clip(h / d, -1.0, 1.0))
                 spread = np.arcsin(np.minimum(r / d, 1.0))
-            phi[~(d > 0)] = 0.0
-            spread[~(d > r)] = np.inf
-            s_lo, s_hi = phi - spread, phi + spread
-        else:  # special case cylinder: rho is the height along T, the shell the distance to T
-            rho0, rho1 = h - self.h0 - r, h - self.h0 + r
-            s_lo, s_hi = radial - r, radial + r
+                phi[~(d > 0)] = 0.0
+                spread[~(d > r)] = np.inf
+                s_lo, s_hi = phi - spread, phi + spread
+            else:  # special case cylinder: rho is the height along T, the shell the distance to T
+                rho0, rho1 = h - self.h0 - r, h - self.h0 + r
+                s_lo, s_hi = radial - r, radial + r
         # branches: lift the query's angle interval by every 2π k meeting the lattice's angle range
         kmin = np.ceil((self.th_lo - (theta + half)) / TWO_PI)
         kmax = np.floor((self.th_hi - (theta - half)) / TWO_PI)
@@ -458,7 +461,7 @@ class _Layer:
         nj = nj.reshape(-1)[nz].astype(np.int64)
         cnt = ni.reshape(-1)[nz].astype(np.int64) * nj
         pair = np.repeat(np.arange(len(nz)), cnt)
-        off = np.arange(len(pair)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        off = np.arange(len(pair)) - (np.cumsum(cnt) - cnt)[pair]
         di, dj = np.divmod(off, nj[pair])
         ci = i0.reshape(-1)[nz].astype(np.int64)[pair] + di
         cj = j0.reshape(-1)[nz].astype(np.int64)[pair] + dj
@@ -504,12 +507,12 @@ class _Layer:
         if self.tables is not None:  # angle addition over per-index tables: no trig per candidate
             cu, su, eu = self.tables[0].take(ci, axis=1)
             cv, sv, ev = self.tables[1].take(cj, axis=1)
-            cth, sth = cu * cv - su * sv, su * cv + cu * sv
-            xr, yr = x * cth + y * sth, y * cth - x * sth
             if self.kind == "cylinder":
-                return xr, yr, z - (eu + ev), rq
-            s = eu * ev
-            return xr * s, yr * s, z * s, rq * s
+                cth, sth = cu * cv - su * sv, su * cv + cu * sv
+                return x * cth + y * sth, y * cth - x * sth, z - (eu + ev), rq
+            # cone: the tables hold scale · (cos, sin), so these are s cos θ and s sin θ
+            cth, sth, s = cu * cv - su * sv, su * cv + cu * sv, eu * ev
+            return x * cth + y * sth, y * cth - x * sth, z * s, rq * s
         ci, cj = ci.astype(float), cj.astype(float)
         if self.kind == "translation":
             (ux, uy, uz), (vx, vy, vz) = self.step_u, self.step_v
