@@ -31,6 +31,7 @@ TIE_PERTURBATION = 1e-6
 SUPPORT_TOL = 1e-10  # a supporting plane may cut a circle's cone by at most this (cosine units)
 ROLL_SLACK = 1e-9  # turns down to -1e-9 rad count as rolling forward (coplanar neighbours)
 NEAR_COPLANAR = 1e-3  # |N1·(N2×N3)| below this: Appendix A divides by ~0, use Eq. A.3's case
+DEGENERATE_ARC = 1e-12  # a corridor whose arcs and ends are this short is a bare edge
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -395,6 +396,7 @@ def corridor_mesh(c: Chocc, arc_segments) -> ChoccMesh:
     nv = 3 * t
     faces = [np.arange(3 * t).reshape(t, 3)]
     per_circle_samples: dict[tuple[int, int], np.ndarray] = {}
+    merge: list[tuple[int, int]] = []
     point = c.alphas == 0.0
     apexes = corridor_apexes(c.normals, c.alphas, c.corridors[:, :2]) if len(c.corridors) else np.zeros((0, 4))
 
@@ -413,6 +415,13 @@ def corridor_mesh(c: Chocc, arc_segments) -> ChoccMesh:
         pa0, pa1, pb0, pb1 = c.points[t1, ka1], c.points[t2, ka2], c.points[t1, kb1], c.points[t2, kb2]
         da = cw_delta(a, pa0, pa1)  # clockwise on a from T1 to T2
         db = cw_delta(b, pb1, pb0)  # clockwise on b from T2 to T1
+        if (max(da, db) < DEGENERATE_ARC and np.linalg.norm(pa1 - pa0) < DEGENERATE_ARC
+                and np.linalg.norm(pb1 - pb0) < DEGENERATE_ARC):
+            # coplanar neighbours (four circles on one plane): the corridor is a bare edge;
+            # merge its two vertex pairs so that T1 and T2 share that edge
+            merge += [(va1, va0), (vb1, vb0)]
+            per_circle_samples[(ci, a)] = per_circle_samples[(ci, b)] = np.zeros(0, np.int64)
+            continue
         m = max(1, int(arc_segments(max(da, db))))
         s = np.arange(1, m) / m
         if m > 1 and c.alphas[a] >= c.alphas[b]:
@@ -452,7 +461,12 @@ def corridor_mesh(c: Chocc, arc_segments) -> ChoccMesh:
     remap = np.arange(len(vertices))
     for i in np.flatnonzero(point):
         remap[rings[i]] = rings[i][0]
-        rings[i] = rings[i][:1]
+    for x, y in merge:
+        remap[remap == remap[x]] = remap[y]
+    for i in range(n):
+        r = remap[rings[i]]
+        keep_r = r != np.roll(r, 1)  # consecutive duplicates on a ring: one vertex
+        rings[i] = r[keep_r] if keep_r.any() else r[:1]
     faces = remap[faces]
     keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
     return ChoccMesh(vertices, faces[keep].astype(np.int64), rings, vertex_circle)

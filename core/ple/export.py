@@ -74,7 +74,7 @@ class StlWriter:
         self.count += len(rec)
         if self.count > STL_MAX_TRIANGLES:
             raise PleError(f"binary STL holds at most {STL_MAX_TRIANGLES} triangles; use a smaller --region")
-        self.fh.write(rec.tobytes())
+        self.fh.write(memoryview(rec).cast("B"))
 
     def close(self) -> None:
         self.fh.seek(80)

@@ -362,9 +362,9 @@ class _Tessellator:
                                               lat.template_centers[b.n1], lat.template_centers[b.n2])
                 f = self.strips[key]
                 which, li = f[..., 1], f[..., 0]
-                va = ring_a[np.where(which == 0, li, 0)][None] + offsets[src[sel]][:, None, None]
-                vb = ring_b[np.where(which == 1, li, 0)][None] + offsets[dst[sel]][:, None, None]
-                out.append(np.where(which[None] == 0, va, vb).reshape(-1, 3))
+                local = np.where(which == 0, ring_a[np.where(which == 0, li, 0)], ring_b[np.where(which == 1, li, 0)])
+                base = np.where(which[None] == 0, offsets[src[sel]][:, None, None], offsets[dst[sel]][:, None, None])
+                out.append((base + local[None]).reshape(-1, 3))
         return out
 
 
