@@ -1,4 +1,4 @@
-"""LiL coarse lattice (thesis Fig. 7.9 top): cylindrical 5×17×9 groups (radial, angular closing the ring, axial) around the thesis_cylindrical lattice, 1 ball, 3 beam-patterns."""
+"""LiL coarse (thesis Fig. 7.9): cylindrical 5×17×9 around thesis_cylindrical, ring closed, 1 ball, 3 beam-patterns."""
 
 import math
 

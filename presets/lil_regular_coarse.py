@@ -1,4 +1,4 @@
-"""LiL coarse lattice (thesis Fig. 7.9): regular n³ cubic frame, 1 ball and 3 beam-patterns, spanning the 75³ thesis_regular box."""
+"""LiL coarse (thesis Fig. 7.9): regular n³ cubic frame over the 75³ thesis_regular box, 1 ball, 3 beam-patterns."""
 
 
 def lattice(n: Range(2, 50) = 9, span: Range(1, 500) = 74.0, radius: Range(0.01, 0.45) = 0.12):

@@ -1,6 +1,4 @@
-"""LiL coarse lattice (thesis Fig. 7.9 bottom-right): n³ cubic frame turned about z and twisted layer by layer (screw W), 1 ball, 3 beam-patterns."""
-
-import math
+"""LiL coarse (thesis Fig. 7.9): semi-regular n³ frame turned about z and twisted (screw W), 1 ball, 3 beam-patterns."""
 
 
 def lattice(n: Range(2, 50) = 8, span: Range(1, 500) = 63.0, radius: Range(0.01, 0.45) = 0.12,
