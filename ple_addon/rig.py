@@ -182,13 +182,15 @@ def filtered(rig, lat, space=None, _seen=()):
 
 
 def evaluate_region(rig, lat):
-    """Evaluation of the drawn region, through the rig's filter if any (None if empty)."""
+    """Evaluation of the drawn region, through the program's and the panel's filters (None if
+    the region is empty)."""
     r = region_of(rig, lat)
     if r is None:
         return None
-    f = filtered(rig, lat)
-    if f is None:
+    parts = [f for f in (getattr(lat, "filter", None), filtered(rig, lat)) if f is not None]
+    if not parts:  # the program's own filter (Lattice.set_filter) and the panel's are and-ed
         return lat.evaluate(r)
+    f = parts[0] if len(parts) == 1 else parts[0] & parts[1]
     return optional("filters").FilteredLattice(lat, f).evaluate(r)
 
 

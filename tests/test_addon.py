@@ -428,6 +428,11 @@ def case_filters():
     assert len(co) == 500 and np.allclose(np.round(co[:, 0]) % 2, 0)
     assert bpy.ops.ple.stencil_filter(rig=fine.name, clear=True) == {"FINISHED"}
     assert len(region_arrays(fine)[0]) == 1000
+    prog = new_rig("hier_stencil", region=(4, 4, 4))  # a filter set by the program itself
+    lat = core.program.load_lattice("hier_stencil")
+    want = core.filters.FilteredLattice(lat, lat.filter).evaluate("0:4,0:4,0:4")
+    co, _, ed = region_arrays(prog)
+    assert 0 < len(co) == len(want.center) < 64 * len(lat.nodes) and np.array_equal(ed, want.beam_nodes)
 
 
 def case_tessellate():
