@@ -274,3 +274,33 @@ def test_cli_bad_input(tmp_path, capsys, argv):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "error" in err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_program_filters_are_honoured():
+    # a lattice carrying its own filter (Lattice.set_filter) filters its own level of a LiL
+    _, fine, coarse = pair(5, "rotation")
+    stencil = Stencil(np.array([[[True, False]]]))
+    coarse_own = coarse.copy()
+    coarse_own.set_filter(stencil)
+    expected = FilteredLattice(fine, LiL(FilteredLattice(coarse, stencil))).evaluate()
+    assert as_sets(lil(fine, coarse_own).evaluate()) == as_sets(expected)
+    assert as_sets(FilteredLattice(fine, LiL(coarse_own)).evaluate()) == as_sets(expected)
+    fine_own = fine.copy()
+    fine_own.set_filter(Stencil.named("faces", 2))
+    expected = FilteredLattice(fine, Stencil.named("faces", 2) & LiL(coarse)).evaluate()
+    assert as_sets(lil(fine_own, coarse).evaluate()) == as_sets(expected)
+    with pytest.raises(PleError, match="biq"):
+        LiL(coarse_own, method="biq")
+
+
+def test_cli_filter_applies_the_programs_own_filter(tmp_path):
+    from ple.cli import main
+    from ple.program import load_lattice
+
+    out = tmp_path / "h.npz"
+    assert main(["filter", "hier_lil2", "--param", "n=10", "--stencil", "checker:4", "--out", str(out)]) == 0
+    lat = load_lattice("hier_lil2", {"n": 10})
+    ev = FilteredLattice(lat, lat.filter & Stencil.named("checker", 4)).evaluate()
+    with np.load(out) as z:
+        assert np.array_equal(z["beam_index"], ev.beam_index)
+    assert 0 < len(ev.beam_index) < len(FilteredLattice(lat, lat.filter).evaluate().beam_index)

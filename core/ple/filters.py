@@ -408,6 +408,7 @@ class LiL(Filter):
             raise PleError(f"LiL coarse must be a Lattice or a FilteredLattice, got {type(coarse).__name__}")
         if method not in ("auto", "elements", "biq"):
             raise PleError(f"LiL method {method!r}: expected auto, elements or biq")
+        coarse = with_own_filter(coarse)
         if method == "biq" and isinstance(coarse, FilteredLattice):
             raise PleError("LiL method 'biq' needs an unfiltered coarse lattice (BIQ runs on the program)")
         coarse_lat = coarse.lattice if isinstance(coarse, FilteredLattice) else coarse
@@ -442,15 +443,31 @@ def max_radius(lat: Lattice) -> float:
     return float(lat.placement.factor * f * lat.template_radii.max())
 
 
+def with_own_filter(lat):
+    """A Lattice carrying a program filter (``Lattice.set_filter``) as a FilteredLattice; anything
+    else unchanged."""
+    own = getattr(lat, "filter", None)
+    if isinstance(lat, Lattice) and own is not None:
+        return FilteredLattice(lat, own)
+    return lat
+
+
 def lil(fine: Lattice, *coarse: Lattice, extra: Filter | None = None, method: str = "auto") -> FilteredLattice:
     """Cascaded LiL: ``lil(F, M, C)`` is F filtered by (M filtered by C), finest to coarsest.
-    ``extra`` (e.g. a Stencil) is and-ed into the finest level."""
+    ``extra`` (e.g. a Stencil) is and-ed into the finest level. A program filter carried by any
+    of the lattices (``Lattice.set_filter``) is and-ed into its own level."""
     if not coarse:
         raise PleError("LiL needs at least one coarse lattice")
     current: Lattice | FilteredLattice = coarse[-1]
     for medium in reversed(coarse[:-1]):
-        current = FilteredLattice(medium, LiL(current, method="elements"))
+        current = FilteredLattice(medium, own_and(medium, LiL(current, method="elements")))
     top: Filter = LiL(current, method=method if len(coarse) == 1 else "elements")
     if extra is not None:
         top = _as_filter(extra) & top
-    return FilteredLattice(fine, top)
+    return FilteredLattice(fine, own_and(fine, top))
+
+
+def own_and(lat: Lattice, f: Filter) -> Filter:
+    """``f`` preceded by the lattice's own program filter, if it has one."""
+    own = getattr(lat, "filter", None)
+    return f if own is None else _as_filter(own) & f

@@ -49,6 +49,8 @@ def load_coarse(text: str):
 
 def build(args, lat, parts: list[Filter]) -> FilteredLattice:
     parts = list(parts)
+    if getattr(lat, "filter", None) is not None and not args.coarse:
+        parts.append(lat.filter)  # the program's own filter (with --coarse, lil() adds it)
     parts += [Stencil.parse(s) for s in getattr(args, "stencil", [])]
     parts += [parse_implicit(s) for s in getattr(args, "implicit", [])]
     extra = None
