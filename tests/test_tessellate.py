@@ -132,6 +132,13 @@ def test_region_with_capped_exits_is_closed(name):
     assert part.volume <= full.volume + 1e-9
 
 
+@pytest.mark.parametrize("name", ["cubic", "octet", "warped", "becots_annulus"])
+def test_refined_region_with_capped_exits_is_closed(name):
+    lat = small(name, 3)
+    nu, nv, nw = lat.counts
+    assert_closed(tessellate(lat, region=f"1:{nu},0:{max(1, nv - 1)},0:{nw}", style="refined", levels=1))
+
+
 @settings(max_examples=6, deadline=None)
 @given(st.integers(0, 10**6))
 def test_random_steady_lattices_are_closed(seed):

@@ -12,7 +12,8 @@ from ..export import mesh_format, write_beam_lattice_3mf
 from ..tessellate import STYLES, tessellate, write_mesh
 from .common import add_lattice_args, lattice_from_args
 
-MAX_MESH_GROUPS = 20_000_000
+MAX_MESH_GROUPS = 20_000_000  # streamed binary STL
+MAX_MEMORY_GROUPS = 500_000  # formats built in memory (trimesh), --check and --beam-lattice
 CHECK_SAMPLES = 400_000
 
 
@@ -37,6 +38,10 @@ def run(args) -> int:
     region = lat.region(args.region)
     if region.groups > MAX_MESH_GROUPS:
         raise PleError(f"region {region} has {region.groups:,} node-groups; choose a smaller --region")
+    in_memory = args.check or args.beam_lattice or fmt != "stl"
+    if in_memory and region.groups > MAX_MEMORY_GROUPS:
+        raise PleError(f"region {region} has {region.groups:,} node-groups: too many to hold in memory for "
+                       f".{fmt}{' with --check' if args.check else ''}; write .stl (streamed) or a smaller --region")
     t0 = time.perf_counter()
     if args.beam_lattice:
         if fmt != "3mf":
