@@ -18,6 +18,12 @@ a ball containing F gets an unbounded rho range (clipped to the lattice). The cy
 uses the height along T instead of ``ln |FP|``; the translation kind (a regular slab) uses
 affine coordinates directly. W (count > 1) and the placement are handled by moving the
 field with ``G ∘ W**k`` for each k (O(nw) per query).
+
+Everything that does not depend on the queries (shape boxes, limits, shells, the template in
+the field's local frame, per-index cos/sin/scale tables) is a ``_Plan`` cached on the lattice
+and rebuilt when the lattice changes; a batch of queries is then one vectorized pass over
+flat arrays (bounds, candidate windows, exact tests in the template frame, one sort), with no
+Python loop per query, branch or candidate.
 """
 
 from __future__ import annotations
