@@ -14,6 +14,7 @@ from . import rig as rigmod
 from .corelink import PleError, core, ir, optional, program, snippets
 
 SNIPPET_TEXT = "PLE snippet"
+EXPORT_BOXES = 20  # an STL export streams the region in about this many boxes (progress steps)
 
 
 def _preset_items(self, context):
@@ -327,20 +328,21 @@ EXPORT_STYLES = [("BALLS_BEAMS", "Balls and beams", "preview: an icosphere per b
                  *STYLES]
 
 
+def core_style(style: str) -> str:
+    return "balls-beams" if style == "BALLS_BEAMS" else style.lower()
+
+
 def tessellation(lat, region, style: str):
     """Vertices (V, 3) and triangles (F, 3) of a region from the core (``ple.tessellate``)."""
-    if style == "BALLS_BEAMS":
+    tess = optional("tessellate")
+    if tess is not None:
+        mesh = tess.tessellate(lat, region, core_style(style))
+    elif style == "BALLS_BEAMS":
         ev = lat.evaluate(region)
         mesh = core("preview").balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
     else:
-        tess = optional("tessellate")
-        if tess is None:
-            raise PleError("tessellation is not available in this version of the core (ple.tessellate is missing)")
-        mesh = tess.tessellate(lat, region, style.lower())
-    if hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
-        return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
-    verts, faces = mesh[0], mesh[1]
-    return np.asarray(verts, dtype=float), np.asarray(faces, dtype=np.int64)
+        raise PleError("tessellation is not available in this version of the core (ple.tessellate is missing)")
+    return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
 
 
 def mesh_from_arrays(name: str, verts, faces):
@@ -471,20 +473,31 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
         region = rigmod.region_of(rig, lat)
         if region is None:
             raise PleError("the region is empty: set Region from/to inside the repetition counts")
+        tess, export = optional("tessellate"), optional("export")
         yield 0.0
-        verts, faces = tessellation(lat, region, self.style)
-        yield 0.7
-        write = getattr(optional("export"), "write_mesh", None)
-        if write is not None:
-            write(verts, faces, path)
+        if tess is not None and export is not None and path.suffix.lower() == ".stl":
+            # binary STL streams box by box (thesis §6.2.2 hubs per box): progress and Esc per box
+            boxes = max(1, region.groups // EXPORT_BOXES)
+            chunks = []
+            for n, chunk in enumerate(tess.iter_triangles(lat, region, core_style(self.style), max_groups=boxes)):
+                chunks.append(chunk)
+                yield min(0.9, 0.9 * (n + 1) * boxes / region.groups)
+            count = export.write_stl(path, chunks)
         else:
+            verts, faces = tessellation(lat, region, self.style)
+            yield 0.7
+            count = len(faces)
             try:
                 import trimesh
             except ImportError:
-                raise PleError("exporting needs trimesh (or the core's ple.export)") from None
-            with core("files").atomic_path(path) as tmp:
-                trimesh.Trimesh(verts, faces, process=False).export(tmp, file_type=path.suffix[1:].lower())
-        self.report({"INFO"}, f"{len(faces)} triangles written to {path}")
+                raise PleError("exporting this format needs trimesh in Blender's Python") from None
+            mesh = trimesh.Trimesh(verts, faces, process=False)
+            if export is not None:
+                export.export_mesh(mesh, path)
+            else:
+                with core("files").atomic_path(path) as tmp:
+                    mesh.export(tmp, file_type=path.suffix[1:].lower())
+        self.report({"INFO"}, f"{count} triangles written to {path}")
         yield 1.0
 
 

@@ -437,29 +437,49 @@ def case_filters():
 
 def case_tessellate():
     rig = new_rig("cubic", region=(2, 2, 2))
-    has_core = ple_ext.corelink.optional("tessellate") is not None
     before = len(bpy.data.meshes)
-    if has_core:
-        assert bpy.ops.ple.tessellate(style="CHOCC") == {"FINISHED"}
-        obj = bpy.data.objects[f"{rig.name}.chocc"]
-        assert len(obj.data.polygons) > 0
-    else:  # the tessellation engineer's core module has not landed: a clean error, nothing created
+    if ple_ext.corelink.optional("tessellate") is None:  # the core module has not landed: a clean error
         fails(bpy.ops.ple.tessellate, "tessellation is not available", style="CHOCC")
         assert len(bpy.data.meshes) == before
+        return
+    from ple.tessellate import tessellate
+
+    lat = core.program.load_lattice("cubic")
+    for style in ("CHOCC", "CNT"):
+        assert bpy.ops.ple.tessellate(style=style) == {"FINISHED"}
+        me = bpy.data.objects[f"{rig.name}.{style.lower()}"].data
+        want = tessellate(lat, "0:2,0:2,0:2", style.lower())
+        assert (len(me.vertices), len(me.polygons)) == (len(want.vertices), len(want.faces))
+        assert len(me.edges) * 2 == 3 * len(me.polygons)  # closed: every edge in two triangles
+        co = np.zeros(len(me.vertices) * 3, np.float32)
+        me.vertices.foreach_get("co", co)
+        assert np.allclose(co.reshape(-1, 3), want.vertices, atol=1e-5)
+    assert len(bpy.data.meshes) == before + 2
 
 
 def case_export():
     import trimesh
 
-    rig = new_rig("cubic", region=(2, 2, 2))
-    path = Path(tempfile.mkdtemp()) / "r.stl"
-    assert bpy.ops.ple.export(filepath=str(path), style="BALLS_BEAMS") == {"FINISHED"}
-    mesh = trimesh.load(path)
-    ev = core.program.load_lattice("cubic").evaluate("0:2,0:2,0:2")
+    rig = new_rig("cubic", region=(3, 3, 2))
+    lat = core.program.load_lattice("cubic")
+    tmp = Path(tempfile.mkdtemp())
+    assert bpy.ops.ple.export(filepath=str(tmp / "r.stl"), style="BALLS_BEAMS") == {"FINISHED"}
+    mesh = trimesh.load(tmp / "r.stl")
+    ev = lat.evaluate("0:3,0:3,0:2")
     want = core.preview.balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
     assert len(mesh.faces) == len(want.faces)
     assert np.allclose(mesh.bounds, want.bounds, atol=1e-5)
-    assert rig.ple.status == ""
+    if ple_ext.corelink.optional("tessellate") is not None:
+        from ple.tessellate import tessellate
+
+        exact = tessellate(lat, "0:3,0:3,0:2", "chocc")
+        assert bpy.ops.ple.export(filepath=str(tmp / "c.stl"), style="CHOCC") == {"FINISHED"}  # streamed by box
+        got = trimesh.load(tmp / "c.stl")
+        assert len(got.faces) == len(exact.faces) and got.is_watertight
+        assert np.isclose(got.volume, exact.volume, rtol=1e-5)
+        assert bpy.ops.ple.export(filepath=str(tmp / "c.ply"), style="CNT") == {"FINISHED"}
+        assert len(trimesh.load(tmp / "c.ply").faces) == len(tessellate(lat, "0:3,0:3,0:2", "cnt").faces)
+    assert rig.ple.status == "" and sorted(p.name for p in tmp.iterdir() if p.name.startswith(".")) == []
 
 
 def case_ui():
