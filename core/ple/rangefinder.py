@@ -45,6 +45,7 @@ MAX_WRAP_STEPS = 64
 BLOCK = 8  # W-rows per block side in the "uv" path's culling level
 QUERY_BATCH = 1 << 15
 MAX_VW_TABLE = 1 << 18  # largest V×W table of the O(ū) path kept per lattice
+MAX_POWER_TABLE = 1 << 20  # longest direction whose powers are cached for the exact tests
 
 
 # ----- normalized maps of one incremental similarity -----------------------------------------
@@ -571,15 +572,39 @@ def cached_plan(lat: Lattice) -> _Plan:
 
 
 # ----- exact tests on candidates --------------------------------------------------------------------
-def _exact(lat: Lattice, cand: np.ndarray, qc: np.ndarray, qr: np.ndarray):
+def _power_rows(lat: Lattice, pl: _Plan):
+    """Cached rows [S**p]_{3x4} and factors s**p of U, V, W for p in [-reach, count + reach)."""
+    if "pow" not in pl.tables:
+        reach = max([abs(x) for b in lat.beams for x in b.offset], default=0)
+        out = []
+        for s, n in zip((lat.U, lat.V, lat.W), lat.counts):
+            p = np.arange(-reach, n + reach)
+            out.append((reach, np.ascontiguousarray(s.power_matrices(p)[:, :3]), s.factor ** p.astype(float)))
+        pl.tables["pow"] = out
+    return pl.tables["pow"]
+
+
+def _balls_fast(lat: Lattice, pl: _Plan, idx: np.ndarray):
+    """Centres and radii in the lattice frame of nodes (N, 4) [i, j, k, n], by cached powers."""
+    c = lat.template_centers[idx[:, 3]]
+    r = lat.template_radii[idx[:, 3]].copy()
+    for col, (reach, rows, fac) in enumerate(_power_rows(lat, pl)):
+        m = rows[idx[:, col] + reach]
+        c = (m[:, :, :3] @ c[:, :, None])[:, :, 0] + m[:, :, 3]
+        r *= fac[idx[:, col] + reach]
+    return c, r
+
+
+def _exact(lat: Lattice, cand: np.ndarray, qc: np.ndarray, qr: np.ndarray, pl: _Plan | None = None):
     """Split candidates into node hits and beam hits (qid, i, j, k, n|pattern), exactly tested."""
+    balls = (lambda idx: _frame_balls(lat, idx)) if pl is None else (lambda idx: _balls_fast(lat, pl, idx))
     nn = len(lat.nodes)
     nu, nv, nw = lat.counts
     is_node = cand[:, 4] < nn
     nodes = cand[is_node]
     hit = np.zeros(0, bool)
     if len(nodes):
-        c, r = _frame_balls(lat, nodes[:, 1:])
+        c, r = balls(nodes[:, 1:])
         hit = ball_ball_interfere(c, r, qc[nodes[:, 0]], qr[nodes[:, 0]])
     node_hits = nodes[hit]
     beams = cand[~is_node].copy()
@@ -591,8 +616,8 @@ def _exact(lat: Lattice, cand: np.ndarray, qc: np.ndarray, qr: np.ndarray):
         valid = (ti >= 0) & (ti < nu) & (tj >= 0) & (tj < nv) & (tk >= 0) & (tk < nw)
         beams, pp, ti, tj, tk = beams[valid], pp[valid], ti[valid], tj[valid], tk[valid]
     if len(beams):
-        ca, ra = _frame_balls(lat, np.stack([beams[:, 1], beams[:, 2], beams[:, 3], pp[:, 0]], axis=1))
-        cb, rb = _frame_balls(lat, np.stack([ti, tj, tk, pp[:, 1]], axis=1))
+        ca, ra = balls(np.stack([beams[:, 1], beams[:, 2], beams[:, 3], pp[:, 0]], axis=1))
+        cb, rb = balls(np.stack([ti, tj, tk, pp[:, 1]], axis=1))
         hit = ball_beam_interfere(qc[beams[:, 0]], qr[beams[:, 0]], ca, ra, cb, rb)
         beams = beams[hit]
     return node_hits, beams
@@ -613,7 +638,7 @@ def lattice_hits(lat: Lattice, c: np.ndarray, r: np.ndarray):
     for s in range(0, len(qc), QUERY_BATCH):
         cand = _candidates(lat, pl, qc[s:s + QUERY_BATCH], qr[s:s + QUERY_BATCH])
         cand[:, 0] += s
-        nh, bh = _exact(lat, cand, qc, qr)
+        nh, bh = _exact(lat, cand, qc, qr, pl if max(lat.counts) <= MAX_POWER_TABLE else None)
         node_parts.append(nh)
         beam_parts.append(bh)
     cat = lambda parts: np.concatenate(parts) if parts else np.zeros((0, 5), np.int64)  # noqa: E731
