@@ -17,7 +17,7 @@ import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-NOT_SHIPPED = {"build.py", "render_docs.py"}  # repository tools, not part of the add-on
+NOT_SHIPPED = {"build.py", "render_docs.py", "batch.py"}  # repository tools, not part of the add-on
 IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc")
 
 

@@ -137,7 +137,7 @@ def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", f
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     manifest_path = out / "manifest.json"
-    manifest = _read_manifest(manifest_path)
+    manifest = read_manifest(manifest_path)
     done = {e["file"] for e in manifest["outputs"] if (out / e["file"]).is_file()}
     todo = [v for v in variants if v.filename not in done]
     manifest.update({"program": path, "style": style, "format": fmt, "region": region})
@@ -157,14 +157,14 @@ def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", f
                     failures.append({"file": v.filename, "params": v.params, "error": str(exc)})
                 atomic_write_text(manifest_path, json.dumps(manifest, indent=1) + "\n")
                 if progress:
-                    _progress(n, len(todo), time.perf_counter() - t0)
+                    progress_bar(n, len(todo), time.perf_counter() - t0)
     manifest["failures"] = failures
     atomic_write_text(manifest_path, json.dumps(manifest, indent=1) + "\n")
     return {"written": len(todo) - len(failures), "skipped": len(variants) - len(todo), "failed": failures,
             "manifest": str(manifest_path), "seconds": time.perf_counter() - t0}
 
 
-def _read_manifest(path: Path) -> dict:
+def read_manifest(path: Path) -> dict:
     if not path.is_file():
         return {"format": "ple-batch/1", "outputs": []}
     try:
@@ -176,7 +176,7 @@ def _read_manifest(path: Path) -> dict:
     return data
 
 
-def _progress(n: int, total: int, elapsed: float) -> None:
+def progress_bar(n: int, total: int, elapsed: float) -> None:
     width = 30
     fill = math.floor(width * n / total)
     eta = elapsed / n * (total - n)

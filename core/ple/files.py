@@ -21,6 +21,9 @@ def atomic_path(path) -> Iterator[Path]:
         raise PleError(f"{path}: output folder {parent} does not exist")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=parent)
     os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # a normal file's permissions, not mkstemp's private 0600
     tmp_path = Path(tmp)
     try:
         yield tmp_path
