@@ -166,19 +166,36 @@ def beams_between(lat: Lattice, a: Region, rows_a: np.ndarray, b: Region, rows_b
     # one Boolean array over (i, j, k, pattern): np.nonzero then lists beams already sorted
     alive = np.zeros((*(hi_all - lo_all), len(lat.beams)), dtype=bool)
     a0, b0 = np.array((a.i0, a.j0, a.k0)), np.array((b.i0, b.j0, b.k0))
+    keep_a = rows_a >= 0
+    keep_b = keep_a if rows_b is rows_a else rows_b >= 0
     for p, bp, lo, hi in boxes:
-        fa = rows_a[tuple(slice(x, y) for x, y in zip(lo - a0, hi - a0)) + (bp.n1,)]
-        tb = rows_b[tuple(slice(x, y) for x, y in zip(lo + bp.offset - b0, hi + bp.offset - b0)) + (bp.n2,)]
-        alive[tuple(slice(x, y) for x, y in zip(lo - lo_all, hi - lo_all)) + (p,)] = (fa >= 0) & (tb >= 0)
-    ii, jj, kk, pp = np.nonzero(alive)
-    ii, jj, kk = ii + lo_all[0], jj + lo_all[1], kk + lo_all[2]
+        fa = keep_a[tuple(slice(x, y) for x, y in zip(lo - a0, hi - a0)) + (bp.n1,)]
+        tb = keep_b[tuple(slice(x, y) for x, y in zip(lo + bp.offset - b0, hi + bp.offset - b0)) + (bp.n2,)]
+        np.logical_and(fa, tb, out=alive[tuple(slice(x, y) for x, y in zip(lo - lo_all, hi - lo_all)) + (p,)])
+    flat = np.flatnonzero(alive)  # linear (i, j, k, pattern) positions, in sorted order
+    nb = len(lat.beams)
+    ext = hi_all - lo_all
+    pp = flat % nb
+    g = flat // nb
+    kk = g % ext[2] + lo_all[2]
+    g //= ext[2]
+    jj = g % ext[1] + lo_all[1]
+    ii = g // ext[1] + lo_all[0]
     n1 = np.array([bp.n1 for bp in lat.beams])[pp]
     n2 = np.array([bp.n2 for bp in lat.beams])[pp]
     off = np.array([bp.offset for bp in lat.beams], dtype=np.int64)[pp]
-    start = rows_a[ii - a.i0, jj - a.j0, kk - a.k0, n1]
-    end = rows_b[ii + off[:, 0] - b.i0, jj + off[:, 1] - b.j0, kk + off[:, 2] - b.k0, n2]
-    index = np.stack([ii, jj, kk, pp], axis=1).astype(np.int64)
-    return index, np.stack([start, end], axis=1).astype(np.int64)
+    index = np.empty((len(flat), 4), dtype=np.int64)
+    index[:, 0], index[:, 1], index[:, 2], index[:, 3] = ii, jj, kk, pp
+    ends = np.empty((len(flat), 2), dtype=np.int64)
+    ends[:, 0] = _lookup(rows_a, a, ii, jj, kk, n1)
+    ends[:, 1] = _lookup(rows_b, b, ii + off[:, 0], jj + off[:, 1], kk + off[:, 2], n2)
+    return index, ends
+
+
+def _lookup(rows: np.ndarray, box: Region, i, j, k, n) -> np.ndarray:
+    """rows[i - i0, j - j0, k - k0, n] through one linear index (faster than 4-D fancy indexing)."""
+    _, nj, nk, nn = rows.shape
+    return rows.reshape(-1)[(((i - box.i0) * nj + (j - box.j0)) * nk + (k - box.k0)) * nn + n]
 
 
 # ----- index stencils (thesis §9: F(N) = S[i mod x, j mod y, k mod z]) ---------------------------
