@@ -75,6 +75,10 @@ def balls_beams_group():
         return ng
     ng = bpy.data.node_groups.new(NODE_GROUP, "GeometryNodeTree")
     ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    detail = ng.interface.new_socket("Ball detail", in_out="INPUT", socket_type="NodeSocketInt")
+    detail.default_value, detail.min_value, detail.max_value = 1, 0, 4
+    sides = ng.interface.new_socket("Beam sides", in_out="INPUT", socket_type="NodeSocketInt")
+    sides.default_value, sides.min_value, sides.max_value = 8, 3, 64
     ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
     nodes, links = ng.nodes, ng.links
     gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
@@ -84,14 +88,14 @@ def balls_beams_group():
     points = nodes.new("GeometryNodeMeshToPoints")
     sphere = nodes.new("GeometryNodeMeshIcoSphere")
     sphere.inputs["Radius"].default_value = 1.0
-    sphere.inputs["Subdivisions"].default_value = 1
     balls = nodes.new("GeometryNodeInstanceOnPoints")
     curve = nodes.new("GeometryNodeMeshToCurve")
     circle = nodes.new("GeometryNodeCurvePrimitiveCircle")
-    circle.inputs["Resolution"].default_value = 8
     circle.inputs["Radius"].default_value = 1.0
     beams = nodes.new("GeometryNodeCurveToMesh")
     join = nodes.new("GeometryNodeJoinGeometry")
+    links.new(gin.outputs["Ball detail"], sphere.inputs["Subdivisions"])
+    links.new(gin.outputs["Beam sides"], circle.inputs["Resolution"])
     links.new(gin.outputs[0], points.inputs["Mesh"])
     links.new(points.outputs["Points"], balls.inputs["Points"])
     links.new(sphere.outputs["Mesh"], balls.inputs["Instance"])
@@ -109,3 +113,21 @@ def balls_beams_group():
 def add_balls_beams_modifier(obj) -> None:
     mod = obj.modifiers.new("PLE balls and beams", "NODES")
     mod.node_group = balls_beams_group()
+
+
+# (elements drawn, ball detail, beam sides): coarser drawing for big regions keeps edits interactive
+DETAIL_LEVELS = ((8_000, 1, 8), (30_000, 0, 6), (None, 0, 4))
+
+
+def set_detail(obj, elements: int) -> None:
+    """Pick the drawing detail of the balls-and-beams modifier from the number of elements."""
+    mod = obj.modifiers.get("PLE balls and beams")
+    if mod is None or mod.node_group is None:
+        return
+    _, detail, sides = next(level for level in DETAIL_LEVELS if level[0] is None or elements <= level[0])
+    ids = {item.name: item.identifier for item in mod.node_group.interface.items_tree
+           if getattr(item, "in_out", None) == "INPUT"}
+    for name, value in (("Ball detail", detail), ("Beam sides", sides)):
+        key = ids.get(name)
+        if key is not None and mod.get(key) != value:
+            mod[key] = value

@@ -37,6 +37,7 @@ class RigState:
     lattice: object = None
     expected: dict = field(default_factory=dict)
     signature: tuple = ()
+    topology: tuple = ()  # (key, Evaluation) of the last unfiltered region drawn
 
 
 _state: dict[str, RigState] = {}
@@ -181,15 +182,25 @@ def filtered(rig, lat, space=None, _seen=()):
     return filters.LiL(coarse_lat)
 
 
-def evaluate_region(rig, lat):
+def evaluate_region(rig, lat, st: RigState | None = None):
     """Evaluation of the drawn region, through the program's and the panel's filters (None if
-    the region is empty)."""
+    the region is empty). Unfiltered, a move of a frame changes only ball centres and radii:
+    the node and beam indices of the last evaluation are reused (``Lattice.region_balls``)."""
     r = region_of(rig, lat)
     if r is None:
         return None
     parts = [f for f in (getattr(lat, "filter", None), filtered(rig, lat)) if f is not None]
     if not parts:  # the program's own filter (Lattice.set_filter) and the panel's are and-ed
-        return lat.evaluate(r)
+        key = (str(r), len(lat.nodes), tuple((b.n1, b.n2, b.di, b.dj, b.dk) for b in lat.beams))
+        if st is not None and st.topology and st.topology[0] == key:
+            last = st.topology[1]
+            centers, radii = lat.region_balls(r)
+            return type(last)(last.node_index, centers.reshape(-1, 3), radii.reshape(-1), last.beam_index,
+                              last.beam_nodes)
+        ev = lat.evaluate(r)
+        if st is not None:
+            st.topology = (key, ev)
+        return ev
     f = parts[0] if len(parts) == 1 else parts[0] & parts[1]
     return optional("filters").FilteredLattice(lat, f).evaluate(r)
 
@@ -272,7 +283,7 @@ def refresh(rig, force: bool = False) -> str | None:
                     rig.ple.status = ""
                 return None
             lat = lattice_of(rig, st)
-            ev = evaluate_region(rig, lat)
+            ev = evaluate_region(rig, lat, st)
         except PleError as exc:
             rig.ple.status = str(exc)
             return str(exc)
@@ -292,6 +303,7 @@ def draw_rig(rig, lat, ev, st: RigState) -> None:
         rig.ple.counts = lat.counts
     if "region" in p:
         draw.region_mesh(p["region"].data, ev)
+        draw.set_detail(p["region"], 0 if ev is None else len(ev.center) + len(ev.beam_nodes))
     if "cage" in p:
         draw.cage_curve(p["cage"].data, cage.cage_curves(lat, interior=rig.ple.cage_interior))
     frames = {"G": lat.placement.matrix}
