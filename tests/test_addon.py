@@ -127,6 +127,11 @@ def case_install():
     for op in ("lattice_add", "tessellate", "lil_filter", "stencil_filter", "snippet_copy", "program_apply", "export"):
         assert hasattr(bpy.ops.ple, op)
         assert "UNDO" in getattr(bpy.types, f"PLE_OT_{op}").bl_options
+    addon_utils.disable("bl_ext.user_default.ple", default_set=True)  # unregisters cleanly
+    assert not hasattr(bpy.types.Object, "ple") and not hasattr(bpy.types, "PLE_OT_export")
+    assert not any(getattr(h, "__module__", "").startswith("bl_ext") for h in bpy.app.handlers.depsgraph_update_post)
+    addon_utils.enable("bl_ext.user_default.ple", default_set=True)
+    assert hasattr(bpy.types.Object, "ple")
 
 
 def case_lattice_add_sources():
@@ -394,6 +399,16 @@ def case_undo():
     assert np.allclose(region_arrays(rig)[0], co0)
     update()
     assert ple_ext.rig.edits_of(rig) == []
+    # an operator's step (bpy pushes it itself only in the UI: here we push it as the UI would)
+    assert bpy.ops.ple.node_add(rig=name, center=(0.5, 0.5, 0), radius=0.05) == {"FINISHED"}
+    bpy.ops.ed.undo_push(message="Add Template Node")
+    assert len(region_arrays(bpy.data.objects[name])[0]) == 16
+    assert bpy.ops.ed.undo() == {"FINISHED"}
+    rig = bpy.data.objects[name]
+    assert len(region_arrays(rig)[0]) == 8 and ("node", 1) not in ple_ext.rig.parts(rig)
+    assert bpy.ops.ed.redo() == {"FINISHED"}
+    rig = bpy.data.objects[name]
+    assert len(region_arrays(rig)[0]) == 16 and len(ple_ext.rig.lattice_of(rig).nodes) == 2
 
 
 def case_filters():
