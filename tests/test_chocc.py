@@ -19,6 +19,7 @@ from ple.chocc import (
     corridor_apexes,
     corridor_mesh,
     map_generators,
+    pair_hull_mesh,
     sampled_segments,
 )
 from ple.errors import PleError
@@ -232,3 +233,17 @@ def test_bad_input():
         chocc(np.eye(3)[:2], [0.1, 0.1])
     with pytest.raises(PleError, match="overlap"):
         chocc(np.array([[1, 0, 0], [0.99, 0.1, 0], [0, 0, 1.0]]), [0.3, 0.3, 0.3])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_two_circles_case(seed):
+    """n = 2: two disks and one corridor band all the way round (no triangles); its volume
+    converges to the ConvexHull oracle; rings run clockwise about their normals."""
+    normals, alphas = random_caps(np.random.default_rng(seed), 2, amax=0.8)
+    m = pair_hull_mesh(normals, alphas, 256)
+    mesh = trimesh.Trimesh(m.vertices, m.faces, process=False)
+    assert mesh.is_watertight and mesh.is_winding_consistent
+    assert mesh.volume == pytest.approx(ConvexHull(circle_samples(normals, alphas)).volume, rel=5e-4)
+    for i, ring in enumerate(m.rings):
+        p = m.vertices[ring]
+        assert np.einsum("ij,j->", np.cross(p, np.roll(p, -1, axis=0)), normals[i]) < 0

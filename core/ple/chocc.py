@@ -490,3 +490,37 @@ def cnt_segments(delta: float) -> int:
 def sampled_segments(segments: int):
     """Corridors as strips: about ``segments`` generators per full circle."""
     return lambda delta: max(1, int(np.ceil(delta * segments / (2 * np.pi) - 1e-9)))
+
+
+def pair_hull_mesh(normals, alphas, segments: int = 32) -> ChoccMesh:
+    """The CHoCC case n = 2 (§3–4): two disks joined by one corridor that goes all the way
+    round — the band of the elliptic cone through both circles, sampled as ``segments``
+    generators through its apex. (Case n = 1 is the disk alone: no volume.) Faces include
+    both disks; outward oriented."""
+    normals = _unit(np.asarray(normals, float).reshape(2, 3))
+    alphas = np.asarray(alphas, float).reshape(2)
+    if np.arccos(np.clip(normals[0] @ normals[1], -1, 1)) <= alphas.sum():
+        raise PleError("CHoCC: caps 0 and 1 overlap or touch")
+    big, small = (0, 1) if alphas[0] >= alphas[1] else (1, 0)
+    e1, e2 = _arc_frames(normals)
+    th = np.arange(segments) * 2 * np.pi / segments
+    ring_big = (np.cos(alphas[big]) * normals[big]
+                + np.sin(alphas[big]) * (np.cos(th)[:, None] * e1[big] + np.sin(th)[:, None] * e2[big]))
+    apex = corridor_apexes(normals, alphas, np.array([[big, small]]))
+    ring_small = map_generators(ring_big[None], apex, normals[small:small + 1], alphas[small:small + 1])[0]
+    verts = np.concatenate([ring_big, ring_small])
+    k = np.arange(segments)
+    nxt = (k + 1) % segments
+    # the big disk's fan runs k -> k+1 (counter-clockwise about its normal), the band runs the
+    # rings the other way, the small disk's fan again opposite to the band
+    band = np.concatenate([np.stack([segments + nxt, nxt, k], 1), np.stack([segments + k, segments + nxt, k], 1)])
+    disks = np.concatenate([np.stack([np.zeros(segments - 2, int), k[1:-1], k[2:]], 1),
+                            np.stack([np.full(segments - 2, segments), segments + k[2:], segments + k[1:-1]], 1)])
+    faces = np.concatenate([band, disks])
+    vol = np.einsum("ij,ij->i", verts[faces[:, 0]], np.cross(verts[faces[:, 1]], verts[faces[:, 2]])).sum()
+    if vol < 0:
+        faces = faces[:, ::-1]
+    ring_of = [k, segments + k] if big == 0 else [segments + k, k]
+    rings = [r if (verts[r[1]] - verts[r[0]]) @ np.cross(normals[i], verts[r[0]]) < 0 else r[::-1]
+             for i, r in enumerate(ring_of)]  # clockwise about each normal
+    return ChoccMesh(verts, faces.astype(np.int64), rings, np.repeat([big, small], segments))
