@@ -23,6 +23,7 @@ U^-i V^-j W^dk V^(j+dj) U^(i+di) — independent of k — so hubs are computed o
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -458,8 +459,15 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
         yield np.asarray(mesh.vertices), np.asarray(mesh.faces)
         return
     tess = _Tessellator(lat, r, style, levels, segments)
-    for box in lat.iter_slabs(max_groups=max_groups, region=r):
-        yield tess.build(box)
+    boxes = list(lat.iter_slabs(max_groups=max_groups, region=r))
+    # build the next box in a worker thread while the caller writes this one (numpy releases
+    # the GIL in its large array operations): at most two boxes are held at a time
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        pending = pool.submit(tess.build, boxes[0]) if boxes else None
+        for nxt in boxes[1:] + [None]:
+            done = pending.result()
+            pending = pool.submit(tess.build, nxt) if nxt is not None else None
+            yield done
 
 
 def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: int | None = None,
