@@ -247,3 +247,25 @@ def test_two_circles_case(seed):
     for i, ring in enumerate(m.rings):
         p = m.vertices[ring]
         assert np.einsum("ij,j->", np.cross(p, np.roll(p, -1, axis=0)), normals[i]) < 0
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_apex_matches_eq_3_to_5(seed):
+    """The homogeneous apex equals Eq. 3–5: F = L(A1, B2) ∩ L(B1, A2) with
+    |FA1| = |d1 (d1 d3 + d2 d4) / (d2² − d1²)|."""
+    rng = np.random.default_rng(seed)
+    n, a = random_caps(rng, 2)
+    a = np.array([max(a[0], a[1]) + 0.05, min(a[0], a[1])])  # unequal circles: finite apex
+    f = corridor_apexes(n, a, np.array([[0, 1]]))[0]
+    f = f[:3] / f[3]
+    n1, n2 = n
+    nn = np.cross(n1, n2)
+    nn /= np.linalg.norm(nn)
+    o1, o2 = np.cos(a[0]) * n1, np.cos(a[1]) * n2
+    r1, r2 = np.sin(a)
+    a1, b1 = o1 - r1 * np.cross(n1, nn), o1 + r1 * np.cross(n1, nn)
+    a2, b2 = o2 - r2 * np.cross(n2, nn), o2 + r2 * np.cross(n2, nn)
+    assert np.linalg.norm(np.cross(f - a1, b2 - a1)) < 1e-12
+    assert np.linalg.norm(np.cross(f - b1, a2 - b1)) < 1e-12
+    d1, d2, d3, d4 = 2 * r1, 2 * r2, np.linalg.norm(a1 - b2), np.linalg.norm(a2 - b1)
+    assert np.linalg.norm(f - a1) == pytest.approx(abs(d1 * (d1 * d3 + d2 * d4) / (d2**2 - d1**2)), rel=1e-10)
