@@ -22,13 +22,16 @@ def core(name: str) -> ModuleType:
 
 
 def optional(name: str) -> ModuleType | None:
-    """A core sub-module that may not exist in this version (tessellate, export, becots)."""
+    """A core sub-module that may not exist in this version (None), e.g. ``tessellate``.
+    If it exists but needs a package Blender's Python lacks (trimesh, scipy), that is a
+    PleError naming the package, reported to the user instead of a traceback."""
     try:
         return core(name)
     except ModuleNotFoundError as exc:
         if exc.name == f"{ple.__name__}.{name}":
             return None
-        raise
+        raise ple.PleError(f"ple.{name} needs the Python package {exc.name!r}, which Blender's Python "
+                           "does not have (install it into Blender's Python to use this)") from None
 
 
 cage = core("cage")

@@ -337,9 +337,9 @@ def tessellation(lat, region, style: str):
     tess = optional("tessellate")
     if tess is not None:
         mesh = tess.tessellate(lat, region, core_style(style))
-    elif style == "BALLS_BEAMS":
+    elif style == "BALLS_BEAMS" and optional("preview") is not None:
         ev = lat.evaluate(region)
-        mesh = core("preview").balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
+        mesh = optional("preview").balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
     else:
         raise PleError("tessellation is not available in this version of the core (ple.tessellate is missing)")
     return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)

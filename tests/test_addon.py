@@ -366,6 +366,17 @@ def case_errors():
     assert not Path("/tmp/x.docx").exists()
     fails(bpy.ops.ple.lil_filter, "coarse")
     fails(bpy.ops.ple.lattice_add, "no text block", source="TEXT", text="nope")
+    # a Blender without trimesh: the tessellation reports the missing package, no traceback
+    new_rig("cubic", region=(2, 2, 2))
+    vendored = "bl_ext.user_default.ple.vendor.ple"
+    saved = {k: sys.modules.pop(k) for k in list(sys.modules)
+             if k == "trimesh" or k.startswith("trimesh.") or k in (f"{vendored}.tessellate", f"{vendored}.preview")}
+    sys.modules["trimesh"] = None
+    try:
+        fails(bpy.ops.ple.tessellate, "'trimesh'", style="CNT")
+    finally:
+        del sys.modules["trimesh"]
+        sys.modules.update(saved)
 
 
 def case_untrusted():
