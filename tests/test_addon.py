@@ -241,6 +241,9 @@ def case_counts():
     assert lat.counts == (4, 12, 15)
     assert bpy.ops.ple.snippet_copy() == {"FINISHED"}
     assert bpy.data.texts["PLE snippet"].as_string().startswith("lat.set_u(4, lat.u.similarity")
+    assert bpy.ops.ple.edits_clear() == {"FINISHED"}  # back to what the program gives
+    assert tuple(rig.ple.counts) == (7, 12, 15) and ple_ext.rig.edits_of(rig) == []
+    assert_region_is(rig, core.program.load_lattice("fig6_3"), "0:3,0:3,0:3")
 
 
 def case_template_ops():
