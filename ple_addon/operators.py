@@ -90,6 +90,12 @@ class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
     region: IntVectorProperty(name="Region", size=3, min=1, default=(3, 3, 3),
                               description="Node-groups per direction drawn in full")
 
+    def invoke(self, context, event):
+        if self.source == "FILE" and not self.filepath:
+            context.window_manager.fileselect_add(self)
+            return {"RUNNING_MODAL"}
+        return context.window_manager.invoke_props_dialog(self)
+
     def source_text(self):
         """(Text datablock, kind, default name); a new Text for presets and files."""
         if self.source == "TEXT":
