@@ -26,12 +26,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from .elements import beam_distance
+from .errors import PleError
 from .lattice import Lattice
 from .similarity import Similarity
 
 HUB_GRID = 24  # direction cells per cube face side (6 faces), edge cells refined REFINE × REFINE
 REFINE = 8
-MAX_HUB_SHAPES = 64  # more hub classes than this: no area/volume (keeps ple info bounded)
+MAX_HUBS = 200_000  # more hub classes than this: no area/volume (guard for huge base slabs)
+GRID_START, GRID_MAX = 4, 128  # fast path: overlap quadrature cells per cube face side, first and last
+ADAPT_TOL = 5e-4  # refine a hub while its overlap integrals at n and n/2 differ by more than this × its measure
 
 
 @dataclass
@@ -283,77 +286,217 @@ def _similar_axes(lat: Lattice) -> tuple[bool, bool, bool]:
     return u, vw, True
 
 
-class _HubCache:
-    """Measures of hub shapes keyed by their geometry in the hub's own group frame."""
-
-    def __init__(self, lat: Lattice, grid: int):
-        self.lat, self.grid, self.shapes = lat, grid, {}
-        self.incident = _incident(lat)
-
-    def hub(self, i: int, j: int, k: int, n: int) -> tuple[float, float, float]:
-        """(area, volume, factor) of hub H[i,j,k,n]; area/volume of its template-frame
-        shape, to be multiplied by factor² / factor³."""
-        lat = self.lat
-        nu, nv, nw = lat.counts
-        g = np.array([i, j, k])
-        parts = []
-        for off, partner, _ in self.incident[n]:
-            o = g + off
-            if np.all(o >= 0) and np.all(o < (nu, nv, nw)):
-                parts.append((int(o[0]), int(o[1]), int(o[2]), partner))
-        idx = np.array([(i, j, k, n)] + parts, dtype=np.int64)
-        c, r = lat.node_balls(idx)
-        m = lat.group_matrices([i], [j], [k])[0]
-        f = float(lat.group_factors([i], [j], [k])[0])
-        lin = m[:3, :3] / f
-        local = (c - m[:3, 3]) @ lin / f  # back into the template frame (rotation transpose)
-        rl = r / f
-        key = tuple(np.round(np.concatenate([local.reshape(-1), rl]), 9))
-        if key not in self.shapes:
-            hbs = [HalfBeam(local[p] - local[0], float(rl[0]), float(rl[p])) for p in range(1, len(idx))]
-            self.shapes[key] = hub_measures(float(rl[0]), hbs, self.grid)
-        a, v = self.shapes[key]
-        return a, v, f
+def _rep_hubs(lat: Lattice, segs):
+    """Representative hubs of every segment box: indices (H, 4) and per-hub area/volume series
+    weights (the §3.6 sums over the segment box of s^2 and s^3 powers)."""
+    s = (lat.U.factor, lat.V.factor, lat.W.factor)
+    reps, wa, wv = [], [], []
+    for d in range(3):
+        reps.append(np.array([g[2] for g in segs[d]]))
+        wa.append(np.array([_series(s[d], 2, *g) for g in segs[d]]))
+        wv.append(np.array([_series(s[d], 3, *g) for g in segs[d]]))
+    nn = len(lat.nodes)
+    grids = np.meshgrid(np.arange(len(segs[0])), np.arange(len(segs[1])), np.arange(len(segs[2])), np.arange(nn),
+                        indexing="ij")
+    a, b, c, n = (x.reshape(-1) for x in grids)
+    idx = np.stack([reps[0][a], reps[1][b], reps[2][c], n], axis=1)
+    return idx, wa[0][a] * wa[1][b] * wa[2][c], wv[0][a] * wv[1][b] * wv[2][c]
 
 
-def lattice_measures(lat: Lattice, method: str = "closed", grid: int = HUB_GRID,
-                     max_shapes: int = MAX_HUB_SHAPES) -> dict:
-    """{"area", "volume", "area_method", "hub_shapes", ...} of a clean lattice.
+def _hub_geometry(lat: Lattice, idx: np.ndarray):
+    """Per hub (H rows of (i, j, k, n)): its node radius, partner offsets (H, B, 3) and radii
+    (H, B) in the hub's own group frame (divided by the group's factor), presence mask (H, B)
+    and the group factor (H,). Absent partners are extrapolated and masked."""
+    incident = _incident(lat)
+    nb = max(1, max(len(x) for x in incident))
+    offs = np.zeros((len(lat.nodes), nb, 3), np.int64)
+    partner = np.zeros((len(lat.nodes), nb), np.int64)
+    valid = np.zeros((len(lat.nodes), nb), bool)
+    for n, lst in enumerate(incident):
+        for b, (off, p, _) in enumerate(lst):
+            offs[n, b], partner[n, b], valid[n, b] = off, p, True
+    n = idx[:, 3]
+    pidx = idx[:, None, :3] + offs[n]  # (H, B, 3)
+    present = valid[n] & np.all((pidx >= 0) & (pidx < np.array(lat.counts)), axis=2)
+    allidx = np.concatenate([idx[:, None, :], np.concatenate([pidx, partner[n][..., None]], axis=2)], axis=1)
+    c, r = lat.node_balls(allidx.reshape(-1, 4))
+    c, r = c.reshape(len(idx), nb + 1, 3), r.reshape(len(idx), nb + 1)
+    m = lat.group_matrices(idx[:, 0], idx[:, 1], idx[:, 2])
+    f = lat.group_factors(idx[:, 0], idx[:, 1], idx[:, 2])
+    lin = m[:, :3, :3] / f[:, None, None]
+    # back into the template frame: rotation transpose, divided by the factor
+    local = np.einsum("hpa,hab->hpb", c - c[:, :1], lin) / f[:, None, None]
+    rl = r / f[:, None]
+    return rl[:, 0], local[:, 1:], rl[:, 1:], present & valid[n], f
+
+
+def lattice_measures(lat: Lattice, method: str = "closed", grid: int = 0, max_hubs: int = MAX_HUBS) -> dict:
+    """{"area", "volume", "area_method", "hubs", "hub_shapes", ...} of a clean lattice.
 
     ``method="closed"``: geometric series along every direction where hubs are similar
-    (§3.6, §3.7, §6.1.4); ``"sum"``: every hub measured and added (reference). Returns
-    {"area_method": "skipped: ..."} without area/volume when more than ``max_shapes``
-    distinct hub shapes would need measuring (so that ``ple info`` stays fast)."""
+    (§3.6, §3.7, §6.1.4); ``"sum"``: every hub measured and added (reference). Hubs congruent
+    after normalization by their group similarity are measured once, all in one batch
+    (``hub_measures_batch``; ``grid`` 0 = adaptive). Returns {"area_method": "skipped: ..."}
+    without area/volume when more than ``max_hubs`` hubs would need measuring (a guard for
+    huge base slabs, so that ``ple info`` stays bounded)."""
     lat.validate()
+    if method not in ("closed", "sum"):
+        raise PleError(f"unknown area/volume method {method!r} (closed or sum)")
     reach = [max([abs(b.offset[d]) for b in lat.beams], default=0) for d in range(3)]
     similar = _similar_axes(lat) if method == "closed" else (False, False, False)
     segs = [_segments(c, rch, sim) for c, rch, sim in zip(lat.counts, reach, similar)]
     n_hubs = len(segs[0]) * len(segs[1]) * len(segs[2]) * len(lat.nodes)
-    if n_hubs > max_shapes:
-        return {"area_method": f"skipped: {n_hubs} hub classes to measure (limit {max_shapes})"}
-    cache = _HubCache(lat, grid)
-    s = (lat.U.factor, lat.V.factor, lat.W.factor)
-    area = volume = 0.0
-    for su in segs[0]:
-        for sv in segs[1]:
-            for sw in segs[2]:
-                for n in range(len(lat.nodes)):
-                    a, v, f = cache.hub(su[2], sv[2], sw[2], n)
-                    if len(cache.shapes) > max_shapes:
-                        return {"area_method": f"skipped: more than {max_shapes} distinct hub shapes"}
-                    sa = sv_ = 1.0
-                    for (start, stop, rep), sd in zip((su, sv, sw), s):
-                        sa *= _series(sd, 2, start, stop, rep)
-                        sv_ *= _series(sd, 3, start, stop, rep)
-                    area += a * f * f * sa
-                    volume += v * f ** 3 * sv_
+    if n_hubs > max_hubs:
+        return {"area_method": f"skipped: {n_hubs} hub classes to measure (limit {max_hubs})"}
+    idx, wa, wv = _rep_hubs(lat, segs)
+    ra, off, rb, present, f = _hub_geometry(lat, idx)
+    key = np.round(np.concatenate([idx[:, 3:], ra[:, None], off.reshape(len(idx), -1), rb, present], axis=1), 9)
+    key[key == 0] = 0.0  # -0.0 and 0.0 alike
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    a, v = hub_measures_batch(ra[first], off[first], rb[first], present[first], grid=grid)
+    area = float(np.sum(a[inverse] * f * f * wa))
+    volume = float(np.sum(v[inverse] * f**3 * wv))
     axes = "".join(name for name, sim in zip("UVW", similar) if sim)
     label = {"UVW": "closed form O(1) (§3.7)", "VW": "closed form O(ū) (§3.6)",
              "W": "closed form O(ūv̄) (§6.1.4)"}.get(axes, "sum over hubs")
-    return {"area": area, "volume": volume, "area_method": label, "hub_shapes": len(cache.shapes),
-            "hub_grid": grid}
+    return {"area": area, "volume": volume, "area_method": label, "hubs": n_hubs, "hub_shapes": len(first),
+            "hub_grid": grid or "adaptive"}
 
 
 def lattice_volume(lat: Lattice) -> float | None:
-    """Volume of a clean lattice (None when it has too many distinct hub shapes)."""
+    """Volume of a clean lattice (None when it has too many hubs to measure)."""
     return lattice_measures(lat).get("volume")
+
+
+# ----- fast path: analytic single-beam hubs + a batched quadrature of their overlaps -------------------
+def single_beam_excess(ra, rb, length):
+    """(ΔA, ΔV) = measures of ball(0, ra) ∪ one half-beam minus those of the ball, exactly
+    (a solid of revolution: ball A up to the contact circle x = ra·s, the cone frustum, ball
+    B's zone past its contact circle if the radical plane lies beyond it; thesis §2.1)."""
+    ra, rb, length = np.broadcast_arrays(*(np.asarray(x, float) for x in (ra, rb, length)))
+    contained = length + rb <= ra  # special case: ball A contains ball B, the half-beam adds nothing
+    safe = np.where(contained, 1.0, length)
+    s = np.clip((ra - rb) / safe, -1.0, 1.0)
+    c = np.sqrt(np.maximum(1 - s * s, 1e-300))
+    x0 = ra * s
+    x_cut = (safe * safe + ra * ra - rb * rb) / (2 * safe)
+    x_b = safe + rb * s  # ball B's contact circle
+    x1 = np.minimum(x_cut, x_b)
+    r0, r1 = (ra - s * x0) / c, (ra - s * x1) / c
+    area = 2 * math.pi * ra * ra * (1 + s) + math.pi * (r0 + r1) * (x1 - x0) / c
+    volume = math.pi * (ra * ra * (x0 + ra) - (x0**3 + ra**3) / 3)  # ball A's segment up to the contact circle
+    volume = volume + math.pi * (x1 - x0) * (r0 * r0 + r0 * r1 + r1 * r1) / 3  # the cone frustum
+    u0, u1 = rb * s, np.maximum(x_cut - safe, rb * s)  # ball B's zone, in B's coordinate
+    area = area + 2 * math.pi * rb * (u1 - u0)
+    volume = volume + math.pi * (rb * rb * (u1 - u0) - (u1**3 - u0**3) / 3)
+    d_area = np.where(contained, 0.0, area - 4 * math.pi * ra * ra)
+    d_volume = np.where(contained, 0.0, volume - 4 / 3 * math.pi * ra**3)
+    return d_area, d_volume
+
+
+_DIRECTIONS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def sphere_quadrature(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cubed-sphere directions (6 n², 3) and their solid-angle weights (sum 4π): n × n cells
+    per cube face, one midpoint each, weight du dv / (1 + u² + v²)^1.5."""
+    if n not in _DIRECTIONS:
+        h = 2.0 / n
+        g = -1 + (np.arange(n) + 0.5) * h
+        u, v = (x.reshape(-1) for x in np.meshgrid(g, g, indexing="ij"))
+        dirs = np.concatenate([_face_directions(face, u, v) for face in _FACES])
+        w = np.tile(_jacobian(u, v) * h * h, 6)
+        _DIRECTIONS[n] = (dirs, w * (4 * math.pi / w.sum()))
+    return _DIRECTIONS[n]
+
+
+def hub_measures_batch(ra, offsets, rb, present=None, grid: int = 0, chunk: int = 1 << 21):
+    """(areas (H,), volumes (H,)) of H hubs: ball(0, ra[h]) ∪ half-beams towards offsets[h, b]
+    (H, B, 3) with far radii rb[h, b]; ``present`` (H, B) masks absent beams (padding).
+
+    Exact single-beam excesses (``single_beam_excess``) plus the overlap of half-beams: the
+    hub's radial function is R = max_b R_b (each ball ∪ half-beam is star-shaped from the
+    centre), so V = V_ball + Σ ΔV_b − ∫ (Σ_b R_b³ − R³)/3 dω, and the same for the area with
+    integrand R²/(n·ω) (0 on cut disks). Only that overlap integral, non-zero where two or more
+    half-beams reach past the ball, uses quadrature (``sphere_quadrature(grid)``); grid 0 refines
+    each hub adaptively (GRID_START, doubling to GRID_MAX) until two grids agree to ADAPT_TOL."""
+    ra = np.asarray(ra, float)
+    off = np.asarray(offsets, float).reshape(len(ra), -1, 3)
+    rb = np.asarray(rb, float).reshape(off.shape[:2])
+    present = np.ones(rb.shape, bool) if present is None else np.asarray(present, bool)
+    length = np.linalg.norm(off, axis=2)
+    present = present & (length > 0)
+    safe = np.where(present, length, 1.0)
+    d_area, d_volume = single_beam_excess(ra[:, None], np.where(present, rb, 0.0), safe)
+    area = 4 * math.pi * ra * ra + np.sum(np.where(present, d_area, 0.0), axis=1)
+    volume = 4 / 3 * math.pi * ra**3 + np.sum(np.where(present, d_volume, 0.0), axis=1)
+    if off.shape[1] < 2:
+        return area, volume
+    if grid:
+        ca, cv = _overlap_chunked(ra, off / safe[..., None], safe, rb, present, grid, chunk)
+        return area - ca, volume - cv
+    # adaptive: halve the cell size of every hub whose overlap integrals at n and n/2 differ by
+    # more than ADAPT_TOL of its measure (midpoint rule, error O(h²)); then Richardson-extrapolate
+    e = off / safe[..., None]
+    todo = np.arange(len(ra))
+    lo_a, lo_v = _overlap_chunked(ra, e, safe, rb, present, GRID_START, chunk)
+    n = 2 * GRID_START
+    while len(todo):
+        t = todo
+        hi_a, hi_v = _overlap_chunked(ra[t], e[t], safe[t], rb[t], present[t], n, chunk)
+        ok = ((np.abs(hi_a - lo_a) <= ADAPT_TOL * area[t]) & (np.abs(hi_v - lo_v) <= ADAPT_TOL * volume[t])) | (
+            n >= GRID_MAX)
+        d = t[ok]
+        area[d] -= hi_a[ok] + (hi_a[ok] - lo_a[ok]) / 3
+        volume[d] -= hi_v[ok] + (hi_v[ok] - lo_v[ok]) / 3
+        todo, lo_a, lo_v, n = t[~ok], hi_a[~ok], hi_v[~ok], 2 * n
+    return area, volume
+
+
+def _overlap_chunked(ra, e, length, rb, present, grid: int, chunk: int):
+    dirs, weights = sphere_quadrature(grid)
+    per = max(1, chunk // (e.shape[1] * len(dirs)))
+    out_a, out_v = np.zeros(len(ra)), np.zeros(len(ra))
+    for lo in range(0, len(ra), per):
+        sl = slice(lo, lo + per)
+        out_a[sl], out_v[sl] = _overlap_integrals(ra[sl], e[sl], length[sl], rb[sl], present[sl], dirs, weights)
+    return out_a, out_v
+
+
+def _overlap_integrals(ra, e, length, rb, present, dirs, weights):
+    """∫ (Σ_b f_b − f_max) dω for area (f = R²/(n·ω), 0 on a cut) and volume (f = R³/3)."""
+    ra3 = ra[:, None, None]
+    s = np.clip((ra[:, None] - rb) / length, -1.0, 1.0)[..., None]
+    c = np.sqrt(np.maximum(1 - s * s, 0.0))
+    mu = np.einsum("hbk,mk->hbm", e, dirs)
+    nu = np.sqrt(np.maximum(1 - mu * mu, 0.0))
+    lb, rbb = length[..., None], rb[..., None]
+    # ball B: far root of |tω − d|² = rb², n·ω = sqrt(disc) / rb
+    beta = mu * lb
+    disc = beta * beta - (lb * lb - rbb * rbb)
+    root = np.sqrt(np.maximum(disc, 0.0))
+    t = np.where(disc >= 0, beta + root, -np.inf)
+    cos = root / np.where(rbb > 0, rbb, 1.0)
+    # lateral cone s x + c y = ra between the contact circles, n·ω = s μ + c ν
+    den = s * mu + c * nu
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tl = np.where(den > 0, ra3 / den, -np.inf)
+    x = tl * mu
+    tl = np.where((x >= ra3 * s) & (x <= lb + rbb * s) & (lb + ra3 > rbb), tl, -np.inf)
+    use = tl > t
+    t, cos = np.where(use, tl, t), np.where(use, den, cos)
+    ball = ~(t > ra3) | ~present[..., None] | (lb + rbb <= ra3)
+    t = np.where(ball, ra3, t)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f_area = np.where(ball, ra3 * ra3, t * t / cos)
+        x_cut = ((lb * lb + ra3 * ra3 - rbb * rbb) / (2 * lb))
+        tp = np.where(mu > 0, x_cut / np.where(mu > 0, mu, 1.0), np.inf)
+    cut = ~ball & (tp < t)
+    t = np.where(cut, tp, t)
+    f_area = np.where(cut, 0.0, f_area)
+    f_vol = t**3 / 3
+    best = np.argmax(t, axis=1)[:, None]
+    over_a = f_area.sum(axis=1) - np.take_along_axis(f_area, best, axis=1)[:, 0] - (e.shape[1] - 1) * ra[:, None] ** 2
+    over_v = f_vol.sum(axis=1) - np.take_along_axis(f_vol, best, axis=1)[:, 0] - (e.shape[1] - 1) * ra[:, None] ** 3 / 3
+    return over_a @ weights, over_v @ weights
