@@ -8,8 +8,9 @@ import math
 import numpy as np
 import pytest
 from ple.elements import beam_distance, enclosing_ball
+from ple.errors import PleError
 from ple.lattice import Lattice
-from ple.measure import HalfBeam, hub_measures, lattice_measures, lattice_volume
+from ple.measure import HalfBeam, hub_measures, hub_measures_batch, lattice_measures, lattice_volume
 from ple.similarity import Rotation, Scaling, Screw, Swirl, Translation
 
 
@@ -169,3 +170,53 @@ def test_too_many_hub_classes_are_skipped_quickly():
     lat = _lattice("uv").with_counts(60, 60, 5)
     m = lattice_measures(lat, max_hubs=1000)
     assert "area" not in m and m["area_method"].startswith("skipped") and "limit 1000" in m["area_method"]
+
+
+@pytest.mark.parametrize("ra,rb,length", [(0.3, 0.3, 2.0), (0.3, 0.15, 2.0), (0.1, 0.25, 1.0), (0.2, 0.6, 0.7)])
+def test_fast_single_beam_hub_is_exact(ra, rb, length):
+    area, volume = revolution_measures(ra, rb, length, n=2000001)
+    a, v = hub_measures_batch([ra], [[[0.3 * length, -0.8 * length, math.sqrt(0.27) * length]]], [[rb]])
+    assert abs(a[0] / area - 1) < 1e-6 and abs(v[0] / volume - 1) < 1e-6
+
+
+def _random_hub(rng, nbeams):
+    ra = 0.1
+    dirs = rng.normal(size=(nbeams, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    off = dirs * rng.uniform(0.4, 1.0, (nbeams, 1))
+    return ra, off, rng.uniform(0.05, 0.12, nbeams)
+
+
+def test_fast_hub_matches_fine_reference_quadrature():
+    rng = np.random.default_rng(7)
+    for nbeams in (3, 8):
+        ra, off, rb = _random_hub(rng, nbeams)
+        ref_a, ref_v = hub_measures(ra, [HalfBeam(o, ra, b) for o, b in zip(off, rb)], grid=32)
+        a, v = hub_measures_batch([ra], [off], [rb])
+        assert abs(a[0] / ref_a - 1) < 1e-3 and abs(v[0] / ref_v - 1) < 1e-3
+
+
+def test_fast_hub_converges_with_grid():
+    """The adaptive result agrees with a very fine fixed grid (midpoint rule, O(h²))."""
+    rng = np.random.default_rng(3)
+    ra, off, rb = _random_hub(rng, 10)
+    a, v = hub_measures_batch([ra], [off], [rb])
+    fa, fv = hub_measures_batch([ra], [off], [rb], grid=160)
+    assert abs(a[0] / fa[0] - 1) < 1e-3 and abs(v[0] / fv[0] - 1) < 1e-3
+
+
+def test_shared_geometry_variants_equal_separate_hubs():
+    rng = np.random.default_rng(11)
+    ra, off, rb = _random_hub(rng, 6)
+    masks = np.array([[1, 1, 1, 1, 1, 1], [1, 0, 1, 1, 0, 1], [0, 0, 0, 1, 0, 0]], bool)
+    a, v = hub_measures_batch([ra, ra], [off, off], [rb, rb], masks[:2].repeat(1, 0)[[0, 1]], grid=12)
+    av, vv = hub_measures_batch([ra], [off], [rb], masks, grid=12, geometry=[0, 0, 0])
+    for m, x, y in zip(masks, av, vv):
+        sa, sv = hub_measures_batch([ra], [off[m]], [rb[m]], grid=12)
+        assert np.isclose(x, sa[0], rtol=1e-12) and np.isclose(y, sv[0], rtol=1e-12)
+    assert np.allclose(a, av[:2], rtol=1e-12) and np.allclose(v, vv[:2], rtol=1e-12)
+
+
+def test_bad_method_names_it():
+    with pytest.raises(PleError, match="nope"):
+        lattice_measures(_lattice("1"), method="nope")

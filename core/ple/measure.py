@@ -34,7 +34,7 @@ HUB_GRID = 24  # direction cells per cube face side (6 faces), edge cells refine
 REFINE = 8
 MAX_HUBS = 200_000  # more hub classes than this: no area/volume (guard for huge base slabs)
 GRID_START, GRID_MAX = 4, 128  # fast path: overlap quadrature cells per cube face side, first and last
-ADAPT_TOL = 5e-4  # refine a hub while its overlap integrals at n and n/2 differ by more than this × its measure
+ADAPT_TOL = 1e-3  # refine a hub while its overlap integrals at n and n/2 differ by more than this × its measure
 
 
 @dataclass
@@ -350,17 +350,24 @@ def lattice_measures(lat: Lattice, method: str = "closed", grid: int = 0, max_hu
         return {"area_method": f"skipped: {n_hubs} hub classes to measure (limit {max_hubs})"}
     idx, wa, wv = _rep_hubs(lat, segs)
     ra, off, rb, present, f = _hub_geometry(lat, idx)
-    key = np.round(np.concatenate([idx[:, 3:], ra[:, None], off.reshape(len(idx), -1), rb, present], axis=1), 9)
+    # congruent hubs after normalization: one geometry (all incident beams, absent partners
+    # extrapolated), measured once per subset of present beams
+    key = np.round(np.concatenate([idx[:, 3:], ra[:, None], off.reshape(len(idx), -1), rb], axis=1), 9)
     key[key == 0] = 0.0  # -0.0 and 0.0 alike
-    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    _, geo_first, geo = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    geo = geo.reshape(-1)
+    _, first, inverse = np.unique(np.concatenate([geo[:, None], present], axis=1), axis=0, return_index=True,
+                                  return_inverse=True)
     inverse = inverse.reshape(-1)
-    a, v = hub_measures_batch(ra[first], off[first], rb[first], present[first], grid=grid)
+    g = geo_first
+    a, v = hub_measures_batch(ra[g], off[g], rb[g], present[first], grid=grid, geometry=geo[first])
     area = float(np.sum(a[inverse] * f * f * wa))
     volume = float(np.sum(v[inverse] * f**3 * wv))
     axes = "".join(name for name, sim in zip("UVW", similar) if sim)
     label = {"UVW": "closed form O(1) (§3.7)", "VW": "closed form O(ū) (§3.6)",
              "W": "closed form O(ūv̄) (§6.1.4)"}.get(axes, "sum over hubs")
     return {"area": area, "volume": volume, "area_method": label, "hubs": n_hubs, "hub_shapes": len(first),
+            "hub_geometries": len(g),
             "hub_grid": grid or "adaptive"}
 
 
@@ -411,61 +418,79 @@ def sphere_quadrature(n: int) -> tuple[np.ndarray, np.ndarray]:
     return _DIRECTIONS[n]
 
 
-def hub_measures_batch(ra, offsets, rb, present=None, grid: int = 0, chunk: int = 1 << 21):
-    """(areas (H,), volumes (H,)) of H hubs: ball(0, ra[h]) ∪ half-beams towards offsets[h, b]
-    (H, B, 3) with far radii rb[h, b]; ``present`` (H, B) masks absent beams (padding).
+def hub_measures_batch(ra, offsets, rb, present=None, grid: int = 0, geometry=None, chunk: int = 1 << 19):
+    """(areas, volumes) of hubs: ball(0, ra[g]) ∪ half-beams towards offsets[g, b] (G, B, 3)
+    with far radii rb[g, b]; ``present`` masks absent beams (padding). With ``geometry`` (V,)
+    indices into the G geometries, ``present`` is (V, B) and each of the V results is that
+    geometry with that subset of beams (boundary hubs share their geometry's ray casting).
 
     Exact single-beam excesses (``single_beam_excess``) plus the overlap of half-beams: the
     hub's radial function is R = max_b R_b (each ball ∪ half-beam is star-shaped from the
     centre), so V = V_ball + Σ ΔV_b − ∫ (Σ_b R_b³ − R³)/3 dω, and the same for the area with
     integrand R²/(n·ω) (0 on cut disks). Only that overlap integral, non-zero where two or more
     half-beams reach past the ball, uses quadrature (``sphere_quadrature(grid)``); grid 0 refines
-    each hub adaptively (GRID_START, doubling to GRID_MAX) until two grids agree to ADAPT_TOL."""
+    each geometry adaptively (GRID_START, doubling to GRID_MAX) until two grids agree to ADAPT_TOL."""
     ra = np.asarray(ra, float)
     off = np.asarray(offsets, float).reshape(len(ra), -1, 3)
     rb = np.asarray(rb, float).reshape(off.shape[:2])
-    present = np.ones(rb.shape, bool) if present is None else np.asarray(present, bool)
+    vg = np.arange(len(ra)) if geometry is None else np.asarray(geometry, np.int64).reshape(-1)
+    present = np.ones((len(vg), off.shape[1]), bool) if present is None else np.asarray(present, bool)
     length = np.linalg.norm(off, axis=2)
-    present = present & (length > 0)
-    safe = np.where(present, length, 1.0)
-    d_area, d_volume = single_beam_excess(ra[:, None], np.where(present, rb, 0.0), safe)
-    area = 4 * math.pi * ra * ra + np.sum(np.where(present, d_area, 0.0), axis=1)
-    volume = 4 / 3 * math.pi * ra**3 + np.sum(np.where(present, d_volume, 0.0), axis=1)
+    safe = np.where(length > 0, length, 1.0)
+    present = present & (length[vg] > 0)
+    d_area, d_volume = single_beam_excess(ra[:, None], rb, safe)
+    area = 4 * math.pi * ra[vg] ** 2 + np.sum(np.where(present, d_area[vg], 0.0), axis=1)
+    volume = 4 / 3 * math.pi * ra[vg] ** 3 + np.sum(np.where(present, d_volume[vg], 0.0), axis=1)
     if off.shape[1] < 2:
         return area, volume
-    if grid:
-        ca, cv = _overlap_chunked(ra, off / safe[..., None], safe, rb, present, grid, chunk)
-        return area - ca, volume - cv
-    # adaptive: halve the cell size of every hub whose overlap integrals at n and n/2 differ by
-    # more than ADAPT_TOL of its measure (midpoint rule, error O(h²)); then Richardson-extrapolate
     e = off / safe[..., None]
+    order = np.argsort(vg, kind="stable")
+    vg, present = vg[order], present[order]
+    rest = (ra, e, safe, rb, vg, present)
+    if grid:
+        ca, cv = _overlap_chunked(np.arange(len(ra)), rest, grid, chunk)
+        area[order] -= ca
+        volume[order] -= cv
+        return area, volume
+    # adaptive: halve the cell size of every geometry whose overlap integrals at n and n/2 differ
+    # by more than ADAPT_TOL of a hub's measure (midpoint rule, error O(h²)); Richardson-extrapolate
+    a_s, v_s = area[order], volume[order]
     todo = np.arange(len(ra))
-    lo_a, lo_v = _overlap_chunked(ra, e, safe, rb, present, GRID_START, chunk)
+    lo_a, lo_v = _overlap_chunked(todo, rest, GRID_START, chunk)
     n = 2 * GRID_START
     while len(todo):
-        t = todo
-        hi_a, hi_v = _overlap_chunked(ra[t], e[t], safe[t], rb[t], present[t], n, chunk)
-        ok = ((np.abs(hi_a - lo_a) <= ADAPT_TOL * area[t]) & (np.abs(hi_v - lo_v) <= ADAPT_TOL * volume[t])) | (
-            n >= GRID_MAX)
-        d = t[ok]
-        area[d] -= hi_a[ok] + (hi_a[ok] - lo_a[ok]) / 3
-        volume[d] -= hi_v[ok] + (hi_v[ok] - lo_v[ok]) / 3
-        todo, lo_a, lo_v, n = t[~ok], hi_a[~ok], hi_v[~ok], 2 * n
+        rows = np.nonzero(np.isin(vg, todo))[0]
+        hi_a, hi_v = _overlap_chunked(todo, rest, n, chunk)
+        bad = (np.abs(hi_a - lo_a) > ADAPT_TOL * a_s[rows]) | (np.abs(hi_v - lo_v) > ADAPT_TOL * v_s[rows])
+        bad_geo = np.zeros(len(ra), bool)
+        bad_geo[vg[rows[bad]]] = n < GRID_MAX
+        ok = ~bad_geo[vg[rows]]
+        a_s[rows[ok]] -= hi_a[ok] + (hi_a[ok] - lo_a[ok]) / 3
+        v_s[rows[ok]] -= hi_v[ok] + (hi_v[ok] - lo_v[ok]) / 3
+        todo, lo_a, lo_v, n = todo[bad_geo[todo]], hi_a[~ok], hi_v[~ok], 2 * n
+    area[order], volume[order] = a_s, v_s
     return area, volume
 
 
-def _overlap_chunked(ra, e, length, rb, present, grid: int, chunk: int):
+def _overlap_chunked(geos, rest, grid: int, chunk: int):
+    """Overlap integrals of every variant (rows sorted by geometry) of the geometries ``geos``."""
+    ra, e, length, rb, vg, present = rest
     dirs, weights = sphere_quadrature(grid)
     per = max(1, chunk // (e.shape[1] * len(dirs)))
-    out_a, out_v = np.zeros(len(ra)), np.zeros(len(ra))
-    for lo in range(0, len(ra), per):
-        sl = slice(lo, lo + per)
-        out_a[sl], out_v[sl] = _overlap_integrals(ra[sl], e[sl], length[sl], rb[sl], present[sl], dirs, weights)
-    return out_a, out_v
+    out_a, out_v = [], []
+    for lo in range(0, len(geos), per):
+        g = geos[lo:lo + per]
+        rows = np.nonzero(np.isin(vg, g))[0]
+        local = np.searchsorted(g, vg[rows])
+        a, v = _overlap_integrals(ra[g], e[g], length[g], rb[g], dirs, weights, local, present[rows])
+        out_a.append(a)
+        out_v.append(v)
+    return np.concatenate(out_a), np.concatenate(out_v)
 
 
-def _overlap_integrals(ra, e, length, rb, present, dirs, weights):
-    """∫ (Σ_b f_b − f_max) dω for area (f = R²/(n·ω), 0 on a cut) and volume (f = R³/3)."""
+def _overlap_integrals(ra, e, length, rb, dirs, weights, vg, present):
+    """∫ (Σ_b f_b − f_max) dω for area (f = R²/(n·ω), 0 on a cut) and volume (f = R³/3), per
+    variant (geometry vg with beams ``present``)."""
     ra3 = ra[:, None, None]
     s = np.clip((ra[:, None] - rb) / length, -1.0, 1.0)[..., None]
     c = np.sqrt(np.maximum(1 - s * s, 0.0))
@@ -486,7 +511,7 @@ def _overlap_integrals(ra, e, length, rb, present, dirs, weights):
     tl = np.where((x >= ra3 * s) & (x <= lb + rbb * s) & (lb + ra3 > rbb), tl, -np.inf)
     use = tl > t
     t, cos = np.where(use, tl, t), np.where(use, den, cos)
-    ball = ~(t > ra3) | ~present[..., None] | (lb + rbb <= ra3)
+    ball = ~(t > ra3) | (lb + rbb <= ra3)
     t = np.where(ball, ra3, t)
     with np.errstate(divide="ignore", invalid="ignore"):
         f_area = np.where(ball, ra3 * ra3, t * t / cos)
@@ -495,6 +520,12 @@ def _overlap_integrals(ra, e, length, rb, present, dirs, weights):
     cut = ~ball & (tp < t)
     t = np.where(cut, tp, t)
     f_area = np.where(cut, 0.0, f_area)
+    # the variants: absent beams fall back to the ball
+    rv = ra[vg][:, None, None]
+    keep = present[..., None]
+    t = np.where(keep, t[vg], rv)
+    f_area = np.where(keep, f_area[vg], rv * rv)
+    ra = ra[vg]
     f_vol = t**3 / 3
     best = np.argmax(t, axis=1)[:, None]
     over_a = f_area.sum(axis=1) - np.take_along_axis(f_area, best, axis=1)[:, 0] - (e.shape[1] - 1) * ra[:, None] ** 2
