@@ -129,10 +129,11 @@ def add_edits(rig, new) -> None:
         rig.ple.edits = snippets.edits_to_json(snippets.coalesce(edits_of(rig) + list(new)))
 
 
-def lattice_of(rig, st: RigState | None = None):
-    """The rig's current lattice: program (or IR) with its inputs, then the GUI edits."""
+def lattice_of(rig, st: RigState | None = None, new=()):
+    """The rig's current lattice: program (or IR) with its inputs, then the GUI edits (and
+    ``new`` ones not yet stored)."""
     st = st if st is not None else _state.setdefault(rig.name_full, RigState())
-    return snippets.apply_to_lattice(base_lattice(rig, st), edits_of(rig))
+    return snippets.apply_to_lattice(base_lattice(rig, st), edits_of(rig) + list(new))
 
 
 def region_of(rig, lat):
@@ -276,17 +277,17 @@ def refresh(rig, force: bool = False) -> str | None:
     _busy = True
     try:
         try:
-            add_edits(rig, user_edits(rig, st))
-            sig = signature(rig)
-            if not force and sig == st.signature and st.lattice is not None:
+            new = user_edits(rig, st)
+            if not new and not force and signature(rig) == st.signature and st.lattice is not None:
                 if rig.ple.status:  # e.g. a degenerate frame was put back: nothing is wrong now
                     rig.ple.status = ""
                 return None
-            lat = lattice_of(rig, st)
+            lat = lattice_of(rig, st, new)  # new edits are kept only if the lattice they give is valid
             ev = evaluate_region(rig, lat, st)
         except PleError as exc:
             rig.ple.status = str(exc)
             return str(exc)
+        add_edits(rig, new)
         st.lattice = lat
         draw_rig(rig, lat, ev, st)
         st.signature = signature(rig)
@@ -477,7 +478,7 @@ def rigs_in_updates(depsgraph) -> list:
     found = {}
     for u in depsgraph.updates:
         obj = u.id.original if isinstance(u.id, bpy.types.Object) else None
-        if obj is None or obj.ple.role not in ("RIG", "FRAME", "NODE"):
+        if obj is None or obj.ple.role not in ("RIG", "FRAME", "NODE", "CORNER"):
             continue
         rig = rig_of(obj)
         if rig is not None:

@@ -567,17 +567,20 @@ def case_becots_corners():
     p = ple_ext.rig.parts(rig)
     for label, c in zip("ABCD", corners):
         assert np.allclose(matrix(p[("corner", label)])[:3, 3], c, atol=1e-5)
+    rig.ple.region_min, rig.ple.region_max = (0, 0, 0), (3, 3, lat.counts[2])
     p[("corner", "C")].location = (4.0, 6.5, -2.0)  # drag corner C: the slab follows (set_becots)
     update()
     assert rig.ple.status == "", rig.ple.status
     moved = [tuple(matrix(p[("corner", c)])[:3, 3]) for c in "ABCD"]
     want = lat.copy()
     want.set_becots(*moved, counts=tuple(lat.becots.counts))
-    r = f"0:3,0:3,0:{lat.counts[2]}"
-    rig.ple.region_min, rig.ple.region_max = (0, 0, 0), (3, 3, lat.counts[2])
-    assert_region_is(rig, want, r)
+    assert_region_is(rig, want, f"0:3,0:3,0:{lat.counts[2]}")
     assert bpy.ops.ple.snippet_copy() == {"FINISHED"}
     assert "lat.set_becots(Pt(" in bpy.data.texts["PLE snippet"].as_string()
+    good = rig.ple.edits
+    p[("corner", "B")].location = p[("corner", "A")].location  # coincident corners: refused, not stored
+    update()
+    assert "coincide" in rig.ple.status and rig.ple.edits == good, (rig.ple.status, good, rig.ple.edits)
 
 
 def main(zip_path: str, out: str) -> None:
