@@ -30,6 +30,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--edits", type=int, default=30)
     parser.add_argument("--lattices", default="cubic,fig6_3,octet")
+    parser.add_argument("--out", help="also write the JSON to this file")
     args = parser.parse_args()
     os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp()
     sys.path.insert(0, str(ROOT))
@@ -40,9 +41,12 @@ def main() -> None:
     bpy.ops.wm.read_factory_settings(use_empty=True)
     ple_addon.register()
     rows = [measure(bpy, name, args.edits) for name in args.lattices.split(",")]
-    print(json.dumps({"benchmark": "addon_redraw", "edits": args.edits, "machine": {
-        "cpus": os.cpu_count(), "python": platform.python_version(), "blender": bpy.app.version_string},
-        "target_ms": 50, "rows": rows}, indent=1))
+    text = json.dumps({"benchmark": "addon_redraw", "edits": args.edits, "machine": {
+        "cpus": os.cpu_count(), "python": platform.python_version(), "blender": bpy.app.version_string,
+        "load_average": os.getloadavg()[0]}, "target_ms": 50, "rows": rows}, indent=1)
+    if args.out:
+        Path(args.out).write_text(text + "\n")
+    print(text)
 
 
 def measure(bpy, name: str, edits: int) -> dict:
