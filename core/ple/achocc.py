@@ -109,6 +109,7 @@ class HubGeometry:
     slots: int
     clean: bool = True
     alphas: np.ndarray | None = None
+    base_triangles: np.ndarray | None = None  # CHoCC triangles before the off-centre fix (a hint for neighbours)
 
     def exit_distance(self, u: np.ndarray) -> np.ndarray:
         """Distance (V,) from the centre along unit rays ``u`` (V, 3) to the boundary of the
@@ -207,8 +208,9 @@ def _visible_face(c: Chocc) -> tuple[float, np.ndarray, np.ndarray]:
     return best, centroid, normal
 
 
-def hub_geometry(radius: float, dirs, other_radii, lengths) -> HubGeometry:
-    """The junction of one ball: r⁺, contact circles, CHoCC with the off-centre fix (§5–6)."""
+def hub_geometry(radius: float, dirs, other_radii, lengths, hint=None) -> HubGeometry:
+    """The junction of one ball: r⁺, contact circles, CHoCC with the off-centre fix (§5–6).
+    ``hint``: the ``base_triangles`` of a similar hub (see ``ple.chocc.chocc``)."""
     dirs = np.asarray(dirs, float).reshape(-1, 3)
     other_radii = np.asarray(other_radii, float).reshape(-1)
     lengths = np.asarray(lengths, float).reshape(-1)
@@ -239,7 +241,8 @@ def hub_geometry(radius: float, dirs, other_radii, lengths) -> HubGeometry:
             clean = False
     normals = np.concatenate([dirs, _seed_points(dirs)])
     alist = np.concatenate([alphas, np.zeros(len(normals) - len(dirs))])
-    c = chocc(normals, alist)
+    c = chocc(normals, alist, hint)
+    base_triangles = c.triangles
     # off-centre fix (§6): while the centre is outside the CNT, add a point circle where the
     # ray from the centroid of a face visible from the centre, through the centre, meets S⁺
     for _ in range(MAX_FIX_CIRCLES):
@@ -256,4 +259,5 @@ def hub_geometry(radius: float, dirs, other_radii, lengths) -> HubGeometry:
         normals = np.concatenate([normals, p[None]])
         alist = np.concatenate([alist, [0.0]])
         c = chocc(normals, alist)
-    return HubGeometry(float(radius), float(r_plus), dirs, other_radii, lengths, c, len(dirs), clean, alphas)
+    return HubGeometry(float(radius), float(r_plus), dirs, other_radii, lengths, c, len(dirs), clean, alphas,
+                       base_triangles)

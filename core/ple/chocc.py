@@ -34,6 +34,13 @@ NEAR_COPLANAR = 1e-3  # |N1·(N2×N3)| below this: Appendix A divides by ~0, use
 DEGENERATE_ARC = 1e-12  # a corridor whose arcs and ends are this short is a bare edge
 
 
+def _cross(a, b) -> np.ndarray:
+    """Cross product over the last axis (broadcasting); np.cross is slow on the small arrays here."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
 def _unit(v: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.where(n > 0, n, 1.0)
@@ -62,7 +69,7 @@ def appendix_a(n: np.ndarray, alpha: np.ndarray) -> tuple[np.ndarray, np.ndarray
     cos(alpha_C + alpha_i) = N_C · N_i (the caps outside K(C)), sin(alpha_C) > 0.
     Undefined (inf/NaN) when the normals are coplanar; see ``apollonius_planes``."""
     n1, n2, n3 = n[..., 0, :], n[..., 1, :], n[..., 2, :]
-    c23, c31, c12 = np.cross(n2, n3), np.cross(n3, n1), np.cross(n1, n2)
+    c23, c31, c12 = _cross(n2, n3), _cross(n3, n1), _cross(n1, n2)
     det = np.einsum("...i,...i->...", n1, c23)[..., None]
     ca, sa = np.cos(alpha), np.sin(alpha)
     a = (ca[..., 0:1] * c23 + ca[..., 1:2] * c31 + ca[..., 2:3] * c12) / det
@@ -100,7 +107,7 @@ def apollonius_planes(n: np.ndarray, alpha: np.ndarray) -> tuple[np.ndarray, np.
     space of the same linear system. Shapes as ``appendix_a``."""
     n = np.asarray(n, float)
     alpha = np.asarray(alpha, float)
-    det = np.abs(np.einsum("...i,...i->...", n[..., 0, :], np.cross(n[..., 1, :], n[..., 2, :])))
+    det = np.abs(np.einsum("...i,...i->...", n[..., 0, :], _cross(n[..., 1, :], n[..., 2, :])))
     with np.errstate(divide="ignore", invalid="ignore"):
         normals, angles = appendix_a(n, alpha)
     flat = det < NEAR_COPLANAR
@@ -129,7 +136,7 @@ def _candidates(normals, alphas, triples):
     about each plane's normal: normals (m, 2, 3), angles (m, 2), contact (m, 2, 3, 3), ccw (m, 2)."""
     pn, pa = apollonius_planes(normals[triples], alphas[triples])
     pts = contact_points(pn[:, :, None, :], pa[:, :, None], normals[triples][:, None, :, :])
-    ccw = np.einsum("msi,msi->ms", np.cross(pts[:, :, 1] - pts[:, :, 0], pts[:, :, 2] - pts[:, :, 0]), pn)
+    ccw = np.einsum("msi,msi->ms", _cross(pts[:, :, 1] - pts[:, :, 0], pts[:, :, 2] - pts[:, :, 0]), pn)
     return pn, pa, pts, ccw
 
 
@@ -185,7 +192,7 @@ def roll_planes(normals: np.ndarray, alphas: np.ndarray) -> tuple[np.ndarray, np
         # the unsigned angle between normals) separates the two ways around a symmetric hinge.
         nt = planes[ti]
         e = points[ti][(k + 1) % 3] - points[ti][k]
-        o = np.cross(e, nt)
+        o = _cross(e, nt)
         o /= max(np.linalg.norm(o), 1e-300)
         turn = (np.arctan2(pn @ o, pn @ nt) + ROLL_SLACK) % (2 * np.pi)
         score = np.where(ok, -turn, -np.inf)
@@ -274,9 +281,9 @@ def corridor_apexes(normals: np.ndarray, alphas: np.ndarray, pairs: np.ndarray) 
     def h(phi):
         return np.stack([np.cos(phi), np.sin(phi), np.ones_like(phi)], axis=1)
 
-    line1 = np.cross(h(a1), h(th - a2))
-    line2 = np.cross(h(-a1), h(th + a2))
-    f = np.cross(line1, line2)
+    line1 = _cross(h(a1), h(th - a2))
+    line2 = _cross(h(-a1), h(th + a2))
+    f = _cross(line1, line2)
     out = np.concatenate([f[:, :1] * e1 + f[:, 1:2] * e2, f[:, 2:3]], axis=1)
     norm = np.linalg.norm(out, axis=1, keepdims=True)
     # two point circles: both generator lines coincide (the corridor is one segment)
@@ -293,8 +300,44 @@ def map_generators(points: np.ndarray, apex: np.ndarray, n2: np.ndarray, a2: np.
     return points + t[..., None] * d
 
 
-def chocc(normals, alphas) -> Chocc:
+def _topology_from_hint(normals, alphas, tris):
+    """Adopt a known triangle set (e.g. the neighbouring hub's) when it is still the hull:
+    every triangle's plane supports all circles with the rolling orientation and every
+    directed edge has exactly one reverse. Returns (triangles, twin) or None."""
+    tris = np.asarray(tris, np.int64)
+    n = len(normals)
+    if tris.ndim != 2 or len(tris) != 2 * n - 4 or tris.max() >= n:
+        return None
+    pn, pa = apollonius_planes(normals[tris], alphas[tris])
+    pts = contact_points(pn[:, :, None, :], pa[:, :, None], normals[tris][:, None, :, :])
+    ccw = np.einsum("tsi,tsi->ts", _cross(pts[:, :, 1] - pts[:, :, 0], pts[:, :, 2] - pts[:, :, 0]), pn)
+    lim = np.minimum(pa[..., None] + alphas, np.pi)
+    viol = np.einsum("tsi,mi->tsm", pn, normals) - np.cos(lim)  # (t, 2, n)
+    own = np.zeros((len(tris), n), bool)
+    own[np.arange(len(tris))[:, None], tris] = True
+    viol[np.broadcast_to(own[:, None, :], viol.shape)] = -np.inf
+    ok = (ccw > 1e-12) & (viol.max(axis=-1) <= -1e-9)  # strict: ties go to plane rolling
+    if not np.all(ok.sum(axis=1) == 1):
+        return None
+    e = np.stack([tris, np.roll(tris, -1, axis=1)], axis=-1).reshape(-1, 2)
+    key = e[:, 0] * n + e[:, 1]
+    rev = e[:, 1] * n + e[:, 0]
+    order = np.argsort(key)
+    if np.any(np.diff(key[order]) == 0):
+        return None  # a repeated directed edge: two corridors between one pair, roll instead
+    pos = np.searchsorted(key[order], rev)
+    if np.any(pos >= len(key)) or np.any(key[order][np.minimum(pos, len(key) - 1)] != rev):
+        return None
+    other = order[pos]
+    twin = np.stack([other // 3, other % 3], axis=1).reshape(-1, 3, 2)
+    return tris, twin
+
+
+def chocc(normals, alphas, hint=None) -> Chocc:
     """The CHoCC of n ≥ 3 disjoint cospherical circles on the unit sphere (§3).
+
+    ``hint``: triangles of a similar configuration (a neighbouring hub); adopted after an
+    exact validity check, which skips plane rolling for smoothly varying steady lattices.
 
     The cases n = 1 (a disk) and n = 2 (the hull of two circles: a single corridor band,
     no triangles) have no triangle vertices; callers add point circles (see ``ple.achocc``)."""
@@ -310,10 +353,11 @@ def chocc(normals, alphas) -> Chocc:
     if gap.min() <= 0:
         i, j = np.unravel_index(np.argmin(gap), gap.shape)
         raise PleError(f"CHoCC: caps {i} and {j} overlap or touch")
-    tris, twin = roll_planes(normals, alphas)
+    known = _topology_from_hint(normals, alphas, hint) if hint is not None else None
+    tris, twin = known if known is not None else roll_planes(normals, alphas)
     pn, pa = apollonius_planes(normals[tris], alphas[tris])
     pts = contact_points(pn[:, :, None, :], pa[:, :, None], normals[tris][:, None, :, :])
-    ccw = np.einsum("tsi,tsi->ts", np.cross(pts[:, :, 1] - pts[:, :, 0], pts[:, :, 2] - pts[:, :, 0]), pn)
+    ccw = np.einsum("tsi,tsi->ts", _cross(pts[:, :, 1] - pts[:, :, 0], pts[:, :, 2] - pts[:, :, 0]), pn)
     viol = _support_violation(pn, pa, normals, alphas)
     # of the two candidates, the supporting one with the rolling orientation (ties: larger ccw)
     key = np.where(viol <= 1e-8, 1.0, 0.0) * 10 + np.sign(np.round(ccw, 14))
@@ -378,8 +422,8 @@ class ChoccMesh:
 
 def _arc_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
-    e1 = _unit(np.cross(normals, helper))
-    return e1, np.cross(normals, e1)
+    e1 = _unit(_cross(normals, helper))
+    return e1, _cross(normals, e1)
 
 
 def corridor_mesh(c: Chocc, arc_segments) -> ChoccMesh:
@@ -517,10 +561,10 @@ def pair_hull_mesh(normals, alphas, segments: int = 32) -> ChoccMesh:
     disks = np.concatenate([np.stack([np.zeros(segments - 2, int), k[1:-1], k[2:]], 1),
                             np.stack([np.full(segments - 2, segments), segments + k[2:], segments + k[1:-1]], 1)])
     faces = np.concatenate([band, disks])
-    vol = np.einsum("ij,ij->i", verts[faces[:, 0]], np.cross(verts[faces[:, 1]], verts[faces[:, 2]])).sum()
+    vol = np.einsum("ij,ij->i", verts[faces[:, 0]], _cross(verts[faces[:, 1]], verts[faces[:, 2]])).sum()
     if vol < 0:
         faces = faces[:, ::-1]
     ring_of = [k, segments + k] if big == 0 else [segments + k, k]
-    rings = [r if (verts[r[1]] - verts[r[0]]) @ np.cross(normals[i], verts[r[0]]) < 0 else r[::-1]
+    rings = [r if (verts[r[1]] - verts[r[0]]) @ _cross(normals[i], verts[r[0]]) < 0 else r[::-1]
              for i, r in enumerate(ring_of)]  # clockwise about each normal
     return ChoccMesh(verts, faces.astype(np.int64), rings, np.repeat([big, small], segments))

@@ -122,7 +122,7 @@ def _arc_mids(pa, pb, n, alpha, r_plus, frames, ci) -> np.ndarray:
 
 
 def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, levels: int,
-                 segments: int) -> HubTemplate:
+                 segments: int, hint=None) -> HubTemplate:
     """Tessellate one junction: ball (center (3,), radius) with beams to the balls
     (neighbor_centers (S, 3), neighbor_radii (S,)), in the given style."""
     center = np.asarray(center, float)
@@ -131,7 +131,7 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
     if np.any(lengths <= 0):
         raise PleError("a beam joins two balls with the same centre")
     dirs = vec / lengths[:, None]
-    hub = hub_geometry(radius, dirs, np.asarray(neighbor_radii, float).reshape(-1), lengths)
+    hub = hub_geometry(radius, dirs, np.asarray(neighbor_radii, float).reshape(-1), lengths, hint)
     if style == "refined":
         base = corridor_mesh(hub.chocc, cnt_segments)
         verts, faces, rings = _refine(base, hub, levels)
@@ -200,6 +200,7 @@ class _Tessellator:
                       + [(p, -1) for p, b in enumerate(lat.beams) if b.n2 == n] for n in range(nn)]
         self.templates: dict = {}
         self.strips: dict = {}
+        self.hints: dict = {}
         self.scale = lat.template_radii * KEY_QUANTUM
 
     # ----- hubs -----------------------------------------------------------------------
@@ -265,8 +266,11 @@ class _Tessellator:
                 key = (n, q[u].tobytes())
                 if key not in self.templates:
                     have = ~np.isnan(local[u, :, 3])
+                    hint_key = (n, have.tobytes())  # the last hub with these beams: likely the same hull
                     tpl = hub_template(lat.template_centers[n], lat.template_radii[n], local[u, have, :3],
-                                       local[u, have, 3], self.style, self.levels, self.segments)
+                                       local[u, have, 3], self.style, self.levels, self.segments,
+                                       self.hints.get(hint_key))
+                    self.hints[hint_key] = tpl.geometry.base_triangles
                     slot_of = np.cumsum(have) - 1
                     self.templates[key] = (len(self.templates), tpl, np.where(have, slot_of, -1))
                 rep_tid[u] = self.templates[key][0]
