@@ -269,3 +269,20 @@ def test_apex_matches_eq_3_to_5(seed):
     assert np.linalg.norm(np.cross(f - b1, a2 - b1)) < 1e-12
     d1, d2, d3, d4 = 2 * r1, 2 * r2, np.linalg.norm(a1 - b2), np.linalg.norm(a2 - b1)
     assert np.linalg.norm(f - a1) == pytest.approx(abs(d1 * (d1 * d3 + d2 * d4) / (d2**2 - d1**2)), rel=1e-10)
+
+
+def test_topology_hint_is_checked():
+    """A neighbour's triangles are adopted only when they are this hull's: a good hint gives
+    the rolled result, a wrong one (another configuration's) falls back to rolling."""
+    rng = np.random.default_rng(21)
+    normals, alphas = random_caps(rng, 9)
+    rolled = chocc(normals, alphas)
+    moved = chocc(normals + 1e-4 * rng.normal(size=normals.shape), alphas * (1 + 1e-4), hint=rolled.triangles)
+    assert {tuple(np.roll(t, -np.argmin(t))) for t in moved.triangles} == \
+        {tuple(np.roll(t, -np.argmin(t))) for t in rolled.triangles}
+    other_n, other_a = random_caps(np.random.default_rng(22), 9)
+    wrong = chocc(normals, alphas, hint=chocc(other_n, other_a).triangles)
+    assert {tuple(np.roll(t, -np.argmin(t))) for t in wrong.triangles} == \
+        {tuple(np.roll(t, -np.argmin(t))) for t in rolled.triangles}
+    mesh, _ = closed_mesh(wrong, cnt_segments)
+    assert mesh.is_watertight and mesh.is_winding_consistent
