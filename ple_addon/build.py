@@ -1,8 +1,9 @@
 """Build the Blender extension: ``python -m ple_addon.build`` (``make extension``).
 
 Stages the add-on (``ple_addon/``), a vendored copy of the core package ``ple`` as the
-relative sub-package ``vendor.ple`` (no global ``sys.path`` changes inside Blender) and the
-presets, with the repository's ``blender_manifest.toml``; then builds and validates
+relative sub-package ``vendor.ple`` (no global ``sys.path`` changes inside Blender), the
+presets and the trimesh wheel (for tessellation and export), with the repository's
+``blender_manifest.toml`` (plus its ``wheels`` list); then builds and validates
 ``dist/ple-<version>.zip`` with Blender's ``blender_ext.py``.
 """
 
@@ -19,6 +20,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 NOT_SHIPPED = {"build.py", "render_docs.py", "batch.py"}  # repository tools, not part of the add-on
 IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc")
+WHEELS = ["trimesh>=4.0"]  # pure-Python packages the core needs beyond Blender's own numpy
 
 
 def blender_ext_tool() -> Path:
@@ -34,11 +36,31 @@ def blender_ext_tool() -> Path:
     return found[-1]
 
 
-def stage(dest: Path) -> dict:
-    """Copy manifest, add-on, vendored core and presets into ``dest``; returns the manifest."""
+def fetch_wheels(dest: Path) -> list[str]:
+    """Download the wheels of ``WHEELS`` (no dependencies: numpy ships with Blender) with pip;
+    returns their manifest paths, or [] with a warning when pip cannot get them (offline)."""
+    dest.mkdir(parents=True, exist_ok=True)
+    res = subprocess.run([sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:",
+                          "--python-version", "3.11", "-d", str(dest), *WHEELS], capture_output=True, text=True)
+    found = sorted(dest.glob("*.whl"))
+    if res.returncode != 0 or not found:
+        print(f"warning: no wheels bundled ({res.stderr.strip()[-300:]}); tessellate/export then need trimesh "
+              "installed in Blender's Python", file=sys.stderr)
+        return []
+    return [f"./wheels/{w.name}" for w in found]
+
+
+def stage(dest: Path, wheels: bool = True) -> dict:
+    """Copy manifest, add-on, vendored core and presets into ``dest`` (and the wheels of
+    ``WHEELS``, listed in the staged manifest); returns the manifest."""
     manifest = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
     dest.mkdir(parents=True, exist_ok=True)
-    shutil.copy2(ROOT / "blender_manifest.toml", dest / "blender_manifest.toml")
+    text = (ROOT / "blender_manifest.toml").read_text()
+    paths = fetch_wheels(dest / "wheels") if wheels else []
+    if paths:  # a top-level key: it goes before the first [table]
+        head, sep, tail = text.partition("\n[")
+        text = head + "\nwheels = [" + ", ".join(f'"{p}"' for p in paths) + "]\n" + sep + tail
+    (dest / "blender_manifest.toml").write_text(text)
     for f in sorted((ROOT / "ple_addon").iterdir()):
         if f.name in NOT_SHIPPED or f.name.startswith((".", "__pycache__")):
             continue
@@ -54,11 +76,11 @@ def stage(dest: Path) -> dict:
     return manifest
 
 
-def build(out_dir: Path) -> Path:
+def build(out_dir: Path, wheels: bool = True) -> Path:
     tool = blender_ext_tool()
     with tempfile.TemporaryDirectory(prefix="ple-ext-") as tmp:
         src = Path(tmp) / "ple"
-        manifest = stage(src)
+        manifest = stage(src, wheels)
         out_dir.mkdir(parents=True, exist_ok=True)
         zip_path = out_dir / f"{manifest['id']}-{manifest['version']}.zip"
         for cmd in (["validate", str(src)],
@@ -73,8 +95,9 @@ def build(out_dir: Path) -> Path:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=str(ROOT / "dist"), help="output folder (default: dist/)")
+    parser.add_argument("--no-wheels", action="store_true", help=f"do not bundle {', '.join(WHEELS)}")
     args = parser.parse_args(argv)
-    print(build(Path(args.out)))
+    print(build(Path(args.out), wheels=not args.no_wheels))
     return 0
 
 

@@ -121,6 +121,8 @@ def case_install():
 
     assert "bl_ext.user_default.ple" in {m.__name__ for m in addon_utils.modules()}
     assert "bl_ext.user_default.ple" in bpy.context.preferences.addons
+    local = Path(os.environ["BLENDER_USER_RESOURCES"]) / "extensions" / ".local"
+    assert list(local.rglob("site-packages/trimesh/__init__.py"))  # the bundled wheel was installed
     link = sys.modules["bl_ext.user_default.ple.corelink"]
     assert link.ple.__name__ == "bl_ext.user_default.ple.vendor.ple"  # the vendored core is used
     assert "/extensions/user_default/ple/vendor/ple" in link.ple.__file__
