@@ -40,7 +40,8 @@ def fetch_wheels(dest: Path) -> list[str]:
     """Download the wheels of ``WHEELS`` (no dependencies: numpy ships with Blender) with pip;
     returns their manifest paths, or [] with a warning when pip cannot get them (offline)."""
     dest.mkdir(parents=True, exist_ok=True)
-    res = subprocess.run([sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:",
+    res = subprocess.run([sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:", "--retries", "0",
+                          "--timeout", "15",
                           "--python-version", "3.11", "-d", str(dest), *WHEELS], capture_output=True, text=True)
     found = sorted(dest.glob("*.whl"))
     if res.returncode != 0 or not found:
