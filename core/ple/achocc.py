@@ -194,17 +194,20 @@ def _visible_face(c: Chocc) -> tuple[float, np.ndarray, np.ndarray]:
     h = np.cos(c.plane_alphas)
     i = int(np.argmin(h))
     best, centroid, normal = float(h[i]), c.points[i].mean(axis=0), c.plane_normals[i]
-    for a, b, t1, t2 in c.corridors:
-        k = [int(np.flatnonzero(c.triangles[t] == x)[0]) for t, x in ((t1, a), (t2, a), (t2, b), (t1, b))]
-        q = np.array([c.points[t1, k[0]], c.points[t2, k[1]], c.points[t2, k[2]], c.points[t1, k[3]]])
-        nrm = np.cross(q[1] - q[3], q[2] - q[0])  # outward: the CCW quad (b0, a0, a1, b1)'s diagonals
-        ln = np.linalg.norm(nrm)
-        if ln < 1e-12:
-            continue
-        nrm = nrm / ln
-        hq = float(nrm @ q[0])
-        if hq < best:
-            best, centroid, normal = hq, q.mean(axis=0), nrm
+    if len(c.corridors):
+        a, b, t1, t2 = c.corridors.T
+        corner = lambda t, x: np.argmax(c.triangles[t] == x[:, None], axis=1)  # noqa: E731
+        q = np.stack([c.points[t1, corner(t1, a)], c.points[t2, corner(t2, a)],
+                      c.points[t2, corner(t2, b)], c.points[t1, corner(t1, b)]], axis=1)  # (m, 4, 3)
+        # outward: the CCW quad (b0, a0, a1, b1)'s diagonals
+        nrm = np.cross(q[:, 1] - q[:, 3], q[:, 2] - q[:, 0])
+        ln = np.linalg.norm(nrm, axis=1)
+        ok = ln > 1e-12
+        if ok.any():
+            hq = np.where(ok, np.einsum("mi,mi->m", nrm, q[:, 0]) / np.where(ok, ln, 1.0), np.inf)
+            j = int(np.argmin(hq))
+            if hq[j] < best:
+                best, centroid, normal = float(hq[j]), q[j].mean(axis=0), nrm[j] / ln[j]
     return best, centroid, normal
 
 
