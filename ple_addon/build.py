@@ -40,9 +40,9 @@ def fetch_wheels(dest: Path) -> list[str]:
     """Download the wheels of ``WHEELS`` (no dependencies: numpy ships with Blender) with pip;
     returns their manifest paths, or [] with a warning when pip cannot get them (offline)."""
     dest.mkdir(parents=True, exist_ok=True)
-    res = subprocess.run([sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:", "--retries", "0",
-                          "--timeout", "15",
-                          "--python-version", "3.11", "-d", str(dest), *WHEELS], capture_output=True, text=True)
+    cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:", "--python-version", "3.11",
+           "--retries", "0", "--timeout", "15", "-d", str(dest), *WHEELS]  # fail fast when offline
+    res = subprocess.run(cmd, capture_output=True, text=True)
     found = sorted(dest.glob("*.whl"))
     if res.returncode != 0 or not found:
         print(f"warning: no wheels bundled ({res.stderr.strip()[-300:]}); tessellate/export then need trimesh "
