@@ -163,6 +163,10 @@ def main(argv: list[str] | None = None) -> int:
         build_thumbnails(force="--force" in argv)
         from .docs_pictures import build_pictures
         build_pictures(force="--force" in argv)
+        rig_png = DOCS / "img" / "addon_rig.png"
+        if "--force" in argv or not rig_png.is_file():  # the add-on guide's picture of a rig
+            subprocess.run([sys.executable, "-m", "ple_addon.render_docs", "--out", str(rig_png)], cwd=ROOT,
+                           check=True)
     atomic_write_text(DOCS / "presets.md", presets_page())
     print(f"wrote {DOCS / 'presets.md'}")
     return 0
