@@ -210,3 +210,26 @@ def test_balls_beams_preview_and_bad_input():
         tessellate(lat, style="refined", levels=9)
     with pytest.raises(PleError, match="region"):
         tessellate(lat, region="0:5,0:1,0:1")
+
+
+@pytest.mark.parametrize("style", ["cnt", "chocc", "refined"])
+def test_placement_similarity_scales_volume(style):
+    """Hub meshes live in the template frame: a placement G = rotation ∘ scaling by s moves
+    the mesh rigidly and multiplies its volume by s³."""
+    from ple.geometry import Pt, Vec
+    from ple.similarity import Rotation, Scaling
+
+    lat = small("octet")
+    base = tessellate(lat, style=style, levels=2)
+    lat.set_placement(Rotation(0.7, Vec(1, 2, 3), Pt(1, 0, 0)) @ Scaling(2.5, Pt(0, 1, 0)))
+    placed = tessellate(lat, style=style, levels=2)
+    assert_closed(placed)
+    assert len(placed.faces) == len(base.faces)
+    assert placed.volume == pytest.approx(base.volume * 2.5**3, rel=1e-9)
+
+
+@pytest.mark.parametrize("name", preset_names())
+def test_single_group_is_closed(name):
+    lat = load_lattice(name).with_counts(1, 1, 1)
+    for style, levels in STYLES:
+        assert_closed(tessellate(lat, style=style, levels=levels))

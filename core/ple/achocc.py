@@ -191,7 +191,9 @@ def _seed_points(dirs: np.ndarray) -> np.ndarray:
 def _visible_face(c: Chocc) -> tuple[float, np.ndarray, np.ndarray]:
     """Smallest signed distance of the centre below the planes of the CNT faces (triangles and
     planar corridor quads), and the centroid and outward normal of the face achieving it."""
-    h = np.cos(c.plane_alphas)
+    # rounded so that symmetric ties pick the first face whatever the round-off (deterministic
+    # fixes: a similar copy of the lattice gets the same hubs)
+    h = np.round(np.cos(c.plane_alphas), 9)
     i = int(np.argmin(h))
     best, centroid, normal = float(h[i]), c.points[i].mean(axis=0), c.plane_normals[i]
     if len(c.corridors):
@@ -204,7 +206,7 @@ def _visible_face(c: Chocc) -> tuple[float, np.ndarray, np.ndarray]:
         ln = np.linalg.norm(nrm, axis=1)
         ok = ln > 1e-12
         if ok.any():
-            hq = np.where(ok, np.einsum("mi,mi->m", nrm, q[:, 0]) / np.where(ok, ln, 1.0), np.inf)
+            hq = np.where(ok, np.round(np.einsum("mi,mi->m", nrm, q[:, 0]) / np.where(ok, ln, 1.0), 9), np.inf)
             j = int(np.argmin(hq))
             if hq[j] < best:
                 best, centroid, normal = float(hq[j]), q[j].mean(axis=0), nrm[j] / ln[j]

@@ -162,12 +162,12 @@ def zipper(angles_a: np.ndarray, angles_b: np.ndarray) -> np.ndarray:
     two_pi = 2 * np.pi
     pa = _unwrap_ring(angles_a)
     rel = (angles_b - angles_a[0] + np.pi) % two_pi - np.pi
-    b0 = int(np.argmin(np.abs(rel)))
+    b0 = int(np.argmin(np.round(np.abs(rel), 9)))
     order_b = (np.arange(mb) + b0) % mb
     pb = rel[b0] + _unwrap_ring(angles_b[order_b])
     key_a = np.append(pa[1:], two_pi)  # a-event s (1..ma): reach A[s]
     key_b = np.append(pb[1:], rel[b0] + two_pi)
-    keys = np.concatenate([key_a, key_b])
+    keys = np.round(np.concatenate([key_a, key_b]), 9)  # equal angles (symmetric rings) tie robustly
     is_b = np.concatenate([np.zeros(ma, bool), np.ones(mb, bool)])
     order = np.lexsort((is_b, keys))
     is_b = is_b[order]
