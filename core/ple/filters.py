@@ -488,3 +488,11 @@ def own_and(lat: Lattice, f: Filter) -> Filter:
     """``f`` preceded by the lattice's own program filter, if it has one."""
     own = getattr(lat, "filter", None)
     return f if own is None else _as_filter(own) & f
+
+
+def evaluate_lattice(lat: Lattice, region=None) -> Evaluation:
+    """A region's nodes and beams with the lattice's own filter (``Lattice.set_filter``)
+    applied when it has one: what every command draws, meshes and writes."""
+    if lat.filter is None:
+        return lat.evaluate(region)
+    return FilteredLattice(lat, lat.filter).evaluate(region)

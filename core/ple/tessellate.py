@@ -202,6 +202,14 @@ class _Tessellator:
         self.strips: dict = {}
         self.hints: dict = {}
         self.scale = lat.template_radii * KEY_QUANTUM
+        self.node_filter = lat.filter  # thesis §9: only surviving nodes get hubs; beams need both ends
+
+    def kept(self, idx: np.ndarray) -> np.ndarray:
+        """Which nodes idx (N, 4) survive the lattice's filter (all, without one)."""
+        if self.node_filter is None or len(idx) == 0:
+            return np.ones(len(idx), bool)
+        c, r = self.lat.node_balls(idx)
+        return np.asarray(self.node_filter.node_mask(self.lat, idx, c, r), dtype=bool)
 
     # ----- hubs -----------------------------------------------------------------------
     def _neighbors(self, idx: np.ndarray, n: int):
@@ -217,6 +225,8 @@ class _Tessellator:
         nb = np.stack(out, axis=1) if out else np.zeros((len(idx), 0, 4), np.int64)
         counts = np.array(lat.counts)
         exists = np.all((nb[..., :3] >= 0) & (nb[..., :3] < counts), axis=-1)
+        if self.node_filter is not None and exists.any():
+            exists[exists] = self.kept(nb[exists])  # a beam to a filtered-out node does not exist
         lo = np.array([r.i0, r.j0, r.k0])
         hi = np.array([r.i1, r.j1, r.k1])
         inside = np.all((nb[..., :3] >= lo) & (nb[..., :3] < hi), axis=-1)
@@ -284,12 +294,14 @@ class _Tessellator:
         lat = self.lat
         nn = len(lat.nodes)
         own = _box_index(box, nn)
+        own = own[self.kept(own)]
         # ghosts: the far ends of beams leaving the box but not the region
         ghosts = []
         for b in lat.beams:
             src = own[own[:, 3] == b.n1]
             dst = np.concatenate([src[:, :3] + [b.di, b.dj, b.dk], np.full((len(src), 1), b.n2)], axis=1)
             ok = _in(dst, self.region) & ~_in(dst, box)
+            ok[ok] = self.kept(dst[ok])
             ghosts.append(dst[ok])
         ghosts = np.unique(np.concatenate(ghosts), axis=0) if ghosts else np.zeros((0, 4), np.int64)
         idx = np.concatenate([own, ghosts]).astype(np.int64)
@@ -340,6 +352,7 @@ class _Tessellator:
             src = np.flatnonzero(idx[:n_own, 3] == b.n1)
             dst_idx = np.concatenate([idx[src, :3] + [b.di, b.dj, b.dk], np.full((len(src), 1), b.n2)], axis=1)
             ok = _in(dst_idx, self.region)
+            ok[ok] = self.kept(dst_idx[ok])
             src, dst_idx = src[ok], dst_idx[ok]
             if len(src) == 0:
                 continue
@@ -442,9 +455,10 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
     if style == "balls-beams":
+        from .filters import evaluate_lattice
         from .preview import balls_beams_mesh
 
-        ev = lat.evaluate(r)
+        ev = evaluate_lattice(lat, r)
         return balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
     verts, faces = _Tessellator(lat, r, style, levels, segments).build(r)
     mesh = trimesh.Trimesh(verts, faces, process=False)

@@ -7,7 +7,8 @@ import argparse
 import numpy as np
 
 from ..files import atomic_path
-from ..lattice import Evaluation, Lattice
+from ..filters import evaluate_lattice  # noqa: F401 - re-exported for the commands
+from ..lattice import Lattice
 from ..program import load_lattice
 
 
@@ -31,10 +32,3 @@ def save_npz(path, arrays: dict) -> None:
         with open(tmp, "wb") as fh:
             np.savez(fh, **arrays)
 
-
-def evaluate_lattice(lat: Lattice, region=None) -> Evaluation:
-    """A region's nodes and beams, with the program's filter applied when it has one."""
-    if lat.filter is None:
-        return lat.evaluate(region)
-    from ..filters import FilteredLattice
-    return FilteredLattice(lat, lat.filter).evaluate(region)

@@ -72,7 +72,7 @@ def check_report(lat, region, mesh) -> dict:
     rep = {"triangles": int(len(mesh.faces)), "watertight": bool(mesh.is_watertight),
            "winding_consistent": bool(mesh.is_winding_consistent),
            "euler_characteristic": int(mesh.euler_number), "mesh_volume": float(mesh.volume)}
-    whole = region == lat.region()
+    whole = region == lat.region() and lat.filter is None  # the closed form knows no filter
     exact = None
     if whole:
         try:
@@ -97,8 +97,9 @@ def monte_carlo_volume(lat, region, samples: int = CHECK_SAMPLES, seed: int = 0)
     """Volume of the union of the region's balls and cone-beams by uniform sampling of its box
     (estimate, standard error). Only for --check (the mesh itself never needs it)."""
     from ..achocc import round_cone_distance
+    from ..filters import evaluate_lattice
 
-    ev = lat.evaluate(region)
+    ev = evaluate_lattice(lat, region)
     lo = (ev.center - ev.radius[:, None]).min(axis=0)
     hi = (ev.center + ev.radius[:, None]).max(axis=0)
     rng = np.random.default_rng(seed)
