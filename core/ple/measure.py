@@ -28,13 +28,14 @@ import numpy as np
 from .elements import beam_distance
 from .errors import PleError
 from .lattice import Lattice
-from .similarity import Similarity
+from .similarity import Rotation, Similarity
 
 HUB_GRID = 24  # direction cells per cube face side (6 faces), edge cells refined REFINE × REFINE
 REFINE = 8
 MAX_HUBS = 200_000  # more hub classes than this: no area/volume (guard for huge base slabs)
-GRID_START, GRID_MAX = 4, 128  # fast path: overlap quadrature cells per cube face side, first and last
-ADAPT_TOL = 1e-3  # refine a hub while its overlap integrals at n and n/2 differ by more than this × its measure
+GRID_START, GRID_MAX = 8, 64  # fast path: overlap quadrature cells per cube face side, first and last
+FEATURE_CELLS = 2  # first grid: cells per narrowest angle between two beams of the hub
+ADAPT_TOL = 1e-3  # refine a hub while its overlap integrals on two turned grids differ by more than this × its measure
 
 
 @dataclass
@@ -402,20 +403,22 @@ def single_beam_excess(ra, rb, length):
     return d_area, d_volume
 
 
-_DIRECTIONS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+_DIRECTIONS: dict[tuple[int, bool], tuple[np.ndarray, np.ndarray]] = {}
+_TURN = Rotation(1.0, [1.0, math.sqrt(2.0), math.pi], [0, 0, 0]).matrix[:3, :3]  # a generic rotation
 
 
-def sphere_quadrature(n: int) -> tuple[np.ndarray, np.ndarray]:
+def sphere_quadrature(n: int, turned: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Cubed-sphere directions (6 n², 3) and their solid-angle weights (sum 4π): n × n cells
-    per cube face, one midpoint each, weight du dv / (1 + u² + v²)^1.5."""
-    if n not in _DIRECTIONS:
+    per cube face, one midpoint each, weight du dv / (1 + u² + v²)^1.5; ``turned``: the same
+    grid under a fixed generic rotation (an independent second estimate)."""
+    if (n, turned) not in _DIRECTIONS:
         h = 2.0 / n
         g = -1 + (np.arange(n) + 0.5) * h
         u, v = (x.reshape(-1) for x in np.meshgrid(g, g, indexing="ij"))
         dirs = np.concatenate([_face_directions(face, u, v) for face in _FACES])
         w = np.tile(_jacobian(u, v) * h * h, 6)
-        _DIRECTIONS[n] = (dirs, w * (4 * math.pi / w.sum()))
-    return _DIRECTIONS[n]
+        _DIRECTIONS[n, turned] = (dirs @ _TURN.T if turned else dirs, w * (4 * math.pi / w.sum()))
+    return _DIRECTIONS[n, turned]
 
 
 def hub_measures_batch(ra, offsets, rb, present=None, grid: int = 0, geometry=None, chunk: int = 1 << 19):
@@ -429,7 +432,8 @@ def hub_measures_batch(ra, offsets, rb, present=None, grid: int = 0, geometry=No
     centre), so V = V_ball + Σ ΔV_b − ∫ (Σ_b R_b³ − R³)/3 dω, and the same for the area with
     integrand R²/(n·ω) (0 on cut disks). Only that overlap integral, non-zero where two or more
     half-beams reach past the ball, uses quadrature (``sphere_quadrature(grid)``); grid 0 refines
-    each geometry adaptively (GRID_START, doubling to GRID_MAX) until two grids agree to ADAPT_TOL."""
+    each geometry adaptively: grids n (from the narrowest beam angle, at least GRID_START) and 2n,
+    alternately turned, until they agree to ADAPT_TOL of the measure (2n kept; n up to GRID_MAX)."""
     ra = np.asarray(ra, float)
     off = np.asarray(offsets, float).reshape(len(ra), -1, 3)
     rb = np.asarray(rb, float).reshape(off.shape[:2])
@@ -452,30 +456,61 @@ def hub_measures_batch(ra, offsets, rb, present=None, grid: int = 0, geometry=No
         area[order] -= ca
         volume[order] -= cv
         return area, volume
-    # adaptive: halve the cell size of every geometry whose overlap integrals at n and n/2 differ
-    # by more than ADAPT_TOL of a hub's measure (midpoint rule, error O(h²)); Richardson-extrapolate
+    # adaptive: each geometry's overlap integrals on two grids of n × n cells per face, the
+    # second turned; their mean is kept when they agree to ADAPT_TOL of every variant's measure,
+    # else n doubles (up to GRID_MAX)
     a_s, v_s = area[order], volume[order]
-    todo = np.arange(len(ra))
-    lo_a, lo_v = _overlap_chunked(todo, rest, GRID_START, chunk)
-    n = 2 * GRID_START
-    while len(todo):
+    # the first grid resolves the narrowest angle between two beams of a geometry (the overlap
+    # lens of two beams is about that wide): cells of at most half that angle
+    cosines = np.einsum("gbk,gck->gbc", e, e) - 2 * np.eye(e.shape[1])[None]
+    closest = np.arccos(np.clip(cosines.max(axis=(1, 2)), -1.0, 1.0))
+    start = np.clip(FEATURE_CELLS * (math.pi / 2) / np.maximum(closest, 1e-9), GRID_START, GRID_MAX)
+    todo, n, waiting = np.zeros(0, np.int64), GRID_START, np.arange(len(ra))
+    prev = None  # the finer grid of the last round (rows of ``todo``), reused as the coarse one
+    while len(todo) or len(waiting):
+        new = waiting[start[waiting] <= n]
+        waiting = waiting[start[waiting] > n]
+        if len(new):
+            a0, v0 = _overlap_chunked(new, rest, n, chunk, turned=_turned(n))
+            prev = _merge(todo, prev, new, (a0, v0), vg)
+            todo = np.union1d(todo, new)
+        if not len(todo):
+            n *= 2
+            continue
         rows = np.nonzero(np.isin(vg, todo))[0]
-        hi_a, hi_v = _overlap_chunked(todo, rest, n, chunk)
-        bad = (np.abs(hi_a - lo_a) > ADAPT_TOL * a_s[rows]) | (np.abs(hi_v - lo_v) > ADAPT_TOL * v_s[rows])
+        a1, v1 = prev
+        # the finer grid turned against the coarse one, so that their cells do not line up
+        a2, v2 = _overlap_chunked(todo, rest, 2 * n, chunk, turned=_turned(2 * n))
+        bad = (np.abs(a1 - a2) > ADAPT_TOL * a_s[rows]) | (np.abs(v1 - v2) > ADAPT_TOL * v_s[rows])
         bad_geo = np.zeros(len(ra), bool)
-        bad_geo[vg[rows[bad]]] = n < GRID_MAX
+        bad_geo[vg[rows[bad]]] = 4 * n <= GRID_MAX
         ok = ~bad_geo[vg[rows]]
-        a_s[rows[ok]] -= hi_a[ok] + (hi_a[ok] - lo_a[ok]) / 3
-        v_s[rows[ok]] -= hi_v[ok] + (hi_v[ok] - lo_v[ok]) / 3
-        todo, lo_a, lo_v, n = todo[bad_geo[todo]], hi_a[~ok], hi_v[~ok], 2 * n
+        a_s[rows[ok]] -= a2[ok]
+        v_s[rows[ok]] -= v2[ok]
+        todo, prev, n = todo[bad_geo[todo]], (a2[~ok], v2[~ok]), 2 * n
     area[order], volume[order] = a_s, v_s
     return area, volume
 
 
-def _overlap_chunked(geos, rest, grid: int, chunk: int):
+def _turned(n: int) -> bool:
+    """Grids of successive refinement levels alternate between plain and turned."""
+    return round(math.log2(n / GRID_START)) % 2 == 1
+
+
+def _merge(todo, prev, new, values, vg):
+    """Per-row values of the geometries todo ∪ new (rows sorted by geometry), from both parts."""
+    if prev is None or not len(todo):
+        return values
+    rows_old, rows_new = np.nonzero(np.isin(vg, todo))[0], np.nonzero(np.isin(vg, new))[0]
+    rows = np.concatenate([rows_old, rows_new])
+    order = np.argsort(rows, kind="stable")
+    return tuple(np.concatenate([p, q])[order] for p, q in zip(prev, values))
+
+
+def _overlap_chunked(geos, rest, grid: int, chunk: int, turned: bool = False):
     """Overlap integrals of every variant (rows sorted by geometry) of the geometries ``geos``."""
     ra, e, length, rb, vg, present = rest
-    dirs, weights = sphere_quadrature(grid)
+    dirs, weights = sphere_quadrature(grid, turned)
     per = max(1, chunk // (e.shape[1] * len(dirs)))
     out_a, out_v = [], []
     for lo in range(0, len(geos), per):
@@ -490,44 +525,51 @@ def _overlap_chunked(geos, rest, grid: int, chunk: int):
 
 def _overlap_integrals(ra, e, length, rb, dirs, weights, vg, present):
     """∫ (Σ_b f_b − f_max) dω for area (f = R²/(n·ω), 0 on a cut) and volume (f = R³/3), per
-    variant (geometry vg with beams ``present``)."""
-    ra3 = ra[:, None, None]
-    s = np.clip((ra[:, None] - rb) / length, -1.0, 1.0)[..., None]
-    c = np.sqrt(np.maximum(1 - s * s, 0.0))
-    mu = np.einsum("hbk,mk->hbm", e, dirs)
-    nu = np.sqrt(np.maximum(1 - mu * mu, 0.0))
-    lb, rbb = length[..., None], rb[..., None]
-    # ball B: far root of |tω − d|² = rb², n·ω = sqrt(disc) / rb
-    beta = mu * lb
-    disc = beta * beta - (lb * lb - rbb * rbb)
-    root = np.sqrt(np.maximum(disc, 0.0))
-    t = np.where(disc >= 0, beta + root, -np.inf)
-    cos = root / np.where(rbb > 0, rbb, 1.0)
-    # lateral cone s x + c y = ra between the contact circles, n·ω = s μ + c ν
-    den = s * mu + c * nu
+    variant (geometry vg with beams ``present``). Computed in units of the node radius."""
+    m = len(dirs)
+    lb, rbb = (length / ra[:, None])[..., None], (rb / ra[:, None])[..., None]  # (G, B, 1)
+    s = np.clip((1 - rbb) / lb, -1.0, 1.0)
+    c = np.sqrt(1 - s * s)
+    x_cut = (lb * lb + 1 - rbb * rbb) / (2 * lb)  # the radical plane, beyond the ball (clean lattice)
+    x_b = lb + rbb * s  # ball B's contact circle
+    beam = lb + rbb > 1  # special case: a ball A containing ball B has no cone; the beam adds nothing
+    mu = np.einsum("gbk,mk->gbm", e, dirs)
+    den = c * np.sqrt(np.maximum(1 - mu * mu, 0.0))
+    den += s * mu  # n·ω on the lateral cone s x + c y = 1
     with np.errstate(divide="ignore", invalid="ignore"):
-        tl = np.where(den > 0, ra3 / den, -np.inf)
-    x = tl * mu
-    tl = np.where((x >= ra3 * s) & (x <= lb + rbb * s) & (lb + ra3 > rbb), tl, -np.inf)
-    use = tl > t
-    t, cos = np.where(use, tl, t), np.where(use, den, cos)
-    ball = ~(t > ra3) | (lb + rbb <= ra3)
-    t = np.where(ball, ra3, t)
+        inv = 1 / den
+    hit = (den > 0) & (mu >= s * den) & beam  # the cone, past the contact circle on ball A
+    t = np.where(hit, inv, 1.0)
+    f_area = np.where(hit, inv * inv * inv, 1.0)  # R² / (n·ω) = 1/den³ on the cone, 1 on the ball
+    far = beam & (x_cut > x_b)  # special case: the radical plane lies past B's contact circle
+    if far.any():  # ... so rays may leave through ball B: far root of |tω − d|² = rb², n·ω = sqrt(disc)/rb
+        beta = mu * lb
+        disc = beta * beta - (lb * lb - rbb * rbb)
+        root = np.sqrt(np.maximum(disc, 0.0))
+        tb = np.where((disc >= 0) & far, beta + root, -np.inf)
+        onb = (tb > t) & ~(hit & (mu * t <= x_b))
+        t = np.where(onb, tb, t)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            f_area = np.where(onb, tb * tb * rbb / root, f_area)
+        hit |= onb
+    cut = hit & (mu * t > x_cut)  # the radical-plane disk: not surface of the lattice
     with np.errstate(divide="ignore", invalid="ignore"):
-        f_area = np.where(ball, ra3 * ra3, t * t / cos)
-        x_cut = ((lb * lb + ra3 * ra3 - rbb * rbb) / (2 * lb))
-        tp = np.where(mu > 0, x_cut / np.where(mu > 0, mu, 1.0), np.inf)
-    cut = ~ball & (tp < t)
-    t = np.where(cut, tp, t)
-    f_area = np.where(cut, 0.0, f_area)
-    # the variants: absent beams fall back to the ball
-    rv = ra[vg][:, None, None]
-    keep = present[..., None]
-    t = np.where(keep, t[vg], rv)
-    f_area = np.where(keep, f_area[vg], rv * rv)
-    ra = ra[vg]
-    f_vol = t**3 / 3
-    best = np.argmax(t, axis=1)[:, None]
-    over_a = f_area.sum(axis=1) - np.take_along_axis(f_area, best, axis=1)[:, 0] - (e.shape[1] - 1) * ra[:, None] ** 2
-    over_v = f_vol.sum(axis=1) - np.take_along_axis(f_vol, best, axis=1)[:, 0] - (e.shape[1] - 1) * ra[:, None] ** 3 / 3
-    return over_a @ weights, over_v @ weights
+        t = np.where(cut, x_cut / mu, t)
+    f_area[cut] = 0.0
+    ia = f_area.reshape(-1, m) @ weights  # per-beam integrals (G·B,)
+    iv = (t * t * t).reshape(-1, m) @ weights / 3
+    # the variants: absent beams fall back to the ball (t = 1, f = 1); the bounding beam per direction
+    tmax = np.ones((len(vg), m))
+    famax = np.ones((len(vg), m))
+    for b in range(t.shape[1]):
+        tb_, better = t[vg, b], present[:, b:b + 1]
+        better = better & (tb_ > tmax)
+        tmax = np.where(better, tb_, tmax)
+        famax = np.where(better, f_area[vg, b], famax)
+    nb = present.sum(axis=1)
+    sum_a = np.sum(np.where(present, ia.reshape(len(ra), -1)[vg], 0.0), axis=1)
+    sum_v = np.sum(np.where(present, iv.reshape(len(ra), -1)[vg], 0.0), axis=1)
+    over_a = sum_a - famax @ weights - (nb - 1) * 4 * math.pi
+    over_v = sum_v - (tmax**3) @ weights / 3 - (nb - 1) * 4 * math.pi / 3
+    r = ra[vg]
+    return over_a * r * r, over_v * r**3
