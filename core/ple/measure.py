@@ -4,18 +4,23 @@ A hub is a node's ball with the halves of its incident beams, each beam cut by t
 plane of its two balls. In a clean lattice hubs have disjoint interiors, so the lattice's
 volume is the sum of hub volumes and its area the sum of hub areas without the cut disks.
 
-One hub is measured by quadrature over directions from its node centre: every half-beam is
-convex and contains the centre, so the hub is star-shaped and, with R(ω) the exit distance
-along direction ω, Volume = ∫ R³/3 dω and Area = ∫ R² / (n·ω) dω over non-cut surface.
-A cubed-sphere direction grid refined at the pieces' edges gives a few 1e-4 relative
-error at worst (tests: analytic solids of revolution and Monte Carlo).
+Every half-beam is convex and contains the node's centre, so a hub is star-shaped and, with
+R(ω) the exit distance along direction ω, Volume = ∫ R³/3 dω and Area = ∫ R² / (n·ω) dω over
+non-cut surface. ``hub_measures`` (the reference, slow) integrates that on a cubed-sphere grid
+refined at the pieces' edges. ``hub_measures_batch`` (used for lattices) writes R = max_b R_b
+over the one-beam hubs ball ∪ half-beam b, whose measures are exact solids of revolution, so
+only the overlap term ∫ (Σ_b f_b − f_max) dω needs quadrature; it is vectorized over many hubs
+at once and refined per hub until two grids (n and 2n, turned) agree (tests: solids of
+revolution, fine reference grids, Monte Carlo). Assumes neighbouring balls are disjoint.
 
 The sum over hubs uses similarity: hubs that differ by a group similarity of factor f have
 f² times the area and f³ times the volume (§3.6). Along every direction whose similarity
 commutes with the later ones (always W, §6.1.4; also V when V and W commute; U as well when
 it commutes with both, §3.7) the hubs of the interior indices are copies of one hub, so
 their sum is a geometric series; boundary indices (where beams are missing, §3.8) are
-measured separately. ``method="sum"`` adds every hub individually (the plain sum).
+measured separately. Hubs congruent after normalization by their group similarity (all
+interior hubs of a translation lattice, say) are measured once; hubs differing only in which
+beams are present share their ray casting. ``method="sum"`` adds every hub individually.
 """
 
 from __future__ import annotations
