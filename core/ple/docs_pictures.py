@@ -98,8 +98,15 @@ def chocc():
     return meshes, None
 
 
+def demo():
+    """What ``make demo`` makes: the LiL-filtered hierarchical lattice, refined and watertight."""
+    from .demo import DEFAULT_PARAMS, DEFAULT_PRESET
+    from .tessellate import tessellate
+    return [tessellate(load_lattice(DEFAULT_PRESET, DEFAULT_PARAMS), style="refined", levels=2)], None
+
+
 PICTURES = {"steady_rows": steady_rows, "cage": cage, "frames": frames, "becots_corners": becots_corners,
-            "lil": lil, "chocc": chocc}
+            "lil": lil, "chocc": chocc, "demo": demo}
 
 
 def build_pictures(force: bool = False) -> list[str]:
