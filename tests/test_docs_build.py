@@ -32,3 +32,13 @@ def test_render_produces_a_picture_of_the_lattice(tmp_path):
     # the object is drawn: the picture is not a single flat background colour
     background = img[0, 0]
     assert (np.abs(img - background).sum(axis=2) > 30).mean() > 0.02
+
+
+def test_every_preset_has_a_rendered_thumbnail():
+    """make docs renders one per preset (re-rendered when the preset changes)."""
+    from ple.docs_build import THUMBS
+    for name in preset_names():
+        png = THUMBS / f"{name}.png"
+        assert png.is_file(), f"{name}: run make docs"
+        img = np.asarray(Image.open(png).convert("RGB")).astype(int)
+        assert (np.abs(img - img[0, 0]).sum(axis=2) > 30).mean() > 0.01, f"{name}: empty thumbnail"
