@@ -426,7 +426,7 @@ def sphere_quadrature(n: int, turned: bool = False) -> tuple[np.ndarray, np.ndar
     return _DIRECTIONS[n, turned]
 
 
-def hub_measures_batch(ra, offsets, rb, present=None, grid: int = 0, geometry=None, chunk: int = 1 << 19):
+def hub_measures_batch(ra, offsets, rb, present=None, grid: int = 0, geometry=None, chunk: int = 1 << 17):
     """(areas, volumes) of hubs: ball(0, ra[g]) ∪ half-beams towards offsets[g, b] (G, B, 3)
     with far radii rb[g, b]; ``present`` masks absent beams (padding). With ``geometry`` (V,)
     indices into the G geometries, ``present`` is (V, B) and each of the V results is that
@@ -532,20 +532,22 @@ def _overlap_integrals(ra, e, length, rb, dirs, weights, vg, present):
     """∫ (Σ_b f_b − f_max) dω for area (f = R²/(n·ω), 0 on a cut) and volume (f = R³/3), per
     variant (geometry vg with beams ``present``). Computed in units of the node radius."""
     m = len(dirs)
-    lb, rbb = (length / ra[:, None])[..., None], (rb / ra[:, None])[..., None]  # (G, B, 1)
+    f32 = np.float32  # rays in single precision (1e-7 relative), sums in double
+    lb = (length / ra[:, None])[..., None].astype(f32)  # (G, B, 1)
+    rbb = (rb / ra[:, None])[..., None].astype(f32)
     s = np.clip((1 - rbb) / lb, -1.0, 1.0)
     c = np.sqrt(1 - s * s)
     x_cut = (lb * lb + 1 - rbb * rbb) / (2 * lb)  # the radical plane, beyond the ball (clean lattice)
     x_b = lb + rbb * s  # ball B's contact circle
     beam = lb + rbb > 1  # special case: a ball A containing ball B has no cone; the beam adds nothing
-    mu = np.einsum("gbk,mk->gbm", e, dirs)
+    mu = np.einsum("gbk,mk->gbm", e.astype(f32), dirs.astype(f32))
     den = c * np.sqrt(np.maximum(1 - mu * mu, 0.0))
     den += s * mu  # n·ω on the lateral cone s x + c y = 1
     with np.errstate(divide="ignore", invalid="ignore"):
         inv = 1 / den
     hit = (den > 0) & (mu >= s * den) & beam  # the cone, past the contact circle on ball A
-    t = np.where(hit, inv, 1.0)
-    f_area = np.where(hit, inv * inv * inv, 1.0)  # R² / (n·ω) = 1/den³ on the cone, 1 on the ball
+    t = np.where(hit, inv, f32(1.0))
+    f_area = np.where(hit, inv * inv * inv, f32(1.0))  # R² / (n·ω) = 1/den³ on the cone, 1 on the ball
     far = beam & (x_cut > x_b)  # special case: the radical plane lies past B's contact circle
     if far.any():  # ... so rays may leave through ball B: far root of |tω − d|² = rb², n·ω = sqrt(disc)/rb
         beta = mu * lb
