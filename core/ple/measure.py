@@ -40,7 +40,7 @@ REFINE = 8
 MAX_HUBS = 200_000  # more hub classes than this: no area/volume (guard for huge base slabs)
 GRID_START, GRID_MAX = 8, 64  # fast path: overlap quadrature cells per cube face side, first and last
 FEATURE_CELLS = 2  # first grid: cells per narrowest angle between two beams of the hub
-ADAPT_TOL = 1e-3  # refine a hub while its overlap integrals on two turned grids differ by more than this × its measure
+ADAPT_TOL = 3e-4  # refine while the overlap integrals on grids n and 2n (turned) differ by more than this × the measure
 
 
 @dataclass
