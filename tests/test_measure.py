@@ -220,3 +220,20 @@ def test_shared_geometry_variants_equal_separate_hubs():
 def test_bad_method_names_it():
     with pytest.raises(PleError, match="nope"):
         lattice_measures(_lattice("1"), method="nope")
+
+
+def test_adaptive_hubs_of_a_preset_within_0_1_percent_of_a_fine_grid():
+    """fig6_3 (scaling, rotation, swirl; 8 beams per hub, unequal radii): sampled boundary and
+    interior hubs of its closed-form path vs a fixed 128 × 128-per-face grid."""
+    from ple import measure
+    from ple.program import load_lattice
+
+    lat = load_lattice("fig6_3", {})
+    reach = [1, 1, 1]
+    segs = [measure._segments(c, r, s) for c, r, s in zip(lat.counts, reach, measure._similar_axes(lat))]
+    idx, _, _ = measure._rep_hubs(lat, segs)
+    idx = idx[np.random.default_rng(5).choice(len(idx), 16, replace=False)]
+    ra, off, rb, present, _ = measure._hub_geometry(lat, idx)
+    a, v = hub_measures_batch(ra, off, rb, present)
+    fa, fv = hub_measures_batch(ra, off, rb, present, grid=128)
+    assert np.all(np.abs(a / fa - 1) < 1e-3) and np.all(np.abs(v / fv - 1) < 1e-3)
