@@ -33,6 +33,15 @@ def assert_closed(mesh, merged=True):
         assert m.is_watertight and len(m.faces) == len(mesh.faces)
 
 
+def assert_closed_unless_filtered_away(lat, mesh, region=None):
+    """A program's filter (thesis §9) may keep no node of a small corner: then the mesh is empty."""
+    from ple.filters import evaluate_lattice
+    if lat.filter is not None and len(evaluate_lattice(lat, region).center) == 0:
+        assert len(mesh.faces) == 0
+    else:
+        assert_closed(mesh)
+
+
 # ----- independent truth: the union of balls and cone-beams, from 2D geometry ---------------
 def beam_frame(p, a, b):
     d = b - a
@@ -118,7 +127,8 @@ def random_steady_lattice(seed):
 @pytest.mark.parametrize("name", preset_names())
 @pytest.mark.parametrize("style,levels", STYLES)
 def test_every_preset_is_closed(name, style, levels):
-    assert_closed(tessellate(small(name), style=style, levels=levels))
+    lat = small(name)
+    assert_closed_unless_filtered_away(lat, tessellate(lat, style=style, levels=levels))
 
 
 @pytest.mark.parametrize("name", preset_names())
@@ -128,7 +138,7 @@ def test_region_with_capped_exits_is_closed(name):
     region = f"0:{max(1, nu - 1)},{min(1, nv - 1)}:{nv},0:{max(1, nw - 1)}"
     full = tessellate(lat, style="cnt")
     part = tessellate(lat, region=region, style="cnt")
-    assert_closed(part)
+    assert_closed_unless_filtered_away(lat, part, region)
     assert part.volume <= full.volume + 1e-9
 
 
@@ -144,7 +154,7 @@ def test_refined_region_with_capped_exits_is_closed(name):
 def test_random_steady_lattices_are_closed(seed):
     lat = random_steady_lattice(seed)
     for style, levels in STYLES:
-        assert_closed(tessellate(lat, style=style, levels=levels))
+        assert_closed_unless_filtered_away(lat, tessellate(lat, style=style, levels=levels))
 
 
 @pytest.mark.parametrize("name", ["cubic", "bcc"])
@@ -232,4 +242,4 @@ def test_placement_similarity_scales_volume(style):
 def test_single_group_is_closed(name):
     lat = load_lattice(name).with_counts(1, 1, 1)
     for style, levels in STYLES:
-        assert_closed(tessellate(lat, style=style, levels=levels))
+        assert_closed_unless_filtered_away(lat, tessellate(lat, style=style, levels=levels))
