@@ -30,16 +30,51 @@ def biq_section(d) -> list[str]:
     return out + [""]
 
 
+def _n(x) -> str:
+    return "–" if x is None else f"{x:,}"
+
+
 def lil_section(d) -> list[str]:
-    out = ["## Lattice-in-Lattice (`ple bench lil`)", "", "| case | ours | thesis | nodes kept | beams kept |",
-           "|---|---|---|---|---|"]
+    out = ["## Lattice-in-Lattice (`ple bench lil`)", "",
+           "| case | ours | thesis (8 threads) | nodes kept | beams kept | KD-tree baseline (same run) |",
+           "|---|---|---|---|---|---|"]
     for r in d.get("rows", []):
-        name = r.get("case") or r.get("name") or r.get("fine")
-        ours = r.get("seconds") or r.get("time_s") or r.get("lil_s")
-        thesis = r.get("thesis_s")
-        out.append(f"| {name} | {ours:.3f} s | {'–' if thesis is None else f'{thesis} s'} | "
-                   f"{r.get('nodes_kept', '–'):,} | {r.get('beams_kept', '–'):,} |")
-    return out + ["", "Raw JSON: `benchmarks/results/lil.json`.", ""]
+        if "seconds" not in r:
+            continue
+        thesis = r.get("thesis_seconds_8_threads")
+        base = r.get("kdtree_baseline_seconds", r.get("naive_seconds"))
+        label = r.get("fine", "") + (f" vs {r['coarse']}" if "coarse" in r else "")
+        out.append(f"| {r['case']}{': ' + label if label else ''} | {r['seconds']:.3f} s | "
+                   f"{'–' if thesis is None else f'{thesis} s'} | {_n(r.get('nodes_kept'))} | "
+                   f"{_n(r.get('beams_kept'))} | {'–' if base is None else f'{base:.3f} s'} |")
+    return out + ["", "Raw JSON (with the 10⁸-beam streaming run when `--big` is given): "
+                  "`benchmarks/results/lil.json`.", ""]
+
+
+def mesh_section(d) -> list[str]:
+    st, big, reg = d["stl_write"], d["big_lattice"], d["region_vs_manifold3d"]
+    out = ["## Tessellation (`ple bench mesh`)", "",
+           f"- Binary STL writer: {st['ple_triangles_per_s'] / 1e6:.1f} M triangles/s "
+           f"(trimesh's exporter, same mesh: {st['baseline_triangles_per_s'] / 1e6:.1f} M/s).",
+           f"- {big['beams']:,}-beam {d['lattice']} lattice, style `{big['style']}`: {big['seconds']:.1f} s, "
+           f"{big['triangles']:,} triangles, peak memory {big['peak_rss_gb']:.2f} GB.",
+           f"- {reg['groups']:,}-group region vs the manifold3d union of ball and beam meshes "
+           f"({reg['baseline_manifold3d_union']['seconds']:.2f} s):", "",
+           "| style | seconds | triangles | volume | speed-up vs manifold3d |", "|---|---|---|---|---|"]
+    for style, r in reg["ple"].items():
+        out.append(f"| {style} | {r['seconds']:.2f} | {r['triangles']:,} | {r['volume']:.3f} | "
+                   f"{reg['baseline_manifold3d_union']['seconds'] / r['seconds']:.1f}× |")
+    return out + [""]
+
+
+def measure_section(d) -> list[str]:
+    out = ["## Area and volume (`ple bench measure`)", "",
+           "| preset | groups | seconds | hub shapes measured | method | old per-hub path (extrapolated) |",
+           "|---|---|---|---|---|---|"]
+    for name, r in d["presets"].items():
+        out.append(f"| `{name}` | {r['groups']:,} | {r['wall_s']:.2f} | {r['hub_geometries']:,} | "
+                   f"{r['area_method']} | {r['baseline_extrapolated_s']:.1f} s |")
+    return out + [""]
 
 
 def generic_section(title: str, name: str, d) -> list[str]:
@@ -85,8 +120,12 @@ def write_report() -> Path:
         lines += biq_section(biq)
     if lil:
         lines += lil_section(lil)
-    for title, name, d in (("Tessellation", "mesh", mesh), ("BeCOTS RangeFinder", "becots", becots),
-                           ("Lazy evaluation", "eval", ev)):
+    if mesh:
+        lines += mesh_section(mesh)
+    measure = _load("measure")
+    if measure:
+        lines += measure_section(measure)
+    for title, name, d in (("BeCOTS RangeFinder", "becots", becots), ("Lazy evaluation", "eval", ev)):
         if d:
             lines += generic_section(title, name, d)
     out = DOCS / "performance.md"
