@@ -22,7 +22,8 @@ def _preset_items(self, context):
 
 
 class RigOperator:
-    """Acts on the rig named by ``rig`` or on the rig of the active object."""
+    """Acts on the rig named by ``rig`` or on the rig of the active object; a subclass
+    defines ``run(context, rig) -> set`` (the operator's work)."""
 
     bl_options = {"REGISTER", "UNDO"}
     rig: StringProperty(name="Rig", description="Lattice object to act on (default: the active one)")
@@ -38,9 +39,6 @@ class RigOperator:
     @classmethod
     def poll(cls, context):
         return True
-
-    def run(self, context, rig) -> set:
-        raise NotImplementedError
 
     def execute(self, context):
         try:
@@ -364,14 +362,12 @@ def mesh_from_arrays(name: str, verts, faces):
 
 
 class SteppedOperator(RigOperator):
-    """Long work as steps: ``execute`` runs them all with progress; ``invoke`` (with a window)
+    """Long work as steps: a subclass defines the generator ``steps(context, rig)`` yielding
+    progress fractions; ``execute`` runs them all with progress; ``invoke`` (with a window)
     runs one step per timer tick so that Esc cancels between steps."""
 
     _steps = None
     _timer = None
-
-    def steps(self, context, rig):
-        raise NotImplementedError
 
     def execute(self, context):
         wm = context.window_manager

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import os
+from abc import ABC, abstractmethod
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -27,12 +28,12 @@ MAX_CELL_ENTRIES = 4_000_000  # (grid cell, element) candidates before the exact
 
 
 # ----- the filter model ------------------------------------------------------------------------
-class Filter:
+class Filter(ABC):
     """Decides per node. Subclasses implement ``node_mask``."""
 
+    @abstractmethod
     def node_mask(self, lat: Lattice, node_index: np.ndarray, center: np.ndarray, radius: np.ndarray) -> np.ndarray:
         """bool (N,): which nodes survive, given node_index (N, 4), centres (N, 3) and radii (N,)."""
-        raise NotImplementedError
 
     def __and__(self, other: Filter) -> Filter:
         return And(self, _as_filter(other))

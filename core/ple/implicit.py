@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from abc import ABC, abstractmethod
 
 import numpy as np
 
@@ -38,7 +39,7 @@ def _td_operators() -> np.ndarray:
 TD_OPERATORS = _td_operators()
 
 
-class Field:
+class Field(ABC):
     """A scalar field on world points, through a placement similarity and a cell size."""
 
     def __init__(self, cell=1.0, placement: Similarity | None = None) -> None:
@@ -58,8 +59,9 @@ class Field:
     def __call__(self, points) -> np.ndarray:
         return self.evaluate_local(self.local(points))
 
+    @abstractmethod
     def evaluate_local(self, x: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
+        """Field values (N,) at cell coordinates x (N, 3)."""
 
 
 # ----- triply periodic minimal surface approximations (level sets in 2π-periodic variables) -------
