@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import PleError
-from .files import atomic_path, atomic_write_text
+from .files import atomic_write_text
 from .program import Param, load_program_file, parse_param_value, resolve_source
 
 FORMATS = ("stl", "3mf", "ply", "obj", "glb")
@@ -93,26 +93,16 @@ def build_mesh(lat, style: str, levels: int | None = None, region=None):
     """Mesh of a lattice (region) in a style: the core's tessellation or the preview."""
     if style not in STYLES:
         raise PleError(f"--style {style!r}: expected one of {', '.join(STYLES)}")
-    if style == "balls-beams":
-        from .preview import balls_beams_mesh
-        ev = lat.evaluate(region)
-        return balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
-    from .tessellate import tessellate
+    from .tessellate import tessellate  # balls-beams too, with the program's filter applied
     kwargs = {"levels": levels} if levels is not None else {}
     return tessellate(lat, region=region, style=style, **kwargs)
 
 
 def write_mesh_file(mesh, path: Path) -> None:
     """Write a trimesh mesh atomically in the format of ``path``'s extension."""
-    try:
-        from .export import export_mesh
-    except ImportError:
-        export_mesh = None
-    if export_mesh is not None:
-        export_mesh(mesh, path)
-        return
-    with atomic_path(path) as tmp:
-        mesh.export(tmp, file_type=path.suffix[1:])
+    from .export import export_mesh
+
+    export_mesh(mesh, path)
 
 
 def _run_variant(source: str, params: dict, style: str, levels, region, out: str) -> dict:

@@ -12,7 +12,6 @@ that it interferes with (closed sets: touching counts). Two paths give identical
 
 from __future__ import annotations
 
-import importlib.util
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,7 +63,7 @@ def query(lat: Lattice, centers, radii, method: str = "auto") -> list[BIQResult]
     lat.validate()
     if method not in ("auto", "naive", "rangefinder"):
         raise PleError(f"method {method!r}: expected auto, naive or rangefinder")
-    if getattr(lat, "becots", None) is not None and method != "naive" and _has_becots_rangefinder():
+    if lat.becots is not None and method != "naive":
         from . import becots_rangefinder
 
         return becots_rangefinder.query(lat, c, r)
@@ -82,7 +81,7 @@ def any_hit(lat: Lattice, centers, radii) -> np.ndarray:
     """bool (q,): does each query ball interfere with any ball or beam of ``lat``?"""
     c, r = check_queries(centers, radii)
     lat.validate()
-    if getattr(lat, "becots", None) is not None and _has_becots_rangefinder():
+    if lat.becots is not None:
         from . import becots_rangefinder
 
         res = becots_rangefinder.query(lat, c, r)
@@ -124,10 +123,6 @@ def distance_query(lat: Lattice, point, r: float) -> DistanceResult:
 
 
 # ----- helpers shared with the RangeFinder path --------------------------------------------------
-def _has_becots_rangefinder() -> bool:
-    return importlib.util.find_spec("ple.becots_rangefinder") is not None
-
-
 def _beam_balls(lat: Lattice, beams: np.ndarray):
     """End balls ((centres, radii), (centres, radii)) of beams given as (m, 4) [i, j, k, p]."""
     beams = np.asarray(beams, dtype=np.int64).reshape(-1, 4)

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from .export import export_mesh, write_beam_lattice_3mf
-from .filters import FilteredLattice
+from .filters import evaluate_lattice
 from .ir import save_ir
 from .program import load_lattice
 
@@ -37,8 +37,7 @@ def run(out_dir: Path, preset: str, params: dict, levels: int | None, render: bo
     clock = _Clock()
     lat = clock("program", load_lattice, preset, params)
     save_ir(lat, out_dir / f"{preset}.json")
-    kept = clock("LiL filter", FilteredLattice(lat, lat.filter).evaluate) if lat.filter is not None \
-        else clock("evaluate", lat.evaluate)
+    kept = clock("LiL filter" if lat.filter is not None else "evaluate", evaluate_lattice, lat)
     kwargs = {"levels": levels} if levels is not None else {}
     mesh = clock("refined tessellation", tessellate, lat, style="refined", **kwargs)
     stl = out_dir / f"{preset}.stl"

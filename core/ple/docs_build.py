@@ -37,10 +37,7 @@ def api_reference() -> str:
     out = ["# Program API reference", "",
            "Generated from the docstrings by `make docs` (`python -m ple.docs_build`).", ""]
     for name in API_MODULES:
-        try:
-            mod = importlib.import_module(f"ple.{name}")
-        except ImportError:
-            continue
+        mod = importlib.import_module(f"ple.{name}")
         out += [f"## `ple.{name}`", "", inspect.cleandoc(mod.__doc__ or "").split("\n\n")[0], ""]
         for attr, obj in vars(mod).items():
             if attr.startswith("_") or getattr(obj, "__module__", None) != mod.__name__:
@@ -117,14 +114,11 @@ def thumbnail_region(lat) -> str:
 
 def preset_preview(name: str):
     """The preview mesh of a preset's thumbnail (its filter applied where it has one)."""
+    from .filters import evaluate_lattice
+
     lat = load_lattice(name)
     region = thumbnail_region(lat)
-    flt = getattr(lat, "filter", None)
-    if flt is not None:
-        from .filters import FilteredLattice
-        ev = FilteredLattice(lat, flt).evaluate(region)
-    else:
-        ev = lat.evaluate(region)
+    ev = evaluate_lattice(lat, region)
     return balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes, beam_scale=0.6), region
 
 

@@ -78,9 +78,9 @@ def becots_corners():
 
 def lil():
     """Lattice-in-Lattice: the fine nodes kept (orange) where they meet the coarse lattice (blue)."""
-    from .filters import FilteredLattice
+    from .filters import evaluate_lattice
     lat = load_lattice("hier_lil2", {"n": 20, "coarse_cells": 2})
-    kept = FilteredLattice(lat, lat.filter).evaluate()
+    kept = evaluate_lattice(lat)
     coarse = lat.filter.coarse.evaluate()
     return [balls_beams_mesh(kept.center, kept.radius, kept.beam_nodes, beam_scale=0.6),
             balls_beams_mesh(coarse.center, coarse.radius * 0.25, coarse.beam_nodes)], None

@@ -124,7 +124,7 @@ class FilteredLattice:
         lat = self.lattice
         r = lat.region(region)
         centers, radii = lat.region_balls(r)
-        index = region_node_index(r, len(lat.nodes))
+        index = r.node_index(len(lat.nodes))
         keep = self.node_mask(index, centers.reshape(-1, 3), radii.reshape(-1))
         rows = np.where(keep, np.cumsum(keep) - 1, -1).reshape(radii.shape)
         nodes = Evaluation(index[keep], centers.reshape(-1, 3)[keep], radii.reshape(-1)[keep],
@@ -137,17 +137,6 @@ class FilteredLattice:
         ev, rows = self.region_rows(r)
         ev.beam_index, ev.beam_nodes = beams_between(self.lattice, r, rows, r, rows)
         return ev
-
-
-def region_node_index(r: Region, nn: int) -> np.ndarray:
-    """(i, j, k, n) of every node of a region, (N, 4) int64 in (i, j, k, n) order."""
-    ni, nj, nk = r.shape
-    out = np.empty((ni, nj, nk, nn, 4), dtype=np.int64)
-    out[..., 0] = np.arange(r.i0, r.i1)[:, None, None, None]
-    out[..., 1] = np.arange(r.j0, r.j1)[None, :, None, None]
-    out[..., 2] = np.arange(r.k0, r.k1)[None, None, :, None]
-    out[..., 3] = np.arange(nn)
-    return out.reshape(-1, 4)
 
 
 def beams_between(lat: Lattice, a: Region, rows_a: np.ndarray, b: Region, rows_b: np.ndarray):

@@ -129,10 +129,8 @@ def lattice_from_dict(data) -> Lattice:
     if "placement" in data:
         lat.set_placement(_similarity(data["placement"], "placement"))
     if "becots" in data:
-        try:
-            from .becots import becots_from_ir
-        except ImportError:
-            raise PleError("becots: BeCOTS slabs are not available in this version") from None
+        from .becots import becots_from_ir
+
         becots_from_ir(lat, data["becots"], "becots")
     if "description" in data:
         lat.meta["description"] = str(data["description"])

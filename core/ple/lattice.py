@@ -87,6 +87,17 @@ class Region:
     def __str__(self) -> str:
         return f"{self.i0}:{self.i1},{self.j0}:{self.j1},{self.k0}:{self.k1}"
 
+    def node_index(self, nn: int) -> np.ndarray:
+        """(i, j, k, n) of every node of the box for ``nn`` template nodes: (N, 4) int64 in
+        (i, j, k, n) order — the row order of every region evaluation."""
+        ni, nj, nk = self.shape
+        out = np.empty((ni, nj, nk, nn, 4), dtype=np.int64)
+        out[..., 0] = np.arange(self.i0, self.i1)[:, None, None, None]
+        out[..., 1] = np.arange(self.j0, self.j1)[None, :, None, None]
+        out[..., 2] = np.arange(self.k0, self.k1)[None, None, :, None]
+        out[..., 3] = np.arange(nn)
+        return out.reshape(-1, 4)
+
     @staticmethod
     def parse(text: str) -> Region:
         """Parse ``I0:I1,J0:J1,K0:K1`` (half-open; an empty bound means the lattice's)."""
@@ -395,12 +406,9 @@ class Lattice:
         """All nodes and beams of a region (default: the whole lattice)."""
         r = self.region(region)
         centers, radii = self.region_balls(r)
-        ni, nj, nk = r.shape
-        nn = len(self.nodes)
-        grid = np.stack(np.meshgrid(np.arange(r.i0, r.i1), np.arange(r.j0, r.j1), np.arange(r.k0, r.k1),
-                                    np.arange(nn), indexing="ij"), axis=-1).reshape(-1, 4)
         beam_index, beam_nodes = self.region_beams(r)
-        return Evaluation(grid.astype(np.int64), centers.reshape(-1, 3), radii.reshape(-1), beam_index, beam_nodes)
+        return Evaluation(r.node_index(len(self.nodes)), centers.reshape(-1, 3), radii.reshape(-1), beam_index,
+                          beam_nodes)
 
     def beams_of_pattern(self, pattern: int, i, j, k):
         """For from-groups given as index arrays: (valid (N,) bool, from-ball, to-ball).

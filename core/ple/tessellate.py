@@ -293,7 +293,7 @@ class _Tessellator:
         the region), with capped disks where a beam leaves the region."""
         lat = self.lat
         nn = len(lat.nodes)
-        own = _box_index(box, nn)
+        own = box.node_index(nn)
         own = own[self.kept(own)]
         # ghosts: the far ends of beams leaving the box but not the region
         ghosts = []
@@ -420,12 +420,6 @@ def _similarity_inverse(m: np.ndarray) -> np.ndarray:
     inv[:, :3, 3] = -np.einsum("nij,nj->ni", inv[:, :3, :3], m[:, :3, 3])
     inv[:, 3, 3] = 1.0
     return inv
-
-
-def _box_index(box: Region, nn: int) -> np.ndarray:
-    g = np.meshgrid(np.arange(box.i0, box.i1), np.arange(box.j0, box.j1), np.arange(box.k0, box.k1),
-                    np.arange(nn), indexing="ij")
-    return np.stack(g, axis=-1).reshape(-1, 4).astype(np.int64)
 
 
 def _in(idx: np.ndarray, r: Region) -> np.ndarray:

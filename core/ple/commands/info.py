@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 from ..lattice import Lattice
+from ..measure import lattice_measures
 from .common import add_lattice_args, lattice_from_args
 
 
@@ -31,16 +32,8 @@ def lattice_info(lat: Lattice) -> dict:
         "bounds": {"min": lo.tolist(), "max": hi.tolist()},
         "mean_radius": lat.mean_radius(),
     }
-    info.update(_measures(lat))
+    info.update(lattice_measures(lat))
     return info
-
-
-def _measures(lat: Lattice) -> dict:
-    try:
-        from ..measure import lattice_measures
-    except ImportError:
-        return {}
-    return lattice_measures(lat)
 
 
 def run(args) -> int:

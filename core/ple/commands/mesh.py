@@ -75,11 +75,11 @@ def check_report(lat, region, mesh) -> dict:
     whole = region == lat.region() and lat.filter is None  # the closed form knows no filter
     exact = None
     if whole:
-        try:
-            from ..measure import lattice_volume  # written in parallel by the queries engineer
+        from ..measure import lattice_volume
 
+        try:
             exact = lattice_volume(lat)
-        except (ImportError, AttributeError, PleError):
+        except PleError:  # e.g. too many hub classes: fall back to the Monte Carlo estimate
             exact = None
         if exact is not None:
             exact = float(exact)
