@@ -27,7 +27,7 @@ $(STAMP): pyproject.toml | syslibs
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/python -m ple.demo
+	$(BIN)/python -m tools.demo
 
 test: $(STAMP)
 	$(BIN)/ruff check .
@@ -46,4 +46,4 @@ extension: $(STAMP)
 	$(BIN)/python -m ple_addon.build
 
 docs: $(STAMP)
-	$(BIN)/python -m ple.docs_build
+	$(BIN)/python -m tools.docs_build

@@ -50,7 +50,7 @@ def main() -> None:
 
 
 def measure(bpy, name: str, edits: int) -> dict:
-    from ple.preview import balls_beams_mesh
+    from ple.meshing.preview import balls_beams_mesh
 
     from ple_addon import draw, rig
 

@@ -35,9 +35,10 @@ def build_zip(tmp: Path) -> Path:
 
 
 def run(args) -> int:
-    from ple.batch import plan, progress_bar, read_manifest
+    from ple.app.batch import plan, read_manifest
+    from ple.app.progress import Progress
     from ple.errors import PleError
-    from ple.files import atomic_write_text
+    from ple.io.files import atomic_write_text
 
     try:
         if args.style not in STYLES:
@@ -70,7 +71,7 @@ def run(args) -> int:
                 workers.append(subprocess.Popen([sys.executable, "-m", "ple_addon.batch", "--worker", str(job)],
                                                 cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                                 text=True, env=env))
-            finished = 0
+            bar = Progress(len(todo), "batch")
             for proc in workers:
                 for line in proc.stdout:
                     if not line.startswith("PLE-RESULT "):
@@ -78,8 +79,7 @@ def run(args) -> int:
                     entry = json.loads(line[len("PLE-RESULT "):])
                     (manifest["failures"] if "error" in entry else manifest["outputs"]).append(entry)
                     atomic_write_text(manifest_path, json.dumps(manifest, indent=1) + "\n")
-                    finished += 1
-                    progress_bar(finished, len(todo), time.perf_counter() - t0)
+                    bar.update(1, entry.get("file", ""))
                 err = proc.stderr.read()
                 if proc.wait() != 0:
                     print(f"ple_addon.batch: a Blender worker failed: {err.strip()[-800:]}", file=sys.stderr)
@@ -103,7 +103,7 @@ def worker(job_path: str) -> int:
     addon_utils.enable("bl_ext.user_default.ple", default_set=True)
     import importlib
     rigmod = importlib.import_module("bl_ext.user_default.ple.rig")
-    core_export = importlib.import_module("bl_ext.user_default.ple.vendor.ple.export")
+    core_export = importlib.import_module("bl_ext.user_default.ple.vendor.ple.io.export")
     source = Path(job["program"]).read_text()
     for item in job["variants"]:
         t0 = time.perf_counter()

@@ -18,8 +18,10 @@ import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-NOT_SHIPPED = {"build.py", "render_docs.py", "batch.py"}  # repository tools, not part of the add-on
-IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc")
+NOT_SHIPPED = {"build.py", "batch.py"}  # repository tools, not part of the add-on
+IGNORE_NAMES = ("__pycache__", "*.pyc")
+IGNORE = shutil.ignore_patterns(*IGNORE_NAMES)
+NOT_VENDORED = ("cli", "bench")  # the core's doors for the command line: the extension needs only the library layers
 WHEELS = ["trimesh>=4.0"]  # pure-Python packages the core needs beyond Blender's own numpy
 
 
@@ -72,7 +74,7 @@ def stage(dest: Path, wheels: bool = True) -> dict:
     vendor = dest / "vendor"
     vendor.mkdir(exist_ok=True)
     (vendor / "__init__.py").write_text('"""Vendored copy of the PLE core package (built by ple_addon/build.py)."""\n')
-    shutil.copytree(ROOT / "core" / "ple", vendor / "ple", ignore=IGNORE)
+    shutil.copytree(ROOT / "core" / "ple", vendor / "ple", ignore=shutil.ignore_patterns(*NOT_VENDORED, *IGNORE_NAMES))
     shutil.copytree(ROOT / "presets", vendor / "ple" / "presets", ignore=IGNORE)
     return manifest
 

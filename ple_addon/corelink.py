@@ -17,27 +17,27 @@ except ImportError:  # running from the source tree: the core is installed in th
 
 
 def core(name: str) -> ModuleType:
-    """A core sub-module, e.g. ``core("cage")``."""
+    """A core sub-module, e.g. ``core("model.cage")``."""
     return importlib.import_module(f"{ple.__name__}.{name}")
 
 
-def optional(name: str) -> ModuleType | None:
-    """A core sub-module that may not exist in this version (None), e.g. ``tessellate``.
-    If it exists but needs a package Blender's Python lacks (trimesh, scipy), that is a
-    PleError naming the package, reported to the user instead of a traceback."""
+def needs(name: str) -> ModuleType:
+    """A core sub-module that imports a package Blender's Python may lack (trimesh, scipy),
+    e.g. ``meshing.tessellate``: a missing package is a PleError naming it, reported to the
+    user instead of a traceback."""
     try:
         return core(name)
     except ModuleNotFoundError as exc:
-        if exc.name == f"{ple.__name__}.{name}":
-            return None
         raise ple.PleError(f"ple.{name} needs the Python package {exc.name!r}, which Blender's Python "
                            "does not have (install it into Blender's Python to use this)") from None
 
 
-cage = core("cage")
-ir = core("ir")
-program = core("program")
-snippets = core("snippets")
+cage = core("model.cage")
+ir = core("model.ir")
+presets = core("program.presets")
+program = core("program.runtime")
+snippets = core("program.snippets")
+styles = core("meshing.styles")
 PleError = ple.PleError
 Lattice = ple.Lattice
 Similarity = ple.Similarity

@@ -11,14 +11,14 @@ import numpy as np
 from bpy.props import EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, IntVectorProperty, StringProperty
 
 from . import rig as rigmod
-from .corelink import PleError, core, ir, optional, program, snippets
+from .corelink import PleError, ir, needs, presets, snippets, styles
 
 SNIPPET_TEXT = "PLE snippet"
 EXPORT_BOXES = 20  # an STL export streams the region in about this many boxes (progress steps)
 
 
 def _preset_items(self, context):
-    return [(n, n, program.preset_description(n)) for n in program.preset_names()]
+    return [(n, n, presets.preset_description(n)) for n in presets.preset_names()]
 
 
 class RigOperator:
@@ -103,7 +103,7 @@ class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
             kind = "IR" if text.as_string().lstrip().startswith("{") else "PROGRAM"
             return text, kind, Path(text.name).stem
         if self.source == "PRESET":
-            path = program.preset_path(self.preset)
+            path = presets.preset_path(self.preset)
             if path is None:
                 raise PleError(f"unknown preset {self.preset!r}")
         else:
@@ -296,8 +296,6 @@ class PLE_OT_lil_filter(RigOperator, bpy.types.Operator):  # noqa: N801 - Blende
             coarse = next((o for o in context.selected_objects if rigmod.is_rig(o) and o != rig), None)
         if not rigmod.is_rig(coarse) or coarse == rig:
             raise PleError("LiL filter: give (or select) another PLE lattice object as the coarse lattice")
-        if optional("filters") is None:
-            raise PleError("filters are not available in this version of the core")
         return self.set_filter(rig, filter_kind="LIL", coarse=coarse)
 
 
@@ -316,8 +314,6 @@ class PLE_OT_stencil_filter(RigOperator, bpy.types.Operator):  # noqa: N801 - Bl
         if self.clear:
             rig.ple.filter_kind = "NONE"
             return self.refreshed(rig)
-        if optional("filters") is None:
-            raise PleError("filters are not available in this version of the core")
         n = int(np.prod(tuple(self.shape)))
         if len(self.bits) != n or set(self.bits) - {"0", "1"}:
             raise PleError(f"stencil: expected {n} characters 0/1 for shape {tuple(self.shape)}, got {self.bits!r}")
@@ -325,27 +321,21 @@ class PLE_OT_stencil_filter(RigOperator, bpy.types.Operator):  # noqa: N801 - Bl
 
 
 # ----- long operations: tessellate and export ---------------------------------------------------
-STYLES = [("CHOCC", "CHoCC", "convex hulls of cospherical circles per hub (CHoCC paper)"),
-          ("CNT", "CNT", "Crude Natural Tessellation"),
-          ("REFINED", "Refined", "CNT refined towards the exact hub surfaces")]
-EXPORT_STYLES = [("BALLS_BEAMS", "Balls and beams", "preview: an icosphere per ball, a frustum per beam"),
-                 *STYLES]
+def _style_item(s) -> tuple[str, str, str]:
+    return s.name.upper().replace("-", "_"), s.label, s.description
+
+
+EXPORT_STYLES = [_style_item(s) for s in styles.STYLES.values()]  # the core's registry of styles
+STYLES = [_style_item(s) for s in styles.STYLES.values() if s.solid]
 
 
 def core_style(style: str) -> str:
-    return "balls-beams" if style == "BALLS_BEAMS" else style.lower()
+    return style.lower().replace("_", "-")
 
 
 def tessellation(lat, region, style: str):
     """Vertices (V, 3) and triangles (F, 3) of a region from the core (``ple.tessellate``)."""
-    tess = optional("tessellate")
-    if tess is not None:
-        mesh = tess.tessellate(lat, region, core_style(style))
-    elif style == "BALLS_BEAMS" and optional("preview") is not None:
-        ev = lat.evaluate(region)
-        mesh = optional("preview").balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
-    else:
-        raise PleError("tessellation is not available in this version of the core (ple.tessellate is missing)")
+    mesh = needs("meshing.tessellate").tessellate(lat, region, core_style(style))
     return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
 
 
@@ -475,9 +465,9 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
         region = rigmod.region_of(rig, lat)
         if region is None:
             raise PleError("the region is empty: set Region from/to inside the repetition counts")
-        tess, export = optional("tessellate"), optional("export")
+        tess, export = needs("meshing.tessellate"), needs("io.export")
         yield 0.0
-        if tess is not None and export is not None and path.suffix.lower() == ".stl":
+        if path.suffix.lower() == ".stl":
             # binary STL streams box by box (thesis §6.2.2 hubs per box): progress and Esc per box
             boxes = max(1, region.groups // EXPORT_BOXES)
             chunks = []
@@ -486,19 +476,10 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
                 yield min(0.9, 0.9 * (n + 1) * boxes / region.groups)
             count = export.write_stl(path, chunks)
         else:
-            verts, faces = tessellation(lat, region, self.style)
+            mesh = tess.tessellate(lat, region, core_style(self.style))
             yield 0.7
-            count = len(faces)
-            try:
-                import trimesh
-            except ImportError:
-                raise PleError("exporting this format needs trimesh in Blender's Python") from None
-            mesh = trimesh.Trimesh(verts, faces, process=False)
-            if export is not None:
-                export.export_mesh(mesh, path)
-            else:
-                with core("files").atomic_path(path) as tmp:
-                    mesh.export(tmp, file_type=path.suffix[1:].lower())
+            count = len(mesh.faces)
+            export.export_mesh(mesh, path)
         self.report({"INFO"}, f"{count} triangles written to {path}")
         yield 1.0
 

@@ -18,7 +18,7 @@ import numpy as np
 from mathutils import Matrix
 
 from . import draw
-from .corelink import PleError, cage, ir, optional, program, snippets
+from .corelink import PleError, cage, core, ir, program, snippets
 
 PARAM_PREFIX = "ple:"
 FRAME_NAMES = ("G", "u", "v", "w")
@@ -160,9 +160,7 @@ def filtered(rig, lat, space=None, _seen=()):
     kind = rig.ple.filter_kind
     if kind == "NONE":
         return None
-    filters = optional("filters")
-    if filters is None:
-        raise PleError("filters are not available in this version of the core")
+    filters = core("filters")
     if kind == "STENCIL":
         shape = tuple(rig.ple.stencil_shape)
         bits = rig.ple.stencil_bits.strip()
@@ -203,7 +201,7 @@ def evaluate_region(rig, lat, st: RigState | None = None):
             st.topology = (key, ev)
         return ev
     f = parts[0] if len(parts) == 1 else parts[0] & parts[1]
-    return optional("filters").FilteredLattice(lat, f).evaluate(r)
+    return core("filters").FilteredLattice(lat, f).evaluate(r)
 
 
 # ----- reading user moves ---------------------------------------------------------------------

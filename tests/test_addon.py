@@ -139,8 +139,8 @@ def case_install():
 def case_lattice_add_sources():
     tmp = Path(tempfile.mkdtemp())
     (tmp / "prog.py").write_text(PROGRAM)
-    lat = core.program.load_lattice("fig6_3")
-    core.ir.save_ir(lat, tmp / "fig.json")
+    lat = core.load_lattice("fig6_3")
+    core.io.irfile.save_ir(lat, tmp / "fig.json")
     rig = new_rig("fig6_3", region=(2, 2, 2))
     assert tuple(rig.ple.counts) == (7, 12, 15) and rig.ple.source_kind == "PROGRAM"
     assert "ple:thickness" in rig.keys() and rig.id_properties_ui("ple:thickness").as_dict()["max"] == 0.12
@@ -163,9 +163,9 @@ def case_region_matches_core():
     for preset in ("fig6_3", "octet", "cylindrical"):
         rig = new_rig(preset)
         rig.ple.region_min, rig.ple.region_max = (1, 0, 2), (3, 2, 5)
-        assert_region_is(rig, core.program.load_lattice(preset), "1:3,0:2,2:5")
+        assert_region_is(rig, core.load_lattice(preset), "1:3,0:2,2:5")
         curves = part(rig, "cage").data.splines
-        want = core.cage.cage_curves(core.program.load_lattice(preset), interior=1)
+        want = core.model.cage.cage_curves(core.load_lattice(preset), interior=1)
         assert len(curves) == len(want)
         got = np.zeros(len(curves[0].points) * 4, np.float32)
         curves[0].points.foreach_get("co", got)
@@ -175,7 +175,7 @@ def case_region_matches_core():
 def case_frame_moves():
     """Dragging, rotating and scaling the U frame, and moving G: the region follows the core."""
     rig = new_rig("fig6_3")
-    lat0 = core.program.load_lattice("fig6_3")
+    lat0 = core.load_lattice("fig6_3")
     fu = part(rig, "u")
     turn = core.Rotation(0.2, core.Vec(0, 1, 1), core.Pt(0.5, 0, 0)).matrix
     new = turn @ matrix(fu) @ np.diag([1.1, 1.1, 1.1, 1.0])
@@ -245,7 +245,7 @@ def case_counts():
     assert bpy.data.texts["PLE snippet"].as_string().startswith("lat.set_u(4, lat.u.similarity")
     assert bpy.ops.ple.edits_clear() == {"FINISHED"}  # back to what the program gives
     assert tuple(rig.ple.counts) == (7, 12, 15) and ple_ext.rig.edits_of(rig) == []
-    assert_region_is(rig, core.program.load_lattice("fig6_3"), "0:3,0:3,0:3")
+    assert_region_is(rig, core.load_lattice("fig6_3"), "0:3,0:3,0:3")
 
 
 def case_template_ops():
@@ -266,7 +266,7 @@ def case_template_ops():
     n1.location = (0.5, 0.25, 0.1)  # move a template node
     n1.scale = (0.08, 0.08, 0.08)
     update()
-    want = core.program.load_lattice("cubic")
+    want = core.load_lattice("cubic")
     want.add_node(core.Pt(0.5, 0.25, 0.1), 0.08)
     want.add_beam(1, 0, 0, 0, 1)
     assert_region_is(rig, want, "0:2,0:2,0:2")
@@ -306,22 +306,22 @@ def case_snippet_round_trip():
     assert bpy.ops.ple.program_apply() == {"FINISHED"}
     new = text.as_string()
     assert "# the template node-group" in new and "# along U" in new
-    rerun = core.program.compile_program(new).run(thickness=0.1, n=4)
-    assert core.snippets.lattices_close(rerun, gui, 1e-9)
-    assert rig.ple.edits == "[]" and core.snippets.lattices_close(ple_ext.rig.lattice_of(rig), gui, 1e-9)
+    rerun = core.compile_program(new).run(thickness=0.1, n=4)
+    assert core.program.snippets.lattices_close(rerun, gui, 1e-9)
+    assert rig.ple.edits == "[]" and core.program.snippets.lattices_close(ple_ext.rig.lattice_of(rig), gui, 1e-9)
 
 
 def case_ir_apply():
     tmp = Path(tempfile.mkdtemp())
-    core.ir.save_ir(core.program.load_lattice("cubic", {"n": 3}), tmp / "c.json")
+    core.io.irfile.save_ir(core.load_lattice("cubic", {"n": 3}), tmp / "c.json")
     assert bpy.ops.ple.lattice_add(source="FILE", filepath=str(tmp / "c.json")) == {"FINISHED"}
     rig = bpy.context.active_object
     part(rig, "v").location = (0.1, 1.5, 0)
     update()
     gui = ple_ext.rig.lattice_of(rig)
     assert bpy.ops.ple.program_apply() == {"FINISHED"}
-    again = core.ir.lattice_from_dict(json.loads(rig.ple.text.as_string()))
-    assert core.snippets.lattices_close(again, gui, 1e-9)
+    again = core.model.ir.lattice_from_dict(json.loads(rig.ple.text.as_string()))
+    assert core.program.snippets.lattices_close(again, gui, 1e-9)
 
 
 def case_no_leaks():
@@ -375,7 +375,8 @@ def case_errors():
     new_rig("cubic", region=(2, 2, 2))
     vendored = "bl_ext.user_default.ple.vendor.ple"
     saved = {k: sys.modules.pop(k) for k in list(sys.modules)
-             if k == "trimesh" or k.startswith("trimesh.") or k in (f"{vendored}.tessellate", f"{vendored}.preview")}
+             if k == "trimesh" or k.startswith("trimesh.") or k in (f"{vendored}.meshing.tessellate",
+                                                                   f"{vendored}.meshing.preview")}
     sys.modules["trimesh"] = None
     try:
         fails(bpy.ops.ple.tessellate, "'trimesh'", style="CNT")
@@ -433,7 +434,7 @@ def case_filters():
     coarse.location = (2, 2, 0)
     update()
     assert bpy.ops.ple.lil_filter(rig=fine.name, coarse=coarse.name) == {"FINISHED"}
-    lat_f, lat_c = core.program.load_lattice("cubic"), core.program.load_lattice("fig6_3")
+    lat_f, lat_c = core.load_lattice("cubic"), core.load_lattice("fig6_3")
     placed = lat_c.copy()
     placed.set_placement(core.Translation(core.Vec(2, 2, 0)) @ lat_c.placement)
     want = core.filters.lil(lat_f, placed).evaluate("0:10,0:10,0:10")
@@ -447,7 +448,7 @@ def case_filters():
     update()
     assert bpy.ops.ple.lil_filter(rig=medium.name, coarse=coarse.name) == {"FINISHED"}
     assert bpy.ops.ple.lil_filter(rig=fine.name, coarse=medium.name) == {"FINISHED"}
-    lat_m = core.program.load_lattice("cubic", {"cell": 0.5})
+    lat_m = core.load_lattice("cubic", {"cell": 0.5})
     lat_m.set_placement(core.Translation(core.Vec(1, 1, 0)))
     want = core.filters.lil(lat_f, lat_m, placed).evaluate("0:10,0:10,0:10")
     co, _, _ = region_arrays(fine)
@@ -460,7 +461,7 @@ def case_filters():
     assert bpy.ops.ple.stencil_filter(rig=fine.name, clear=True) == {"FINISHED"}
     assert len(region_arrays(fine)[0]) == 1000
     prog = new_rig("hier_stencil", region=(4, 4, 4))  # a filter set by the program itself
-    lat = core.program.load_lattice("hier_stencil")
+    lat = core.load_lattice("hier_stencil")
     want = core.filters.FilteredLattice(lat, lat.filter).evaluate("0:4,0:4,0:4")
     co, _, ed = region_arrays(prog)
     assert 0 < len(co) == len(want.center) < 64 * len(lat.nodes) and np.array_equal(ed, want.beam_nodes)
@@ -469,13 +470,9 @@ def case_filters():
 def case_tessellate():
     rig = new_rig("cubic", region=(2, 2, 2))
     before = len(bpy.data.meshes)
-    if ple_ext.corelink.optional("tessellate") is None:  # the core module has not landed: a clean error
-        fails(bpy.ops.ple.tessellate, "tessellation is not available", style="CHOCC")
-        assert len(bpy.data.meshes) == before
-        return
-    from ple.tessellate import tessellate
+    from ple.meshing.tessellate import tessellate
 
-    lat = core.program.load_lattice("cubic")
+    lat = core.load_lattice("cubic")
     for style in ("CHOCC", "CNT"):
         assert bpy.ops.ple.tessellate(style=style) == {"FINISHED"}
         me = bpy.data.objects[f"{rig.name}.{style.lower()}"].data
@@ -492,24 +489,23 @@ def case_export():
     import trimesh
 
     rig = new_rig("cubic", region=(3, 3, 2))
-    lat = core.program.load_lattice("cubic")
+    lat = core.load_lattice("cubic")
     tmp = Path(tempfile.mkdtemp())
     assert bpy.ops.ple.export(filepath=str(tmp / "r.stl"), style="BALLS_BEAMS") == {"FINISHED"}
     mesh = trimesh.load(tmp / "r.stl")
     ev = lat.evaluate("0:3,0:3,0:2")
-    want = core.preview.balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
+    want = core.meshing.preview.balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
     assert len(mesh.faces) == len(want.faces)
     assert np.allclose(mesh.bounds, want.bounds, atol=1e-5)
-    if ple_ext.corelink.optional("tessellate") is not None:
-        from ple.tessellate import tessellate
+    from ple.meshing.tessellate import tessellate
 
-        exact = tessellate(lat, "0:3,0:3,0:2", "chocc")
-        assert bpy.ops.ple.export(filepath=str(tmp / "c.stl"), style="CHOCC") == {"FINISHED"}  # streamed by box
-        got = trimesh.load(tmp / "c.stl")
-        assert len(got.faces) == len(exact.faces) and got.is_watertight
-        assert np.isclose(got.volume, exact.volume, rtol=1e-5)
-        assert bpy.ops.ple.export(filepath=str(tmp / "c.ply"), style="CNT") == {"FINISHED"}
-        assert len(trimesh.load(tmp / "c.ply").faces) == len(tessellate(lat, "0:3,0:3,0:2", "cnt").faces)
+    exact = tessellate(lat, "0:3,0:3,0:2", "chocc")
+    assert bpy.ops.ple.export(filepath=str(tmp / "c.stl"), style="CHOCC") == {"FINISHED"}  # streamed by box
+    got = trimesh.load(tmp / "c.stl")
+    assert len(got.faces) == len(exact.faces) and got.is_watertight
+    assert np.isclose(got.volume, exact.volume, rtol=1e-5)
+    assert bpy.ops.ple.export(filepath=str(tmp / "c.ply"), style="CNT") == {"FINISHED"}
+    assert len(trimesh.load(tmp / "c.ply").faces) == len(tessellate(lat, "0:3,0:3,0:2", "cnt").faces)
     assert rig.ple.status == "" and sorted(p.name for p in tmp.iterdir() if p.name.startswith(".")) == []
     # Esc in the modal run closes the step generator between steps: nothing is written
     op = type("Op", (), {"filepath": str(tmp / "cancelled.stl"), "style": "CHOCC", "report": print})()
@@ -571,7 +567,7 @@ class CheckedLayout:
 
 def case_becots_corners():
     rig = new_rig("becots_kagome")
-    lat = core.program.load_lattice("becots_kagome")
+    lat = core.load_lattice("becots_kagome")
     corners = lat.becots.to_ir()["corners"]
     p = ple_ext.rig.parts(rig)
     for label, c in zip("ABCD", corners):
@@ -600,7 +596,7 @@ def main(zip_path: str, out: str) -> None:
 
     bpy = _bpy
     core = _core
-    for name in ("cage", "filters", "ir", "preview", "program", "snippets"):
+    for name in ("model.cage", "filters", "model.ir", "io.irfile", "meshing.preview", "program.snippets"):
         __import__(f"ple.{name}")
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)

@@ -7,10 +7,11 @@ import json
 import numpy as np
 import pytest
 import trimesh
-from ple.batch import parse_sweep, plan, run_batch
-from ple.cli import main
+from ple.app.batch import parse_sweep, plan, run_batch
+from ple.cli.main import main
 from ple.errors import PleError
-from ple.program import Param, load_lattice
+from ple.program.runtime import Param
+from ple.program.sources import load_lattice
 
 
 def test_sweep_syntax():

@@ -8,8 +8,8 @@ import sys
 from pathlib import Path
 
 import trimesh
-from ple.program import load_lattice
-from ple.tessellate import tessellate
+from ple.meshing.tessellate import tessellate
+from ple.program.sources import load_lattice
 
 ROOT = Path(__file__).resolve().parent.parent
 

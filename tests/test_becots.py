@@ -14,22 +14,17 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
-from ple import biq
-from ple.becots import (
-    BeCOTSField,
-    becots_lattice,
-    becots_of,
-    constant_radius_connectors,
-    kabsch,
-    set_field,
-    stack_lattice,
-    stack_pmc,
-)
+from ple.algebra.similarity import Rotation, Screw, Translation
 from ple.errors import PleError
-from ple.ir import lattice_from_dict, lattice_to_dict, save_ir
-from ple.lattice import Lattice
-from ple.program import load_lattice
-from ple.similarity import Rotation, Screw, Translation
+from ple.io.irfile import save_ir
+from ple.meshing.connectors import constant_radius_connectors, kabsch
+from ple.model.becots import BeCOTSField, becots_of
+from ple.model.becots_builders import becots_lattice, set_field, stack_lattice
+from ple.model.ir import lattice_from_dict, lattice_to_dict
+from ple.model.lattice import Lattice
+from ple.program.sources import load_lattice
+from ple.queries import biq
+from ple.queries.becots_rangefinder import stack_pmc
 from scipy.spatial import cKDTree
 
 CORNERS = [[0, 0, 0], [0, 3, 0.5], [3.5, 3.2, 1.5], [3, 0, 0.2]]
@@ -325,7 +320,7 @@ def test_constant_radius_connectors_are_congruent_per_class():
 
 
 def _connector_of(lat, centers, row, radius, beam_radius, mesh=False):
-    from ple.becots import connector_mesh, connector_points
+    from ple.meshing.connectors import connector_mesh, connector_points
 
     ev = lat.evaluate()
     me = int(np.nonzero((ev.node_index == row).all(axis=1))[0][0])

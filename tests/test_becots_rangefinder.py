@@ -7,10 +7,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from ple import becots_rangefinder as brf
-from ple import biq
-from ple.becots import BeCOTSField, becots_lattice, stack_lattice
-from ple.similarity import Rotation, Translation
+from ple.algebra.similarity import Rotation, Translation
+from ple.model.becots import BeCOTSField
+from ple.model.becots_builders import becots_lattice, stack_lattice
+from ple.queries import becots_rangefinder as brf
+from ple.queries import biq
 
 CORNERS = [[0, 0, 0], [0, 3, 0.5], [3.5, 3.2, 1.5], [3, 0, 0.2]]
 

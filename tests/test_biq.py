@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from ple import biq
-from ple.cli import main
-from ple.elements import beam_distance
-from ple.lattice import Lattice
-from ple.program import load_lattice
-from ple.rangefinder import cached_plan, row_candidates
-from ple.similarity import Rotation, Scaling, Screw, Similarity, Swirl, Translation
+from ple.algebra.elements import beam_distance
+from ple.algebra.similarity import Rotation, Scaling, Screw, Similarity, Swirl, Translation
+from ple.cli.main import main
+from ple.model.lattice import Lattice
+from ple.program.sources import load_lattice
+from ple.queries import biq
+from ple.queries.rangefinder import cached_plan, row_candidates
 
 KINDS = ("translation", "rotation", "scaling", "screw", "swirl")
 

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from ple import Lattice, PleError, Pt, Rotation, Scaling, Screw, Swirl, Translation, Vec
-from ple.cage import (
+from ple.model.cage import (
     base_frame,
     cage_curves,
     cage_point,
@@ -14,7 +14,7 @@ from ple.cage import (
     map_points,
     placement_from_frame,
 )
-from ple.program import load_lattice
+from ple.program.sources import load_lattice
 from scipy.linalg import fractional_matrix_power
 
 

@@ -10,7 +10,8 @@ import pytest
 import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from ple.chocc import (
+from ple.errors import PleError
+from ple.meshing.chocc import (
     apollonius_planes,
     appendix_a,
     chocc,
@@ -22,7 +23,6 @@ from ple.chocc import (
     pair_hull_mesh,
     sampled_segments,
 )
-from ple.errors import PleError
 from scipy.optimize import least_squares
 from scipy.spatial import ConvexHull
 

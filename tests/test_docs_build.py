@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 from PIL import Image
-from ple.docs_build import api_reference, presets_page, render
-from ple.preview import balls_beams_mesh
-from ple.program import load_lattice, preset_names
+from ple.meshing.preview import balls_beams_mesh
+from ple.program.presets import preset_names
+from ple.program.sources import load_lattice
+
+from tools.docs_build import api_reference, presets_page, render
 
 
 def test_api_reference_covers_the_program_api():
@@ -36,7 +38,7 @@ def test_render_produces_a_picture_of_the_lattice(tmp_path):
 
 def test_every_preset_has_a_rendered_thumbnail():
     """make docs renders one per preset (re-rendered when the preset changes)."""
-    from ple.docs_build import THUMBS
+    from tools.docs_build import THUMBS
     for name in preset_names():
         png = THUMBS / f"{name}.png"
         assert png.is_file(), f"{name}: run make docs"

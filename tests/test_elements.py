@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from ple.elements import ball_ball_interfere, ball_beam_interfere, beam_distance, enclosing_ball
+from ple.algebra.elements import ball_ball_interfere, ball_beam_interfere, beam_distance, enclosing_ball
 
 T = np.linspace(0.0, 1.0, 8001)
 

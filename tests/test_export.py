@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 import trimesh
 from lxml import etree
-from ple.cli import main
+from ple.cli.main import main
 from ple.errors import PleError
-from ple.export import NS_BALLS, NS_BEAM, NS_CORE, export_mesh, write_beam_lattice_3mf, write_stl
-from ple.program import load_lattice
-from ple.tessellate import tessellate
+from ple.io.export import NS_BALLS, NS_BEAM, NS_CORE, export_mesh, write_beam_lattice_3mf, write_stl
+from ple.meshing.tessellate import tessellate
+from ple.program.sources import load_lattice
 
 
 def read_stl(path):

@@ -7,11 +7,11 @@ import json
 
 import numpy as np
 import pytest
-from ple.cli import main
-from ple.commands.mesh import monte_carlo_volume
-from ple.filters import evaluate_lattice
-from ple.program import load_lattice
-from ple.tessellate import tessellate
+from ple.cli.main import main
+from ple.cli.mesh import monte_carlo_volume
+from ple.filters.base import evaluate_lattice
+from ple.meshing.tessellate import tessellate
+from ple.program.sources import load_lattice
 
 CASES = [("hier_stencil", {"n": 7, "period": 3}), ("hier_lil2", {"n": 8, "coarse_cells": 1}),
          ("hier_gyroid", {"n": 7, "cell": 5.0, "level": 0.0})]

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from ple.algebra.similarity import Rotation, Scaling, Screw, Swirl, Translation
+from ple.cli.common import parse_stencil
 from ple.errors import PleError
-from ple.filters import FilteredLattice, LiL, Stencil, lil
-from ple.lattice import Lattice
-from ple.similarity import Rotation, Scaling, Screw, Swirl, Translation
+from ple.filters.base import FilteredLattice
+from ple.filters.lil import LiL, lil
+from ple.filters.stencil import Stencil
+from ple.model.lattice import Lattice
 
 KINDS = ("translation", "rotation", "scaling", "screw", "swirl")
 
@@ -104,7 +107,7 @@ def brute_lil_mask(fine: Lattice, coarse_ev):
 
 def brute_filtered(lat: Lattice, keep):
     """An Evaluation-like of lat's surviving elements (from a brute mask) for cascades."""
-    from ple.filters import select
+    from ple.filters.base import select
 
     return select(lat.evaluate(), keep)
 
@@ -199,13 +202,13 @@ def test_named_stencils():
     assert Stencil.named("corners", (2, 3, 4)).array.sum() == 1
     c = Stencil.named("checker", 4).array
     assert c.sum() == 32 and c[0, 0, 0] and not c[2, 0, 0]
-    assert Stencil.parse("layers:2x2x5:2").array.sum() == 2 * 2 * 2
+    assert parse_stencil("layers:2x2x5:2").array.sum() == 2 * 2 * 2
 
 
 @pytest.mark.parametrize("bad", ["nope:4", "edges:0", "edges:a", "edges:2x2", "edges:2:0", "x.npy"])
 def test_bad_stencils(bad):
     with pytest.raises(PleError):
-        Stencil.parse(bad)
+        parse_stencil(bad)
 
 
 def test_bad_filter_inputs():
@@ -225,8 +228,8 @@ def test_bad_filter_inputs():
 
 # ----- command line --------------------------------------------------------------------------------
 def test_cli_lil_cascade_matches_api(tmp_path, capsys):
-    from ple.cli import main
-    from ple.program import load_lattice
+    from ple.cli.main import main
+    from ple.program.sources import load_lattice
 
     out = tmp_path / "lil.npz"
     argv = ["lil", "thesis_regular", "--param", "n=12", "--coarse", "lil_regular_coarse:n=4,span=11",
@@ -244,8 +247,8 @@ def test_cli_lil_cascade_matches_api(tmp_path, capsys):
 
 
 def test_cli_lil_with_stencil_and_region(tmp_path):
-    from ple.cli import main
-    from ple.program import load_lattice
+    from ple.cli.main import main
+    from ple.program.sources import load_lattice
 
     out = tmp_path / "s.npz"
     assert main(["lil", "bcc", "--param", "n=10", "--coarse", "cubic:n=3,cell=4.5,radius=0.1",
@@ -267,7 +270,7 @@ def test_cli_lil_with_stencil_and_region(tmp_path):
     ["filter", "bcc", "--implicit", "blob", "--out", "X"],
 ])
 def test_cli_bad_input(tmp_path, capsys, argv):
-    from ple.cli import main
+    from ple.cli.main import main
 
     argv = [str(tmp_path / "o.npz") if a == "X" else a for a in argv]
     assert main(argv) == 2
@@ -294,8 +297,8 @@ def test_program_filters_are_honoured():
 
 
 def test_cli_filter_applies_the_programs_own_filter(tmp_path):
-    from ple.cli import main
-    from ple.program import load_lattice
+    from ple.cli.main import main
+    from ple.program.sources import load_lattice
 
     out = tmp_path / "h.npz"
     assert main(["filter", "hier_lil2", "--param", "n=10", "--stencil", "checker:4", "--out", str(out)]) == 0

@@ -9,9 +9,10 @@ import sys
 import numpy as np
 import pytest
 from conftest import reference_matrix
-from ple.cli import main
-from ple.ir import lattice_from_dict, lattice_to_dict
-from ple.program import load_lattice, preset_names
+from ple.cli.main import main
+from ple.model.ir import lattice_from_dict, lattice_to_dict
+from ple.program.presets import preset_names
+from ple.program.sources import load_lattice
 
 KINDS = {
     "identity": {},

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from conftest import reference_matrix
 from ple import Lattice, PleError, Pt, Similarity, Translation, Vec, load_lattice
-from ple.program import preset_names
+from ple.program.presets import preset_names
 from scipy.spatial.transform import Rotation as SciRotation
 
 
@@ -188,8 +188,8 @@ def test_every_preset_builds_and_evaluates(name):
 
 def test_program_filters_apply_in_eval(tmp_path):
     """A program may attach a filter (thesis §9); ple eval keeps exactly the accepted nodes."""
-    from ple.cli import main
-    from ple.filters import Stencil
+    from ple.cli.main import main
+    from ple.filters.stencil import Stencil
     lat = load_lattice("hier_stencil", {"n": 8, "period": 3})
     keep = Stencil.named("edges", 3, 1).node_mask(lat, lat.evaluate().node_index, None, None)
     out = tmp_path / "e.npz"

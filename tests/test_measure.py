@@ -7,11 +7,11 @@ import math
 
 import numpy as np
 import pytest
-from ple.elements import beam_distance, enclosing_ball
+from ple.algebra.elements import beam_distance, enclosing_ball
+from ple.algebra.similarity import Rotation, Scaling, Screw, Swirl, Translation
 from ple.errors import PleError
-from ple.lattice import Lattice
-from ple.measure import HalfBeam, hub_measures, hub_measures_batch, lattice_measures, lattice_volume
-from ple.similarity import Rotation, Scaling, Screw, Swirl, Translation
+from ple.measure.integrals import HalfBeam, hub_measures, hub_measures_batch, lattice_measures, lattice_volume
+from ple.model.lattice import Lattice
 
 
 def revolution_measures(ra, rb, length, n=400001):
@@ -225,8 +225,8 @@ def test_bad_method_names_it():
 def test_adaptive_hubs_of_a_preset_within_0_1_percent_of_a_fine_grid():
     """fig6_3 (scaling, rotation, swirl; 8 beams per hub, unequal radii): sampled boundary and
     interior hubs of its closed-form path vs a fixed 128 × 128-per-face grid."""
-    from ple import measure
-    from ple.program import load_lattice
+    from ple.measure import integrals as measure
+    from ple.program.sources import load_lattice
 
     lat = load_lattice("fig6_3", {})
     reach = [1, 1, 1]

@@ -10,7 +10,7 @@ from conftest import reference_matrix, similarities
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from ple import PleError, Pt, Rotation, Scaling, Screw, Similarity, Swirl, Translation, Vec
-from ple.similarity import similarity_from_dict
+from ple.algebra.similarity import similarity_from_dict
 
 
 def close(a, b, tol=1e-9):
@@ -192,7 +192,7 @@ def test_bad_input_is_named(build, message):
 
 
 def test_to_code_round_trips_through_the_program_api():
-    from ple.program import API
+    from ple.program.runtime import API
     for s in [Swirl(0.224, Vec(0, 1, 0), Pt(10.872, 0, 0.039), 0.953), Screw(1, Vec(0, 0, 1), Pt(1, 2, 3), 0.5),
               Translation(Vec(1, 0, 0)), Scaling(1.187, Pt(-3.333, 0, 0)), Similarity()]:
         assert close(eval(s.to_code(12), dict(API)).matrix, s.matrix, 1e-10)  # noqa: S307

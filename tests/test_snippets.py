@@ -5,8 +5,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from ple import PleError, Pt, Rotation, Scaling, Screw, Swirl, Translation, Vec
-from ple.program import compile_program, preset_names, preset_path
-from ple.snippets import (
+from ple.program.presets import preset_names, preset_path
+from ple.program.runtime import compile_program
+from ple.program.snippets import (
     AddBeam,
     AddNode,
     MoveNode,

@@ -6,10 +6,13 @@ import json
 
 import numpy as np
 import pytest
+from ple.app.progress import Progress
 from ple.errors import PleError
-from ple.filters import Filter, FilteredLattice, LiL, Stencil
-from ple.implicit import ImplicitFilter, TPMSField
-from ple.stream import Progress, iter_chunks, load_chunks, read_manifest, stream_filter
+from ple.filters.base import Filter, FilteredLattice
+from ple.filters.implicit import ImplicitFilter, TPMSField
+from ple.filters.lil import LiL
+from ple.filters.stencil import Stencil
+from ple.io.chunks import iter_chunks, load_chunks, read_manifest, stream_filter
 from test_filters import KINDS, centre_on, random_lattice
 
 
@@ -121,8 +124,8 @@ def test_progress_bar_writes_to_a_terminal_only():
 
 
 def test_cli_filter_streams_chunks(tmp_path):
-    from ple.cli import main
-    from ple.program import load_lattice
+    from ple.cli.main import main
+    from ple.program.sources import load_lattice
 
     out = tmp_path / "chunks"
     argv = ["filter", "bcc", "--param", "n=9", "--implicit", "gyroid:cell=4,level=0.6,sheet", "--stencil", "edges:3",

@@ -9,11 +9,13 @@ import pytest
 import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from ple.algebra.similarity import Similarity
 from ple.errors import PleError
-from ple.lattice import Lattice
-from ple.program import load_lattice, preset_names
-from ple.similarity import Similarity
-from ple.tessellate import _Tessellator, tessellate, write_mesh
+from ple.io.export import write_mesh
+from ple.meshing.tessellate import _Tessellator, tessellate
+from ple.model.lattice import Lattice
+from ple.program.presets import preset_names
+from ple.program.sources import load_lattice
 
 STYLES = [("cnt", None), ("chocc", None), ("refined", 1)]
 
@@ -35,7 +37,7 @@ def assert_closed(mesh, merged=True):
 
 def assert_closed_unless_filtered_away(lat, mesh, region=None):
     """A program's filter (thesis §9) may keep no node of a small corner: then the mesh is empty."""
-    from ple.filters import evaluate_lattice
+    from ple.filters.base import evaluate_lattice
     if lat.filter is not None and len(evaluate_lattice(lat, region).center) == 0:
         assert len(mesh.faces) == 0
     else:
@@ -226,8 +228,8 @@ def test_balls_beams_preview_and_bad_input():
 def test_placement_similarity_scales_volume(style):
     """Hub meshes live in the template frame: a placement G = rotation ∘ scaling by s moves
     the mesh rigidly and multiplies its volume by s³."""
-    from ple.geometry import Pt, Vec
-    from ple.similarity import Rotation, Scaling
+    from ple.algebra.similarity import Rotation, Scaling
+    from ple.algebra.vectors import Pt, Vec
 
     lat = small("octet")
     base = tessellate(lat, style=style, levels=2)

@@ -1,11 +1,12 @@
 """PLE — the Programmed Lattice Editor core: lattice programs, similarities, lazy evaluation,
 queries, filters and tessellation, with no Blender dependency."""
 
+from .algebra.similarity import Identity, Rotation, Scaling, Screw, Similarity, Swirl, Translation
+from .algebra.vectors import Pt, Vec
 from .errors import PleError
-from .geometry import Pt, Vec
-from .lattice import BeamPattern, Direction, Evaluation, Lattice, Node, Region
-from .program import Range, compile_program, load_lattice
-from .similarity import Identity, Rotation, Scaling, Screw, Similarity, Swirl, Translation
+from .model.lattice import BeamPattern, Direction, Evaluation, Lattice, Node, Region
+from .program.runtime import Range, compile_program
+from .program.sources import load_lattice
 
 __version__ = "0.1.0"
 

@@ -12,9 +12,10 @@ import time
 
 import numpy as np
 
-from .. import biq
-from ..becots import BeCOTSField, becots_lattice, stack_lattice, stack_pmc
-from ..becots_rangefinder import PLAN_ATTR, query
+from ..model.becots import BeCOTSField
+from ..model.becots_builders import becots_lattice, stack_lattice
+from ..queries import biq
+from ..queries.becots_rangefinder import PLAN_ATTR, query, stack_pmc
 from ._timing import best_of
 
 

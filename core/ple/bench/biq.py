@@ -7,8 +7,8 @@ import time
 
 import numpy as np
 
-from ..biq import query
-from ..program import load_lattice
+from ..program.sources import load_lattice
+from ..queries.biq import query
 from ._timing import best_of
 
 THESIS_MS = {"thesis_regular": 5.86, "thesis_cylindrical": 55.4, "thesis_warped": 3680.0}

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..lattice import Lattice
-from ..program import load_lattice
+from ..model.lattice import Lattice
+from ..program.sources import load_lattice
 from ._timing import best_of
 
 

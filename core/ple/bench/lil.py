@@ -17,10 +17,11 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..elements import ball_ball_interfere, ball_beam_interfere, enclosing_ball
-from ..filters import FilteredLattice, lil, select
-from ..implicit import FourierField, ImplicitFilter, TPMSField, sample_grid
-from ..program import load_lattice
+from ..algebra.elements import ball_ball_interfere, ball_beam_interfere, enclosing_ball
+from ..filters.base import FilteredLattice, select
+from ..filters.implicit import FourierField, ImplicitFilter, TPMSField, sample_grid
+from ..filters.lil import lil
+from ..program.sources import load_lattice
 from ._timing import best_of
 
 CASES = [

@@ -13,8 +13,8 @@ import time
 
 import numpy as np
 
-from .. import measure
-from ..program import load_lattice
+from ..measure import integrals as measure
+from ..program.sources import load_lattice
 
 PRESETS = "thesis_regular,thesis_cylindrical,thesis_warped,fig6_3,octet,fcc,cubic,bcc,warped"
 

@@ -14,9 +14,9 @@ import time
 import numpy as np
 import trimesh
 
-from ..export import write_stl
-from ..program import load_lattice
-from ..tessellate import tessellate
+from ..io.export import write_stl
+from ..meshing.tessellate import tessellate
+from ..program.sources import load_lattice
 from ._timing import best_of
 
 CHILD = """

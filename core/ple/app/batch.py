@@ -1,0 +1,158 @@
+"""Batch export of parameter variants: ``ple batch`` (and the engine of the Blender batch).
+
+A sweep gives each input either one value (``thickness=0.05``), a list
+(``thickness=0.05,0.07``) or a range ``lo:hi:n`` (n evenly spaced values, ends included);
+the variants are the Cartesian product. Each variant is built, meshed and written to
+``DIR/<stem>__<name>-<value>….<ext>``; ``DIR/manifest.json`` records what was produced.
+Finished outputs are skipped on a re-run (resume), the work runs on a process pool and
+progress goes to stderr.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import PleError
+from ..io.export import export_mesh
+from ..io.files import atomic_write_text
+from ..io.formats import format_named
+from ..meshing.styles import style as style_named
+from ..meshing.tessellate import tessellate
+from ..program.runtime import Param, load_program_file, parse_param_value
+from ..program.sources import load_lattice, resolve_source
+from .progress import Progress
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One point of a sweep: its parameter values and output file name."""
+
+    params: dict
+    filename: str
+
+
+def parse_sweep(param: Param, text: str) -> list:
+    """Values of one ``--param`` sweep: ``v``, ``v1,v2,…`` or ``lo:hi:n``."""
+    if ":" in text and param.kind in (int, float):
+        parts = text.split(":")
+        if len(parts) != 3:
+            raise PleError(f"--param {param.name}={text}: a range reads lo:hi:n")
+        lo, hi = (parse_param_value(param, p) for p in parts[:2])
+        try:
+            n = int(parts[2])
+        except ValueError:
+            raise PleError(f"--param {param.name}={text}: the count n must be an integer") from None
+        if n < 1:
+            raise PleError(f"--param {param.name}={text}: the count n must be at least 1")
+        values = np.linspace(float(lo), float(hi), n)
+        return [int(round(v)) for v in values] if param.kind is int else [float(v) for v in values]
+    return [parse_param_value(param, p) for p in text.split(",")]
+
+
+def _value_text(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return str(v).replace(os.sep, "_")
+
+
+def plan(source: str, sweeps: list[str], fmt: str) -> tuple[str, list[Variant]]:
+    """The variants of a sweep over a program's inputs (the program is compiled once)."""
+    format_named(fmt)
+    path = resolve_source(source)
+    if path.suffix != ".py":
+        if sweeps:
+            raise PleError(f"{source}: a .json lattice file has no inputs to sweep")
+        return str(path), [Variant({}, f"{path.stem}.{fmt}")]
+    prog = load_program_file(path)
+    known = {p.name: p for p in prog.parameters()}
+    axes: dict[str, list] = {}
+    for s in sweeps:
+        if "=" not in s:
+            raise PleError(f"--param {s!r}: expected NAME=VALUES")
+        name, text = (x.strip() for x in s.split("=", 1))
+        if name not in known:
+            raise PleError(f"--param {name}: unknown parameter (inputs: {', '.join(known) or 'none'})")
+        axes[name] = parse_sweep(known[name], text)
+    variants = []
+    for combo in itertools.product(*axes.values()):
+        params = dict(zip(axes, combo))
+        tag = "__".join(f"{k}-{_value_text(v)}" for k, v in params.items())
+        variants.append(Variant(params, f"{path.stem}{'__' + tag if tag else ''}.{fmt}"))
+    return str(path), variants
+
+
+def build_mesh(lat, style: str, levels: int | None = None, region=None):
+    """Mesh of a lattice (region) in a style: the core's tessellation or the preview."""
+    style_named(style)  # balls-beams too, with the program's filter applied
+    kwargs = {"levels": levels} if levels is not None else {}
+    return tessellate(lat, region=region, style=style, **kwargs)
+
+
+def _run_variant(source: str, params: dict, style: str, levels, region, out: str) -> dict:
+    """Worker: build, mesh and write one variant; returns its manifest entry."""
+    t0 = time.perf_counter()
+    lat = load_lattice(source, params)
+    mesh = build_mesh(lat, style, levels, region)
+    export_mesh(mesh, Path(out))
+    return {"file": Path(out).name, "params": params, "triangles": int(len(mesh.faces)),
+            "bytes": Path(out).stat().st_size, "seconds": round(time.perf_counter() - t0, 3),
+            "watertight": bool(mesh.is_watertight) if style != "balls-beams" else False}
+
+
+def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", fmt: str = "stl",
+              levels: int | None = None, region: str | None = None, jobs: int | None = None,
+              progress=True) -> dict:
+    """Export every variant of a sweep; skip those already in the manifest with their file."""
+    style_named(style)
+    path, variants = plan(source, sweeps, fmt)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    manifest_path = out / "manifest.json"
+    manifest = read_manifest(manifest_path)
+    done = {e["file"] for e in manifest["outputs"] if (out / e["file"]).is_file()}
+    todo = [v for v in variants if v.filename not in done]
+    manifest.update({"program": path, "style": style, "format": fmt, "region": region})
+    manifest["outputs"] = [e for e in manifest["outputs"] if e["file"] in done]
+    jobs = max(1, min(jobs or os.cpu_count() or 1, len(todo) or 1))
+    failures = []
+    t0 = time.perf_counter()
+    bar = Progress(len(todo), "batch", enabled=None if progress else False)
+    if todo:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            futures = {pool.submit(_run_variant, path, v.params, style, levels, region, str(out / v.filename)): v
+                       for v in todo}
+            for fut in as_completed(futures):
+                v = futures[fut]
+                try:
+                    manifest["outputs"].append(fut.result())
+                except PleError as exc:
+                    failures.append({"file": v.filename, "params": v.params, "error": str(exc)})
+                atomic_write_text(manifest_path, json.dumps(manifest, indent=1) + "\n")
+                if bar:
+                    bar.update(1, v.filename)
+    if bar:
+        bar.close()
+    manifest["failures"] = failures
+    atomic_write_text(manifest_path, json.dumps(manifest, indent=1) + "\n")
+    return {"written": len(todo) - len(failures), "skipped": len(variants) - len(todo), "failed": failures,
+            "manifest": str(manifest_path), "seconds": time.perf_counter() - t0}
+
+
+def read_manifest(path: Path) -> dict:
+    if not path.is_file():
+        return {"format": "ple-batch/1", "outputs": []}
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError:
+        raise PleError(f"{path}: existing manifest is not valid JSON; move it away to start afresh") from None
+    if not isinstance(data, dict) or not isinstance(data.get("outputs"), list):
+        raise PleError(f"{path}: existing manifest has no 'outputs' list")
+    return data

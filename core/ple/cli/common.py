@@ -1,0 +1,79 @@
+"""Argument helpers shared by sub-commands (not itself a command): the lattice argument and the
+small languages of ``--stencil`` and ``--implicit``."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from ..algebra.similarity import Translation
+from ..errors import PleError
+from ..filters.implicit import VARIANTS, Field, FourierField, ImplicitFilter, TPMSField
+from ..filters.stencil import Stencil
+from ..model.lattice import Lattice
+from ..program.sources import load_lattice
+
+
+def add_lattice_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("lattice", metavar="LATTICE", help="a program .py, an IR .json, or a preset name")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="set a program input (repeatable)")
+
+
+def lattice_from_args(args) -> Lattice:
+    return load_lattice(args.lattice, args.param)
+
+
+def parse_stencil(text: str) -> Stencil:
+    """``NAME[:P|PxQxR][:W]`` (a named stencil) or a ``.npy`` file holding a Boolean array."""
+    if text.endswith(".npy"):
+        try:
+            return Stencil(np.load(text, allow_pickle=False))
+        except OSError as exc:
+            raise PleError(f"--stencil {text}: {exc.strerror or exc}") from None
+        except ValueError as exc:
+            raise PleError(f"--stencil {text}: {exc}") from None
+    parts = text.split(":")
+    try:
+        period = [int(p) for p in parts[1].split("x")] if len(parts) > 1 else [4]
+        width = int(parts[2]) if len(parts) > 2 else 1
+    except ValueError:
+        raise PleError(f"--stencil {text!r}: expected NAME[:PERIOD or PxQxR][:WIDTH]") from None
+    if len(period) not in (1, 3) or len(parts) > 3:
+        raise PleError(f"--stencil {text!r}: expected NAME[:PERIOD or PxQxR][:WIDTH]")
+    return Stencil.named(parts[0], period[0] if len(period) == 1 else period, width)
+
+
+def parse_implicit(text: str) -> ImplicitFilter:
+    """``KIND[:key=value,...]`` with KIND a TPMS name or ``fourier`` (key ``file=F.npz``);
+    keys ``cell`` (number or AxBxC), ``level``, ``variant`` (network|sheet) or a bare
+    ``sheet``/``network``, ``origin`` (x/y/z, the placement's translation)."""
+    kind, _, rest = text.partition(":")
+    opts: dict[str, str] = {}
+    for item in filter(None, rest.split(",")):
+        key, eq, value = item.partition("=")
+        if not eq:
+            if key in VARIANTS:
+                opts["variant"] = key
+                continue
+            raise PleError(f"--implicit {text!r}: expected key=value, got {item!r}")
+        opts[key.strip()] = value.strip()
+    unknown = set(opts) - {"cell", "level", "variant", "origin", "file"}
+    if unknown:
+        raise PleError(f"--implicit {text!r}: unknown key(s) {', '.join(sorted(unknown))}")
+    try:
+        cell_parts = [float(x) for x in opts.get("cell", "1").split("x")]
+        cell = cell_parts[0] if len(cell_parts) == 1 else cell_parts
+        level = float(opts.get("level", "0"))
+        origin = [float(x) for x in opts["origin"].split("/")] if "origin" in opts else None
+    except ValueError:
+        raise PleError(f"--implicit {text!r}: cell, level and origin must be numbers") from None
+    placement = Translation(origin) if origin is not None else None
+    if kind == "fourier":
+        if "file" not in opts:
+            raise PleError(f"--implicit {text!r}: a fourier field needs file=COEFFS.npz")
+        field: Field = FourierField.load(opts["file"], cell, placement)
+    else:
+        field = TPMSField(kind, cell, placement)
+    return ImplicitFilter(field, level, opts.get("variant", "network"))

@@ -1,0 +1,95 @@
+"""``ple filter LATTICE [--stencil S] [--implicit SPEC] [--coarse C] [--region R] --out F.npz|DIR``.
+
+Filters combine with *and*: a node survives when every given filter keeps it; a beam when
+both of its nodes survive (thesis §9). ``--out`` ending in ``.npz`` evaluates in memory
+(arrays as ``ple eval``); any other ``--out`` is a directory of streamed chunks (ple.stream).
+"""
+
+from __future__ import annotations
+
+from ..app.progress import Progress
+from ..errors import PleError
+from ..filters.base import Filter, FilteredLattice
+from ..filters.lil import lil
+from ..io.chunks import DEFAULT_SLAB_GROUPS, stream_filter
+from ..io.files import save_npz
+from ..program.sources import load_lattice
+from .common import add_lattice_args, lattice_from_args, parse_implicit, parse_stencil
+from .eval import MAX_EVAL_GROUPS
+
+
+def register(sub) -> None:
+    p = sub.add_parser("filter", help="filter a lattice (stencil, implicit field, LiL) to .npz or chunks")
+    add_lattice_args(p)
+    p.add_argument("--stencil", action="append", default=[], metavar="S",
+                   help="NAME[:P|PxQxR][:WIDTH] (corners, edges, faces, checker, layers) or a Boolean .npy")
+    p.add_argument("--implicit", action="append", default=[], metavar="SPEC",
+                   help="KIND[:cell=C,level=L,sheet|network,origin=x/y/z] with KIND gyroid, schwarz_p, "
+                        "schwarz_d, diamond, iwp, or fourier:file=COEFFS.npz")
+    add_output_args(p)
+    p.set_defaults(func=run)
+
+
+def add_output_args(p) -> None:
+    p.add_argument("--coarse", action="append", default=[], metavar="C",
+                   help="LiL coarse lattice, SOURCE[:NAME=VALUE,...]; several cascade from finest to coarsest")
+    p.add_argument("--region", help="I0:I1,J0:J1,K0:K1 (half-open) of the filtered lattice; default: all")
+    p.add_argument("--out", help="output .npz (in memory) or a directory (streamed chunks)")
+    p.add_argument("--slab-groups", type=int, default=DEFAULT_SLAB_GROUPS,
+                   help=f"node-groups per streamed slab (default {DEFAULT_SLAB_GROUPS})")
+    p.add_argument("--method", choices=("auto", "elements", "biq"), default="auto",
+                   help="LiL test against the coarsest level (default auto)")
+
+
+def load_coarse(text: str):
+    """``SOURCE[:NAME=VALUE,...]``: a preset, program or IR with optional program inputs."""
+    source, sep, rest = text.partition(":")
+    if sep and "=" in rest:
+        return load_lattice(source, [x for x in rest.split(",") if x])
+    return load_lattice(text)
+
+
+def build(args, lat, parts: list[Filter]) -> FilteredLattice:
+    parts = list(parts)
+    if getattr(lat, "filter", None) is not None and not args.coarse:
+        parts.append(lat.filter)  # the program's own filter (with --coarse, lil() adds it)
+    parts += [parse_stencil(s) for s in getattr(args, "stencil", [])]
+    parts += [parse_implicit(s) for s in getattr(args, "implicit", [])]
+    extra = None
+    if parts:
+        extra = parts[0]
+        for f in parts[1:]:
+            extra = extra & f
+    if args.coarse:
+        return lil(lat, *(load_coarse(c) for c in args.coarse), extra=extra, method=args.method)
+    if extra is None:
+        raise PleError("no filter given: use --stencil, --implicit or --coarse")
+    return FilteredLattice(lat, extra)
+
+
+def write(args, flat: FilteredLattice) -> int:
+    lat = flat.lattice
+    region = lat.region(args.region)
+    total = f"of {region.groups * len(lat.nodes):,} nodes"
+    if args.out is None or args.out.endswith(".npz"):
+        if region.groups * len(lat.nodes) > MAX_EVAL_GROUPS:
+            raise PleError(f"region {region} has {region.groups * len(lat.nodes):,} nodes; "
+                           "give --out a directory to stream chunks instead of one .npz")
+        ev = flat.evaluate(region)
+        if args.out is not None:
+            save_npz(args.out, ev.arrays())
+        print(f"{'wrote ' + args.out if args.out else 'kept'}: {len(ev.center):,} nodes {total}, "
+              f"{len(ev.beam_nodes):,} beams")
+        return 0
+    bar = Progress(flat.lattice.region(region).groups, "filter")
+    manifest = stream_filter(flat, args.out, region, args.slab_groups, progress=bar)
+    print(f"wrote {args.out}/ ({len(manifest['chunks'])} chunks): {manifest['nodes']:,} nodes {total}, "
+          f"{manifest['beams']:,} beams")
+    return 0
+
+
+def run(args) -> int:
+    if args.out is None:
+        raise PleError("--out is required (a .npz file or a directory for streamed chunks)")
+    lat = lattice_from_args(args)
+    return write(args, build(args, lat, []))

@@ -1,1 +1,0 @@
-"""Sub-commands of ``ple``; every module here is discovered by ``ple.cli``."""

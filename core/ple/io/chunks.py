@@ -1,0 +1,132 @@
+"""Stream a filter over a lattice larger than memory: slabs in, ``.npz`` chunks out.
+
+The filtered lattice is walked slab by slab (``Lattice.iter_slabs``, boxes of node-groups in
+(i, j, k) order). Each node is decided once, in its own slab; its output row is global (the
+chunks' nodes concatenated in order). A beam is written with the later of its two slabs, when
+both of its nodes have been decided: the row maps of earlier slabs are kept only while a beam
+offset can still reach them (i-layers within max |di| of the current slab), so memory stays
+bounded by one slab plus a few i-layers of row maps.
+
+Output directory: ``manifest.json`` (format ``ple-chunks/1``) and ``chunk_NNNNNN.npz`` files
+with the arrays of ``ple eval`` — node_index, center, radius (this slab's surviving nodes),
+beam_index, beam_nodes (beams completed in this slab; rows index the concatenation of all
+chunks' nodes). ``load_chunks`` reassembles them into one Evaluation.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import PleError
+from ..filters.base import FilteredLattice, beams_between
+from ..model.lattice import Evaluation
+
+FORMAT = "ple-chunks/1"
+DEFAULT_SLAB_GROUPS = 1 << 18
+
+
+def stream_filter(flat: FilteredLattice, out_dir, region=None, slab_groups: int = DEFAULT_SLAB_GROUPS,
+                  progress=None) -> dict:
+    """Write the surviving nodes and beams of ``region`` (default: all) as chunks in ``out_dir``.
+
+    ``progress``: an object with ``update(groups, note)`` and ``close()`` (e.g.
+    ``ple.app.progress.Progress``), or None. Returns the manifest. The directory appears
+    complete or not at all (written beside it, then renamed); an existing chunk directory is
+    replaced, any other non-empty one refused."""
+    out = Path(out_dir)
+    if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (out / "manifest.json").exists())):
+        raise PleError(f"--out {out}: exists and is not a chunk directory (no manifest.json); not overwriting")
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        raise PleError(f"--out {out}: folder {parent} does not exist")
+    if int(slab_groups) < 1:
+        raise PleError(f"slab size must be at least 1 node-group, got {slab_groups}")
+    lat = flat.lattice
+    lat.validate()
+    r = lat.region(region)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
+    try:
+        manifest = _write_chunks(flat, r, tmp, int(slab_groups), progress)
+        if out.exists():
+            trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=parent))
+            out.rename(trash / "old")
+            tmp.rename(out)
+            shutil.rmtree(trash)
+        else:
+            tmp.rename(out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+    return manifest
+
+
+def _write_chunks(flat: FilteredLattice, r, folder: Path, slab_groups: int, progress) -> dict:
+    lat = flat.lattice
+    reach_i = max((abs(b.di) for b in lat.beams), default=0)
+    retained: list[tuple] = []  # (slab region, global row map) of slabs a later beam may reach
+    chunks, node_offset, beam_total = [], 0, 0
+    for n, slab in enumerate(lat.iter_slabs(slab_groups, r)):
+        nodes, rows = flat.region_rows(slab)
+        rows = np.where(rows >= 0, rows + node_offset, -1)
+        retained = [(s, m) for s, m in retained if s.i1 - 1 + reach_i >= slab.i0]
+        parts = [beams_between(lat, slab, rows, slab, rows)]
+        for s, m in retained:
+            parts.append(beams_between(lat, s, m, slab, rows))
+            parts.append(beams_between(lat, slab, rows, s, m))
+        idx = np.concatenate([p[0] for p in parts])
+        ends = np.concatenate([p[1] for p in parts])
+        order = np.lexsort((idx[:, 3], idx[:, 2], idx[:, 1], idx[:, 0]))
+        name = f"chunk_{n:06d}.npz"
+        with open(folder / name, "wb") as fh:
+            np.savez(fh, node_index=nodes.node_index, center=nodes.center, radius=nodes.radius,
+                     beam_index=idx[order], beam_nodes=ends[order])
+        chunks.append({"file": name, "region": str(slab), "nodes": len(nodes.node_index), "beams": len(idx),
+                       "node_offset": node_offset})
+        node_offset += len(nodes.node_index)
+        beam_total += len(idx)
+        retained.append((slab, rows))
+        if progress:
+            progress.update(slab.groups, f"{node_offset:,} nodes {beam_total:,} beams kept")
+    if progress:
+        progress.close()
+    manifest = {"format": FORMAT, "region": str(r), "counts": list(lat.counts), "nodes": node_offset,
+                "beams": beam_total, "chunks": chunks}
+    (folder / "manifest.json").write_text(json.dumps(manifest, indent=1))
+    return manifest
+
+
+def read_manifest(folder) -> dict:
+    path = Path(folder) / "manifest.json"
+    try:
+        manifest = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise PleError(f"{folder}: not a chunk directory ({exc})") from None
+    if manifest.get("format") != FORMAT:
+        raise PleError(f"{path}: format {manifest.get('format')!r}, expected {FORMAT}")
+    return manifest
+
+
+def iter_chunks(folder):
+    """Yield (chunk entry, arrays dict) in order, one chunk in memory at a time."""
+    folder = Path(folder)
+    for entry in read_manifest(folder)["chunks"]:
+        with np.load(folder / entry["file"], allow_pickle=False) as z:
+            yield entry, {k: z[k] for k in z.files}
+
+
+def load_chunks(folder) -> Evaluation:
+    """All chunks as one Evaluation, beams sorted by (i, j, k, pattern) as ``ple eval``."""
+    parts = [a for _, a in iter_chunks(folder)]
+    cat = {k: np.concatenate([p[k] for p in parts]) if parts else None for k in
+           ("node_index", "center", "radius", "beam_index", "beam_nodes")}
+    if not parts:
+        return Evaluation(np.zeros((0, 4), np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 4), np.int64),
+                          np.zeros((0, 2), np.int64))
+    idx = cat["beam_index"]
+    order = np.lexsort((idx[:, 3], idx[:, 2], idx[:, 1], idx[:, 0]))
+    return Evaluation(cat["node_index"], cat["center"], cat["radius"], idx[order], cat["beam_nodes"][order])

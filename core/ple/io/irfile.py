@@ -1,0 +1,33 @@
+"""``ple-lattice/1`` files (SPEC §5): read and validate, write atomically. Loading never runs code."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from ..errors import PleError
+from ..model.ir import lattice_from_dict, lattice_to_dict
+from ..model.lattice import Lattice
+from .files import atomic_write_text
+
+
+def load_ir(path) -> Lattice:
+    """Load and validate a ``ple-lattice/1`` file."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise PleError(f"{path}: cannot read ({exc.strerror})") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise PleError(f"{path}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+    try:
+        return lattice_from_dict(data)
+    except PleError as exc:
+        raise PleError(f"{path}: {exc}") from None
+
+
+def save_ir(lat: Lattice, path, resolved: bool = True) -> None:
+    """Write the IR atomically (no partial file on failure)."""
+    atomic_write_text(path, json.dumps(lattice_to_dict(lat, resolved), indent=1) + "\n")

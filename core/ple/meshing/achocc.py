@@ -1,0 +1,268 @@
+"""ACHoCC: a lattice as an assembly of CHoCCs (CHoCC paper, 001_ §5–6).
+
+Each ball gets an inflated sphere S⁺ (same centre, radius r⁺) beyond which its incident
+beams no longer interfere; each beam meets S⁺ in a contact circle bounding a disk; the
+ball's *junction* (hub) is the CHoCC of its contact circles and each beam element is the
+frustum of the beam's cone between its two disks. Beams are cone-beams: the convex hull of
+their two balls.
+
+Everything here is per hub, in the hub's own frame: centre at the origin, hub ball radius
+``radius``, incident beams given by the unit direction ``dirs`` (S, 3) to the other ball,
+its radius ``other_radii`` (S,) and the centre distance ``lengths`` (S,).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import PleError
+from .chocc import Chocc, chocc
+
+INFLATE = 1e-4  # r⁺ "slightly larger than" the largest pairwise candidate (§5), relative
+CENTRE_MARGIN = 1e-3  # the hub's CNT must contain its centre by this much (unit sphere) for central projection
+MAX_FIX_CIRCLES = 8
+MAX_DISK_REACH = 0.45  # a contact disk may sit at most this far along its beam (two ends never cross)
+MIN_DISK_RADIUS = 0.25  # nor shrink below this fraction of the thinner ball
+UNCLEAN_GAP = 1e-3  # radians between shrunk caps of an unclean junction
+
+
+def beam_profile(radius, other_radii, lengths):
+    """sin and cos of the half-angle phi of each beam's cone (positive: narrowing away from
+    the hub): sin phi = (r − r_other) / L (the cone tangent to both balls)."""
+    s = (radius - other_radii) / lengths
+    if np.any(np.abs(s) >= 1):
+        raise PleError("lattice is not clean: a ball lies inside a beam's other ball (cone-beam undefined)")
+    return s, np.sqrt(1 - s * s)
+
+
+def inflated_radius(radius: float, dirs: np.ndarray, other_radii: np.ndarray, lengths: np.ndarray) -> float:
+    """r⁺ of §5: the largest distance from the centre at which the profiles of two incident
+    beams intersect, in the plane of their axes (line-line intersection), or ``radius``."""
+    s = len(dirs)
+    if s < 2:
+        return float(radius)
+    sphi, cphi = beam_profile(radius, other_radii, lengths)
+    i, j = np.triu_indices(s, 1)
+    d1, d2 = dirs[i], dirs[j]
+    cos_t = np.clip(np.einsum("mi,mi->m", d1, d2), -1, 1)
+    sin_t = np.sqrt(1 - cos_t**2)
+    if np.any(sin_t < 1e-9) and np.any(cos_t[sin_t < 1e-9] > 0):
+        raise PleError("lattice is not clean: two beams of one ball point the same way")
+    # 2D frame (x along d1, y towards d2); profile k: n_k·p = r, n_k = sin(phi_k) d_k + cos(phi_k) w_k,
+    # w_1 = (0, 1), w_2 = the normal of d2 towards d1 = (sin t, -cos t)
+    n1 = np.stack([sphi[i], cphi[i]], axis=1)
+    d2xy = np.stack([cos_t, sin_t], axis=1)
+    w2 = np.stack([sin_t, -cos_t], axis=1)
+    n2 = sphi[j, None] * d2xy + cphi[j, None] * w2
+    det = n1[:, 0] * n2[:, 1] - n1[:, 1] * n2[:, 0]
+    safe = np.abs(det) > 1e-12
+    det = np.where(safe, det, 1.0)
+    px = radius * (n2[:, 1] - n1[:, 1]) / det
+    py = radius * (n1[:, 0] - n2[:, 0]) / det
+    forward = safe & (px > 0) & (px * d2xy[:, 0] + py * d2xy[:, 1] > 0)
+    cand = np.where(forward, np.hypot(px, py), radius)
+    return float(max(radius, cand.max()))
+
+
+def contact_circles(radius, r_plus, dirs, other_radii, lengths, strict: bool = True):
+    """Half-angles (S,) of the contact circles of the beams on S⁺ (unit-sphere cone angles),
+    and the axial position (S,) and radius (S,) of each contact disk (in world units)."""
+    sphi, cphi = beam_profile(radius, other_radii, lengths)
+    s = np.sqrt(max(r_plus**2 - radius**2, 0.0))
+    x = radius * sphi + s * cphi  # tangent point r n plus s along the profile line
+    y = radius * cphi - s * sphi
+    if strict and (np.any(y <= 0) or np.any(x >= lengths)):
+        raise PleError("lattice is not clean: a beam is too short for its junction (r+ passes its far end)")
+    return np.arctan2(np.maximum(y, 0.0), x), x, y
+
+
+def _max_inflation(radius, other_radii, lengths) -> float:
+    """The largest r⁺ for which every contact disk stays in the first MAX_DISK_REACH of its beam
+    and keeps at least MIN_DISK_RADIUS of the thinner ball's radius (beyond: unclean)."""
+    sphi, cphi = beam_profile(radius, other_radii, lengths)
+    # axial x = r sin(phi) + s cos(phi) ≤ reach·L, radius y = r cos(phi) − s sin(phi) ≥ m·min(r, r_o)
+    s_max = (MAX_DISK_REACH * lengths - radius * sphi) / cphi
+    y_min = MIN_DISK_RADIUS * np.minimum(radius, other_radii)
+    s_y = np.where(sphi > 0, (radius * cphi - y_min) / np.where(sphi > 0, sphi, 1.0), np.inf)
+    s = np.clip(np.minimum(s_max, s_y).min(), 0.0, None)
+    return float(np.sqrt(radius**2 + s**2))
+
+
+@dataclass
+class HubGeometry:
+    """A junction of the ACHoCC on its unit sphere (scale by ``r_plus``).
+
+    ``chocc`` holds the S real contact circles first, then point circles added so that the
+    hub has triangles (n ≤ 2) and contains its centre (the off-centre fix of §6). ``clean`` is
+    False when the lattice violates the ACHoCC assumption (junctions of neighbouring balls
+    would overlap): r⁺ is then capped inside the beams and the caps shrunk to stay disjoint, so
+    the mesh stays closed but its contact rings lie inside the beams, not on them."""
+
+    radius: float
+    r_plus: float
+    dirs: np.ndarray
+    other_radii: np.ndarray
+    lengths: np.ndarray
+    chocc: Chocc
+    slots: int
+    clean: bool = True
+    alphas: np.ndarray | None = None
+    base_triangles: np.ndarray | None = None  # CHoCC triangles before the off-centre fix (a hint for neighbours)
+
+    def exit_distance(self, u: np.ndarray) -> np.ndarray:
+        """Distance (V,) from the centre along unit rays ``u`` (V, 3) to the boundary of the
+        exact lattice near this ball: the union of its incident cone-beams (or the ball).
+        Each cone-beam contains the centre and is convex, so the union is star-shaped from
+        it and the exit is the largest of the per-beam exits, each in closed form: on the
+        hub ball's cap (cos < sin phi), on the cone (up to the far tangent circle), or on
+        the far ball."""
+        t = np.full(len(u), self.radius)
+        if not len(self.dirs):
+            return t
+        r = self.radius
+        sphi, cphi = beam_profile(r, self.other_radii, self.lengths)
+        cu = np.clip(u @ self.dirs.T, -1, 1)  # (V, S)
+        su = np.sqrt(1 - cu**2)
+        den = sphi * cu + cphi * su
+        t_cone = np.where(den > 0, r / np.where(den > 0, den, 1.0), np.inf)
+        x_far = self.lengths + self.other_radii * sphi  # axial end of the cone part
+        ln = self.lengths
+        disc = np.maximum(ln**2 * cu**2 - ln**2 + self.other_radii**2, 0)
+        t_ball = ln * cu + np.sqrt(disc)
+        t_k = np.where(cu <= sphi, r, np.where(t_cone * cu <= x_far, t_cone, t_ball))
+        return np.maximum(t, t_k.max(axis=1))
+
+    def signed_distance(self, p: np.ndarray) -> np.ndarray:
+        """Signed distance (V,) from points (V, 3) to the union of the ball and its beams."""
+        d = np.linalg.norm(p, axis=1) - self.radius
+        for k in range(len(self.dirs)):
+            d = np.minimum(d, round_cone_distance(p, np.zeros(3), self.dirs[k] * self.lengths[k],
+                                                  self.radius, self.other_radii[k]))
+        return d
+
+
+def round_cone_distance(p, a, b, ra, rb) -> np.ndarray:
+    """Exact signed distance from points p (V, 3) to the cone-beam hull of balls (a, ra), (b, rb)."""
+    ba = b - a
+    l2 = ba @ ba
+    rr = ra - rb
+    a2 = l2 - rr * rr
+    pa = p - a
+    y = pa @ ba
+    z = y - l2
+    x2 = np.einsum("vi,vi->v", pa * l2 - np.outer(y, ba), pa * l2 - np.outer(y, ba))
+    y2, z2 = y * y * l2, z * z * l2
+    k = np.sign(rr) * rr * rr * x2
+    far = np.sign(z) * a2 * z2 > k
+    near = np.sign(y) * a2 * y2 < k
+    side = (np.sqrt(np.maximum(x2 * a2 / l2, 0)) + y * rr) / l2 - ra
+    return np.where(far, np.sqrt(x2 + z2) / l2 - rb, np.where(near, np.sqrt(x2 + y2) / l2 - ra, side))
+
+
+def _perpendicular(d: np.ndarray) -> np.ndarray:
+    helper = np.array([1.0, 0, 0]) if abs(d[0]) < 0.9 else np.array([0, 1.0, 0])
+    e = np.cross(d, helper)
+    return e / np.linalg.norm(e)
+
+
+def _seed_points(dirs: np.ndarray) -> np.ndarray:
+    """Point circles for hubs with fewer than three beams (CHoCC cases n = 0, 1, 2)."""
+    if len(dirs) == 0:  # an isolated ball: the octahedron
+        return np.concatenate([np.eye(3), -np.eye(3)])
+    if len(dirs) == 1:  # a beam end: a tripod on the far hemisphere
+        d = dirs[0]
+        e1 = _perpendicular(d)
+        e2 = np.cross(d, e1)
+        ang = np.arange(3) * 2 * np.pi / 3
+        return -0.5 * d + 0.866 * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2)
+    if len(dirs) == 2:  # two beams: near the poles of their great circle, tilted away from the
+        # beams (exact poles would put the centre on the face through both)
+        m = np.cross(dirs[0], dirs[1])
+        m = m / np.linalg.norm(m) if np.linalg.norm(m) > 1e-9 else _perpendicular(dirs[0])
+        b = dirs[0] + dirs[1]
+        b = b / np.linalg.norm(b) if np.linalg.norm(b) > 1e-6 else np.cross(dirs[0], m)
+        p = np.stack([m - 0.3 * b, -m - 0.3 * b])
+        return p / np.linalg.norm(p, axis=1, keepdims=True)
+    return np.zeros((0, 3))
+
+
+def _visible_face(c: Chocc) -> tuple[float, np.ndarray, np.ndarray]:
+    """Smallest signed distance of the centre below the planes of the CNT faces (triangles and
+    planar corridor quads), and the centroid and outward normal of the face achieving it."""
+    # rounded so that symmetric ties pick the first face whatever the round-off (deterministic
+    # fixes: a similar copy of the lattice gets the same hubs)
+    h = np.round(np.cos(c.plane_alphas), 9)
+    i = int(np.argmin(h))
+    best, centroid, normal = float(h[i]), c.points[i].mean(axis=0), c.plane_normals[i]
+    if len(c.corridors):
+        a, b, t1, t2 = c.corridors.T
+        corner = lambda t, x: np.argmax(c.triangles[t] == x[:, None], axis=1)  # noqa: E731
+        q = np.stack([c.points[t1, corner(t1, a)], c.points[t2, corner(t2, a)],
+                      c.points[t2, corner(t2, b)], c.points[t1, corner(t1, b)]], axis=1)  # (m, 4, 3)
+        # outward: the CCW quad (b0, a0, a1, b1)'s diagonals
+        nrm = np.cross(q[:, 1] - q[:, 3], q[:, 2] - q[:, 0])
+        ln = np.linalg.norm(nrm, axis=1)
+        ok = ln > 1e-12
+        if ok.any():
+            hq = np.where(ok, np.round(np.einsum("mi,mi->m", nrm, q[:, 0]) / np.where(ok, ln, 1.0), 9), np.inf)
+            j = int(np.argmin(hq))
+            if hq[j] < best:
+                best, centroid, normal = float(hq[j]), q[j].mean(axis=0), nrm[j] / ln[j]
+    return best, centroid, normal
+
+
+def hub_geometry(radius: float, dirs, other_radii, lengths, hint=None) -> HubGeometry:
+    """The junction of one ball: r⁺, contact circles, CHoCC with the off-centre fix (§5–6).
+    ``hint``: the ``base_triangles`` of a similar hub (see ``ple.chocc.chocc``)."""
+    dirs = np.asarray(dirs, float).reshape(-1, 3)
+    other_radii = np.asarray(other_radii, float).reshape(-1)
+    lengths = np.asarray(lengths, float).reshape(-1)
+    r_plus = inflated_radius(radius, dirs, other_radii, lengths) * (1 + INFLATE)
+    if len(dirs):  # a beam widening away from the ball meets S⁺ in front of the centre only beyond r / cos(phi)
+        _, cphi = beam_profile(radius, other_radii, lengths)
+        r_plus = max(r_plus, radius / cphi.min() * (1 + 1e-2))
+    clean = True
+    if len(dirs):
+        limit = _max_inflation(radius, other_radii, lengths)
+        if r_plus > limit:  # unclean: neighbouring junctions would overlap; stay inside the beams
+            r_plus, clean = max(limit, radius), False
+    alphas, _, _ = contact_circles(radius, r_plus, dirs, other_radii, lengths, strict=clean)
+    if len(dirs) > 1:
+        theta = np.arccos(np.clip(dirs @ dirs.T, -1, 1))
+        np.fill_diagonal(theta, np.inf)
+        gap = theta - (alphas[:, None] + alphas[None, :])
+        while clean and gap.min() <= 1e-9:  # caps still touching at r⁺ (round-off): inflate a little more
+            if r_plus * 1.001 > limit:
+                clean = False
+                break
+            r_plus *= 1.001
+            alphas, _, _ = contact_circles(radius, r_plus, dirs, other_radii, lengths)
+            gap = theta - (alphas[:, None] + alphas[None, :])
+        if gap.min() <= 1e-9:  # caps overlap at the allowed r⁺: shrink each to its share
+            share = (theta - UNCLEAN_GAP) * alphas[:, None] / np.maximum(alphas[:, None] + alphas[None, :], 1e-300)
+            alphas = np.clip(np.minimum(alphas, share.min(axis=1)), 0.0, None)
+            clean = False
+    normals = np.concatenate([dirs, _seed_points(dirs)])
+    alist = np.concatenate([alphas, np.zeros(len(normals) - len(dirs))])
+    c = chocc(normals, alist, hint)
+    base_triangles = c.triangles
+    # off-centre fix (§6): while the centre is outside the CNT, add a point circle where the
+    # ray from the centroid of a face visible from the centre, through the centre, meets S⁺
+    for _ in range(MAX_FIX_CIRCLES):
+        h, g, nrm = _visible_face(c)
+        if h > CENTRE_MARGIN:
+            break
+        p = -g / np.linalg.norm(g)
+        if np.any(np.arccos(np.clip(normals @ p, -1, 1)) <= alist + 1e-6):
+            # the ray's exit lies in a cap: use the face's outward normal instead (its cap of
+            # half-angle acos(h) ≥ 90° holds no circle, so the point is free and lifts the face)
+            p = nrm
+        if np.any(np.arccos(np.clip(normals @ p, -1, 1)) <= alist + 1e-6):
+            break
+        normals = np.concatenate([normals, p[None]])
+        alist = np.concatenate([alist, [0.0]])
+        c = chocc(normals, alist)
+    return HubGeometry(float(radius), float(r_plus), dirs, other_radii, lengths, c, len(dirs), clean, alphas,
+                       base_triangles)

@@ -1,0 +1,222 @@
+"""The data-only lattice description, format ``ple-lattice/1`` (SPEC §5): dicts to and from lattices.
+
+Loading never runs code. Every validation error names the offending field with a
+JSON path such as ``U.similarity.axis`` or ``beams[3].to``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..algebra.similarity import Similarity, similarity_from_dict
+from ..algebra.vectors import _as3
+from ..errors import PleError
+from .becots import BeCOTSField, Stack
+from .lattice import Lattice
+
+FORMAT = "ple-lattice/1"
+TOP_KEYS = {"format", "nodes", "beams", "U", "V", "W", "placement", "becots", "description", "meta"}
+
+
+def _num(x, where: str) -> float:
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        raise PleError(f"{where}: expected a number, got {x!r}")
+    if not math.isfinite(float(x)):
+        raise PleError(f"{where}: must be finite, got {x!r}")
+    return float(x)
+
+
+def _vec3(x, where: str) -> list[float]:
+    if not isinstance(x, list) or len(x) != 3:
+        raise PleError(f"{where}: expected a list of 3 numbers, got {x!r}")
+    return [_num(c, f"{where}[{n}]") for n, c in enumerate(x)]
+
+
+def _similarity(d, where: str) -> Similarity:
+    """``{"matrix": 4x4}`` or ``{"similarity": {"kind": ...}}``."""
+    if not isinstance(d, dict):
+        raise PleError(f"{where}: expected an object")
+    if ("matrix" in d) == ("similarity" in d):
+        raise PleError(f"{where}: give exactly one of 'matrix' or 'similarity'")
+    if "matrix" in d:
+        m = d["matrix"]
+        if not isinstance(m, list) or len(m) != 4 or any(not isinstance(row, list) or len(row) != 4 for row in m):
+            raise PleError(f"{where}.matrix: expected 4 rows of 4 numbers")
+        vals = [[_num(v, f"{where}.matrix[{r}][{c}]") for c, v in enumerate(row)] for r, row in enumerate(m)]
+        return Similarity.from_matrix(np.array(vals), f"{where}.matrix")
+    sim = d["similarity"]
+    if isinstance(sim, dict):
+        for key, val in sim.items():
+            if key in ("axis", "point", "vector"):
+                _vec3(val, f"{where}.similarity.{key}")
+            elif key in ("angle", "factor", "distance"):
+                _num(val, f"{where}.similarity.{key}")
+    return similarity_from_dict(sim, f"{where}.similarity")
+
+
+def lattice_from_dict(data) -> Lattice:
+    """Build a Lattice from parsed ``ple-lattice/1`` data (validated)."""
+    if not isinstance(data, dict):
+        raise PleError("lattice file: expected a JSON object at the top level")
+    if data.get("format") != FORMAT:
+        raise PleError(f"format: expected {FORMAT!r}, got {data.get('format')!r}")
+    unknown = sorted(set(data) - TOP_KEYS)
+    if unknown:
+        raise PleError(f"{unknown[0]}: unknown field (expected some of {', '.join(sorted(TOP_KEYS))})")
+    lat = Lattice()
+    nodes = data.get("nodes")
+    if not isinstance(nodes, list) or not nodes:
+        raise PleError("nodes: expected a non-empty list of nodes")
+    for n, node in enumerate(nodes):
+        where = f"nodes[{n}]"
+        if not isinstance(node, dict):
+            raise PleError(f"{where}: expected an object with center and radius")
+        for key in ("center", "radius"):
+            if key not in node:
+                raise PleError(f"{where}.{key}: missing")
+        center = _vec3(node["center"], f"{where}.center")
+        radius = _num(node["radius"], f"{where}.radius")
+        if radius <= 0:
+            raise PleError(f"{where}.radius: must be positive, got {radius}")
+        name = node.get("id")
+        if name is not None and not isinstance(name, (str, int)) or isinstance(name, bool):
+            raise PleError(f"{where}.id: must be a string or an integer")
+        if isinstance(name, int) and name != n:
+            raise PleError(f"{where}.id: an integer id must equal the node's position {n}")
+        label = name if isinstance(name, str) else None
+        if label is not None and any(x.name == label for x in lat.nodes):
+            raise PleError(f"{where}.id: {label!r} is used twice")
+        lat.add_node(center, radius, label)
+    for b, beam in enumerate(data.get("beams", [])):
+        where = f"beams[{b}]"
+        if not isinstance(beam, dict):
+            raise PleError(f"{where}: expected an object with from, to, offset")
+        for key in ("from", "to"):
+            if key not in beam:
+                raise PleError(f"{where}.{key}: missing")
+            try:
+                lat.node_id(beam[key])
+            except PleError:
+                raise PleError(f"{where}.{key}: unknown node id {beam[key]!r}") from None
+        offset = beam.get("offset", [0, 0, 0])
+        if (not isinstance(offset, list) or len(offset) != 3
+                or any(isinstance(x, bool) or not isinstance(x, int) for x in offset)):
+            raise PleError(f"{where}.offset: expected 3 integers, got {offset!r}")
+        try:
+            lat.add_beam(beam["from"], beam["to"], *offset)
+        except PleError as exc:
+            raise PleError(f"{where}: {exc}") from None
+    for name in ("U", "V", "W"):
+        if name not in data:
+            continue
+        d = data[name]
+        if not isinstance(d, dict):
+            raise PleError(f"{name}: expected an object with count and a similarity")
+        count = d.get("count", 1)
+        if isinstance(count, bool) or not isinstance(count, int):
+            raise PleError(f"{name}.count: expected an integer, got {count!r}")
+        cumulative = d.get("cumulative", False)
+        if not isinstance(cumulative, bool):
+            raise PleError(f"{name}.cumulative: expected true or false")
+        sim = _similarity({k: v for k, v in d.items() if k in ("matrix", "similarity")}, name)
+        try:
+            getattr(lat, f"set_{name.lower()}")(count, sim, cumulative)
+        except PleError as exc:
+            raise PleError(f"{name}.count: {exc}") from None
+    if "placement" in data:
+        lat.set_placement(_similarity(data["placement"], "placement"))
+    if "becots" in data:
+        becots_from_ir(lat, data["becots"], "becots")
+    if "description" in data:
+        lat.meta["description"] = str(data["description"])
+    return lat
+
+
+def _matrix_list(s: Similarity) -> list[list[float]]:
+    return [[float(x) for x in row] for row in s.matrix]
+
+
+def lattice_to_dict(lat: Lattice, resolved: bool = True) -> dict:
+    """The IR of a lattice. ``resolved``: every U/V/W as its incremental 4x4 matrix (what
+    ``ple ir`` writes); otherwise canonical similarities with their cumulative flags."""
+    out: dict = {"format": FORMAT}
+    if lat.meta.get("description"):
+        out["description"] = lat.meta["description"]
+    out["nodes"] = [{"id": n.name if n.name is not None else i, "center": [float(c) for c in n.center],
+                     "radius": float(n.radius)} for i, n in enumerate(lat.nodes)]
+
+    def ref(i: int):
+        return lat.nodes[i].name if lat.nodes[i].name is not None else i
+
+    out["beams"] = [{"from": ref(b.n1), "to": ref(b.n2), "offset": [b.di, b.dj, b.dk]} for b in lat.beams]
+    for name, d in (("U", lat.u), ("V", lat.v), ("W", lat.w)):
+        if resolved:
+            out[name] = {"count": d.count, "matrix": _matrix_list(d.incremental)}
+        else:
+            entry = {"count": d.count, "similarity": d.similarity.to_dict()}
+            if d.cumulative:
+                entry["cumulative"] = True
+            out[name] = entry
+    out["placement"] = ({"matrix": _matrix_list(lat.placement)} if resolved
+                        else {"similarity": lat.placement.to_dict()})
+    if lat.becots is not None and not resolved:
+        out["becots"] = lat.becots.to_ir()
+        del out["U"], out["V"]
+    return out
+
+
+def becots_from_ir(lat: Lattice, data, where: str = "becots") -> None:
+    """Apply the IR ``"becots"`` object (SPEC §5) to ``lat``; errors name the offending field."""
+    if not isinstance(data, dict):
+        raise PleError(f"{where}: expected an object with corners and counts")
+    unknown = sorted(set(data) - {"corners", "counts", "branch", "closed", "field", "stack"})
+    if unknown:
+        raise PleError(f"{where}.{unknown[0]}: unknown field")
+    if ("corners" in data) == ("field" in data):
+        raise PleError(f"{where}: give exactly one of 'corners' or 'field'")
+    if "counts" not in data:
+        raise PleError(f"{where}.counts: missing")
+    counts = data["counts"]
+    if not isinstance(counts, list) or len(counts) != 2 or any(isinstance(n, bool) or not isinstance(n, int)
+                                                               for n in counts):
+        raise PleError(f"{where}.counts: expected two integers [nu, nv], got {counts!r}")
+    closed = data.get("closed", False)
+    if not isinstance(closed, bool):
+        raise PleError(f"{where}.closed: expected true or false")
+    try:
+        if "corners" in data:
+            corners = data["corners"]
+            if not isinstance(corners, list) or len(corners) != 4:
+                raise PleError(f"{where}.corners: expected 4 points [A, B, C, D]")
+            pts = [_ir_point(p, f"{where}.corners[{n}]") for n, p in enumerate(corners)]
+            fld = BeCOTSField.from_corners(*pts, branch=data.get("branch", (0, 0)))
+        else:
+            fld = BeCOTSField.from_dict(data["field"], f"{where}.field")
+        stack = _stack_from_ir(data["stack"], lat, f"{where}.stack") if "stack" in data else None
+        lat.set_field(fld, counts, closed, stack)
+    except PleError as exc:
+        msg = str(exc)
+        raise PleError(msg if msg.startswith(where) else f"{where}: {msg}") from None
+
+
+def _ir_point(p, where: str) -> np.ndarray:
+    if not isinstance(p, list) or len(p) != 3 or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in p):
+        raise PleError(f"{where}: expected 3 numbers, got {p!r}")
+    return _as3(p, where)
+
+
+def _stack_from_ir(d, lat: Lattice, where: str) -> Stack:
+    if not isinstance(d, dict):
+        raise PleError(f"{where}: expected an object")
+    try:
+        layers, per = int(d["layers"]), int(d["nodes_per_layer"])
+        step = _as3(d["step"], f"{where}.step")
+    except KeyError as exc:
+        raise PleError(f"{where}.{exc.args[0]}: missing") from None
+    except (TypeError, ValueError):
+        raise PleError(f"{where}: layers and nodes_per_layer must be integers") from None
+    if layers < 1 or per < 1 or layers * per != len(lat.nodes):
+        raise PleError(f"{where}: {layers} layers × {per} nodes do not match the {len(lat.nodes)} template nodes")
+    return Stack(layers, per, step, str(d.get("mode", "raise")))

@@ -1,0 +1,498 @@
+"""Steady lattices as programs: template node-group, beam-patterns, U, V, W, placement G.
+
+Node-group (i, j, k) is ``G ∘ W**k ∘ V**j ∘ U**i ∘ N[0,0,0]`` (thesis §6.1.2, SPEC §3); a
+beam-pattern (n1, di, dj, dk, n2) joins N[i,j,k,n1] to N[i+di,j+dj,k+dk,n2] wherever both
+exist (§2.1.2). Nothing is evaluated until asked: every evaluation takes index arrays or a
+region and costs memory proportional to what it returns.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..algebra.similarity import Similarity
+from ..algebra.vectors import Pt
+from ..errors import PleError
+from .becots import BeCOTS, BeCOTSField, Stack, becots_counts
+
+MAX_COUNT = 10**7  # per direction; beyond this a count is certainly a typo
+MAX_GROUPS = 10**13
+
+
+@dataclass
+class Node:
+    """A template ball: ``center`` (3,), ``radius`` > 0, optional ``name``."""
+
+    center: np.ndarray
+    radius: float
+    name: str | None = None
+
+
+@dataclass(frozen=True)
+class BeamPattern:
+    """Joins node ``n1`` of group (i, j, k) to node ``n2`` of group (i+di, j+dj, k+dk)."""
+
+    n1: int
+    n2: int
+    di: int
+    dj: int
+    dk: int
+
+    @property
+    def offset(self) -> tuple[int, int, int]:
+        return (self.di, self.dj, self.dk)
+
+
+@dataclass(frozen=True)
+class Direction:
+    """A repetition count and its similarity, given incrementally or cumulatively (§2.6.2)."""
+
+    count: int = 1
+    similarity: Similarity = field(default_factory=Similarity)
+    cumulative: bool = False
+
+    @property
+    def incremental(self) -> Similarity:
+        """The per-step similarity; a cumulative S spans groups 0 .. count-1: S**(1/(count-1))."""
+        if not self.cumulative:
+            return self.similarity
+        if self.count <= 1:
+            return Similarity()
+        return self.similarity ** (1.0 / (self.count - 1))
+
+
+@dataclass(frozen=True)
+class Region:
+    """Half-open index box ``[i0, i1) × [j0, j1) × [k0, k1)``."""
+
+    i0: int
+    i1: int
+    j0: int
+    j1: int
+    k0: int
+    k1: int
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return (self.i1 - self.i0, self.j1 - self.j0, self.k1 - self.k0)
+
+    @property
+    def groups(self) -> int:
+        a, b, c = self.shape
+        return a * b * c
+
+    def __str__(self) -> str:
+        return f"{self.i0}:{self.i1},{self.j0}:{self.j1},{self.k0}:{self.k1}"
+
+    def node_index(self, nn: int) -> np.ndarray:
+        """(i, j, k, n) of every node of the box for ``nn`` template nodes: (N, 4) int64 in
+        (i, j, k, n) order — the row order of every region evaluation."""
+        ni, nj, nk = self.shape
+        out = np.empty((ni, nj, nk, nn, 4), dtype=np.int64)
+        out[..., 0] = np.arange(self.i0, self.i1)[:, None, None, None]
+        out[..., 1] = np.arange(self.j0, self.j1)[None, :, None, None]
+        out[..., 2] = np.arange(self.k0, self.k1)[None, None, :, None]
+        out[..., 3] = np.arange(nn)
+        return out.reshape(-1, 4)
+
+    @staticmethod
+    def parse(text: str) -> Region:
+        """Parse ``I0:I1,J0:J1,K0:K1`` (half-open; an empty bound means the lattice's)."""
+        parts = text.split(",")
+        if len(parts) != 3:
+            raise PleError(f"region {text!r}: expected I0:I1,J0:J1,K0:K1")
+        vals: list[int | None] = []
+        for part in parts:
+            ab = part.split(":")
+            if len(ab) != 2:
+                raise PleError(f"region {text!r}: each axis must read A:B, got {part!r}")
+            for x in ab:
+                try:
+                    vals.append(int(x) if x.strip() else None)
+                except ValueError:
+                    raise PleError(f"region {text!r}: {x!r} is not an integer") from None
+        return _OpenRegion(*vals)  # resolved against the lattice by Lattice.region()
+
+
+@dataclass(frozen=True)
+class _OpenRegion:
+    i0: int | None
+    i1: int | None
+    j0: int | None
+    j1: int | None
+    k0: int | None
+    k1: int | None
+
+
+@dataclass
+class Evaluation:
+    """Evaluated nodes and beams of a region (the arrays of ``ple eval``).
+
+    node_index (N, 4) int64: i, j, k, n; center (N, 3); radius (N,);
+    beam_index (M, 4) int64: i, j, k, pattern of the beam's *from* group;
+    beam_nodes (M, 2) int64: rows of the node arrays.
+    """
+
+    node_index: np.ndarray
+    center: np.ndarray
+    radius: np.ndarray
+    beam_index: np.ndarray
+    beam_nodes: np.ndarray
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {"node_index": self.node_index, "center": self.center, "radius": self.radius,
+                "beam_index": self.beam_index, "beam_nodes": self.beam_nodes}
+
+
+class Lattice:
+    """A steady lattice program (SPEC §4). Build with add_node/add_beam/set_u/set_v/set_w."""
+
+    def __init__(self) -> None:
+        self.nodes: list[Node] = []
+        self.beams: list[BeamPattern] = []
+        self.u = Direction()
+        self.v = Direction()
+        self.w = Direction()
+        self.placement = Similarity()
+        self.becots = None  # a BeCOTS description for corner-operated slabs (set_becots, set_field)
+        self.filter = None  # an optional ple.filters.Filter deciding which nodes survive (thesis §9)
+        self.meta: dict = {}
+
+    # ----- building -----------------------------------------------------------------------
+    def add_node(self, center, radius: float, name: str | None = None) -> int:
+        """Add a template ball; returns its node id (its position in ``nodes``)."""
+        c = Pt(center)
+        r = float(radius)
+        if not math.isfinite(r) or r <= 0:
+            raise PleError(f"node radius must be a positive number, got {radius!r}")
+        if name is not None and any(n.name == name for n in self.nodes):
+            raise PleError(f"node id {name!r} is used twice")
+        self.nodes.append(Node(c, r, name))
+        return len(self.nodes) - 1
+
+    def node_id(self, ref) -> int:
+        """Resolve a node reference (int position or string name) to its position."""
+        if isinstance(ref, (bool, np.bool_)):
+            raise PleError(f"unknown node id {ref!r}")
+        if isinstance(ref, (int, np.integer)):
+            if 0 <= int(ref) < len(self.nodes):
+                return int(ref)
+            raise PleError(f"unknown node id {ref!r} (the template has {len(self.nodes)} nodes)")
+        for idx, node in enumerate(self.nodes):
+            if node.name == ref:
+                return idx
+        raise PleError(f"unknown node id {ref!r}")
+
+    def add_beam(self, n1, n2, di: int = 0, dj: int = 0, dk: int = 0) -> int:
+        """Add beam-pattern (n1, di, dj, dk, n2); returns its index."""
+        a, b = self.node_id(n1), self.node_id(n2)
+        offs = []
+        for name, d in (("di", di), ("dj", dj), ("dk", dk)):
+            if int(d) != d:
+                raise PleError(f"beam offset {name} must be an integer, got {d!r}")
+            offs.append(int(d))
+        if a == b and offs == [0, 0, 0]:
+            raise PleError(f"beam from node {n1!r} to itself with offset 0,0,0 has no length")
+        self.beams.append(BeamPattern(a, b, *offs))
+        return len(self.beams) - 1
+
+    def remove_beam(self, index: int) -> None:
+        if not 0 <= index < len(self.beams):
+            raise PleError(f"unknown beam-pattern {index}")
+        del self.beams[index]
+
+    def remove_node(self, ref) -> None:
+        """Remove a template node and every beam-pattern that uses it."""
+        n = self.node_id(ref)
+        del self.nodes[n]
+        shift = lambda m: m - 1 if m > n else m  # noqa: E731
+        self.beams = [BeamPattern(shift(b.n1), shift(b.n2), b.di, b.dj, b.dk)
+                      for b in self.beams if n not in (b.n1, b.n2)]
+
+    def _direction(self, name: str, count, similarity: Similarity, cumulative: bool) -> Direction:
+        if isinstance(count, bool) or int(count) != count:
+            raise PleError(f"{name} count must be an integer, got {count!r}")
+        count = int(count)
+        if count < 1:
+            raise PleError(f"{name} count must be at least 1, got {count}")
+        if count > MAX_COUNT:
+            raise PleError(f"{name} count {count} is absurdly large (limit {MAX_COUNT})")
+        if not isinstance(similarity, Similarity):
+            raise PleError(f"{name} similarity must be a Similarity, got {type(similarity).__name__}")
+        return Direction(count, similarity, bool(cumulative))
+
+    def set_u(self, count: int, similarity: Similarity, cumulative: bool = False) -> None:
+        self.u = self._direction("U", count, similarity, cumulative)
+        self._check_size()
+
+    def set_v(self, count: int, similarity: Similarity, cumulative: bool = False) -> None:
+        self.v = self._direction("V", count, similarity, cumulative)
+        self._check_size()
+
+    def set_w(self, count: int, similarity: Similarity, cumulative: bool = False) -> None:
+        self.w = self._direction("W", count, similarity, cumulative)
+        self._check_size()
+
+    def set_placement(self, similarity: Similarity) -> None:
+        if not isinstance(similarity, Similarity):
+            raise PleError("placement must be a Similarity")
+        self.placement = similarity
+
+    def set_becots(self, a, b, c, d, counts=(1, 1), branch=(0, 0), closed: bool = False) -> None:
+        """A BeCOTS slab from four corners (M(0,0)=A, M(0,1)=B, M(1,1)=C, M(1,0)=D, thesis
+        §4.2): sets U and V from the corner-operated field (see ``ple.model.becots``)."""
+        self.set_field(BeCOTSField.from_corners(a, b, c, d, branch), counts, closed)
+
+    def set_field(self, fld: BeCOTSField, counts=(1, 1), closed: bool = False, stack: Stack | None = None) -> None:
+        """Make this lattice a BeCOTS slab of field ``fld``: node-group (i, j) = S(i/nu, j/nv) ∘ template."""
+        nu, nv = becots_counts(counts)
+        info = BeCOTS(fld, (nu, nv), bool(closed), stack)
+        gu, gv = info.group_counts
+        self.set_u(gu, info.U)
+        self.set_v(gv, info.V)
+        self.becots = info
+
+    def set_filter(self, node_filter) -> None:
+        """Keep only the nodes a filter accepts (stencil, LiL, implicit field; thesis §9); beams
+        survive where both nodes do. Evaluation of the raw program is unchanged: commands
+        apply the filter (``ple.filters.FilteredLattice``)."""
+        if node_filter is not None and not callable(getattr(node_filter, "node_mask", None)):
+            raise PleError(f"filter must be a ple filter (Stencil, LiL, ImplicitFilter, …), "
+                           f"got {type(node_filter).__name__}")
+        self.filter = node_filter
+
+    def _check_size(self) -> None:
+        if self.groups > MAX_GROUPS:
+            raise PleError(f"{self.groups:.3g} node-groups is absurdly large (limit {MAX_GROUPS:.0e})")
+
+    def copy(self) -> Lattice:
+        other = Lattice()
+        other.nodes = [Node(n.center.copy(), n.radius, n.name) for n in self.nodes]
+        other.beams = list(self.beams)
+        other.u, other.v, other.w, other.placement = self.u, self.v, self.w, self.placement
+        other.becots, other.filter, other.meta = self.becots, self.filter, dict(self.meta)
+        return other
+
+    # ----- shape ----------------------------------------------------------------------------
+    @property
+    def counts(self) -> tuple[int, int, int]:
+        return (self.u.count, self.v.count, self.w.count)
+
+    @property
+    def groups(self) -> int:
+        a, b, c = self.counts
+        return a * b * c
+
+    @property
+    def U(self) -> Similarity:  # noqa: N802 - thesis names
+        return self.u.incremental
+
+    @property
+    def V(self) -> Similarity:  # noqa: N802
+        return self.v.incremental
+
+    @property
+    def W(self) -> Similarity:  # noqa: N802
+        return self.w.incremental
+
+    @property
+    def template_centers(self) -> np.ndarray:
+        return np.array([n.center for n in self.nodes], dtype=float).reshape(-1, 3)
+
+    @property
+    def template_radii(self) -> np.ndarray:
+        return np.array([n.radius for n in self.nodes], dtype=float)
+
+    def validate(self) -> None:
+        """Raise PleError if the lattice cannot be evaluated (no nodes)."""
+        if not self.nodes:
+            raise PleError("the lattice has no nodes")
+
+    def node_count(self) -> int:
+        return self.groups * len(self.nodes)
+
+    def beam_count(self) -> int:
+        """Number of beams: per pattern, the groups whose offset partner exists."""
+        total = 0
+        for b in self.beams:
+            total += math.prod(max(0, c - abs(d)) for c, d in zip(self.counts, b.offset))
+        return total
+
+    def region(self, region=None) -> Region:
+        """The full index box, or ``region`` (Region, open region or text) clamped-checked."""
+        nu, nv, nw = self.counts
+        if region is None:
+            return Region(0, nu, 0, nv, 0, nw)
+        if isinstance(region, str):
+            region = Region.parse(region)
+        vals = [region.i0, region.i1, region.j0, region.j1, region.k0, region.k1]
+        lims = [nu, nu, nv, nv, nw, nw]
+        out = []
+        for pos, (x, lim) in enumerate(zip(vals, lims)):
+            if x is None:
+                x = 0 if pos % 2 == 0 else lim
+            if x < 0:
+                x += lim
+            out.append(int(x))
+        r = Region(*out)
+        for axis, (a, b, lim) in enumerate(zip(out[::2], out[1::2], (nu, nv, nw))):
+            if not 0 <= a < b <= lim:
+                raise PleError(f"region {r}: axis {'ijk'[axis]} range {a}:{b} is empty or outside 0:{lim}")
+        return r
+
+    # ----- evaluation -------------------------------------------------------------------------
+    def group_matrices(self, i, j, k) -> np.ndarray:
+        """Matrices of ``G ∘ W**k ∘ V**j ∘ U**i`` for index arrays, shape (N, 4, 4)."""
+        mu, mv, mw = (_power_table(s, np.asarray(x).reshape(-1))
+                      for s, x in ((self.U, i), (self.V, j), (self.W, k)))
+        return self.placement.matrix[None] @ (mw @ (mv @ mu))
+
+    def group_factors(self, i, j, k) -> np.ndarray:
+        """Dilation factor of group (i, j, k): s_G s_W**k s_V**j s_U**i, shape (N,)."""
+        i, j, k = (np.asarray(x, dtype=float).reshape(-1) for x in (i, j, k))
+        return (self.placement.factor * self.W.factor ** k * self.V.factor ** j * self.U.factor ** i)
+
+    def node_balls(self, index) -> tuple[np.ndarray, np.ndarray]:
+        """Centres (N, 3) and radii (N,) of nodes given as an (N, 4) array of (i, j, k, n)."""
+        self.validate()
+        idx = np.asarray(index, dtype=np.int64).reshape(-1, 4)
+        m = self.group_matrices(idx[:, 0], idx[:, 1], idx[:, 2])
+        c = self.template_centers[idx[:, 3]]
+        centers = np.einsum("nab,nb->na", m[:, :3, :3], c) + m[:, :3, 3]
+        radii = self.template_radii[idx[:, 3]] * self.group_factors(idx[:, 0], idx[:, 1], idx[:, 2])
+        return centers, radii
+
+    def region_balls(self, region=None) -> tuple[np.ndarray, np.ndarray]:
+        """Centres (ni, nj, nk, nn, 3) and radii (ni, nj, nk, nn) of a region, vectorized."""
+        self.validate()
+        r = self.region(region)
+        ii, jj, kk = np.arange(r.i0, r.i1), np.arange(r.j0, r.j1), np.arange(r.k0, r.k1)
+        mu = self.U.power_matrices(ii)
+        # G ∘ W^k ∘ V^j for all (j, k): small (nj * nk matrices)
+        mw, mv = self.W.power_matrices(kk), self.V.power_matrices(jj)
+        mvw = self.placement.matrix[None, None] @ mw[None, :] @ mv[:, None]
+        c = self.template_centers
+        a = np.einsum("iab,nb->ina", mu[:, :3, :3], c) + mu[:, None, :3, 3]  # (ni, nn, 3)
+        ni, nn = a.shape[:2]
+        lin = mvw[..., :3, :3].reshape(-1, 3, 3)  # (nj*nk, 3, 3)
+        pts = lin @ a.reshape(-1, 3).T + mvw[..., :3, 3].reshape(-1, 3, 1)  # (nj*nk, 3, ni*nn)
+        centers = pts.reshape(len(jj), len(kk), 3, ni, nn).transpose(3, 0, 1, 4, 2)
+        f = (self.placement.factor * self.U.factor ** ii[:, None, None] * self.V.factor ** jj[None, :, None]
+             * self.W.factor ** kk[None, None, :])
+        radii = f[..., None] * self.template_radii
+        return np.ascontiguousarray(centers), radii
+
+    def region_beams(self, region=None) -> tuple[np.ndarray, np.ndarray]:
+        """Beams with both ends in the region: beam_index (M, 4) and beam_nodes (M, 2) rows
+        of the region's flattened node arrays (order i, j, k, n), sorted by (i, j, k, pattern)."""
+        r = self.region(region)
+        ni, nj, nk = r.shape
+        nn = len(self.nodes)
+        parts_idx, parts_nodes = [], []
+        for p, b in enumerate(self.beams):
+            ranges = []
+            for lo, hi, d in ((r.i0, r.i1, b.di), (r.j0, r.j1, b.dj), (r.k0, r.k1, b.dk)):
+                ranges.append(np.arange(max(lo, lo - d), min(hi, hi - d)))
+            if min(len(x) for x in ranges) == 0:
+                continue
+            gi, gj, gk = (g.reshape(-1) for g in np.meshgrid(*ranges, indexing="ij"))
+            row = lambda i, j, k: (((i - r.i0) * nj + (j - r.j0)) * nk + (k - r.k0)) * nn  # noqa: E731
+            parts_idx.append(np.stack([gi, gj, gk, np.full_like(gi, p)], axis=1))
+            parts_nodes.append(np.stack([row(gi, gj, gk) + b.n1, row(gi + b.di, gj + b.dj, gk + b.dk) + b.n2], axis=1))
+        if not parts_idx:
+            return np.zeros((0, 4), np.int64), np.zeros((0, 2), np.int64)
+        idx = np.concatenate(parts_idx).astype(np.int64)
+        nodes = np.concatenate(parts_nodes).astype(np.int64)
+        order = np.lexsort((idx[:, 3], idx[:, 2], idx[:, 1], idx[:, 0]))
+        return idx[order], nodes[order]
+
+    def evaluate(self, region=None) -> Evaluation:
+        """All nodes and beams of a region (default: the whole lattice)."""
+        r = self.region(region)
+        centers, radii = self.region_balls(r)
+        beam_index, beam_nodes = self.region_beams(r)
+        return Evaluation(r.node_index(len(self.nodes)), centers.reshape(-1, 3), radii.reshape(-1), beam_index,
+                          beam_nodes)
+
+    def beams_of_pattern(self, pattern: int, i, j, k):
+        """For from-groups given as index arrays: (valid (N,) bool, from-ball, to-ball).
+
+        A beam exists where both its groups are inside the lattice; balls are returned as
+        (centres (N, 3), radii (N,)) for every input, valid or not."""
+        b = self.beams[pattern]
+        i, j, k = (np.asarray(x, dtype=np.int64).reshape(-1) for x in (i, j, k))
+        nu, nv, nw = self.counts
+        ti, tj, tk = i + b.di, j + b.dj, k + b.dk
+        valid = ((i >= 0) & (i < nu) & (j >= 0) & (j < nv) & (k >= 0) & (k < nw)
+                 & (ti >= 0) & (ti < nu) & (tj >= 0) & (tj < nv) & (tk >= 0) & (tk < nw))
+        start = self.node_balls(np.stack([i, j, k, np.full_like(i, b.n1)], axis=1))
+        end = self.node_balls(np.stack([ti, tj, tk, np.full_like(i, b.n2)], axis=1))
+        return valid, start, end
+
+    def row_w(self, i: int, j: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The steady row of node n along W at (i, j): centres (nw, 3) and radii (nw,)."""
+        nw = self.w.count
+        idx = np.stack([np.full(nw, i), np.full(nw, j), np.arange(nw), np.full(nw, n)], axis=1)
+        return self.node_balls(idx)
+
+    def iter_slabs(self, max_groups: int = 1 << 18, region=None) -> Iterator[Region]:
+        """Split a region into boxes of at most ``max_groups`` groups (whole k-rows, then
+        j-slabs), in (i, j, k) order, for streaming over lattices larger than memory."""
+        r = self.region(region)
+        ni, nj, nk = r.shape
+        if nk > max_groups:
+            for i in range(r.i0, r.i1):
+                for j in range(r.j0, r.j1):
+                    for k in range(r.k0, r.k1, max_groups):
+                        yield Region(i, i + 1, j, j + 1, k, min(k + max_groups, r.k1))
+            return
+        rows = max(1, max_groups // nk)
+        if rows < nj:
+            for i in range(r.i0, r.i1):
+                for j in range(r.j0, r.j1, rows):
+                    yield Region(i, i + 1, j, min(j + rows, r.j1), r.k0, r.k1)
+            return
+        slabs = max(1, max_groups // (nj * nk))
+        for i in range(r.i0, r.i1, slabs):
+            yield Region(i, min(i + slabs, r.i1), r.j0, r.j1, r.k0, r.k1)
+
+    def bounds(self, region=None) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned bounds (min (3,), max (3,)) of all balls, streamed over slabs."""
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for part in self.iter_slabs(region=region):
+            c, rad = self.region_balls(part)
+            c, rad = c.reshape(-1, 3), rad.reshape(-1, 1)
+            lo = np.minimum(lo, (c - rad).min(axis=0))
+            hi = np.maximum(hi, (c + rad).max(axis=0))
+        return lo, hi
+
+    def mean_radius(self) -> float:
+        """Mean ball radius over the whole lattice, in closed form (geometric series)."""
+        def mean_pow(s: float, n: int) -> float:
+            return 1.0 if abs(s - 1.0) < 1e-15 else (1 - s**n) / ((1 - s) * n)
+        f = (mean_pow(self.U.factor, self.u.count) * mean_pow(self.V.factor, self.v.count)
+             * mean_pow(self.W.factor, self.w.count))
+        return float(self.placement.factor * f * self.template_radii.mean())
+
+    def with_counts(self, nu: int, nv: int, nw: int) -> Lattice:
+        """A copy with other repetition counts and the same incremental similarities."""
+        other = self.copy()
+        other.u = replace(self.u, count=nu, similarity=self.U, cumulative=False)
+        other.v = replace(self.v, count=nv, similarity=self.V, cumulative=False)
+        other.w = replace(self.w, count=nw, similarity=self.W, cumulative=False)
+        return other
+
+
+def _power_table(s: Similarity, idx: np.ndarray) -> np.ndarray:
+    """``S**i`` matrices for integer index array ``idx`` (N,), via a table over its span."""
+    if idx.size == 0:
+        return np.zeros((0, 4, 4))
+    lo, hi = int(idx.min()), int(idx.max())
+    if hi - lo + 1 <= 4 * idx.size:
+        return s.power_matrices(np.arange(lo, hi + 1))[idx - lo]
+    uniq, inv = np.unique(idx, return_inverse=True)
+    return s.power_matrices(uniq)[inv]

@@ -1,0 +1,39 @@
+"""The preset library: lattice programs and IR files shipped as the package ``ple.presets``."""
+
+from __future__ import annotations
+
+import json
+from importlib import resources
+from pathlib import Path
+
+from ..errors import PleError
+from .runtime import ROOT_PACKAGE, load_program_file
+
+
+def preset_dir():
+    return resources.files(f"{ROOT_PACKAGE}.presets")  # also when vendored inside the Blender extension
+
+
+def preset_names() -> list[str]:
+    names = []
+    for entry in preset_dir().iterdir():
+        if entry.name.endswith((".py", ".json")) and not entry.name.startswith("_"):
+            names.append(entry.name.rsplit(".", 1)[0])
+    return sorted(names)
+
+
+def preset_path(name: str) -> Path | None:
+    for ext in (".py", ".json"):
+        entry = preset_dir() / (name + ext)
+        if entry.is_file():
+            return Path(str(entry))
+    return None
+
+
+def preset_description(name: str) -> str:
+    path = preset_path(name)
+    if path is None:
+        raise PleError(f"unknown preset {name!r}")
+    if path.suffix == ".json":
+        return str(json.loads(path.read_text()).get("description", ""))
+    return load_program_file(path).description

@@ -1,0 +1,201 @@
+"""Lattice programs (SPEC §4): Python files defining ``lattice(**params)``.
+
+A program's keyword arguments are its exposed inputs; an annotation ``Range(lo, hi)``
+gives a slider range, e.g. ``def lattice(thickness: Range(0.02, 0.2) = 0.0645)``. The
+program runs with the API below already in scope (``Lattice``, ``Pt``, ``Vec`` and the
+similarity constructors), so thesis Fig. 6.3 reads verbatim.
+"""
+
+from __future__ import annotations
+
+import builtins
+import inspect
+import json
+import math
+import sys
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..algebra.similarity import Identity, Rotation, Scaling, Screw, Similarity, Swirl, Translation
+from ..algebra.vectors import Pt, Vec
+from ..errors import PleError
+from ..filters.base import FilteredLattice
+from ..filters.implicit import FourierField, ImplicitFilter, TPMSField
+from ..filters.lil import LiL
+from ..filters.stencil import Stencil
+from ..model.becots import BeCOTSField
+from ..model.becots_builders import becots_lattice, set_field, stack_lattice
+from ..model.lattice import Lattice
+
+
+@dataclass(frozen=True)
+class Range:
+    """Slider range of a program input: ``lo <= value <= hi``."""
+
+    lo: float
+    hi: float
+    step: float | None = None
+
+
+@dataclass(frozen=True)
+class Param:
+    """An exposed program input: its name, default, optional range and kind."""
+
+    name: str
+    default: Any
+    range: Range | None = None
+
+    @property
+    def kind(self) -> type:
+        return type(self.default)
+
+
+API = {
+    "Lattice": Lattice, "Pt": Pt, "Vec": Vec, "Similarity": Similarity, "Identity": Identity,
+    "Translation": Translation, "Rotation": Rotation, "Scaling": Scaling, "Swirl": Swirl,
+    "Screw": Screw, "Range": Range, "math": math, "pi": math.pi,
+    # filters (thesis §9) and BeCOTS fields, lattices and stacks (§4, §6.3): programs need no
+    # imports, so they run unchanged inside the Blender extension where the core is vendored
+    "Stencil": Stencil, "LiL": LiL, "FilteredLattice": FilteredLattice, "ImplicitFilter": ImplicitFilter,
+    "TPMSField": TPMSField, "FourierField": FourierField, "BeCOTSField": BeCOTSField,
+    "becots_lattice": becots_lattice, "stack_lattice": stack_lattice, "set_field": set_field,
+}
+ROOT_PACKAGE = __package__.rsplit(".", 1)[0]  # "ple", or the vendored copy's full name in Blender
+
+
+@dataclass
+class Program:
+    """A compiled program: its source, the ``lattice`` function and its parameters."""
+
+    source: str
+    name: str
+    namespace: dict
+
+    @property
+    def function(self):
+        return self.namespace["lattice"]
+
+    @property
+    def description(self) -> str:
+        doc = self.namespace.get("__doc__") or ""
+        return doc.strip().splitlines()[0] if doc.strip() else ""
+
+    def parameters(self) -> list[Param]:
+        out = []
+        for p in inspect.signature(self.function).parameters.values():
+            if p.kind not in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY):
+                continue
+            if p.default is inspect.Parameter.empty:
+                raise PleError(f"{self.name}: input {p.name!r} of lattice() needs a default value")
+            rng = p.annotation if isinstance(p.annotation, Range) else None
+            out.append(Param(p.name, p.default, rng))
+        return out
+
+    def run(self, **params) -> Lattice:
+        """Call ``lattice(**params)``; errors inside the program become PleError."""
+        known = {p.name: p for p in self.parameters()}
+        for name in params:
+            if name not in known:
+                raise PleError(f"{self.name}: unknown parameter {name!r} (inputs: {', '.join(known) or 'none'})")
+        try:
+            lat = self.function(**params)
+        except PleError as exc:
+            raise PleError(f"{self.name}: {exc}") from None
+        except Exception as exc:  # the program is user code: report where it failed
+            line = _program_line(exc, self.name)
+            raise PleError(f"{self.name}{line}: program raised {type(exc).__name__}: {exc}") from None
+        if not isinstance(lat, Lattice):
+            raise PleError(f"{self.name}: lattice() must return a Lattice, got {type(lat).__name__}")
+        lat.validate()
+        return lat
+
+
+def _program_line(exc: BaseException, filename: str) -> str:
+    for frame in reversed(traceback.extract_tb(exc.__traceback__)):
+        if frame.filename == filename:
+            return f":{frame.lineno}"
+    return ""
+
+
+def _program_builtins() -> dict:
+    """Builtins for programs. When this core is vendored under another package name (inside
+    the Blender extension), ``import ple...`` in a program resolves to this very package."""
+    names = dict(vars(builtins))
+    if ROOT_PACKAGE == "ple":
+        return names
+    real = builtins.__import__
+
+    def vendored_import(name, globals=None, locals=None, fromlist=(), level=0):
+        if level == 0 and (name == "ple" or name.startswith("ple.")):
+            module = real(ROOT_PACKAGE + name[3:], globals, locals, fromlist, level)
+            return module if fromlist else sys.modules[ROOT_PACKAGE]
+        return real(name, globals, locals, fromlist, level)
+
+    names["__import__"] = vendored_import
+    return names
+
+
+def compile_program(source: str, name: str = "<program>") -> Program:
+    """Compile program text; a syntax error or a missing ``lattice`` names the problem."""
+    try:
+        code = compile(source, name, "exec", dont_inherit=True)  # not this module's future annotations
+    except SyntaxError as exc:
+        raise PleError(f"{name}:{exc.lineno}: syntax error: {exc.msg}") from None
+    ns: dict = dict(API)
+    ns["__builtins__"] = _program_builtins()  # vendored core: "import ple" means this package
+    ns["__name__"] = "ple_program"
+    try:
+        exec(code, ns)  # noqa: S102 - programs are trusted code by design (SPEC §9)
+    except Exception as exc:
+        raise PleError(f"{name}{_program_line(exc, name)}: program raised {type(exc).__name__}: {exc}") from None
+    if not callable(ns.get("lattice")):
+        raise PleError(f"{name}: a program must define a function lattice(...)")
+    return Program(source, name, ns)
+
+
+def parse_param_value(param: Param, text: str):
+    """Convert ``--param NAME=VALUE`` text to the type of the input's default."""
+    kind = param.kind
+    try:
+        if kind is bool:
+            low = text.strip().lower()
+            if low not in ("1", "0", "true", "false", "yes", "no"):
+                raise ValueError
+            return low in ("1", "true", "yes")
+        if kind is int:
+            return int(text)
+        if kind is float:
+            value = float(text)
+            if not math.isfinite(value):
+                raise ValueError
+            return value
+        if kind is str:
+            return text
+        return json.loads(text)
+    except ValueError:
+        raise PleError(f"parameter {param.name}: {text!r} is not a valid {kind.__name__}") from None
+
+
+def parse_params(program: Program, assignments: list[str]) -> dict:
+    """Parse ``NAME=VALUE`` strings against a program's inputs."""
+    known = {p.name: p for p in program.parameters()}
+    out = {}
+    for a in assignments:
+        if "=" not in a:
+            raise PleError(f"--param {a!r}: expected NAME=VALUE")
+        name, value = a.split("=", 1)
+        name = name.strip()
+        if name not in known:
+            raise PleError(f"--param {name}: unknown parameter (inputs: {', '.join(known) or 'none'})")
+        out[name] = parse_param_value(known[name], value)
+    return out
+
+
+def load_program_file(path: Path) -> Program:
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise PleError(f"{path}: cannot read ({exc.strerror})") from None
+    return compile_program(text, str(path))

@@ -1,0 +1,143 @@
+"""Ball-interference queries (BIQ), point membership (PMC) and local distance queries (thesis §7).
+
+``query(lat, centers, radii)`` returns, per query ball, every node and beam of the lattice
+that it interferes with (closed sets: touching counts). Two paths give identical hit sets:
+
+- ``"naive"``: exact tests against every element, streamed over slabs (the reference);
+- ``"rangefinder"``: candidate index ranges from RangeFinder on steady rows (§7.1–7.3), then
+  exact tests on the candidates only. The path taken is recorded on each result: ``"1"``
+  (U, V, W commute and their maps are mutually invariant, §7.3.1 O(1) case), ``"u"`` (the
+  O(ū) case, per U index) or ``"uv"`` (the general algorithm over W-rows).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..algebra.elements import ball_ball_interfere, ball_beam_interfere, beam_distance
+from ..errors import PleError
+from ..model.lattice import Lattice
+from . import becots_rangefinder
+from .hits import BIQResult, check_queries, split_hits
+from .rangefinder import lattice_any, lattice_hits
+
+NAIVE_CHUNK = 1 << 21  # element × query tests per vectorized batch of the naive path
+NAIVE_QUERY_BATCH = 256
+
+
+# ----- public API ------------------------------------------------------------------------------
+def query(lat: Lattice, centers, radii, method: str = "auto") -> list[BIQResult]:
+    """Per query ball, the nodes and beams of ``lat`` it interferes with (see module doc)."""
+    c, r = check_queries(centers, radii)
+    lat.validate()
+    if method not in ("auto", "naive", "rangefinder"):
+        raise PleError(f"method {method!r}: expected auto, naive or rangefinder")
+    if lat.becots is not None and method != "naive":
+
+        return becots_rangefinder.query(lat, c, r)
+    if method == "naive":
+        node_hits, beam_hits = _naive_hits(lat, c, r)
+        path = "naive"
+    else:
+
+        node_hits, beam_hits, path = lattice_hits(lat, c, r)
+    return split_hits(len(c), node_hits, beam_hits, path)
+
+
+def any_hit(lat: Lattice, centers, radii) -> np.ndarray:
+    """bool (q,): does each query ball interfere with any ball or beam of ``lat``?"""
+    c, r = check_queries(centers, radii)
+    lat.validate()
+    if lat.becots is not None:
+
+        res = becots_rangefinder.query(lat, c, r)
+        return np.array([len(x.nodes) > 0 or len(x.beams) > 0 for x in res], dtype=bool)
+
+    return lattice_any(lat, c, r)
+
+
+def pmc(lat: Lattice, points) -> np.ndarray:
+    """Point membership: bool (q,), is each point inside (or on) some ball or beam?"""
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    return any_hit(lat, p, np.zeros(len(p)))
+
+
+@dataclass
+class DistanceResult:
+    """Elements within ``r`` of a point and the nearest signed distance among them
+    (``inf`` when none is within ``r``; negative inside)."""
+
+    nodes: np.ndarray
+    beams: np.ndarray
+    distance: float
+
+
+def distance_query(lat: Lattice, point, r: float) -> DistanceResult:
+    """Elements within distance ``r`` of ``point`` and the smallest signed distance to them."""
+    p = np.asarray(point, dtype=float).reshape(3)
+    c, rr = check_queries(p[None], np.array([float(r)]))
+    res = query(lat, c, rr)[0]
+    best = np.inf
+    if len(res.nodes):
+        centers, radii = lat.node_balls(res.nodes)
+        best = min(best, float(np.min(np.linalg.norm(centers - p, axis=1) - radii)))
+    if len(res.beams):
+        a, b = _beam_balls(lat, res.beams)
+        best = min(best, float(np.min(beam_distance(p, a[0], a[1], b[0], b[1]))))
+    return DistanceResult(res.nodes, res.beams, best)
+
+
+# ----- helpers shared with the RangeFinder path --------------------------------------------------
+def _beam_balls(lat: Lattice, beams: np.ndarray):
+    """End balls ((centres, radii), (centres, radii)) of beams given as (m, 4) [i, j, k, p]."""
+    beams = np.asarray(beams, dtype=np.int64).reshape(-1, 4)
+    pats = np.array([(b.n1, b.n2, b.di, b.dj, b.dk) for b in lat.beams], dtype=np.int64).reshape(-1, 5)
+    pp = pats[beams[:, 3]]
+    start = lat.node_balls(np.stack([beams[:, 0], beams[:, 1], beams[:, 2], pp[:, 0]], axis=1))
+    end = lat.node_balls(np.stack([beams[:, 0] + pp[:, 2], beams[:, 1] + pp[:, 3], beams[:, 2] + pp[:, 4],
+                                   pp[:, 1]], axis=1))
+    return start, end
+
+
+def _naive_hits(lat: Lattice, c: np.ndarray, r: np.ndarray):
+    """Exact tests of every query against every node and beam, streamed over slabs."""
+    if len(c) > NAIVE_QUERY_BATCH:
+        parts = [_naive_hits(lat, c[s:s + NAIVE_QUERY_BATCH], r[s:s + NAIVE_QUERY_BATCH])
+                 for s in range(0, len(c), NAIVE_QUERY_BATCH)]
+        shift = lambda h, s: h + np.array([s, 0, 0, 0, 0])  # noqa: E731
+        return (np.concatenate([shift(n, s) for (n, _), s in zip(parts, range(0, len(c), NAIVE_QUERY_BATCH))]),
+                np.concatenate([shift(b, s) for (_, b), s in zip(parts, range(0, len(c), NAIVE_QUERY_BATCH))]))
+    nn = len(lat.nodes)
+    node_parts, beam_parts = [], []
+    per_slab = max(1, NAIVE_CHUNK // max(1, len(c) * max(nn, len(lat.beams), 1)))
+    for reg in lat.iter_slabs(max_groups=per_slab):
+        gi, gj, gk = (x.reshape(-1) for x in np.meshgrid(np.arange(reg.i0, reg.i1), np.arange(reg.j0, reg.j1),
+                                                          np.arange(reg.k0, reg.k1), indexing="ij"))
+        centers, radii = lat.region_balls(reg)
+        centers, radii = centers.reshape(-1, nn, 3), radii.reshape(-1, nn)
+        for n in range(nn):
+            hit = ball_ball_interfere(c[:, None], r[:, None], centers[None, :, n], radii[None, :, n])
+            qi, gi_ = np.nonzero(hit)
+            node_parts.append(np.stack([qi, gi[gi_], gj[gi_], gk[gi_], np.full_like(qi, n)], axis=1))
+        for p in range(len(lat.beams)):
+            valid, (ca, ra), (cb, rb) = lat.beams_of_pattern(p, gi, gj, gk)
+            if not valid.any():
+                continue
+            ca, ra, cb, rb = ca[valid], ra[valid], cb[valid], rb[valid]
+            hit = ball_beam_interfere(c[:, None], r[:, None], ca[None], ra[None], cb[None], rb[None])
+            qi, bi = np.nonzero(hit)
+            vi, vj, vk = gi[valid], gj[valid], gk[valid]
+            beam_parts.append(np.stack([qi, vi[bi], vj[bi], vk[bi], np.full_like(qi, p)], axis=1))
+    cat = lambda parts: np.concatenate(parts) if parts else np.zeros((0, 5), np.int64)  # noqa: E731
+    return cat(node_parts), cat(beam_parts)
+
+
+def naive_any(lat: Lattice, c: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Reference ``any_hit`` by the naive path."""
+    nh, bh = _naive_hits(lat, c, r)
+    out = np.zeros(len(c), dtype=bool)
+    out[nh[:, 0]] = True
+    out[bh[:, 0]] = True
+    return out
