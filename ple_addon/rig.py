@@ -188,8 +188,8 @@ def evaluate_region(rig, lat, st: RigState | None = None):
     r = region_of(rig, lat)
     if r is None:
         return None
-    parts = [f for f in (getattr(lat, "filter", None), filtered(rig, lat)) if f is not None]
-    if not parts:  # the program's own filter (Lattice.set_filter) and the panel's are and-ed
+    f = core("filters").all_of(getattr(lat, "filter", None), filtered(rig, lat))
+    if f is None:  # the program's own filter (Lattice.set_filter) and the panel's are and-ed
         key = (str(r), len(lat.nodes), tuple((b.n1, b.n2, b.di, b.dj, b.dk) for b in lat.beams))
         if st is not None and st.topology and st.topology[0] == key:
             last = st.topology[1]
@@ -200,7 +200,6 @@ def evaluate_region(rig, lat, st: RigState | None = None):
         if st is not None:
             st.topology = (key, ev)
         return ev
-    f = parts[0] if len(parts) == 1 else parts[0] & parts[1]
     return core("filters").FilteredLattice(lat, f).evaluate(r)
 
 

@@ -12,6 +12,7 @@ from ple.model.becots import BeCOTSField
 from ple.model.becots_builders import becots_lattice, stack_lattice
 from ple.queries import becots_rangefinder as brf
 from ple.queries import biq
+from ple.queries.plans import forget
 
 CORNERS = [[0, 0, 0], [0, 3, 0.5], [3.5, 3.2, 1.5], [3, 0, 0.2]]
 
@@ -109,7 +110,7 @@ def test_without_tables_and_with_the_overflow_sort(rng, monkeypatch):
     for table_limit, key_limit in ((0, brf.KEY_LIMIT), (brf.TABLE_LIMIT, 0), (0, 0)):
         monkeypatch.setattr(brf, "TABLE_LIMIT", table_limit)
         monkeypatch.setattr(brf, "KEY_LIMIT", key_limit)
-        lat.__dict__.pop(brf.PLAN_ATTR, None)
+        forget(lat)
         got = biq.query(lat, c, r)
         assert all(np.array_equal(g.nodes, n) and np.array_equal(g.beams, b) for g, (n, b) in zip(got, ref))
     cyl = BeCOTSField("cylinder", np.array([2.0, 0, 0]), np.zeros(3), np.array([0, 0, 1.0]), (1.0, 1.0), (0.2, -2.0))

@@ -351,3 +351,12 @@ def similarity_from_dict(d: dict, where: str = "similarity") -> Similarity:
         return build(*args)
     except (PleError, TypeError, ValueError) as exc:
         raise PleError(f"{where}: {exc}") from None
+
+
+def commute(a: Similarity, b: Similarity) -> bool:
+    """Do ``a`` and ``b`` commute (a ∘ b == b ∘ a, to 1e-10 relative to their matrices)? Steady
+    rows along two directions are similar copies of each other exactly when they do (thesis §7.3.1)."""
+    ma, mb = a.matrix, b.matrix
+    scale = max(1.0, np.abs(ma).max(), np.abs(mb).max()) ** 2
+    return bool(np.abs(ma @ mb - mb @ ma).max() <= 1e-10 * scale)
+

@@ -1,4 +1,5 @@
-"""Points and vectors of the program API (``Pt``, ``Vec``) and small array helpers."""
+"""Points and vectors of the program API (``Pt``, ``Vec``) and the vector helpers every layer uses:
+unit vectors, fast cross products, perpendicular frames, rotations about an axis."""
 
 from __future__ import annotations
 
@@ -44,3 +45,34 @@ def rotation_matrices(axis: np.ndarray, angles: np.ndarray) -> np.ndarray:
     s = np.sin(angles)[:, None, None]
     c = (1.0 - np.cos(angles))[:, None, None]
     return np.eye(3)[None] + s * k[None] + c * kk[None]
+
+
+def unit_rows(v) -> np.ndarray:
+    """Rows of ``v`` (..., 3) normalized along the last axis; zero rows stay zero."""
+    v = np.asarray(v, float)
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n > 0, n, 1.0)
+
+
+def cross(a, b) -> np.ndarray:
+    """Cross product over the last axis (broadcasting); np.cross is slow on small arrays."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
+def perpendicular_frames(normals) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors (e1, e2) orthogonal to each row of unit ``normals`` (M, 3), with
+    (e1, e2, n) right-handed; e1 is built from the x axis, or the y axis when n is near x."""
+    normals = np.asarray(normals, float)
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+    e1 = unit_rows(cross(normals, helper))
+    return e1, cross(normals, e1)
+
+
+def rotate(v, axis: np.ndarray, angles) -> np.ndarray:
+    """Rodrigues: rotate vectors ``v`` (n, 3) about unit ``axis`` by ``angles`` (n,)."""
+    v = np.asarray(v, float)
+    c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    return v * c + cross(axis, v) * s + axis * (v @ axis)[:, None] * (1.0 - c)
+

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from ..app.progress import Progress
 from ..errors import PleError
-from ..filters.base import Filter, FilteredLattice
+from ..filters.base import Filter, FilteredLattice, all_of
 from ..filters.lil import lil
 from ..io.chunks import DEFAULT_SLAB_GROUPS, stream_filter
 from ..io.files import save_npz
@@ -55,11 +55,7 @@ def build(args, lat, parts: list[Filter]) -> FilteredLattice:
         parts.append(lat.filter)  # the program's own filter (with --coarse, lil() adds it)
     parts += [parse_stencil(s) for s in getattr(args, "stencil", [])]
     parts += [parse_implicit(s) for s in getattr(args, "implicit", [])]
-    extra = None
-    if parts:
-        extra = parts[0]
-        for f in parts[1:]:
-            extra = extra & f
+    extra = all_of(*parts)
     if args.coarse:
         return lil(lat, *(load_coarse(c) for c in args.coarse), extra=extra, method=args.method)
     if extra is None:

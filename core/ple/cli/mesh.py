@@ -7,12 +7,12 @@ import time
 
 import numpy as np
 
+from ..algebra.elements import beam_distance
 from ..errors import PleError
 from ..filters.base import evaluate_lattice
 from ..io.export import export_mesh, write_beam_lattice_3mf, write_mesh
 from ..io.formats import mesh_format
 from ..measure.integrals import lattice_volume
-from ..meshing.achocc import round_cone_distance
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
 from ..meshing.tessellate import tessellate
 from .common import add_lattice_args, lattice_from_args
@@ -114,7 +114,7 @@ def monte_carlo_volume(lat, region, samples: int = CHECK_SAMPLES, seed: int = 0)
         box_hi = np.maximum(ev.center[a] + ev.radius[a], ev.center[b] + ev.radius[b])
         sel = np.flatnonzero(np.all((p >= box_lo) & (p <= box_hi), axis=1) & ~inside)
         if len(sel):
-            inside[sel] |= round_cone_distance(p[sel], ev.center[a], ev.center[b], ev.radius[a], ev.radius[b]) <= 0
+            inside[sel] |= beam_distance(p[sel], ev.center[a], ev.radius[a], ev.center[b], ev.radius[b]) <= 0
     f = inside.mean()
     vol = float(np.prod(hi - lo))
     return f * vol, vol * float(np.sqrt(f * (1 - f) / samples))

@@ -194,10 +194,19 @@ def with_own_filter(lat):
     return lat
 
 
+def all_of(*filters) -> Filter | None:
+    """The filter keeping what every given filter keeps (None entries are skipped; None if
+    none is left): how a program's own filter and the filters added by a command, a LiL
+    level or the add-on's panel are composed, left to right."""
+    parts = [_as_filter(f) for f in filters if f is not None]
+    if not parts:
+        return None
+    return parts[0] if len(parts) == 1 else And(*parts)
+
+
 def own_and(lat: Lattice, f: Filter) -> Filter:
     """``f`` preceded by the lattice's own program filter, if it has one."""
-    own = getattr(lat, "filter", None)
-    return f if own is None else _as_filter(own) & f
+    return all_of(getattr(lat, "filter", None), f)
 
 
 def evaluate_lattice(lat: Lattice, region=None) -> Evaluation:

@@ -31,7 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..algebra.elements import beam_distance
-from ..algebra.similarity import Rotation, Similarity
+from ..algebra.series import geometric_sum
+from ..algebra.similarity import Rotation, commute
 from ..errors import PleError
 from ..model.lattice import Lattice
 
@@ -270,25 +271,15 @@ def _segments(count: int, reach: int, similar: bool):
 def _series(s: float, power: int, start: int, stop: int, rep: int) -> float:
     """Σ_{i=start}^{stop-1} s^(power (i - rep)) in closed form (§3.6)."""
     q = s ** power
-    n = stop - start
-    first = q ** (start - rep)
-    if abs(q - 1.0) < 1e-15:
-        return float(n)
-    return first * (1 - q ** n) / (1 - q)
-
-
-def _commutes(a: Similarity, b: Similarity) -> bool:
-    ma, mb = a.matrix, b.matrix
-    scale = max(1.0, np.abs(ma).max(), np.abs(mb).max()) ** 2
-    return bool(np.abs(ma @ mb - mb @ ma).max() <= 1e-10 * scale)
+    return geometric_sum(q, stop - start, q ** (start - rep))
 
 
 def _similar_axes(lat: Lattice) -> tuple[bool, bool, bool]:
     """Directions along which hubs (of equal beam presence) are similar copies: W always;
     V if V and W commute; U if U commutes with V and W (or those are single)."""
     act = [c > 1 for c in lat.counts]
-    vw = not (act[1] and act[2]) or _commutes(lat.V, lat.W)
-    u = all(not (act[0] and act[x]) or _commutes(lat.U, s) for x, s in ((1, lat.V), (2, lat.W)))
+    vw = not (act[1] and act[2]) or commute(lat.V, lat.W)
+    u = all(not (act[0] and act[x]) or commute(lat.U, s) for x, s in ((1, lat.V), (2, lat.W)))
     return u, vw, True
 
 

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..algebra.elements import beam_distance
+from ..algebra.vectors import perpendicular_frames
 from ..errors import PleError
 from .chocc import Chocc, chocc
 
@@ -138,33 +140,9 @@ class HubGeometry:
         """Signed distance (V,) from points (V, 3) to the union of the ball and its beams."""
         d = np.linalg.norm(p, axis=1) - self.radius
         for k in range(len(self.dirs)):
-            d = np.minimum(d, round_cone_distance(p, np.zeros(3), self.dirs[k] * self.lengths[k],
-                                                  self.radius, self.other_radii[k]))
+            d = np.minimum(d, beam_distance(p, np.zeros(3), self.radius, self.dirs[k] * self.lengths[k],
+                                             self.other_radii[k]))
         return d
-
-
-def round_cone_distance(p, a, b, ra, rb) -> np.ndarray:
-    """Exact signed distance from points p (V, 3) to the cone-beam hull of balls (a, ra), (b, rb)."""
-    ba = b - a
-    l2 = ba @ ba
-    rr = ra - rb
-    a2 = l2 - rr * rr
-    pa = p - a
-    y = pa @ ba
-    z = y - l2
-    x2 = np.einsum("vi,vi->v", pa * l2 - np.outer(y, ba), pa * l2 - np.outer(y, ba))
-    y2, z2 = y * y * l2, z * z * l2
-    k = np.sign(rr) * rr * rr * x2
-    far = np.sign(z) * a2 * z2 > k
-    near = np.sign(y) * a2 * y2 < k
-    side = (np.sqrt(np.maximum(x2 * a2 / l2, 0)) + y * rr) / l2 - ra
-    return np.where(far, np.sqrt(x2 + z2) / l2 - rb, np.where(near, np.sqrt(x2 + y2) / l2 - ra, side))
-
-
-def _perpendicular(d: np.ndarray) -> np.ndarray:
-    helper = np.array([1.0, 0, 0]) if abs(d[0]) < 0.9 else np.array([0, 1.0, 0])
-    e = np.cross(d, helper)
-    return e / np.linalg.norm(e)
 
 
 def _seed_points(dirs: np.ndarray) -> np.ndarray:
@@ -173,14 +151,14 @@ def _seed_points(dirs: np.ndarray) -> np.ndarray:
         return np.concatenate([np.eye(3), -np.eye(3)])
     if len(dirs) == 1:  # a beam end: a tripod on the far hemisphere
         d = dirs[0]
-        e1 = _perpendicular(d)
+        e1 = perpendicular_frames(d[None])[0][0]
         e2 = np.cross(d, e1)
         ang = np.arange(3) * 2 * np.pi / 3
         return -0.5 * d + 0.866 * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2)
     if len(dirs) == 2:  # two beams: near the poles of their great circle, tilted away from the
         # beams (exact poles would put the centre on the face through both)
         m = np.cross(dirs[0], dirs[1])
-        m = m / np.linalg.norm(m) if np.linalg.norm(m) > 1e-9 else _perpendicular(dirs[0])
+        m = m / np.linalg.norm(m) if np.linalg.norm(m) > 1e-9 else perpendicular_frames(dirs[:1])[0][0]
         b = dirs[0] + dirs[1]
         b = b / np.linalg.norm(b) if np.linalg.norm(b) > 1e-6 else np.cross(dirs[0], m)
         p = np.stack([m - 0.3 * b, -m - 0.3 * b])

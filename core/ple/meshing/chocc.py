@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..algebra.vectors import cross, perpendicular_frames, unit_rows
 from ..errors import PleError
 
 # Tie-breaking perturbation of the cone half-angles during plane rolling: four circles
@@ -34,18 +35,6 @@ NEAR_COPLANAR = 1e-3  # |N1·(N2×N3)| below this: Appendix A divides by ~0, use
 DEGENERATE_ARC = 1e-12  # a corridor whose arcs and ends are this short is a bare edge
 
 
-def _cross(a, b) -> np.ndarray:
-    """Cross product over the last axis (broadcasting); np.cross is slow on the small arrays here."""
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.where(n > 0, n, 1.0)
-
-
 def _solve_homogeneous_quadratic(q: np.ndarray) -> np.ndarray:
     """Unit (c, s) with [c s] q [c s]ᵀ = 0 for symmetric 2x2 ``q`` (..., 2, 2): (..., 2, 2)
     (two solutions, NaN where q is definite). Eigen form avoids Appendix A's division by
@@ -56,7 +45,7 @@ def _solve_homogeneous_quadratic(q: np.ndarray) -> np.ndarray:
     a = np.sqrt(np.clip(hi, 0, None))[..., None] * vec[..., :, 0]
     b = np.sqrt(np.clip(-lo, 0, None))[..., None] * vec[..., :, 1]
     sol = np.stack([a + b, a - b], axis=-2)
-    sol = _unit(sol)
+    sol = unit_rows(sol)
     sol[~ok] = np.nan
     return sol
 
@@ -69,7 +58,7 @@ def appendix_a(n: np.ndarray, alpha: np.ndarray) -> tuple[np.ndarray, np.ndarray
     cos(alpha_C + alpha_i) = N_C · N_i (the caps outside K(C)), sin(alpha_C) > 0.
     Undefined (inf/NaN) when the normals are coplanar; see ``apollonius_planes``."""
     n1, n2, n3 = n[..., 0, :], n[..., 1, :], n[..., 2, :]
-    c23, c31, c12 = _cross(n2, n3), _cross(n3, n1), _cross(n1, n2)
+    c23, c31, c12 = cross(n2, n3), cross(n3, n1), cross(n1, n2)
     det = np.einsum("...i,...i->...", n1, c23)[..., None]
     ca, sa = np.cos(alpha), np.sin(alpha)
     a = (ca[..., 0:1] * c23 + ca[..., 1:2] * c31 + ca[..., 2:3] * c12) / det
@@ -96,7 +85,7 @@ def _null_space_planes(n: np.ndarray, alpha: np.ndarray) -> tuple[np.ndarray, np
     scale = np.linalg.norm(p[..., 3:], axis=-1, keepdims=True)
     p = p / np.where(scale > 0, scale, np.nan)
     p = p * np.where(p[..., 4:5] < 0, -1.0, 1.0)
-    return _unit(p[..., :3]), np.arctan2(p[..., 4], p[..., 3])
+    return unit_rows(p[..., :3]), np.arctan2(p[..., 4], p[..., 3])
 
 
 def apollonius_planes(n: np.ndarray, alpha: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -107,7 +96,7 @@ def apollonius_planes(n: np.ndarray, alpha: np.ndarray) -> tuple[np.ndarray, np.
     space of the same linear system. Shapes as ``appendix_a``."""
     n = np.asarray(n, float)
     alpha = np.asarray(alpha, float)
-    det = np.abs(np.einsum("...i,...i->...", n[..., 0, :], _cross(n[..., 1, :], n[..., 2, :])))
+    det = np.abs(np.einsum("...i,...i->...", n[..., 0, :], cross(n[..., 1, :], n[..., 2, :])))
     with np.errstate(divide="ignore", invalid="ignore"):
         normals, angles = appendix_a(n, alpha)
     flat = det < NEAR_COPLANAR
@@ -121,7 +110,7 @@ def contact_points(n_plane: np.ndarray, a_plane: np.ndarray, n_circ: np.ndarray)
     """Tangency points of circle (n_plane, a_plane) with circles of normals n_circ on the unit
     sphere (Eq. 2, written as the point at angle a_plane from n_plane towards N_i, which stays
     well defined when sin(alpha + alpha_i) → 0). Broadcasts; returns (..., 3)."""
-    u = _unit(n_circ - np.einsum("...i,...i->...", n_circ, n_plane)[..., None] * n_plane)
+    u = unit_rows(n_circ - np.einsum("...i,...i->...", n_circ, n_plane)[..., None] * n_plane)
     return np.cos(a_plane)[..., None] * n_plane + np.sin(a_plane)[..., None] * u
 
 
@@ -136,7 +125,7 @@ def _candidates(normals, alphas, triples):
     about each plane's normal: normals (m, 2, 3), angles (m, 2), contact (m, 2, 3, 3), ccw (m, 2)."""
     pn, pa = apollonius_planes(normals[triples], alphas[triples])
     pts = contact_points(pn[:, :, None, :], pa[:, :, None], normals[triples][:, None, :, :])
-    ccw = np.einsum("msi,msi->ms", _cross(pts[:, :, 1] - pts[:, :, 0], pts[:, :, 2] - pts[:, :, 0]), pn)
+    ccw = np.einsum("msi,msi->ms", cross(pts[:, :, 1] - pts[:, :, 0], pts[:, :, 2] - pts[:, :, 0]), pn)
     return pn, pa, pts, ccw
 
 
@@ -192,7 +181,7 @@ def roll_planes(normals: np.ndarray, alphas: np.ndarray) -> tuple[np.ndarray, np
         # the unsigned angle between normals) separates the two ways around a symmetric hinge.
         nt = planes[ti]
         e = points[ti][(k + 1) % 3] - points[ti][k]
-        o = _cross(e, nt)
+        o = cross(e, nt)
         o /= max(np.linalg.norm(o), 1e-300)
         turn = (np.arctan2(pn @ o, pn @ nt) + ROLL_SLACK) % (2 * np.pi)
         score = np.where(ok, -turn, -np.inf)
@@ -275,15 +264,15 @@ def corridor_apexes(normals: np.ndarray, alphas: np.ndarray, pairs: np.ndarray) 
     n1, n2 = normals[pairs[:, 0]], normals[pairs[:, 1]]
     a1, a2 = alphas[pairs[:, 0]], alphas[pairs[:, 1]]
     e1 = n1
-    e2 = _unit(n2 - np.einsum("mi,mi->m", n2, n1)[:, None] * n1)
+    e2 = unit_rows(n2 - np.einsum("mi,mi->m", n2, n1)[:, None] * n1)
     th = np.arctan2(np.einsum("mi,mi->m", n2, e2), np.einsum("mi,mi->m", n2, n1))
 
     def h(phi):
         return np.stack([np.cos(phi), np.sin(phi), np.ones_like(phi)], axis=1)
 
-    line1 = _cross(h(a1), h(th - a2))
-    line2 = _cross(h(-a1), h(th + a2))
-    f = _cross(line1, line2)
+    line1 = cross(h(a1), h(th - a2))
+    line2 = cross(h(-a1), h(th + a2))
+    f = cross(line1, line2)
     out = np.concatenate([f[:, :1] * e1 + f[:, 1:2] * e2, f[:, 2:3]], axis=1)
     norm = np.linalg.norm(out, axis=1, keepdims=True)
     # two point circles: both generator lines coincide (the corridor is one segment)
@@ -310,7 +299,7 @@ def _topology_from_hint(normals, alphas, tris):
         return None
     pn, pa = apollonius_planes(normals[tris], alphas[tris])
     pts = contact_points(pn[:, :, None, :], pa[:, :, None], normals[tris][:, None, :, :])
-    ccw = np.einsum("tsi,tsi->ts", _cross(pts[:, :, 1] - pts[:, :, 0], pts[:, :, 2] - pts[:, :, 0]), pn)
+    ccw = np.einsum("tsi,tsi->ts", cross(pts[:, :, 1] - pts[:, :, 0], pts[:, :, 2] - pts[:, :, 0]), pn)
     lim = np.minimum(pa[..., None] + alphas, np.pi)
     viol = np.einsum("tsi,mi->tsm", pn, normals) - np.cos(lim)  # (t, 2, n)
     own = np.zeros((len(tris), n), bool)
@@ -341,7 +330,7 @@ def chocc(normals, alphas, hint=None) -> Chocc:
 
     The cases n = 1 (a disk) and n = 2 (the hull of two circles: a single corridor band,
     no triangles) have no triangle vertices; callers add point circles (see ``ple.achocc``)."""
-    normals = _unit(np.asarray(normals, float).reshape(-1, 3))
+    normals = unit_rows(np.asarray(normals, float).reshape(-1, 3))
     alphas = np.asarray(alphas, float).reshape(-1)
     n = len(normals)
     if n < 3:
@@ -357,7 +346,7 @@ def chocc(normals, alphas, hint=None) -> Chocc:
     tris, twin = known if known is not None else roll_planes(normals, alphas)
     pn, pa = apollonius_planes(normals[tris], alphas[tris])
     pts = contact_points(pn[:, :, None, :], pa[:, :, None], normals[tris][:, None, :, :])
-    ccw = np.einsum("tsi,tsi->ts", _cross(pts[:, :, 1] - pts[:, :, 0], pts[:, :, 2] - pts[:, :, 0]), pn)
+    ccw = np.einsum("tsi,tsi->ts", cross(pts[:, :, 1] - pts[:, :, 0], pts[:, :, 2] - pts[:, :, 0]), pn)
     viol = _support_violation(pn, pa, normals, alphas)
     # of the two candidates, the supporting one with the rolling orientation (ties: larger ccw)
     key = np.where(viol <= 1e-8, 1.0, 0.0) * 10 + np.sign(np.round(ccw, 14))
@@ -420,12 +409,6 @@ class ChoccMesh:
         return np.concatenate(out) if out else np.zeros((0, 3), np.int64)
 
 
-def _arc_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
-    e1 = _unit(_cross(normals, helper))
-    return e1, _cross(normals, e1)
-
-
 def corridor_mesh(c: Chocc, arc_segments) -> ChoccMesh:
     """Tessellate the corridors of ``c`` as strips of cone generators (§4).
 
@@ -434,7 +417,7 @@ def corridor_mesh(c: Chocc, arc_segments) -> ChoccMesh:
     uniformly in angle, the other through the apex, so every strip edge is a generator.
     Point circles (alpha = 0) keep a single vertex."""
     n, t = c.n, len(c.triangles)
-    e1, e2 = _arc_frames(c.normals)
+    e1, e2 = perpendicular_frames(c.normals)
     verts = [c.points.reshape(-1, 3)]
     vcircle = [c.triangles.reshape(-1)]
     nv = 3 * t
@@ -541,12 +524,12 @@ def pair_hull_mesh(normals, alphas, segments: int = 32) -> ChoccMesh:
     round — the band of the elliptic cone through both circles, sampled as ``segments``
     generators through its apex. (Case n = 1 is the disk alone: no volume.) Faces include
     both disks; outward oriented."""
-    normals = _unit(np.asarray(normals, float).reshape(2, 3))
+    normals = unit_rows(np.asarray(normals, float).reshape(2, 3))
     alphas = np.asarray(alphas, float).reshape(2)
     if np.arccos(np.clip(normals[0] @ normals[1], -1, 1)) <= alphas.sum():
         raise PleError("CHoCC: caps 0 and 1 overlap or touch")
     big, small = (0, 1) if alphas[0] >= alphas[1] else (1, 0)
-    e1, e2 = _arc_frames(normals)
+    e1, e2 = perpendicular_frames(normals)
     th = np.arange(segments) * 2 * np.pi / segments
     ring_big = (np.cos(alphas[big]) * normals[big]
                 + np.sin(alphas[big]) * (np.cos(th)[:, None] * e1[big] + np.sin(th)[:, None] * e2[big]))
@@ -561,10 +544,10 @@ def pair_hull_mesh(normals, alphas, segments: int = 32) -> ChoccMesh:
     disks = np.concatenate([np.stack([np.zeros(segments - 2, int), k[1:-1], k[2:]], 1),
                             np.stack([np.full(segments - 2, segments), segments + k[2:], segments + k[1:-1]], 1)])
     faces = np.concatenate([band, disks])
-    vol = np.einsum("ij,ij->i", verts[faces[:, 0]], _cross(verts[faces[:, 1]], verts[faces[:, 2]])).sum()
+    vol = np.einsum("ij,ij->i", verts[faces[:, 0]], cross(verts[faces[:, 1]], verts[faces[:, 2]])).sum()
     if vol < 0:
         faces = faces[:, ::-1]
     ring_of = [k, segments + k] if big == 0 else [segments + k, k]
-    rings = [r if (verts[r[1]] - verts[r[0]]) @ _cross(normals[i], verts[r[0]]) < 0 else r[::-1]
+    rings = [r if (verts[r[1]] - verts[r[0]]) @ cross(normals[i], verts[r[0]]) < 0 else r[::-1]
              for i, r in enumerate(ring_of)]  # clockwise about each normal
     return ChoccMesh(verts, faces.astype(np.int64), rings, np.repeat([big, small], segments))

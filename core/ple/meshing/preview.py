@@ -9,13 +9,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-
-def _frames(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors orthogonal to each row of unit ``axis`` (M, 3)."""
-    helper = np.where(np.abs(axis[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
-    e1 = np.cross(axis, helper)
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    return e1, np.cross(axis, e1)
+from ..algebra.vectors import perpendicular_frames
 
 
 def balls_beams_mesh(center: np.ndarray, radius: np.ndarray, beam_nodes: np.ndarray,
@@ -36,7 +30,7 @@ def balls_beams_mesh(center: np.ndarray, radius: np.ndarray, beam_nodes: np.ndar
         d = b - a
         length = np.linalg.norm(d, axis=1, keepdims=True)
         axis = d / np.where(length > 0, length, 1.0)
-        e1, e2 = _frames(axis)
+        e1, e2 = perpendicular_frames(axis)
         t = np.linspace(0, 2 * np.pi, segments, endpoint=False)
         ring = np.cos(t)[None, :, None] * e1[:, None] + np.sin(t)[None, :, None] * e2[:, None]  # (M, s, 3)
         bottom = a[:, None] + ring * ra[:, None, None]

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
+from ..algebra.vectors import perpendicular_frames
 from ..errors import PleError
 from ..filters.base import evaluate_lattice
 from ..model.lattice import Lattice, Region
@@ -72,7 +73,7 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
         verts[off] = u * hub.exit_distance(u)[:, None]
     faces = mesh.faces
     rings = [r.copy() for r in mesh.rings]
-    frames = _frames(c.normals)
+    frames = perpendicular_frames(c.normals)
     for _ in range(levels):
         nv = len(verts)
         e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
@@ -104,13 +105,6 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
         faces = np.concatenate([np.stack([v0, m[:, 0], m[:, 2]], 1), np.stack([m[:, 0], v1, m[:, 1]], 1),
                                 np.stack([m[:, 2], m[:, 1], v2], 1), m])
     return verts, faces, rings
-
-
-def _frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
-    e1 = np.cross(normals, helper)
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    return e1, np.cross(normals, e1)
 
 
 def _arc_mids(pa, pb, n, alpha, r_plus, frames, ci) -> np.ndarray:
@@ -403,7 +397,7 @@ def _strip(ta: HubTemplate, ring_a, tb: HubTemplate, ring_b, rel, ca, cb) -> np.
     cb_local = rel[:3, :3] @ cb + rel[:3, 3]
     d = cb_local - ca
     d /= np.linalg.norm(d)
-    e1, e2 = _frames(d[None])
+    e1, e2 = perpendicular_frames(d[None])
     ang = lambda p: np.arctan2((p - ca) @ e2[0], (p - ca) @ e1[0])  # noqa: E731
     a_ccw = np.arange(len(ring_a))[::-1]  # hub rings run clockwise about their outward normal
     f = zipper(ang(pa[a_ccw]), ang(pb))

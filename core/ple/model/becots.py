@@ -27,8 +27,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..algebra.series import geometric_sum
 from ..algebra.similarity import Similarity, Translation
-from ..algebra.vectors import _as3
+from ..algebra.vectors import _as3, unit
 from ..errors import PleError
 
 TWO_PI = 2.0 * math.pi
@@ -39,19 +40,6 @@ DOMAIN_TOL = 1e-9  # slack on the unit square when inverting
 KINDS = ("cone", "cylinder", "translation")
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
-
-
-def _rotate(v: np.ndarray, axis: np.ndarray, angles: np.ndarray) -> np.ndarray:
-    """Rodrigues: rotate vectors v (n, 3) about unit ``axis`` by ``angles`` (n,)."""
-    c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
-    x, y, z = axis
-    cross = np.stack([y * v[:, 2] - z * v[:, 1], z * v[:, 0] - x * v[:, 2], x * v[:, 1] - y * v[:, 0]], axis=1)
-    return v * c + cross * s + axis * (v @ axis)[:, None] * (1.0 - c)
-
-
-# ===== fields ===================================================================================
 @dataclass(frozen=True)
 class BeCOTSField:
     """A BeCOTS field and its map ``M(x, y) = S(x, y) ∘ A`` (see the module doc).
@@ -143,7 +131,7 @@ class BeCOTSField:
     @property
     def frame(self) -> tuple[np.ndarray, np.ndarray]:
         """(e1, e2): e1 along the radial part of FA, e2 = T × e1; theta is measured from e1."""
-        e1 = _unit(self.radial)
+        e1 = unit(self.radial)
         return e1, np.cross(self.axis, e1)
 
     @property
@@ -164,7 +152,7 @@ class BeCOTSField:
         """Cone half-angle between FA and the axis T (π/2 for a planar COTS), §4.3.2."""
         if self.kind != "cone":
             raise PleError(f"a {self.kind} field has no cone angle")
-        fa = _unit(self.a - self.apex)
+        fa = unit(self.a - self.apex)
         return math.acos(float(np.clip(fa @ self.axis, -1.0, 1.0)))
 
     @property
@@ -296,7 +284,7 @@ class BeCOTSField:
         sb = math.sin(self.beta)
         fa = self.a - self.apex
         h = np.cross(np.cross(fa, self.axis), fa)
-        return replace(self, axis=_unit(h), u=(self.u[0], self.u[1] * sb), v=(self.v[0], self.v[1] * sb))
+        return replace(self, axis=unit(h), u=(self.u[0], self.u[1] * sb), v=(self.v[0], self.v[1] * sb))
 
     def bent(self, beta: float) -> BeCOTSField:
         """Bend (Eq. 4.5) the unbent COTS onto the cone of half-angle ``beta`` about F keeping F,
@@ -307,8 +295,8 @@ class BeCOTSField:
             raise PleError(f"bend angle beta={beta!r}: must lie strictly between 0 and π")
         flat = self.unbent()
         sb = math.sin(beta)
-        t = sb * flat.axis + math.cos(beta) * _unit(self.a - self.apex)
-        return replace(flat, axis=_unit(t), u=(flat.u[0], flat.u[1] / sb), v=(flat.v[0], flat.v[1] / sb))
+        t = sb * flat.axis + math.cos(beta) * unit(self.a - self.apex)
+        return replace(flat, axis=unit(t), u=(flat.u[0], flat.u[1] / sb), v=(flat.v[0], flat.v[1] / sb))
 
     def placed(self, g: Similarity) -> BeCOTSField:
         """The field moved by similarity G: G ∘ S(x, y) ∘ G⁻¹, map G ∘ M (§4.3.3 placement)."""
@@ -320,16 +308,16 @@ class BeCOTSField:
         u, v = self.u, self.v
         if self.kind == "cylinder":  # slides scale with G
             u, v = (u[0] * g.factor, u[1]), (v[0] * g.factor, v[1])
-        return replace(self, a=move(self.a), apex=move(self.apex), axis=_unit(lin @ self.axis), u=u, v=v)
+        return replace(self, a=move(self.a), apex=move(self.apex), axis=unit(lin @ self.axis), u=u, v=v)
 
     def controls(self) -> dict:
         """Warp (ln m_u, w_u, ln m_v, w_v of the flat COTS), bend beta, and placement: the
         inputs of ``from_controls`` that rebuild this field (§4.3.3)."""
         self._need_cone("split into warp, bend and placement")
         flat = self.unbent()
-        a = _unit(self.a - self.apex)
+        a = unit(self.a - self.apex)
         perp = self.axis - (self.axis @ a) * a
-        b = _unit(perp)
+        b = unit(perp)
         s = float(np.linalg.norm(self.a - self.apex))
         frame = np.eye(4)
         frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = s * a, s * np.cross(b, a), s * b, self.apex
@@ -351,7 +339,7 @@ class BeCOTSField:
         total = float(template_measure)
         for m, n in zip(self.factors, (nu, nv)):
             d = m ** (power / n)  # ratio between consecutive shapes
-            total *= n if abs(d - 1.0) <= 1e-15 else (d**n - 1.0) / (d - 1.0)
+            total *= geometric_sum(d, n)
         return total
 
     def pattern_area(self, counts, template_area: float) -> float:
@@ -384,7 +372,7 @@ class BeCOTSField:
                 if np.linalg.norm(axis) < 1e-12:
                     raise PleError(f"{where}.axis: zero vector")
                 fld = BeCOTSField(d["kind"], _as3(d["a"], f"{where}.a"), _as3(d["apex"], f"{where}.apex"),
-                                  _unit(axis), u, v)
+                                  unit(axis), u, v)
         except KeyError as exc:
             raise PleError(f"{where}.{exc.args[0]}: missing") from None
         except (TypeError, ValueError):
@@ -429,25 +417,25 @@ def _axis_from_corners(A, B, C, D, sv) -> np.ndarray:
         normal = np.cross(B - A, D - A)
         if np.linalg.norm(normal) < 1e-12 * sv[0] ** 2:
             normal = np.cross(B - A, C - A)
-        return _unit(normal)
-    du = _unit(B - A) - _unit(C - D)  # U turns edge AB into DC: du ⟂ T
-    dv = _unit(D - A) - _unit(C - B)  # V turns edge AD into BC: dv ⟂ T
+        return unit(normal)
+    du = unit(B - A) - unit(C - D)  # U turns edge AB into DC: du ⟂ T
+    dv = unit(D - A) - unit(C - B)  # V turns edge AD into BC: dv ⟂ T
     n = np.cross(du, dv)
     if np.linalg.norm(n) > PARALLEL_TOL:
-        return _unit(n)
+        return unit(n)
     # (one of du, dv zero — a "pure dilation" U or V — puts F, A and the corners on one plane, so
     # that case was already taken by the coplanar special case above)
     if min(np.linalg.norm(du), np.linalg.norm(dv)) > PARALLEL_TOL:
         # special case "cylinder": du ∥ dv (e.g. two screws about one axis) leave a one-parameter
         # family of axes T ⟂ du; pick the one where U's and V's planar fixed points coincide
-        axis = _axis_by_common_centre(A, B, C, D, _unit(du))
+        axis = _axis_by_common_centre(A, B, C, D, unit(du))
         if axis is not None:
             return axis
     raise PleError("corners A, B, C, D: the rotation axis of U and V is undetermined (parallel edges)")
 
 
 def _planar_centres(A, B, C, D, axis) -> tuple[complex, complex] | None:
-    e1 = _unit(np.cross(axis, [1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.cross(axis, [0.0, 1.0, 0.0]))
+    e1 = unit(np.cross(axis, [1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.cross(axis, [0.0, 1.0, 0.0]))
     e2 = np.cross(axis, e1)
     za, zb, zc, zd = (complex((p - A) @ e1, (p - A) @ e2) for p in (A, B, C, D))
     if min(abs(zb - za), abs(zd - za)) < 1e-12:
@@ -465,7 +453,7 @@ def _axis_by_common_centre(A, B, C, D, du) -> np.ndarray | None:
     determine the field there)."""
     from scipy.optimize import minimize_scalar
 
-    p = _unit(np.cross(du, [1.0, 0.0, 0.0]) if abs(du[0]) < 0.9 else np.cross(du, [0.0, 1.0, 0.0]))
+    p = unit(np.cross(du, [1.0, 0.0, 0.0]) if abs(du[0]) < 0.9 else np.cross(du, [0.0, 1.0, 0.0]))
     q = np.cross(du, p)
     scale = max(np.linalg.norm(x - A) for x in (B, C, D))
     axis_of = lambda phi: np.cos(phi) * p + np.sin(phi) * q  # noqa: E731
@@ -497,7 +485,7 @@ def _axis_by_common_centre(A, B, C, D, du) -> np.ndarray | None:
 def _field_with_axis(A, B, C, D, axis, ku: int, kv: int) -> BeCOTSField:
     """U, V about axis T through a common fixed point, from the corners projected onto the
     plane through A normal to T (Eq. 4.9, planar spiral similarities of §2.4.6)."""
-    e1 = _unit(np.cross(axis, [1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.cross(axis, [0.0, 1.0, 0.0]))
+    e1 = unit(np.cross(axis, [1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.cross(axis, [0.0, 1.0, 0.0]))
     e2 = np.cross(axis, e1)
     z = {n: complex((p - A) @ e1, (p - A) @ e2) for n, p in zip("ABCD", (A, B, C, D))}
     h = {n: float((p - A) @ axis) for n, p in zip("ABCD", (A, B, C, D))}

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..algebra.vectors import unit
+from ..algebra.vectors import rotate, unit
 from ..errors import PleError
-from .becots import BeCOTSField, Stack, _rotate, becots_counts, becots_of
+from .becots import BeCOTSField, Stack, becots_counts, becots_of
 from .lattice import Lattice
 
 
@@ -115,7 +115,7 @@ def stack_layer_coordinate(lat: Lattice, pts) -> np.ndarray:
     if fld.kind == "translation":
         return (q - a) @ step / (step @ step)
     _, theta = fld.log_polar(q)
-    back = fld.apex + _rotate(q - fld.apex, fld.axis, -theta)  # into the half-plane of A (and of L)
+    back = fld.apex + rotate(q - fld.apex, fld.axis, -theta)  # into the half-plane of A (and of L)
     if fld.kind == "cylinder":  # no apex: the nearest point of L in that half-plane
         return (back - a) @ step / (step @ step)
     # central projection from F onto L: F + s (back - F) = A + t step, solved by crossing with d

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..algebra.series import geometric_sum
 from ..algebra.similarity import Similarity
 from ..algebra.vectors import Pt
 from ..errors import PleError
@@ -472,10 +473,9 @@ class Lattice:
 
     def mean_radius(self) -> float:
         """Mean ball radius over the whole lattice, in closed form (geometric series)."""
-        def mean_pow(s: float, n: int) -> float:
-            return 1.0 if abs(s - 1.0) < 1e-15 else (1 - s**n) / ((1 - s) * n)
-        f = (mean_pow(self.U.factor, self.u.count) * mean_pow(self.V.factor, self.v.count)
-             * mean_pow(self.W.factor, self.w.count))
+        f = 1.0
+        for s, n in ((self.U, self.u.count), (self.V, self.v.count), (self.W, self.w.count)):
+            f *= geometric_sum(s.factor, n) / n
         return float(self.placement.factor * f * self.template_radii.mean())
 
     def with_counts(self, nu: int, nv: int, nw: int) -> Lattice:

@@ -37,6 +37,7 @@ from ..model.becots import TWO_PI, BeCOTSField, becots_of
 from ..model.becots_builders import stack_layer_coordinate
 from ..model.lattice import Lattice
 from .hits import BIQResult, check_queries, split_hits
+from .plans import cached
 from .rangefinder import lattice_hits
 
 INDEX_SLACK = 1e-7  # index-space slack on candidate ranges (conservative rounding)
@@ -87,30 +88,17 @@ def query_subset(lat: Lattice, c: np.ndarray, r: np.ndarray, nodes=None, beams=N
 
 
 # ----- the per-lattice plan ---------------------------------------------------------------------------
-PLAN_ATTR = "_becots_rangefinder_plan"  # cache slot on the Lattice object: (key, _Plan or None)
-
-
-def _plan_key(lat: Lattice) -> tuple:
-    """Everything the plan depends on; cheap to build and compare on every query call."""
-    info = lat.becots
-    return (id(info), id(getattr(info, "field", None)), getattr(info, "counts", None), getattr(info, "closed", None),
-            id(getattr(info, "stack", None)), lat.u, lat.v, lat.w, lat.placement, tuple(lat.beams),
-            tuple((np.asarray(n.center, float).tobytes(), n.radius) for n in lat.nodes))
-
-
 def _plan(lat: Lattice):
     """The cached per-lattice constants (a ``_Plan``), rebuilt when the lattice changed; None if
     the lattice cannot use this RangeFinder (special case: beam-patterns with dk != 0 and W
     count > 1 are not regular in index space). Raises PleError if ``lat.becots`` is stale."""
-    key = _plan_key(lat)
-    cached = lat.__dict__.get(PLAN_ATTR)
-    if cached is not None and cached[0] == key:
-        return cached[1]
-    info = becots_of(lat)
+    becots_of(lat)  # checked on every call: a later set_u/set_v makes the description stale
+    return cached(lat, "becots", _build_plan)
+
+
+def _build_plan(lat: Lattice):
     lat.validate()
-    plan = None if lat.w.count > 1 and any(b.dk for b in lat.beams) else _Plan(lat, info)
-    lat.__dict__[PLAN_ATTR] = (key, plan, info)  # info kept alive so that its id stays unique
-    return plan
+    return None if lat.w.count > 1 and any(b.dk for b in lat.beams) else _Plan(lat, becots_of(lat))
 
 
 class _Plan:

@@ -35,8 +35,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..algebra.elements import ball_ball_interfere, ball_beam_interfere, beam_distance, enclosing_ball
-from ..algebra.similarity import Similarity
+from ..algebra.similarity import Similarity, commute
 from ..model.lattice import Lattice
+from .plans import cached
 
 RANGE_SLACK = 1e-7  # index units added on both sides of every candidate range
 DEGENERATE = 1e-9  # |log d|, |θ| or slide below this: the primitive's map is dropped
@@ -258,12 +259,6 @@ def _active(lat: Lattice) -> list[bool]:
     return [c > 1 for c in lat.counts]
 
 
-def _commute(a: Similarity, b: Similarity) -> bool:
-    ma, mb = a.matrix, b.matrix
-    scale = max(1.0, np.abs(ma).max(), np.abs(mb).max()) ** 2
-    return bool(np.abs(ma @ mb - mb @ ma).max() <= 1e-10 * scale)
-
-
 def _invariant(rm: RowMap, s: Similarity, pts: np.ndarray) -> bool:
     """Is every map of ``rm`` unchanged by applying ``s`` (§7.3.1 conditions 2–5)?"""
     before, after = map_points(rm, pts), map_points(rm, s.apply_points(pts))
@@ -302,7 +297,7 @@ def plan(lat: Lattice) -> _Plan:
     def ok(x: int, y: int) -> bool:
         if not (act[x] and act[y]):
             return True
-        return (_commute(sims[x], sims[y]) and _invariant(maps[x], sims[y], pts)
+        return (commute(sims[x], sims[y]) and _invariant(maps[x], sims[y], pts)
                 and _invariant(maps[y], sims[x], pts))
 
     elements = len(lat.nodes) + len(lat.beams)
@@ -553,22 +548,8 @@ def _moved_ball_hits(moves, c, r, qc, qr) -> np.ndarray:
     return ball_ball_interfere(c, r * (1 + 1e-9) + 1e-12, qc, qr)
 
 
-def _fingerprint(lat: Lattice) -> tuple:
-    mats = tuple(np.round(s.matrix, 15).tobytes() for s in (lat.U, lat.V, lat.W, lat.placement))
-    return (lat.counts, mats, lat.template_centers.tobytes(), lat.template_radii.tobytes(),
-            tuple((b.n1, b.n2, b.di, b.dj, b.dk) for b in lat.beams))
-
-
-_PLAN_CACHE: dict = {}
-
-
 def cached_plan(lat: Lattice) -> _Plan:
-    key = _fingerprint(lat)
-    if key not in _PLAN_CACHE:
-        if len(_PLAN_CACHE) > 16:
-            _PLAN_CACHE.clear()
-        _PLAN_CACHE[key] = plan(lat)
-    return _PLAN_CACHE[key]
+    return cached(lat, "rangefinder", plan)
 
 
 # ----- exact tests on candidates --------------------------------------------------------------------
