@@ -1,0 +1,189 @@
+"""The layers of the core (docs/architecture.md), enforced: imports run downward only, no cycles,
+no library module reaches the doors (cli, bench, tools, the add-on), query backends never import
+their dispatcher, meshing writes no files, and function-local imports are only for optional
+third-party packages. Imports are read with ``ast``, function-local ones included."""
+
+from __future__ import annotations
+
+import ast
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+
+CORE = Path(__file__).resolve().parent.parent / "core" / "ple"
+# rank of each top-level part of the package: a module may import only parts of lower rank
+# (or modules of its own part, without cycles); measure and meshing stand side by side
+RANK = {"errors": 0, "algebra": 1, "model": 2, "queries": 3, "filters": 4, "measure": 5, "meshing": 5,
+        "io": 6, "program": 7, "app": 8, "bench": 9, "cli": 10, "presets": 11}
+LIBRARY = {"errors", "algebra", "model", "queries", "filters", "measure", "meshing", "io", "program", "app"}
+DOORS = ("cli", "bench")  # inside the package, above the library
+OUTSIDE = ("tools", "ple_addon")  # repository tools and the Blender add-on
+OPTIONAL = {"scipy", "manifold3d", "PIL", "lib3mf", "bpy", "mathutils", "addon_utils", "dask", "distributed", "fsspec"}
+QUERY_DISPATCHER = "ple.queries.biq"
+DOOR_NAMES = re.compile(r"\bple\.(cli|bench)\b|\bple_addon\b|\btools\.\w")  # also in strings (subprocess)
+WRITES = {"write_text", "write_bytes", "savez", "savez_compressed", "save", "tofile", "export", "dump"}
+
+
+def modules(root: Path) -> dict[str, Path]:
+    out = {}
+    for path in sorted(root.rglob("*.py")):
+        rel = path.relative_to(root.parent).with_suffix("")
+        parts = list(rel.parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = path
+    return out
+
+
+def _target(mod: str, is_pkg: bool, node: ast.ImportFrom, alias: str, known: dict) -> str:
+    if node.level:
+        base = mod.split(".") if is_pkg else mod.split(".")[:-1]
+        base = base[:len(base) - (node.level - 1)]
+        name = ".".join(base + ([node.module] if node.module else []))
+    else:
+        name = node.module or ""
+    sub = f"{name}.{alias}"
+    return sub if sub in known else name
+
+
+def imports(root: Path) -> list[tuple[str, str, int, bool]]:
+    """(importer, imported, line, function-local) for every import in the package at ``root``."""
+    known = modules(root)
+    out = []
+    for mod, path in known.items():
+        tree = ast.parse(path.read_text())
+        is_pkg = path.name == "__init__.py"
+        for node in ast.walk(tree):
+            local = getattr(node, "col_offset", 0) > 0
+            if isinstance(node, ast.Import):
+                out += [(mod, a.name, node.lineno, local) for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                out += [(mod, _target(mod, is_pkg, node, a.name, known), node.lineno, local) for a in node.names]
+    return out
+
+
+def part(name: str) -> str | None:
+    bits = name.split(".")
+    return bits[1] if bits[0] == "ple" and len(bits) > 1 else None
+
+
+def cycles(edges: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index, low, stack, on, out, counter = {}, {}, [], set(), [], [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in edges.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in list(edges):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def _writes_files(path: Path) -> list[int]:
+    lines = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if not isinstance(node, ast.Call):
+            continue
+        fn = node.func
+        if isinstance(fn, ast.Name) and fn.id == "open":
+            mode = node.args[1] if len(node.args) > 1 else next((k.value for k in node.keywords if k.arg == "mode"), None)
+            if isinstance(mode, ast.Constant) and set(str(mode.value)) & set("wax+"):
+                lines.append(node.lineno)
+        elif isinstance(fn, ast.Attribute) and fn.attr in WRITES:
+            lines.append(node.lineno)
+    return lines
+
+
+def violations(root: Path) -> list[str]:
+    """Every broken rule in the package at ``root`` (``.../ple``), one line each."""
+    known = modules(root)
+    found = []
+    edges: dict[str, set[str]] = {}
+    for src, dst, line, local in imports(root):
+        where = f"{known[src].relative_to(root.parent)}:{line}"
+        top = dst.split(".")[0]
+        sp, dp = part(src), part(dst)
+        if top == "ple":
+            if dst in known and dst != src:
+                edges.setdefault(src, set()).add(dst)
+            if local:
+                found.append(f"{where}: function-local import of {dst} (only optional third-party packages may be)")
+            if sp in RANK and dp in RANK and sp != dp and RANK[dp] >= RANK[sp]:
+                found.append(f"{where}: {sp} imports {dst}, which is not below it")
+            if sp in LIBRARY and dp in DOORS:
+                found.append(f"{where}: library module imports the door {dst}")
+            if sp == "queries" and dst == QUERY_DISPATCHER and src != QUERY_DISPATCHER:
+                found.append(f"{where}: query backend {src} imports the dispatcher {dst}")
+        elif top in OUTSIDE and sp in LIBRARY:
+            found.append(f"{where}: library module imports {dst}")
+        elif local and top not in OPTIONAL:
+            found.append(f"{where}: function-local import of {dst} (not an optional package)")
+    for comp in cycles(edges):
+        found.append(f"import cycle: {' -> '.join(comp)}")
+    for mod, path in known.items():
+        text = path.read_text()
+        if part(mod) in LIBRARY and DOOR_NAMES.search(text):
+            found.append(f"{path.relative_to(root.parent)}: library module names a door or tool (subprocess?)")
+        if part(mod) == "meshing":
+            found += [f"{path.relative_to(root.parent)}:{n}: meshing writes a file" for n in _writes_files(path)]
+    return found
+
+
+def test_the_core_keeps_its_layers():
+    assert violations(CORE) == []
+
+
+def test_every_part_is_a_documented_layer():
+    for sub in sorted(p for p in CORE.iterdir() if p.is_dir() and p.name != "__pycache__"):
+        assert sub.name in RANK, f"{sub.name}: a new part of the core must get a rank here and in docs/architecture.md"
+        doc = ast.get_docstring(ast.parse((sub / "__init__.py").read_text()))
+        assert doc and doc.strip(), f"{sub.name}/__init__.py needs a docstring saying what the layer holds"
+    arch = (CORE.parent.parent / "docs" / "architecture.md").read_text()
+    for name in RANK:
+        if name != "presets":
+            assert f"`{name}" in arch, f"docs/architecture.md does not describe {name}"
+
+
+@pytest.mark.parametrize("module, text, rule", [
+    ("model/bad.py", "from ..queries import biq\n", "not below it"),
+    ("model/bad.py", "def f():\n    from ..algebra import vectors\n", "function-local import"),
+    ("algebra/bad.py", "import ple.cli.main\n", "imports the door"),
+    ("io/bad.py", "import subprocess\nsubprocess.run(['python', '-m', 'ple.cli', 'info'])\n", "names a door"),
+    ("queries/bad.py", "from .biq import query\n", "imports the dispatcher"),
+    ("meshing/bad.py", "def f(m, p):\n    m.export(p)\n", "meshing writes a file"),
+    ("meshing/bad.py", "def f(p):\n    return open(p, 'wb')\n", "meshing writes a file"),
+    ("model/bad.py", "from . import bad2\n", "import cycle"),
+    ("filters/bad.py", "def f():\n    import trimesh\n", "not an optional package"),
+])
+def test_a_forbidden_import_is_caught(tmp_path, module, text, rule):
+    """The checker itself: a copy of the core with one bad module breaks exactly that rule."""
+    root = tmp_path / "ple"
+    shutil.copytree(CORE, root, ignore=shutil.ignore_patterns("__pycache__"))
+    (root / module).write_text(text)
+    if rule == "import cycle":
+        (root / "model" / "bad2.py").write_text("from . import bad\n")
+    found = violations(root)
+    assert any(rule in v and "bad" in v for v in found), found
+    assert all("bad" in v for v in found), found  # nothing else in the copy is reported
