@@ -108,7 +108,8 @@ def _writes_files(path: Path) -> list[int]:
             continue
         fn = node.func
         if isinstance(fn, ast.Name) and fn.id == "open":
-            mode = node.args[1] if len(node.args) > 1 else next((k.value for k in node.keywords if k.arg == "mode"), None)
+            mode = node.args[1] if len(node.args) > 1 else next(
+                (k.value for k in node.keywords if k.arg == "mode"), None)
             if isinstance(mode, ast.Constant) and set(str(mode.value)) & set("wax+"):
                 lines.append(node.lineno)
         elif isinstance(fn, ast.Attribute) and fn.attr in WRITES:
