@@ -1,9 +1,19 @@
 """PLE — the Programmed Lattice Editor core: lattice programs, similarities, lazy evaluation,
-queries, filters and tessellation, with no Blender dependency."""
+queries, filters and tessellation, with no Blender dependency.
+
+The package is a stack of layers (docs/architecture.md). This top level exports what a program
+or a script needs: the program API (the names a program has in scope) and the ways to get a
+lattice from a program, an IR file or a preset. Everything else is imported from its layer,
+e.g. ``from ple.queries import biq`` or ``from ple.meshing.tessellate import tessellate``.
+"""
 
 from .algebra.similarity import Identity, Rotation, Scaling, Screw, Similarity, Swirl, Translation
 from .algebra.vectors import Pt, Vec
 from .errors import PleError
+from .filters import FilteredLattice, FourierField, ImplicitFilter, LiL, Stencil, TPMSField, evaluate_lattice, lil
+from .io.irfile import load_ir, save_ir
+from .model.becots import BeCOTSField
+from .model.becots_builders import becots_lattice, set_field, stack_lattice
 from .model.lattice import BeamPattern, Direction, Evaluation, Lattice, Node, Region
 from .program.runtime import Range, compile_program
 from .program.sources import load_lattice
@@ -11,7 +21,8 @@ from .program.sources import load_lattice
 __version__ = "0.1.0"
 
 __all__ = [
-    "BeamPattern", "Direction", "Evaluation", "Identity", "Lattice", "Node", "PleError", "Pt", "Range",
-    "Region", "Rotation", "Scaling", "Screw", "Similarity", "Swirl", "Translation", "Vec",
-    "compile_program", "load_lattice",
+    "BeCOTSField", "BeamPattern", "Direction", "Evaluation", "FilteredLattice", "FourierField", "Identity",
+    "ImplicitFilter", "Lattice", "LiL", "Node", "PleError", "Pt", "Range", "Region", "Rotation", "Scaling", "Screw",
+    "Similarity", "Stencil", "Swirl", "TPMSField", "Translation", "Vec", "becots_lattice", "compile_program",
+    "evaluate_lattice", "lil", "load_ir", "load_lattice", "save_ir", "set_field", "stack_lattice",
 ]

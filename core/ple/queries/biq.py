@@ -35,7 +35,6 @@ def query(lat: Lattice, centers, radii, method: str = "auto") -> list[BIQResult]
     if method not in ("auto", "naive", "rangefinder"):
         raise PleError(f"method {method!r}: expected auto, naive or rangefinder")
     if lat.becots is not None and method != "naive":
-
         return becots_rangefinder.query(lat, c, r)
     if method == "naive":
         node_hits, beam_hits = _naive_hits(lat, c, r)

@@ -11,7 +11,7 @@ import trimesh
 from ple.meshing.tessellate import tessellate
 from ple.program.sources import load_lattice
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def run_batch(out: Path, *extra: str) -> subprocess.CompletedProcess:
