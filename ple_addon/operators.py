@@ -424,7 +424,7 @@ class PLE_OT_tessellate(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Bl
     style: EnumProperty(name="Style", items=STYLES, default="CHOCC")
 
     def steps(self, context, rig):
-        lat = rigmod.lattice_of(rig)
+        lat = rigmod.shown_lattice(rig)  # the panel's filter too: what is drawn is what is meshed
         region = rigmod.region_of(rig, lat)
         if region is None:
             raise PleError("the region is empty: set Region from/to inside the repetition counts")
@@ -461,7 +461,7 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
         path = Path(bpy.path.abspath(self.filepath))
         if path.suffix.lower() not in (".stl", ".3mf", ".ply", ".obj", ".glb"):
             raise PleError(f"{self.filepath!r}: choose a .stl, .3mf, .ply, .obj or .glb file")
-        lat = rigmod.lattice_of(rig)
+        lat = rigmod.shown_lattice(rig)  # the panel's filter too: what is drawn is what is meshed
         region = rigmod.region_of(rig, lat)
         if region is None:
             raise PleError("the region is empty: set Region from/to inside the repetition counts")

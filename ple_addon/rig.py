@@ -176,9 +176,7 @@ def filtered(rig, lat, space=None, _seen=()):
     space = rig if space is None else space
     coarse_lat = in_rig_space(space, coarse, lattice_of(coarse))
     inner = filtered(coarse, coarse_lat, space, (*_seen, rig.name_full))
-    if inner is not None:
-        coarse_lat = filters.FilteredLattice(coarse_lat, inner)
-    return filters.LiL(coarse_lat)
+    return filters.LiL(coarse_lat.with_filter(inner))
 
 
 def evaluate_region(rig, lat, st: RigState | None = None):
@@ -188,8 +186,8 @@ def evaluate_region(rig, lat, st: RigState | None = None):
     r = region_of(rig, lat)
     if r is None:
         return None
-    f = core("filters").all_of(getattr(lat, "filter", None), filtered(rig, lat))
-    if f is None:  # the program's own filter (Lattice.set_filter) and the panel's are and-ed
+    panel = filtered(rig, lat)
+    if lat.filter is None and panel is None:
         key = (str(r), len(lat.nodes), tuple((b.n1, b.n2, b.di, b.dj, b.dk) for b in lat.beams))
         if st is not None and st.topology and st.topology[0] == key:
             last = st.topology[1]
@@ -200,7 +198,14 @@ def evaluate_region(rig, lat, st: RigState | None = None):
         if st is not None:
             st.topology = (key, ev)
         return ev
-    return core("filters").FilteredLattice(lat, f).evaluate(r)
+    return lat.with_filter(panel).evaluate(r)  # the program's own filter, then the panel's
+
+
+def shown_lattice(rig):
+    """The rig's lattice as its panel shows it: the program's filter and the panel's filter
+    and-ed, so that drawing, tessellation and export evaluate the same kept set."""
+    lat = lattice_of(rig)
+    return lat.with_filter(filtered(rig, lat))
 
 
 # ----- reading user moves ---------------------------------------------------------------------

@@ -9,7 +9,6 @@ import sys
 import time
 from pathlib import Path
 
-from ple.filters.base import evaluate_lattice
 from ple.io.export import export_mesh, write_beam_lattice_3mf
 from ple.io.irfile import save_ir
 from ple.meshing.tessellate import tessellate
@@ -39,7 +38,7 @@ def run(out_dir: Path, preset: str, params: dict, levels: int | None, render: bo
     clock = _Clock()
     lat = clock("program", load_lattice, preset, params)
     save_ir(lat, out_dir / f"{preset}.json")
-    kept = clock("LiL filter" if lat.filter is not None else "evaluate", evaluate_lattice, lat)
+    kept = clock("LiL filter" if lat.filter is not None else "evaluate", lat.evaluate)
     kwargs = {"levels": levels} if levels is not None else {}
     mesh = clock("refined tessellation", tessellate, lat, style="refined", **kwargs)
     stl = out_dir / f"{preset}.stl"

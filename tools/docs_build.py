@@ -14,7 +14,6 @@ import pkgutil
 import subprocess
 import sys
 
-from ple.filters.base import evaluate_lattice
 from ple.io.files import atomic_write_text
 from ple.meshing.preview import balls_beams_mesh
 from ple.program.presets import preset_description, preset_names, preset_path
@@ -92,7 +91,7 @@ def preset_preview(name: str):
 
     lat = load_lattice(name)
     region = thumbnail_region(lat)
-    ev = evaluate_lattice(lat, region)
+    ev = lat.evaluate(region)
     return balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes, beam_scale=0.6), region
 
 

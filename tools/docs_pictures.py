@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 from ple.algebra.similarity import Rotation, Scaling, Swirl, Translation
-from ple.filters.base import evaluate_lattice
 from ple.meshing.preview import balls_beams_mesh
 from ple.meshing.tessellate import tessellate
 from ple.model.cage import base_frame, cage_curves, direction_frame
@@ -81,7 +80,7 @@ def becots_corners():
 def lil():
     """Lattice-in-Lattice: the fine nodes kept (orange) where they meet the coarse lattice (blue)."""
     lat = load_lattice("hier_lil2", {"n": 20, "coarse_cells": 2})
-    kept = evaluate_lattice(lat)
+    kept = lat.evaluate()
     coarse = lat.filter.coarse.evaluate()
     return [balls_beams_mesh(kept.center, kept.radius, kept.beam_nodes, beam_scale=0.6),
             balls_beams_mesh(coarse.center, coarse.radius * 0.25, coarse.beam_nodes)], None

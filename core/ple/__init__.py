@@ -10,7 +10,7 @@ e.g. ``from ple.queries import biq`` or ``from ple.meshing.tessellate import tes
 from .algebra.similarity import Identity, Rotation, Scaling, Screw, Similarity, Swirl, Translation
 from .algebra.vectors import Pt, Vec
 from .errors import PleError
-from .filters import FilteredLattice, FourierField, ImplicitFilter, LiL, Stencil, TPMSField, evaluate_lattice, lil
+from .filters import FilteredLattice, FourierField, ImplicitFilter, LiL, Stencil, TPMSField, lil
 from .io.irfile import load_ir, save_ir
 from .model.becots import BeCOTSField
 from .model.becots_builders import becots_lattice, set_field, stack_lattice
@@ -24,5 +24,5 @@ __all__ = [
     "BeCOTSField", "BeamPattern", "Direction", "Evaluation", "FilteredLattice", "FourierField", "Identity",
     "ImplicitFilter", "Lattice", "LiL", "Node", "PleError", "Pt", "Range", "Region", "Rotation", "Scaling", "Screw",
     "Similarity", "Stencil", "Swirl", "TPMSField", "Translation", "Vec", "becots_lattice", "compile_program",
-    "evaluate_lattice", "lil", "load_ir", "load_lattice", "save_ir", "set_field", "stack_lattice",
+    "lil", "load_ir", "load_lattice", "save_ir", "set_field", "stack_lattice",
 ]

@@ -63,7 +63,7 @@ def test_cumulative_ir_resolves_to_the_root(tmp_path):
 
 
 def test_eval_of_matrix_lattice_matches_matrix_powers(tmp_path, rng):
-    from test_lattice import random_similarity_matrix
+    from lattices import random_similarity_matrix
     mats = [random_similarity_matrix(rng) for _ in range(4)]
     data = base_ir(U={"count": 3, "matrix": mats[0].tolist()}, V={"count": 4, "matrix": mats[1].tolist()},
                    W={"count": 5, "matrix": mats[2].tolist()}, placement={"matrix": mats[3].tolist()})

@@ -6,7 +6,6 @@ import zipfile
 
 import trimesh
 from lxml import etree
-from ple.filters.base import evaluate_lattice
 from ple.program.sources import load_lattice
 
 from tools.demo import main
@@ -20,7 +19,7 @@ def test_demo_pipeline_outputs(tmp_path, capsys):
     mesh = trimesh.load(tmp_path / "hier_lil2.stl")
     assert mesh.is_watertight and mesh.volume > 0
     from tools.demo import DEFAULT_PARAMS
-    kept = evaluate_lattice(load_lattice("hier_lil2", DEFAULT_PARAMS))
+    kept = load_lattice("hier_lil2", DEFAULT_PARAMS).evaluate()
     with zipfile.ZipFile(tmp_path / "hier_lil2_beams.3mf") as z:
         model = etree.fromstring(z.read("3D/3dmodel.model"))
     n_vertices = len(model.findall(".//{*}vertex"))

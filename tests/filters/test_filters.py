@@ -4,47 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from ple.algebra.similarity import Rotation, Scaling, Screw, Swirl, Translation
+from lattices import KINDS, centre_on, random_lattice
 from ple.cli.common import parse_stencil
 from ple.errors import PleError
 from ple.filters.base import FilteredLattice
 from ple.filters.lil import LiL, lil
 from ple.filters.stencil import Stencil
 from ple.model.lattice import Lattice
-
-KINDS = ("translation", "rotation", "scaling", "screw", "swirl")
-
-
-def random_similarity(rng, kind: str, step: float):
-    axis = rng.normal(size=3)
-    point = rng.normal(size=3) * 3 * step
-    angle = rng.uniform(0.1, 0.35) * rng.choice([-1, 1])
-    factor = rng.uniform(0.88, 1.12)
-    if kind == "translation":
-        return Translation(rng.normal(size=3) * 0.3 * step + step * np.eye(3)[rng.integers(3)])
-    if kind == "rotation":
-        return Rotation(angle, axis, point)
-    if kind == "scaling":
-        return Scaling(factor, point)
-    if kind == "screw":
-        return Screw(angle, axis, point, step * rng.uniform(0.5, 1.0))
-    return Swirl(angle, axis, point, factor)
-
-
-def random_lattice(rng, kinds, counts, step: float, radius: float, nodes: int = 2) -> Lattice:
-    lat = Lattice()
-    for _ in range(nodes):
-        lat.add_node(rng.normal(size=3) * step * 0.4, radius * rng.uniform(0.6, 1.4))
-    offsets = [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, -1, 0), (0, 1, -1), (0, 0, 0)]
-    for off in offsets[: 3 + rng.integers(0, 4)]:
-        n1, n2 = rng.integers(0, nodes, 2)
-        if off == (0, 0, 0) and n1 == n2:
-            continue
-        lat.add_beam(int(n1), int(n2), *off)
-    lat.set_u(counts[0], random_similarity(rng, kinds[0], step))
-    lat.set_v(counts[1], random_similarity(rng, kinds[1], step))
-    lat.set_w(counts[2], random_similarity(rng, kinds[2], step))
-    return lat
 
 
 # ----- brute force: every query ball against every element, nearest point by ternary search --------
@@ -107,9 +73,8 @@ def brute_lil_mask(fine: Lattice, coarse_ev):
 
 def brute_filtered(lat: Lattice, keep):
     """An Evaluation-like of lat's surviving elements (from a brute mask) for cascades."""
-    from ple.filters.base import select
 
-    return select(lat.evaluate(), keep)
+    return lat.evaluate().select(keep)
 
 
 def pair(seed: int, kind: str):
@@ -120,12 +85,6 @@ def pair(seed: int, kind: str):
     coarse = random_lattice(rng, other + [kind], (3, 3, 2), step=1.8, radius=0.3, nodes=1)
     centre_on(coarse, fine)
     return rng, fine, coarse
-
-
-def centre_on(lat: Lattice, target: Lattice) -> None:
-    """Place ``lat`` so that its mean node centre meets ``target``'s (both lattices then overlap)."""
-    shift = target.evaluate().center.mean(axis=0) - lat.evaluate().center.mean(axis=0)
-    lat.set_placement(Translation(shift))
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -292,8 +251,9 @@ def test_program_filters_are_honoured():
     fine_own.set_filter(Stencil.named("faces", 2))
     expected = FilteredLattice(fine, Stencil.named("faces", 2) & LiL(coarse)).evaluate()
     assert as_sets(lil(fine_own, coarse).evaluate()) == as_sets(expected)
-    with pytest.raises(PleError, match="biq"):
-        LiL(coarse_own, method="biq")
+    # the RangeFinder path honours the coarse lattice's own filter too (one truth): same kept set
+    by_biq = FilteredLattice(fine, LiL(coarse_own, method="biq")).evaluate()
+    assert as_sets(by_biq) == as_sets(FilteredLattice(fine, LiL(coarse_own)).evaluate())
 
 
 def test_cli_filter_applies_the_programs_own_filter(tmp_path):

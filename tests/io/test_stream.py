@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from lattices import KINDS, centre_on, random_lattice
 from ple.app.progress import Progress
 from ple.errors import PleError
 from ple.filters.base import Filter, FilteredLattice
@@ -13,7 +14,6 @@ from ple.filters.implicit import ImplicitFilter, TPMSField
 from ple.filters.lil import LiL
 from ple.filters.stencil import Stencil
 from ple.io.chunks import iter_chunks, load_chunks, read_manifest, stream_filter
-from test_filters import KINDS, centre_on, random_lattice
 
 
 def fine_with_far_beams(seed: int, kind: str):

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from ple.cli.main import main
 from ple.cli.mesh import monte_carlo_volume
-from ple.filters.base import evaluate_lattice
 from ple.meshing.tessellate import tessellate
 from ple.program.sources import load_lattice
 
@@ -21,7 +20,7 @@ CASES = [("hier_stencil", {"n": 7, "period": 3}), ("hier_lil2", {"n": 8, "coarse
 @pytest.mark.parametrize("style", ["cnt", "chocc"])
 def test_filtered_mesh_is_closed(name, params, style):
     lat = load_lattice(name, params)
-    kept = evaluate_lattice(lat)
+    kept = lat.evaluate()
     assert 0 < len(kept.center) < lat.node_count()  # the filter really removes nodes
     mesh = tessellate(lat, style=style)
     assert mesh.is_watertight and mesh.is_winding_consistent

@@ -5,17 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import reference_matrix
+from lattices import random_similarity_matrix
 from ple import Lattice, PleError, Pt, Similarity, Translation, Vec, load_lattice
 from ple.program.presets import preset_names
-from scipy.spatial.transform import Rotation as SciRotation
-
-
-def random_similarity_matrix(rng, scale_range=(0.85, 1.15)) -> np.ndarray:
-    m = np.eye(4)
-    q = rng.normal(size=4)
-    m[:3, :3] = rng.uniform(*scale_range) * SciRotation.from_quat(q / np.linalg.norm(q)).as_matrix()
-    m[:3, 3] = rng.normal(size=3)
-    return m
 
 
 def random_lattice(rng, counts=(4, 5, 3), nodes=2):
@@ -181,9 +173,13 @@ def test_remove_node_drops_its_beams():
 def test_every_preset_builds_and_evaluates(name):
     lat = load_lattice(name)
     small = lat.region(f"0:{min(3, lat.counts[0])},0:{min(3, lat.counts[1])},0:{min(3, lat.counts[2])}")
-    ev = lat.evaluate(small)
-    assert len(ev.center) == small.groups * len(lat.nodes)
-    assert np.isfinite(ev.center).all() and (ev.radius > 0).all()
+    full = lat.evaluate_unfiltered(small)
+    assert len(full.center) == small.groups * len(lat.nodes)
+    assert np.isfinite(full.center).all() and (full.radius > 0).all()
+    ev = lat.evaluate(small)  # the one evaluation: what the program's filter keeps, nothing else
+    want = full.select(lat.keeps(full.node_index))
+    assert np.array_equal(ev.node_index, want.node_index) and np.array_equal(ev.beam_index, want.beam_index)
+    assert np.array_equal(ev.center[ev.beam_nodes], want.center[want.beam_nodes])
 
 
 def test_program_filters_apply_in_eval(tmp_path):

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from ..errors import PleError
-from ..filters.base import evaluate_lattice
 from ..io.files import save_npz
 from .common import add_lattice_args, lattice_from_args
 
@@ -26,7 +25,7 @@ def run(args) -> int:
     if region.groups * len(lat.nodes) > MAX_EVAL_GROUPS:
         raise PleError(f"region {region} has {region.groups * len(lat.nodes):,} nodes; "
                        "choose a smaller --region (or stream with ple filter)")
-    ev = evaluate_lattice(lat, region)
+    ev = lat.evaluate(region)
     save_npz(args.out, ev.arrays())
     print(f"wrote {args.out}: {len(ev.center):,} nodes, {len(ev.beam_nodes):,} beams")
     return 0

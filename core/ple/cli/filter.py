@@ -9,10 +9,11 @@ from __future__ import annotations
 
 from ..app.progress import Progress
 from ..errors import PleError
-from ..filters.base import Filter, FilteredLattice, all_of
+from ..filters.base import Filter, all_of
 from ..filters.lil import lil
 from ..io.chunks import DEFAULT_SLAB_GROUPS, stream_filter
 from ..io.files import save_npz
+from ..model.lattice import Lattice
 from ..program.sources import load_lattice
 from .common import add_lattice_args, lattice_from_args, parse_implicit, parse_stencil
 from .eval import MAX_EVAL_GROUPS
@@ -49,36 +50,35 @@ def load_coarse(text: str):
     return load_lattice(text)
 
 
-def build(args, lat, parts: list[Filter]) -> FilteredLattice:
+def build(args, lat: Lattice, parts: list[Filter]) -> Lattice:
+    """``lat`` (with its own filter) filtered by ``parts``, the --stencil and --implicit flags
+    and, with --coarse, a LiL cascade."""
     parts = list(parts)
-    if getattr(lat, "filter", None) is not None and not args.coarse:
-        parts.append(lat.filter)  # the program's own filter (with --coarse, lil() adds it)
     parts += [parse_stencil(s) for s in getattr(args, "stencil", [])]
     parts += [parse_implicit(s) for s in getattr(args, "implicit", [])]
     extra = all_of(*parts)
     if args.coarse:
         return lil(lat, *(load_coarse(c) for c in args.coarse), extra=extra, method=args.method)
-    if extra is None:
+    if extra is None and lat.filter is None:
         raise PleError("no filter given: use --stencil, --implicit or --coarse")
-    return FilteredLattice(lat, extra)
+    return lat.with_filter(extra)
 
 
-def write(args, flat: FilteredLattice) -> int:
-    lat = flat.lattice
+def write(args, lat: Lattice) -> int:
     region = lat.region(args.region)
     total = f"of {region.groups * len(lat.nodes):,} nodes"
     if args.out is None or args.out.endswith(".npz"):
         if region.groups * len(lat.nodes) > MAX_EVAL_GROUPS:
             raise PleError(f"region {region} has {region.groups * len(lat.nodes):,} nodes; "
                            "give --out a directory to stream chunks instead of one .npz")
-        ev = flat.evaluate(region)
+        ev = lat.evaluate(region)
         if args.out is not None:
             save_npz(args.out, ev.arrays())
         print(f"{'wrote ' + args.out if args.out else 'kept'}: {len(ev.center):,} nodes {total}, "
               f"{len(ev.beam_nodes):,} beams")
         return 0
-    bar = Progress(flat.lattice.region(region).groups, "filter")
-    manifest = stream_filter(flat, args.out, region, args.slab_groups, progress=bar)
+    bar = Progress(region.groups, "filter")
+    manifest = stream_filter(lat, args.out, region, args.slab_groups, progress=bar)
     print(f"wrote {args.out}/ ({len(manifest['chunks'])} chunks): {manifest['nodes']:,} nodes {total}, "
           f"{manifest['beams']:,} beams")
     return 0

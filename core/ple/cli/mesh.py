@@ -9,7 +9,6 @@ import numpy as np
 
 from ..algebra.elements import beam_distance
 from ..errors import PleError
-from ..filters.base import evaluate_lattice
 from ..io.export import export_mesh, write_beam_lattice_3mf, write_mesh
 from ..io.formats import mesh_format
 from ..measure.integrals import lattice_volume
@@ -101,7 +100,7 @@ def monte_carlo_volume(lat, region, samples: int = CHECK_SAMPLES, seed: int = 0)
     """Volume of the union of the region's balls and cone-beams by uniform sampling of its box
     (estimate, standard error). Only for --check (the mesh itself never needs it)."""
 
-    ev = evaluate_lattice(lat, region)
+    ev = lat.evaluate(region)
     lo = (ev.center - ev.radius[:, None]).min(axis=0)
     hi = (ev.center + ev.radius[:, None]).max(axis=0)
     rng = np.random.default_rng(seed)

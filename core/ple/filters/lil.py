@@ -9,38 +9,34 @@ from ..errors import PleError
 from ..model.lattice import Evaluation, Lattice
 from ..queries import biq
 from ..queries.element_grid import ElementSet
-from .base import Filter, FilteredLattice, _as_filter, own_and, with_own_filter
+from .base import Filter, all_of
 
 MAX_COARSE_NODES = 20_000_000  # a coarse lattice is evaluated in full; beyond this it is not "coarse"
 
 
-def evaluate_all(coarse) -> Evaluation:
-    """All surviving elements of a (filtered) coarse lattice, with a size guard."""
-    lat = coarse.lattice if isinstance(coarse, FilteredLattice) else coarse
-    if lat.node_count() > MAX_COARSE_NODES:
-        raise PleError(f"coarse lattice has {lat.node_count():,} nodes (limit {MAX_COARSE_NODES:,}); "
+def evaluate_all(coarse: Lattice) -> Evaluation:
+    """All kept elements of a (filtered) coarse lattice, with a size guard."""
+    if coarse.node_count() > MAX_COARSE_NODES:
+        raise PleError(f"coarse lattice has {coarse.node_count():,} nodes (limit {MAX_COARSE_NODES:,}); "
                        "a LiL coarse lattice is evaluated in full")
     return coarse.evaluate()
 
 
 class LiL(Filter):
     """Lattice-in-Lattice: a fine node survives when its ball interferes with a ball or a
-    cone-beam of ``coarse`` (a Lattice, or a FilteredLattice for cascades, thesis Fig. 9.3).
+    cone-beam of ``coarse`` (a Lattice; a filtered one makes a cascade, thesis Fig. 9.3).
 
-    ``method``: ``elements`` evaluates the coarse lattice's (surviving) elements and queries a
-    grid over them; ``biq`` calls ``ple.biq.any_hit`` (RangeFinder BIQs against an unfiltered
-    coarse lattice); ``auto`` picks ``elements``, which measured faster (docs/filters.md)."""
+    ``method``: ``elements`` evaluates the coarse lattice's kept elements and queries a grid
+    over them; ``biq`` calls ``ple.queries.biq.any_hit`` (RangeFinder BIQs against the coarse
+    program, removed elements never hit); ``auto`` picks ``elements``, which measured faster
+    (docs/filters.md)."""
 
     def __init__(self, coarse, method: str = "auto") -> None:
-        if not isinstance(coarse, (Lattice, FilteredLattice)):
-            raise PleError(f"LiL coarse must be a Lattice or a FilteredLattice, got {type(coarse).__name__}")
+        if not isinstance(coarse, Lattice):
+            raise PleError(f"LiL coarse must be a Lattice (filtered or not), got {type(coarse).__name__}")
         if method not in ("auto", "elements", "biq"):
             raise PleError(f"LiL method {method!r}: expected auto, elements or biq")
-        coarse = with_own_filter(coarse)
-        if method == "biq" and isinstance(coarse, FilteredLattice):
-            raise PleError("LiL method 'biq' needs an unfiltered coarse lattice (BIQ runs on the program)")
-        coarse_lat = coarse.lattice if isinstance(coarse, FilteredLattice) else coarse
-        coarse_lat.validate()
+        coarse.validate()
         self.coarse = coarse
         self.method = "elements" if method == "auto" else method
         self._index: ElementSet | None = None
@@ -69,16 +65,14 @@ def max_radius(lat: Lattice) -> float:
     return float(lat.placement.factor * f * lat.template_radii.max())
 
 
-def lil(fine: Lattice, *coarse: Lattice, extra: Filter | None = None, method: str = "auto") -> FilteredLattice:
+def lil(fine: Lattice, *coarse: Lattice, extra: Filter | None = None, method: str = "auto") -> Lattice:
     """Cascaded LiL: ``lil(F, M, C)`` is F filtered by (M filtered by C), finest to coarsest.
     ``extra`` (e.g. a Stencil) is and-ed into the finest level. A program filter carried by any
     of the lattices (``Lattice.set_filter``) is and-ed into its own level."""
     if not coarse:
         raise PleError("LiL needs at least one coarse lattice")
-    current: Lattice | FilteredLattice = coarse[-1]
+    current = coarse[-1]
     for medium in reversed(coarse[:-1]):
-        current = FilteredLattice(medium, own_and(medium, LiL(current, method="elements")))
+        current = medium.with_filter(LiL(current, method="elements"))
     top: Filter = LiL(current, method=method if len(coarse) == 1 else "elements")
-    if extra is not None:
-        top = _as_filter(extra) & top
-    return FilteredLattice(fine, own_and(fine, top))
+    return fine.with_filter(all_of(extra, top))

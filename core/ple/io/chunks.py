@@ -1,11 +1,10 @@
 """Stream a filter over a lattice larger than memory: slabs in, ``.npz`` chunks out.
 
-The filtered lattice is walked slab by slab (``Lattice.iter_slabs``, boxes of node-groups in
-(i, j, k) order). Each node is decided once, in its own slab; its output row is global (the
+The filtered lattice is walked slab by slab (``Lattice.iter_evaluation``, boxes of node-groups
+in (i, j, k) order). Each node is decided once, in its own slab; its output row is global (the
 chunks' nodes concatenated in order). A beam is written with the later of its two slabs, when
-both of its nodes have been decided: the row maps of earlier slabs are kept only while a beam
-offset can still reach them (i-layers within max |di| of the current slab), so memory stays
-bounded by one slab plus a few i-layers of row maps.
+both of its nodes have been decided, so memory stays bounded by one slab plus a few i-layers
+of row maps.
 
 Output directory: ``manifest.json`` (format ``ple-chunks/1``) and ``chunk_NNNNNN.npz`` files
 with the arrays of ``ple eval`` — node_index, center, radius (this slab's surviving nodes),
@@ -23,14 +22,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import PleError
-from ..filters.base import FilteredLattice, beams_between
-from ..model.lattice import Evaluation
+from ..model.lattice import Evaluation, Lattice
 
 FORMAT = "ple-chunks/1"
 DEFAULT_SLAB_GROUPS = 1 << 18
 
 
-def stream_filter(flat: FilteredLattice, out_dir, region=None, slab_groups: int = DEFAULT_SLAB_GROUPS,
+def stream_filter(lat: Lattice, out_dir, region=None, slab_groups: int = DEFAULT_SLAB_GROUPS,
                   progress=None) -> dict:
     """Write the surviving nodes and beams of ``region`` (default: all) as chunks in ``out_dir``.
 
@@ -46,12 +44,11 @@ def stream_filter(flat: FilteredLattice, out_dir, region=None, slab_groups: int 
         raise PleError(f"--out {out}: folder {parent} does not exist")
     if int(slab_groups) < 1:
         raise PleError(f"slab size must be at least 1 node-group, got {slab_groups}")
-    lat = flat.lattice
     lat.validate()
     r = lat.region(region)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
     try:
-        manifest = _write_chunks(flat, r, tmp, int(slab_groups), progress)
+        manifest = _write_chunks(lat, r, tmp, int(slab_groups), progress)
         if out.exists():
             trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=parent))
             out.rename(trash / "old")
@@ -65,31 +62,16 @@ def stream_filter(flat: FilteredLattice, out_dir, region=None, slab_groups: int 
     return manifest
 
 
-def _write_chunks(flat: FilteredLattice, r, folder: Path, slab_groups: int, progress) -> dict:
-    lat = flat.lattice
-    reach_i = max((abs(b.di) for b in lat.beams), default=0)
-    retained: list[tuple] = []  # (slab region, global row map) of slabs a later beam may reach
+def _write_chunks(lat: Lattice, r, folder: Path, slab_groups: int, progress) -> dict:
     chunks, node_offset, beam_total = [], 0, 0
-    for n, slab in enumerate(lat.iter_slabs(slab_groups, r)):
-        nodes, rows = flat.region_rows(slab)
-        rows = np.where(rows >= 0, rows + node_offset, -1)
-        retained = [(s, m) for s, m in retained if s.i1 - 1 + reach_i >= slab.i0]
-        parts = [beams_between(lat, slab, rows, slab, rows)]
-        for s, m in retained:
-            parts.append(beams_between(lat, s, m, slab, rows))
-            parts.append(beams_between(lat, slab, rows, s, m))
-        idx = np.concatenate([p[0] for p in parts])
-        ends = np.concatenate([p[1] for p in parts])
-        order = np.lexsort((idx[:, 3], idx[:, 2], idx[:, 1], idx[:, 0]))
+    for n, (slab, ev) in enumerate(lat.iter_evaluation(r, slab_groups)):
         name = f"chunk_{n:06d}.npz"
         with open(folder / name, "wb") as fh:
-            np.savez(fh, node_index=nodes.node_index, center=nodes.center, radius=nodes.radius,
-                     beam_index=idx[order], beam_nodes=ends[order])
-        chunks.append({"file": name, "region": str(slab), "nodes": len(nodes.node_index), "beams": len(idx),
+            np.savez(fh, **ev.arrays())
+        chunks.append({"file": name, "region": str(slab), "nodes": len(ev.node_index), "beams": len(ev.beam_index),
                        "node_offset": node_offset})
-        node_offset += len(nodes.node_index)
-        beam_total += len(idx)
-        retained.append((slab, rows))
+        node_offset += len(ev.node_index)
+        beam_total += len(ev.beam_index)
         if progress:
             progress.update(slab.groups, f"{node_offset:,} nodes {beam_total:,} beams kept")
     if progress:

@@ -31,7 +31,6 @@ import trimesh
 
 from ..algebra.vectors import perpendicular_frames
 from ..errors import PleError
-from ..filters.base import evaluate_lattice
 from ..model.lattice import Lattice, Region
 from .achocc import HubGeometry, hub_geometry
 from .chocc import ChoccMesh, cnt_segments, corridor_mesh, sampled_segments
@@ -198,14 +197,6 @@ class _Tessellator:
         self.strips: dict = {}
         self.hints: dict = {}
         self.scale = lat.template_radii * KEY_QUANTUM
-        self.node_filter = lat.filter  # thesis §9: only surviving nodes get hubs; beams need both ends
-
-    def kept(self, idx: np.ndarray) -> np.ndarray:
-        """Which nodes idx (N, 4) survive the lattice's filter (all, without one)."""
-        if self.node_filter is None or len(idx) == 0:
-            return np.ones(len(idx), bool)
-        c, r = self.lat.node_balls(idx)
-        return np.asarray(self.node_filter.node_mask(self.lat, idx, c, r), dtype=bool)
 
     # ----- hubs -----------------------------------------------------------------------
     def _neighbors(self, idx: np.ndarray, n: int):
@@ -221,8 +212,8 @@ class _Tessellator:
         nb = np.stack(out, axis=1) if out else np.zeros((len(idx), 0, 4), np.int64)
         counts = np.array(lat.counts)
         exists = np.all((nb[..., :3] >= 0) & (nb[..., :3] < counts), axis=-1)
-        if self.node_filter is not None and exists.any():
-            exists[exists] = self.kept(nb[exists])  # a beam to a filtered-out node does not exist
+        if lat.filter is not None and exists.any():
+            exists[exists] = lat.keeps(nb[exists])  # thesis §9: a beam to a filtered-out node does not exist
         lo = np.array([r.i0, r.j0, r.k0])
         hi = np.array([r.i1, r.j1, r.k1])
         inside = np.all((nb[..., :3] >= lo) & (nb[..., :3] < hi), axis=-1)
@@ -290,14 +281,14 @@ class _Tessellator:
         lat = self.lat
         nn = len(lat.nodes)
         own = box.node_index(nn)
-        own = own[self.kept(own)]
+        own = own[self.lat.keeps(own)]
         # ghosts: the far ends of beams leaving the box but not the region
         ghosts = []
         for b in lat.beams:
             src = own[own[:, 3] == b.n1]
             dst = np.concatenate([src[:, :3] + [b.di, b.dj, b.dk], np.full((len(src), 1), b.n2)], axis=1)
             ok = _in(dst, self.region) & ~_in(dst, box)
-            ok[ok] = self.kept(dst[ok])
+            ok[ok] = self.lat.keeps(dst[ok])
             ghosts.append(dst[ok])
         ghosts = np.unique(np.concatenate(ghosts), axis=0) if ghosts else np.zeros((0, 4), np.int64)
         idx = np.concatenate([own, ghosts]).astype(np.int64)
@@ -348,7 +339,7 @@ class _Tessellator:
             src = np.flatnonzero(idx[:n_own, 3] == b.n1)
             dst_idx = np.concatenate([idx[src, :3] + [b.di, b.dj, b.dk], np.full((len(src), 1), b.n2)], axis=1)
             ok = _in(dst_idx, self.region)
-            ok[ok] = self.kept(dst_idx[ok])
+            ok[ok] = self.lat.keeps(dst_idx[ok])
             src, dst_idx = src[ok], dst_idx[ok]
             if len(src) == 0:
                 continue
@@ -445,7 +436,7 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     r = lat.region(region)
     if style == "balls-beams":
 
-        ev = evaluate_lattice(lat, r)
+        ev = lat.evaluate(r)
         return balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
     verts, faces = _Tessellator(lat, r, style, levels, segments).build(r)
     mesh = trimesh.Trimesh(verts, faces, process=False)

@@ -148,6 +148,16 @@ class Evaluation:
         return {"node_index": self.node_index, "center": self.center, "radius": self.radius,
                 "beam_index": self.beam_index, "beam_nodes": self.beam_nodes}
 
+    def select(self, keep: np.ndarray) -> Evaluation:
+        """Keep the nodes flagged in ``keep`` (N,) and the beams whose two nodes are both kept;
+        beam_nodes are renumbered to rows of the kept nodes."""
+        keep = np.asarray(keep, dtype=bool)
+        new_row = np.cumsum(keep) - 1
+        beam_alive = keep[self.beam_nodes[:, 0]] & keep[self.beam_nodes[:, 1]] if len(self.beam_nodes) else \
+            np.zeros(0, dtype=bool)
+        return Evaluation(self.node_index[keep], self.center[keep], self.radius[keep], self.beam_index[beam_alive],
+                          new_row[self.beam_nodes[beam_alive]].reshape(-1, 2).astype(np.int64))
+
 
 class Lattice:
     """A steady lattice program (SPEC §4). Build with add_node/add_beam/set_u/set_v/set_w."""
@@ -258,13 +268,26 @@ class Lattice:
         self.becots = info
 
     def set_filter(self, node_filter) -> None:
-        """Keep only the nodes a filter accepts (stencil, LiL, implicit field; thesis §9); beams
-        survive where both nodes do. Evaluation of the raw program is unchanged: commands
-        apply the filter (``ple.filters.FilteredLattice``)."""
+        """Keep only the nodes a filter accepts (stencil, LiL, implicit field, … ; thesis §9);
+        beams survive where both nodes do. The filter is part of the lattice: every evaluation,
+        query, measure and mesh of it sees only what the filter keeps."""
         if node_filter is not None and not callable(getattr(node_filter, "node_mask", None)):
             raise PleError(f"filter must be a ple filter (Stencil, LiL, ImplicitFilter, …), "
                            f"got {type(node_filter).__name__}")
         self.filter = node_filter
+
+    def with_filter(self, node_filter) -> Lattice:
+        """A copy whose filter keeps what this lattice's filter and ``node_filter`` both keep
+        (this one's first: a program's own filter, then a command's or a panel's)."""
+        other = self.copy()
+        other.set_filter(node_filter if self.filter is None or node_filter is None else self.filter & node_filter)
+        return other
+
+    def unfiltered(self) -> Lattice:
+        """The same program without its filter (every node of every group)."""
+        other = self.copy()
+        other.filter = None
+        return other
 
     def _check_size(self) -> None:
         if self.groups > MAX_GROUPS:
@@ -412,12 +435,73 @@ class Lattice:
         return idx[order], nodes[order]
 
     def evaluate(self, region=None) -> Evaluation:
-        """All nodes and beams of a region (default: the whole lattice)."""
+        """The nodes and beams of a region (default: the whole lattice) that the lattice's filter
+        keeps (all of them without a filter): the one evaluation every door uses."""
+        r = self.region(region)
+        if self.filter is None:
+            return self.evaluate_unfiltered(r)
+        ev, rows = self.region_rows(r)
+        ev.beam_index, ev.beam_nodes = beams_between(self, r, rows, r, rows)
+        return ev
+
+    def evaluate_unfiltered(self, region=None) -> Evaluation:
+        """Every node and beam of a region, ignoring the filter (the steady program itself)."""
         r = self.region(region)
         centers, radii = self.region_balls(r)
         beam_index, beam_nodes = self.region_beams(r)
         return Evaluation(r.node_index(len(self.nodes)), centers.reshape(-1, 3), radii.reshape(-1), beam_index,
                           beam_nodes)
+
+    def iter_evaluation(self, region=None, max_groups: int = 1 << 18) -> Iterator[tuple[Region, Evaluation]]:
+        """The evaluation of a region streamed slab by slab (``iter_slabs``), memory bounded by one
+        slab plus the few i-layers a beam offset reaches: per slab, its kept nodes and the beams
+        completed in it (those whose later end lies in it); ``beam_nodes`` are global rows into
+        the concatenation of all slabs' nodes. Concatenated, the slabs are ``evaluate(region)``."""
+        r = self.region(region)
+        reach_i = max((abs(b.di) for b in self.beams), default=0)
+        retained: list[tuple] = []  # (slab, global row map) of earlier slabs a beam may still reach
+        offset = 0
+        for slab in self.iter_slabs(max_groups, r):
+            nodes, rows = self.region_rows(slab)
+            rows = np.where(rows >= 0, rows + offset, -1)
+            retained = [(s, m) for s, m in retained if s.i1 - 1 + reach_i >= slab.i0]
+            parts = [beams_between(self, slab, rows, slab, rows)]
+            for s, m in retained:
+                parts.append(beams_between(self, s, m, slab, rows))
+                parts.append(beams_between(self, slab, rows, s, m))
+            idx = np.concatenate([p[0] for p in parts])
+            ends = np.concatenate([p[1] for p in parts])
+            order = np.lexsort((idx[:, 3], idx[:, 2], idx[:, 1], idx[:, 0]))
+            nodes.beam_index, nodes.beam_nodes = idx[order], ends[order]
+            yield slab, nodes
+            offset += len(nodes.node_index)
+            retained.append((slab, rows))
+
+    def keeps(self, index, centers=None, radii=None) -> np.ndarray:
+        """bool (N,): which nodes (N, 4) of (i, j, k, n) the filter keeps (all without one); their
+        balls are computed unless given. Indices outside the counts are never kept."""
+        idx = np.asarray(index, dtype=np.int64).reshape(-1, 4)
+        inside = np.all((idx[:, :3] >= 0) & (idx[:, :3] < np.array(self.counts)), axis=1)
+        if self.filter is None or not inside.any():
+            return inside
+        if centers is None:
+            centers, radii = self.node_balls(idx)
+        keep = np.zeros(len(idx), dtype=bool)
+        rows = np.flatnonzero(inside)
+        keep[rows] = self.filter.node_mask(self, idx[rows], np.asarray(centers)[rows], np.asarray(radii)[rows])
+        return keep
+
+    def region_rows(self, region=None) -> tuple[Evaluation, np.ndarray]:
+        """Kept nodes of a region (an Evaluation without beams) and the region's row map: int64
+        (ni, nj, nk, nn), each kept node's row or -1 for a removed node (for streaming)."""
+        r = self.region(region)
+        centers, radii = self.region_balls(r)
+        index = r.node_index(len(self.nodes))
+        keep = self.keeps(index, centers.reshape(-1, 3), radii.reshape(-1))
+        rows = np.where(keep, np.cumsum(keep) - 1, -1).reshape(radii.shape)
+        nodes = Evaluation(index[keep], centers.reshape(-1, 3)[keep], radii.reshape(-1)[keep],
+                           np.zeros((0, 4), np.int64), np.zeros((0, 2), np.int64))
+        return nodes, rows
 
     def beams_of_pattern(self, pattern: int, i, j, k):
         """For from-groups given as index arrays: (valid (N,) bool, from-ball, to-ball).
@@ -485,6 +569,55 @@ class Lattice:
         other.v = replace(self.v, count=nv, similarity=self.V, cumulative=False)
         other.w = replace(self.w, count=nw, similarity=self.W, cumulative=False)
         return other
+
+
+def beams_between(lat: Lattice, a: Region, rows_a: np.ndarray, b: Region, rows_b: np.ndarray):
+    """Beams whose from-group lies in box ``a`` and to-group in box ``b``, both nodes alive.
+
+    ``rows_a``/``rows_b`` (ni, nj, nk, nn) give each node's output row, -1 where removed.
+    Returns beam_index (M, 4) and beam_nodes (M, 2), sorted by (i, j, k, pattern)."""
+    lo_all, hi_all, boxes = np.full(3, np.iinfo(np.int64).max), np.full(3, np.iinfo(np.int64).min), []
+    for p, bp in enumerate(lat.beams):
+        lo = np.maximum((a.i0, a.j0, a.k0), np.subtract((b.i0, b.j0, b.k0), bp.offset))
+        hi = np.minimum((a.i1, a.j1, a.k1), np.subtract((b.i1, b.j1, b.k1), bp.offset))
+        if np.all(hi > lo):
+            boxes.append((p, bp, lo, hi))
+            lo_all, hi_all = np.minimum(lo_all, lo), np.maximum(hi_all, hi)
+    if not boxes:
+        return np.zeros((0, 4), np.int64), np.zeros((0, 2), np.int64)
+    # one Boolean array over (i, j, k, pattern): np.nonzero then lists beams already sorted
+    alive = np.zeros((*(hi_all - lo_all), len(lat.beams)), dtype=bool)
+    a0, b0 = np.array((a.i0, a.j0, a.k0)), np.array((b.i0, b.j0, b.k0))
+    keep_a = rows_a >= 0
+    keep_b = keep_a if rows_b is rows_a else rows_b >= 0
+    for p, bp, lo, hi in boxes:
+        fa = keep_a[tuple(slice(x, y) for x, y in zip(lo - a0, hi - a0)) + (bp.n1,)]
+        tb = keep_b[tuple(slice(x, y) for x, y in zip(lo + bp.offset - b0, hi + bp.offset - b0)) + (bp.n2,)]
+        np.logical_and(fa, tb, out=alive[tuple(slice(x, y) for x, y in zip(lo - lo_all, hi - lo_all)) + (p,)])
+    flat = np.flatnonzero(alive)  # linear (i, j, k, pattern) positions, in sorted order
+    nb = len(lat.beams)
+    ext = hi_all - lo_all
+    pp = flat % nb
+    g = flat // nb
+    kk = g % ext[2] + lo_all[2]
+    g //= ext[2]
+    jj = g % ext[1] + lo_all[1]
+    ii = g // ext[1] + lo_all[0]
+    n1 = np.array([bp.n1 for bp in lat.beams])[pp]
+    n2 = np.array([bp.n2 for bp in lat.beams])[pp]
+    off = np.array([bp.offset for bp in lat.beams], dtype=np.int64)[pp]
+    index = np.empty((len(flat), 4), dtype=np.int64)
+    index[:, 0], index[:, 1], index[:, 2], index[:, 3] = ii, jj, kk, pp
+    ends = np.empty((len(flat), 2), dtype=np.int64)
+    ends[:, 0] = _lookup(rows_a, a, ii, jj, kk, n1)
+    ends[:, 1] = _lookup(rows_b, b, ii + off[:, 0], jj + off[:, 1], kk + off[:, 2], n2)
+    return index, ends
+
+
+def _lookup(rows: np.ndarray, box: Region, i, j, k, n) -> np.ndarray:
+    """rows[i - i0, j - j0, k - k0, n] through one linear index (faster than 4-D fancy indexing)."""
+    _, nj, nk, nn = rows.shape
+    return rows.reshape(-1)[(((i - box.i0) * nj + (j - box.j0)) * nk + (k - box.k0)) * nn + n]
 
 
 def _power_table(s: Similarity, idx: np.ndarray) -> np.ndarray:

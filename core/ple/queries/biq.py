@@ -35,26 +35,44 @@ def query(lat: Lattice, centers, radii, method: str = "auto") -> list[BIQResult]
     if method not in ("auto", "naive", "rangefinder"):
         raise PleError(f"method {method!r}: expected auto, naive or rangefinder")
     if lat.becots is not None and method != "naive":
-        return becots_rangefinder.query(lat, c, r)
+        return _kept(lat, becots_rangefinder.query(lat, c, r))
     if method == "naive":
         node_hits, beam_hits = _naive_hits(lat, c, r)
         path = "naive"
     else:
-
         node_hits, beam_hits, path = lattice_hits(lat, c, r)
-    return split_hits(len(c), node_hits, beam_hits, path)
+    return _kept(lat, split_hits(len(c), node_hits, beam_hits, path))
 
 
 def any_hit(lat: Lattice, centers, radii) -> np.ndarray:
-    """bool (q,): does each query ball interfere with any ball or beam of ``lat``?"""
+    """bool (q,): does each query ball interfere with any kept ball or beam of ``lat``?"""
     c, r = check_queries(centers, radii)
     lat.validate()
-    if lat.becots is not None:
-
-        res = becots_rangefinder.query(lat, c, r)
+    if lat.becots is not None or lat.filter is not None:
+        res = query(lat, c, r)
         return np.array([len(x.nodes) > 0 or len(x.beams) > 0 for x in res], dtype=bool)
-
     return lattice_any(lat, c, r)
+
+
+def _kept(lat: Lattice, results: list[BIQResult]) -> list[BIQResult]:
+    """Hits of a filtered lattice: a node the filter removed is never a hit, nor a beam with a
+    removed end (thesis §9); the filter is asked once for all hits of all queries."""
+    if lat.filter is None or not results:
+        return results
+    nodes = np.concatenate([x.nodes for x in results]).reshape(-1, 4)
+    beams = np.concatenate([x.beams for x in results]).reshape(-1, 4)
+    keep_nodes = lat.keeps(nodes)
+    pats = np.array([(b.n1, b.n2, *b.offset) for b in lat.beams], dtype=np.int64).reshape(-1, 5)[beams[:, 3]]
+    start = np.concatenate([beams[:, :3], pats[:, :1]], axis=1)
+    end = np.concatenate([beams[:, :3] + pats[:, 2:], pats[:, 1:2]], axis=1)
+    keep_ends = lat.keeps(np.concatenate([start, end]))
+    keep_beams = keep_ends[:len(beams)] & keep_ends[len(beams):]
+    out, n0, b0 = [], 0, 0
+    for x in results:
+        n1, b1 = n0 + len(x.nodes), b0 + len(x.beams)
+        out.append(BIQResult(x.nodes[keep_nodes[n0:n1]], x.beams[keep_beams[b0:b1]], x.path))
+        n0, b0 = n1, b1
+    return out
 
 
 def pmc(lat: Lattice, points) -> np.ndarray:

@@ -1,0 +1,56 @@
+"""Random lattices and similarities shared by tests of several layers (importable as ``lattices``)."""
+
+from __future__ import annotations
+
+import numpy as np
+from ple import Lattice, Rotation, Scaling, Screw, Swirl, Translation
+from scipy.spatial.transform import Rotation as SciRotation
+
+
+def random_similarity_matrix(rng, scale_range=(0.85, 1.15)) -> np.ndarray:
+    m = np.eye(4)
+    q = rng.normal(size=4)
+    m[:3, :3] = rng.uniform(*scale_range) * SciRotation.from_quat(q / np.linalg.norm(q)).as_matrix()
+    m[:3, 3] = rng.normal(size=3)
+    return m
+
+
+KINDS = ("translation", "rotation", "scaling", "screw", "swirl")
+
+
+def random_similarity(rng, kind: str, step: float):
+    axis = rng.normal(size=3)
+    point = rng.normal(size=3) * 3 * step
+    angle = rng.uniform(0.1, 0.35) * rng.choice([-1, 1])
+    factor = rng.uniform(0.88, 1.12)
+    if kind == "translation":
+        return Translation(rng.normal(size=3) * 0.3 * step + step * np.eye(3)[rng.integers(3)])
+    if kind == "rotation":
+        return Rotation(angle, axis, point)
+    if kind == "scaling":
+        return Scaling(factor, point)
+    if kind == "screw":
+        return Screw(angle, axis, point, step * rng.uniform(0.5, 1.0))
+    return Swirl(angle, axis, point, factor)
+
+
+def random_lattice(rng, kinds, counts, step: float, radius: float, nodes: int = 2) -> Lattice:
+    lat = Lattice()
+    for _ in range(nodes):
+        lat.add_node(rng.normal(size=3) * step * 0.4, radius * rng.uniform(0.6, 1.4))
+    offsets = [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, -1, 0), (0, 1, -1), (0, 0, 0)]
+    for off in offsets[: 3 + rng.integers(0, 4)]:
+        n1, n2 = rng.integers(0, nodes, 2)
+        if off == (0, 0, 0) and n1 == n2:
+            continue
+        lat.add_beam(int(n1), int(n2), *off)
+    lat.set_u(counts[0], random_similarity(rng, kinds[0], step))
+    lat.set_v(counts[1], random_similarity(rng, kinds[1], step))
+    lat.set_w(counts[2], random_similarity(rng, kinds[2], step))
+    return lat
+
+
+def centre_on(lat: Lattice, target: Lattice) -> None:
+    """Place ``lat`` so that its mean node centre meets ``target``'s (both lattices then overlap)."""
+    shift = target.evaluate().center.mean(axis=0) - lat.evaluate().center.mean(axis=0)
+    lat.set_placement(Translation(shift))
