@@ -33,7 +33,7 @@ def needs(name: str) -> ModuleType:
 
 
 cage = core("model.cage")
-ir = core("model.ir")
+ir = core("filters.ir")  # ple-lattice/1 data with filters
 presets = core("program.presets")
 program = core("program.runtime")
 snippets = core("program.snippets")

@@ -180,7 +180,7 @@ class PLE_OT_program_apply(RigOperator, bpy.types.Operator):  # noqa: N801 - Ble
         text = rig.ple.text
         if rig.ple.source_kind == "IR":
             lat = rigmod.lattice_of(rig)
-            new = json.dumps(ir.lattice_to_dict(lat, resolved=False), indent=1) + "\n"
+            new = json.dumps(ir.lattice_to_ir(lat, resolved=False), indent=1) + "\n"
         else:
             if not rigmod.trusted(rig):
                 raise PleError("the program is not trusted: press Run Program first")

@@ -108,7 +108,7 @@ def base_lattice(rig, st: RigState):
             data = json.loads(source)
         except json.JSONDecodeError as exc:
             raise PleError(f"{text.name}: malformed JSON at line {exc.lineno}: {exc.msg}") from None
-        base = ir.lattice_from_dict(data)
+        base = ir.lattice_from_ir(data)
         prog = None
     else:
         if not trusted(rig):

@@ -1,10 +1,13 @@
-"""``ple info LATTICE [--json]``: counts, similarity kinds, bounds, beams, area, volume."""
+"""``ple info LATTICE [--region R] [--json]``: counts, similarity kinds, bounds, beams, area,
+volume — of what the lattice keeps (its filter applied), in the whole index box or a region."""
 
 from __future__ import annotations
 
 import json
 
-from ..measure.integrals import lattice_measures
+import numpy as np
+
+from ..measure.integrals import MAX_KEPT_NODES, kept_measures, lattice_measures
 from ..model.lattice import Lattice
 from .common import add_lattice_args, lattice_from_args
 
@@ -12,42 +15,77 @@ from .common import add_lattice_args, lattice_from_args
 def register(sub) -> None:
     p = sub.add_parser("info", help="counts, similarity kinds, bounds, beam count, area, volume")
     add_lattice_args(p)
+    p.add_argument("--region", help="I0:I1,J0:J1,K0:K1 (half-open): report this index box only")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=run)
 
 
-def lattice_info(lat: Lattice) -> dict:
-    lo, hi = lat.bounds()
+def lattice_info(lat: Lattice, region=None) -> dict:
+    """Everything ``ple info`` reports. Without a filter, counts are closed forms and the whole
+    lattice's area and volume come from the geometric series; with a filter (or a region), the
+    kept nodes are decided slab by slab and the kept hubs measured (up to MAX_KEPT_NODES)."""
+    r = lat.region(region)
+    whole = str(r) == str(lat.region())
     info = {
         "counts": list(lat.counts),
-        "groups": lat.groups,
+        "region": str(r),
+        "groups": r.groups,
         "template_nodes": len(lat.nodes),
         "beam_patterns": len(lat.beams),
-        "nodes": lat.node_count(),
-        "beams": lat.beam_count(),
+        "filtered": lat.filter is not None,
         "similarities": {name: {"kind": d.incremental.kind, "cumulative": d.cumulative,
                                 "incremental": d.incremental.to_dict()}
                          for name, d in (("U", lat.u), ("V", lat.v), ("W", lat.w))},
         "placement": lat.placement.to_dict(),
-        "bounds": {"min": lo.tolist(), "max": hi.tolist()},
         "mean_radius": lat.mean_radius(),
     }
-    info.update(lattice_measures(lat))
+    if lat.filter is None:
+        lo, hi = lat.bounds(r)
+        info.update(nodes=lat.node_count(r), beams=lat.beam_count(r), bounds={"min": lo.tolist(), "max": hi.tolist()})
+        info.update(lattice_measures(lat) if whole else kept_measures(lat, r))
+        return info
+    info.update(program_nodes=lat.node_count(r), program_beams=lat.beam_count(r))
+    if lat.node_count(r) > MAX_KEPT_NODES:
+        info["counts_method"] = (f"skipped: {lat.node_count(r):,} nodes to decide one by one (limit "
+                                 f"{MAX_KEPT_NODES:,}; give a smaller --region)")
+        return info
+    nodes = beams = 0
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for _, ev in lat.iter_evaluation(r):
+        nodes, beams = nodes + len(ev.node_index), beams + len(ev.beam_index)
+        if len(ev.radius):
+            lo = np.minimum(lo, (ev.center - ev.radius[:, None]).min(axis=0))
+            hi = np.maximum(hi, (ev.center + ev.radius[:, None]).max(axis=0))
+    info.update(nodes=nodes, beams=beams)
+    if nodes:
+        info["bounds"] = {"min": lo.tolist(), "max": hi.tolist()}
+    info.update(kept_measures(lat, r))
     return info
 
 
 def run(args) -> int:
-    info = lattice_info(lattice_from_args(args))
+    lat = lattice_from_args(args)
+    info = lattice_info(lat, args.region)
     if args.json:
         print(json.dumps(info, indent=1))
         return 0
-    print(f"groups      {info['counts'][0]} x {info['counts'][1]} x {info['counts'][2]} = {info['groups']:,}")
-    print(f"nodes       {info['nodes']:,} ({info['template_nodes']} per group)")
-    print(f"beams       {info['beams']:,} ({info['beam_patterns']} beam-patterns)")
+    c = info["counts"]
+    print(f"groups      {c[0]} x {c[1]} x {c[2]} = {lat.groups:,}"
+          + (f" (region {info['region']}: {info['groups']:,})" if args.region else ""))
+    if info["filtered"]:
+        print(f"filter      {type(lat.filter).__name__} (counts, bounds, area and volume are of what it keeps)")
+    if "nodes" in info:
+        kept = f" of {info['program_nodes']:,}" if info["filtered"] else ""
+        print(f"nodes       {info['nodes']:,}{kept} ({info['template_nodes']} per group)")
+        kept = f" of {info['program_beams']:,}" if info["filtered"] else ""
+        print(f"beams       {info['beams']:,}{kept} ({info['beam_patterns']} beam-patterns)")
+    else:
+        print(f"nodes       {info['counts_method']}")
     for name, s in info["similarities"].items():
         cum = " (given cumulatively)" if s["cumulative"] else ""
         print(f"{name}           {s['kind']}{cum}")
-    print(f"bounds      {_fmt(info['bounds']['min'])} .. {_fmt(info['bounds']['max'])}")
+    if "bounds" in info:
+        print(f"bounds      {_fmt(info['bounds']['min'])} .. {_fmt(info['bounds']['max'])}")
     print(f"mean radius {info['mean_radius']:.6g}")
     for key in ("area", "volume"):
         if key in info:

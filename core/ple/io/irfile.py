@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from ..errors import PleError
-from ..model.ir import lattice_from_dict, lattice_to_dict
+from ..filters.ir import lattice_from_ir, lattice_to_ir
 from ..model.lattice import Lattice
 from .files import atomic_write_text
 
@@ -23,11 +23,11 @@ def load_ir(path) -> Lattice:
     except json.JSONDecodeError as exc:
         raise PleError(f"{path}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
     try:
-        return lattice_from_dict(data)
+        return lattice_from_ir(data)
     except PleError as exc:
         raise PleError(f"{path}: {exc}") from None
 
 
 def save_ir(lat: Lattice, path, resolved: bool = True) -> None:
     """Write the IR atomically (no partial file on failure)."""
-    atomic_write_text(path, json.dumps(lattice_to_dict(lat, resolved), indent=1) + "\n")
+    atomic_write_text(path, json.dumps(lattice_to_ir(lat, resolved), indent=1) + "\n")

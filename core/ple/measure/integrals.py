@@ -39,6 +39,7 @@ from ..model.lattice import Lattice
 HUB_GRID = 24  # direction cells per cube face side (6 faces), edge cells refined REFINE × REFINE
 REFINE = 8
 MAX_HUBS = 200_000  # more hub classes than this: no area/volume (guard for huge base slabs)
+MAX_KEPT_NODES = 20_000_000  # nodes of a filtered lattice or region decided one by one for its measures
 GRID_START, GRID_MAX = 8, 64  # fast path: overlap quadrature cells per cube face side, first and last
 FEATURE_CELLS = 2  # first grid: cells per narrowest angle between two beams of the hub
 ADAPT_TOL = 3e-4  # refine while the overlap integrals on grids n and 2n (turned) differ by more than this × the measure
@@ -300,10 +301,11 @@ def _rep_hubs(lat: Lattice, segs):
     return idx, wa[0][a] * wa[1][b] * wa[2][c], wv[0][a] * wv[1][b] * wv[2][c]
 
 
-def _hub_geometry(lat: Lattice, idx: np.ndarray):
+def _hub_geometry(lat: Lattice, idx: np.ndarray, partners: bool = False):
     """Per hub (H rows of (i, j, k, n)): its node radius, partner offsets (H, B, 3) and radii
     (H, B) in the hub's own group frame (divided by the group's factor), presence mask (H, B)
-    and the group factor (H,). Absent partners are extrapolated and masked."""
+    and the group factor (H,); with ``partners``, also the partners' indices (H, B, 4).
+    Absent partners are extrapolated and masked."""
     incident = _incident(lat)
     nb = max(1, max(len(x) for x in incident))
     offs = np.zeros((len(lat.nodes), nb, 3), np.int64)
@@ -324,6 +326,8 @@ def _hub_geometry(lat: Lattice, idx: np.ndarray):
     # back into the template frame: rotation transpose, divided by the factor
     local = np.einsum("hpa,hab->hpb", c - c[:, :1], lin) / f[:, None, None]
     rl = r / f[:, None]
+    if partners:
+        return rl[:, 0], local[:, 1:], rl[:, 1:], present & valid[n], f, allidx[:, 1:]
     return rl[:, 0], local[:, 1:], rl[:, 1:], present & valid[n], f
 
 
@@ -347,8 +351,20 @@ def lattice_measures(lat: Lattice, method: str = "closed", grid: int = 0, max_hu
         return {"area_method": f"skipped: {n_hubs} hub classes to measure (limit {max_hubs})"}
     idx, wa, wv = _rep_hubs(lat, segs)
     ra, off, rb, present, f = _hub_geometry(lat, idx)
-    # congruent hubs after normalization: one geometry (all incident beams, absent partners
-    # extrapolated), measured once per subset of present beams
+    area, volume, shapes, geometries = _measure_hubs(idx, ra, off, rb, present, f, wa, wv, grid)
+    axes = "".join(name for name, sim in zip("UVW", similar) if sim)
+    label = {"UVW": "closed form O(1) (§3.7)", "VW": "closed form O(ū) (§3.6)",
+             "W": "closed form O(ūv̄) (§6.1.4)"}.get(axes, "sum over hubs")
+    return {"area": area, "volume": volume, "area_method": label, "hubs": n_hubs, "hub_shapes": shapes,
+            "hub_geometries": geometries, "hub_grid": grid or "adaptive"}
+
+
+def _measure_hubs(idx, ra, off, rb, present, f, wa, wv, grid: int = 0) -> tuple[float, float, int, int]:
+    """Σ weights × (f² area, f³ volume) of hubs given in their own frames. Hubs congruent after
+    normalization share one geometry (all incident beams, absent partners extrapolated),
+    measured once per subset of present beams. Returns area, volume, shapes, geometries."""
+    if len(idx) == 0:
+        return 0.0, 0.0, 0, 0
     key = np.round(np.concatenate([idx[:, 3:], ra[:, None], off.reshape(len(idx), -1), rb], axis=1), 9)
     key[key == 0] = 0.0  # -0.0 and 0.0 alike
     _, geo_first, geo = np.unique(key, axis=0, return_index=True, return_inverse=True)
@@ -358,13 +374,36 @@ def lattice_measures(lat: Lattice, method: str = "closed", grid: int = 0, max_hu
     inverse = inverse.reshape(-1)
     g = geo_first
     a, v = hub_measures_batch(ra[g], off[g], rb[g], present[first], grid=grid, geometry=geo[first])
-    area = float(np.sum(a[inverse] * f * f * wa))
-    volume = float(np.sum(v[inverse] * f**3 * wv))
-    axes = "".join(name for name, sim in zip("UVW", similar) if sim)
-    label = {"UVW": "closed form O(1) (§3.7)", "VW": "closed form O(ū) (§3.6)",
-             "W": "closed form O(ūv̄) (§6.1.4)"}.get(axes, "sum over hubs")
-    return {"area": area, "volume": volume, "area_method": label, "hubs": n_hubs, "hub_shapes": len(first),
-            "hub_geometries": len(g),
+    return float(np.sum(a[inverse] * f * f * wa)), float(np.sum(v[inverse] * f**3 * wv)), len(first), len(g)
+
+
+def kept_measures(lat: Lattice, region=None, grid: int = 0, max_nodes: int = MAX_KEPT_NODES) -> dict:
+    """Area and volume of what a region of a (filtered) lattice keeps: every kept hub, with the
+    half-beams to kept partners inside the region only (a removed node takes its beams with it,
+    §9; a region's boundary cuts them). Streamed slab by slab; congruent hubs measured once.
+    Returns {"area_method": "skipped: ..."} when the region holds more than ``max_nodes`` nodes."""
+    lat.validate()
+    r = lat.region(region)
+    total = r.groups * len(lat.nodes)
+    if total > max_nodes:
+        return {"area_method": f"skipped: {total:,} nodes to decide one by one (limit {max_nodes:,}; "
+                               "give a smaller --region)"}
+    lo, hi = np.array([r.i0, r.j0, r.k0]), np.array([r.i1, r.j1, r.k1])
+    area = volume = 0.0
+    hubs = 0
+    for _, ev in lat.iter_evaluation(r):
+        idx = ev.node_index
+        if not len(idx):
+            continue
+        ra, off, rb, present, f, partner = _hub_geometry(lat, idx, partners=True)
+        inside = np.all((partner[..., :3] >= lo) & (partner[..., :3] < hi), axis=-1)
+        present &= inside
+        if lat.filter is not None and present.any():
+            present[present] = lat.keeps(partner[present])
+        ones = np.ones(len(idx))
+        a, v, _, _ = _measure_hubs(idx, ra, off, rb, present, f, ones, ones, grid)
+        area, volume, hubs = area + a, volume + v, hubs + len(idx)
+    return {"area": area, "volume": volume, "area_method": "sum over kept hubs", "hubs": hubs,
             "hub_grid": grid or "adaptive"}
 
 

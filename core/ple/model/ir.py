@@ -17,7 +17,7 @@ from .becots import BeCOTSField, Stack
 from .lattice import Lattice
 
 FORMAT = "ple-lattice/1"
-TOP_KEYS = {"format", "nodes", "beams", "U", "V", "W", "placement", "becots", "description", "meta"}
+TOP_KEYS = {"format", "nodes", "beams", "U", "V", "W", "placement", "becots", "description", "meta", "filter"}
 
 
 def _num(x, where: str) -> float:
@@ -56,8 +56,10 @@ def _similarity(d, where: str) -> Similarity:
     return similarity_from_dict(sim, f"{where}.similarity")
 
 
-def lattice_from_dict(data) -> Lattice:
-    """Build a Lattice from parsed ``ple-lattice/1`` data (validated)."""
+def lattice_from_dict(data, filter_from_dict=None) -> Lattice:
+    """Build a Lattice from parsed ``ple-lattice/1`` data (validated). The optional ``"filter"``
+    field is parsed by ``filter_from_dict(data, where)`` (``ple.filters.ir`` gives one: filters
+    live above the model); without it a filtered file is refused, never silently unfiltered."""
     if not isinstance(data, dict):
         raise PleError("lattice file: expected a JSON object at the top level")
     if data.get("format") != FORMAT:
@@ -131,6 +133,10 @@ def lattice_from_dict(data) -> Lattice:
         becots_from_ir(lat, data["becots"], "becots")
     if "description" in data:
         lat.meta["description"] = str(data["description"])
+    if "filter" in data:
+        if filter_from_dict is None:
+            raise PleError("filter: this reader cannot apply filters (load the file with ple.io.irfile.load_ir)")
+        lat.set_filter(filter_from_dict(data["filter"], "filter"))
     return lat
 
 
@@ -138,9 +144,11 @@ def _matrix_list(s: Similarity) -> list[list[float]]:
     return [[float(x) for x in row] for row in s.matrix]
 
 
-def lattice_to_dict(lat: Lattice, resolved: bool = True) -> dict:
+def lattice_to_dict(lat: Lattice, resolved: bool = True, filter_to_dict=None) -> dict:
     """The IR of a lattice. ``resolved``: every U/V/W as its incremental 4x4 matrix (what
-    ``ple ir`` writes); otherwise canonical similarities with their cumulative flags."""
+    ``ple ir`` writes); otherwise canonical similarities with their cumulative flags. A filter is
+    written by ``filter_to_dict(filter)`` (``ple.filters.ir``); without it a filtered lattice is
+    refused rather than written unfiltered."""
     out: dict = {"format": FORMAT}
     if lat.meta.get("description"):
         out["description"] = lat.meta["description"]
@@ -164,6 +172,10 @@ def lattice_to_dict(lat: Lattice, resolved: bool = True) -> dict:
     if lat.becots is not None and not resolved:
         out["becots"] = lat.becots.to_ir()
         del out["U"], out["V"]
+    if lat.filter is not None:
+        if filter_to_dict is None:
+            raise PleError("filter: this writer cannot write filters (use ple.io.irfile.save_ir)")
+        out["filter"] = filter_to_dict(lat.filter)
     return out
 
 

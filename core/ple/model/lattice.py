@@ -336,14 +336,17 @@ class Lattice:
         if not self.nodes:
             raise PleError("the lattice has no nodes")
 
-    def node_count(self) -> int:
-        return self.groups * len(self.nodes)
+    def node_count(self, region=None) -> int:
+        """Nodes of the program in a region (default: all), before any filter."""
+        return self.region(region).groups * len(self.nodes)
 
-    def beam_count(self) -> int:
-        """Number of beams: per pattern, the groups whose offset partner exists."""
+    def beam_count(self, region=None) -> int:
+        """Beams of the program with both ends in a region (default: all), before any filter:
+        per pattern, the groups of the region whose offset partner is in it too."""
+        r = self.region(region)
         total = 0
         for b in self.beams:
-            total += math.prod(max(0, c - abs(d)) for c, d in zip(self.counts, b.offset))
+            total += math.prod(max(0, c - abs(d)) for c, d in zip(r.shape, b.offset))
         return total
 
     def region(self, region=None) -> Region:

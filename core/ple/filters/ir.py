@@ -1,0 +1,186 @@
+"""Filters as data in ``ple-lattice/1`` (the optional ``"filter"`` field; docs/formats.md): stencils,
+Lattice-in-Lattice (the coarse lattice inline, itself possibly filtered), implicit TPMS and
+Fourier fields, and their and/or/not compounds. Data only: loading never runs code, and every
+malformed field is named by its path (``filter.and[1].lil.coarse.nodes[0].radius``)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..algebra.similarity import Similarity, similarity_from_dict
+from ..errors import PleError
+from ..model.ir import lattice_from_dict, lattice_to_dict
+from ..model.lattice import Lattice
+from .base import And, Filter, Not, Or
+from .implicit import TPMS, VARIANTS, FourierField, ImplicitFilter, TPMSField
+from .lil import LiL
+from .stencil import Stencil
+
+MAX_DEPTH = 32  # nesting of and/or/not and LiL coarse lattices
+MAX_STENCIL_CELLS = 1 << 20
+MAX_FOURIER_TERMS = 1 << 16
+
+
+def lattice_from_ir(data) -> Lattice:
+    """A Lattice from ``ple-lattice/1`` data, with its filter."""
+    return lattice_from_dict(data, filter_from_dict)
+
+
+def lattice_to_ir(lat: Lattice, resolved: bool = True) -> dict:
+    """The ``ple-lattice/1`` data of a lattice, with its filter."""
+    return lattice_to_dict(lat, resolved, filter_to_dict)
+
+
+# ----- writing -------------------------------------------------------------------------------------
+def filter_to_dict(f) -> dict:
+    """The data of a filter; a filter that is not data (a Python object of a program's own) is
+    refused naming its type."""
+    if isinstance(f, Stencil):
+        a = f.array
+        return {"stencil": {"shape": list(a.shape), "cells": a.reshape(-1).astype(int).tolist()}}
+    if isinstance(f, LiL):
+        return {"lil": {"coarse": lattice_to_ir(f.coarse), "method": f.method}}
+    if isinstance(f, ImplicitFilter):
+        return {"implicit": {**_field_to_dict(f.field), "level": f.level, "sheet": f.variant == "sheet"}}
+    if isinstance(f, (And, Or)):
+        return {"and" if isinstance(f, And) else "or": [filter_to_dict(p) for p in f.parts]}
+    if isinstance(f, Not):
+        return {"not": filter_to_dict(f.part)}
+    raise PleError(f"filter: a {type(f).__name__} cannot be written as data (stencil, lil, implicit, "
+                   "and, or, not can)")
+
+
+def _field_to_dict(field) -> dict:
+    cell = field.cell.tolist() if field.cell.ndim else float(field.cell)
+    out = {"cell": cell}
+    if not field.placement.allclose(Similarity(), 0.0):
+        out["placement"] = field.placement.to_dict()
+    if isinstance(field, TPMSField):
+        return {"kind": field.kind, **out}
+    if isinstance(field, FourierField):
+        return {"kind": "fourier", **out, "n": field.n, "symmetric": field.symmetric,
+                "freqs": field.freqs.tolist(), "coeffs": [[float(c.real), float(c.imag)] for c in field.coeffs]}
+    raise PleError(f"filter.implicit: a {type(field).__name__} field cannot be written as data")
+
+
+# ----- reading -------------------------------------------------------------------------------------
+def filter_from_dict(data, where: str = "filter", depth: int = 0) -> Filter:
+    """The filter described by ``data``; errors name the offending field."""
+    if depth > MAX_DEPTH:
+        raise PleError(f"{where}: filters nested deeper than {MAX_DEPTH}")
+    if not isinstance(data, dict) or len(data) != 1:
+        raise PleError(f"{where}: expected an object with exactly one of stencil, lil, implicit, and, or, not")
+    (kind, body), = data.items()
+    here = f"{where}.{kind}"
+    if kind in ("and", "or"):
+        if not isinstance(body, list) or not body:
+            raise PleError(f"{here}: expected a non-empty list of filters")
+        parts = [filter_from_dict(p, f"{here}[{n}]", depth + 1) for n, p in enumerate(body)]
+        return parts[0] if len(parts) == 1 else (And if kind == "and" else Or)(*parts)
+    if kind == "not":
+        return Not(filter_from_dict(body, here, depth + 1))
+    if kind == "stencil":
+        return _stencil(body, here)
+    if kind == "lil":
+        return _lil(body, here, depth)
+    if kind == "implicit":
+        return _implicit(body, here)
+    raise PleError(f"{here}: unknown filter (expected stencil, lil, implicit, and, or, not)")
+
+
+def _keys(body, here: str, required: set, optional: set = frozenset()) -> None:
+    if not isinstance(body, dict):
+        raise PleError(f"{here}: expected an object with {', '.join(sorted(required))}")
+    for key in sorted(required - set(body)):
+        raise PleError(f"{here}.{key}: missing")
+    for key in sorted(set(body) - required - set(optional)):
+        raise PleError(f"{here}.{key}: unknown field (expected some of {', '.join(sorted(required | set(optional)))})")
+
+
+def _number(x, where: str) -> float:
+    if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+        raise PleError(f"{where}: expected a finite number, got {x!r}")
+    return float(x)
+
+
+def _stencil(body, here: str) -> Stencil:
+    _keys(body, here, {"shape", "cells"})
+    shape, cells = body["shape"], body["cells"]
+    if (not isinstance(shape, list) or len(shape) not in (3, 4)
+            or any(isinstance(s, bool) or not isinstance(s, int) or s < 1 for s in shape)):
+        raise PleError(f"{here}.shape: expected 3 (or 4, with a node column) positive integers, got {shape!r}")
+    size = math.prod(shape)
+    if size > MAX_STENCIL_CELLS:
+        raise PleError(f"{here}.shape: {size:,} cells (limit {MAX_STENCIL_CELLS:,})")
+    if not isinstance(cells, list) or len(cells) != size or any(c not in (0, 1) or isinstance(c, float) for c in cells):
+        raise PleError(f"{here}.cells: expected {size} values 0 or 1 (k fastest), got "
+                       f"{len(cells) if isinstance(cells, list) else type(cells).__name__}")
+    return Stencil(np.array(cells, dtype=bool).reshape(shape))
+
+
+def _lil(body, here: str, depth: int) -> LiL:
+    _keys(body, here, {"coarse"}, {"method"})
+    method = body.get("method", "auto")
+    if method not in ("auto", "elements", "biq"):
+        raise PleError(f"{here}.method: expected auto, elements or biq, got {method!r}")
+    try:
+        coarse = lattice_from_dict(body["coarse"], lambda d, w: filter_from_dict(d, w, depth + 1))
+    except PleError as exc:
+        raise PleError(f"{here}.coarse.{exc}") from None
+    return LiL(coarse, method)
+
+
+def _implicit(body, here: str) -> ImplicitFilter:
+    kind = body.get("kind") if isinstance(body, dict) else None
+    fourier = {"n", "symmetric", "freqs", "coeffs"}
+    _keys(body, here, {"kind"}, {"cell", "level", "sheet", "placement"} | (fourier if kind == "fourier" else set()))
+    if kind != "fourier" and kind not in TPMS:
+        raise PleError(f"{here}.kind: expected one of {', '.join(TPMS)}, fourier; got {kind!r}")
+    cell = body.get("cell", 1.0)
+    if isinstance(cell, list):
+        if len(cell) != 3:
+            raise PleError(f"{here}.cell: expected a number or three, got {cell!r}")
+        cell = [_number(c, f"{here}.cell[{n}]") for n, c in enumerate(cell)]
+    else:
+        cell = _number(cell, f"{here}.cell")
+    level = _number(body.get("level", 0.0), f"{here}.level")
+    sheet = body.get("sheet", False)
+    if not isinstance(sheet, bool):
+        raise PleError(f"{here}.sheet: expected true or false")
+    placement = similarity_from_dict(body["placement"], f"{here}.placement") if "placement" in body else None
+    if placement is not None and not isinstance(placement, Similarity):
+        raise PleError(f"{here}.placement: expected a similarity")
+    try:
+        field = _fourier(body, here, cell, placement) if kind == "fourier" else TPMSField(kind, cell, placement)
+        return ImplicitFilter(field, level, VARIANTS[1] if sheet else VARIANTS[0])
+    except PleError as exc:
+        msg = str(exc)
+        raise PleError(msg if msg.startswith(here) else f"{here}: {msg}") from None
+
+
+def _fourier(body, here: str, cell, placement) -> FourierField:
+    for key in ("n", "freqs", "coeffs"):
+        if key not in body:
+            raise PleError(f"{here}.{key}: missing (a fourier field is given by its coefficients)")
+    n = body["n"]
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise PleError(f"{here}.n: expected a positive integer, got {n!r}")
+    freqs, coeffs = body["freqs"], body["coeffs"]
+    if not isinstance(freqs, list) or not isinstance(coeffs, list) or len(freqs) != len(coeffs):
+        raise PleError(f"{here}.freqs: expected as many [i, j, k] frequencies as coeffs")
+    if len(freqs) > MAX_FOURIER_TERMS:
+        raise PleError(f"{here}.freqs: {len(freqs):,} terms (limit {MAX_FOURIER_TERMS:,})")
+    for m, f in enumerate(freqs):
+        if not isinstance(f, list) or len(f) != 3 or any(isinstance(x, bool) or not isinstance(x, int) for x in f):
+            raise PleError(f"{here}.freqs[{m}]: expected 3 integers, got {f!r}")
+    values = []
+    for m, c in enumerate(coeffs):
+        if not isinstance(c, list) or len(c) != 2:
+            raise PleError(f"{here}.coeffs[{m}]: expected [real, imaginary], got {c!r}")
+        values.append(complex(_number(c[0], f"{here}.coeffs[{m}][0]"), _number(c[1], f"{here}.coeffs[{m}][1]")))
+    symmetric = body.get("symmetric", False)
+    if not isinstance(symmetric, bool):
+        raise PleError(f"{here}.symmetric: expected true or false")
+    return FourierField(np.array(freqs, dtype=np.int64).reshape(-1, 3), np.array(values), n, cell, placement, symmetric)
