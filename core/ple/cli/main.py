@@ -17,18 +17,27 @@ from ..errors import PleError
 NOT_COMMANDS = {"main", "common", "__main__"}  # the modules of ple.cli that add no sub-command
 
 
-def build_parser() -> argparse.ArgumentParser:
+def command_names() -> list[str]:
+    """The sub-commands: one module of ``ple.cli`` each, named as the command (found without
+    importing them, so that a command pays only for the modules it uses)."""
+    return sorted(m.name for m in pkgutil.iter_modules(cli.__path__) if m.name not in NOT_COMMANDS)
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every sub-command, or of ``only`` (the one about to run)."""
     parser = argparse.ArgumentParser(prog="ple", description="PLE — the Programmed Lattice Editor.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for info in sorted(pkgutil.iter_modules(cli.__path__), key=lambda m: m.name):
-        if info.name not in NOT_COMMANDS:
-            importlib.import_module(f"{cli.__name__}.{info.name}").register(sub)
+    for name in command_names():
+        if only is None or name == only:
+            importlib.import_module(f"{cli.__name__}.{name}").register(sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    first = next((a for a in argv if not a.startswith("-")), None)
+    parser = build_parser(first if first in command_names() else None)
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)

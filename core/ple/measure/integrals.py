@@ -339,8 +339,11 @@ def lattice_measures(lat: Lattice, method: str = "closed", grid: int = 0, max_hu
     after normalization by their group similarity are measured once, all in one batch
     (``hub_measures_batch``; ``grid`` 0 = adaptive). Returns {"area_method": "skipped: ..."}
     without area/volume when more than ``max_hubs`` hubs would need measuring (a guard for
-    huge base slabs, so that ``ple info`` stays bounded)."""
+    huge base slabs, so that ``ple info`` stays bounded). A filtered lattice is measured by its
+    kept hubs (``kept_measures``): the series assume every group's hubs are present."""
     lat.validate()
+    if lat.filter is not None:
+        return kept_measures(lat, grid=grid)
     if method not in ("closed", "sum"):
         raise PleError(f"unknown area/volume method {method!r} (closed or sum)")
     reach = [max([abs(b.offset[d]) for b in lat.beams], default=0) for d in range(3)]
