@@ -198,3 +198,18 @@ def test_program_filters_apply_in_eval(tmp_path):
         assert tuple(z["node_index"][a]) in kept and tuple(z["node_index"][b]) in kept
     with pytest.raises(PleError, match="filter"):
         lat.set_filter(42)
+
+
+def test_with_filter_ands_after_the_own_filter():
+    from ple.filters.stencil import Stencil
+
+    lat = load_lattice("cubic", {"n": 4})
+    assert lat.with_filter(None).filter is None
+    own = Stencil.named("checker", 2)
+    lat.set_filter(own)
+    assert lat.with_filter(None).filter is own  # nothing added: the program's filter stays
+    both = lat.with_filter(Stencil.named("layers", 2))
+    want = lat.evaluate_unfiltered()
+    keep = own.node_mask(lat, want.node_index, want.center, want.radius) & (want.node_index[:, 2] % 2 == 0)
+    assert np.array_equal(both.evaluate().node_index, want.node_index[keep])
+    assert lat.unfiltered().filter is None and lat.filter is own

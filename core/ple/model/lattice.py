@@ -280,7 +280,8 @@ class Lattice:
         """A copy whose filter keeps what this lattice's filter and ``node_filter`` both keep
         (this one's first: a program's own filter, then a command's or a panel's)."""
         other = self.copy()
-        other.set_filter(node_filter if self.filter is None or node_filter is None else self.filter & node_filter)
+        if node_filter is not None:
+            other.set_filter(node_filter if self.filter is None else self.filter & node_filter)
         return other
 
     def unfiltered(self) -> Lattice:
