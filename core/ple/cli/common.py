@@ -4,6 +4,7 @@ small languages of ``--stencil`` and ``--implicit``."""
 from __future__ import annotations
 
 import argparse
+import sys
 
 import numpy as np
 
@@ -77,3 +78,23 @@ def parse_implicit(text: str) -> ImplicitFilter:
     else:
         field = TPMSField(kind, cell, placement)
     return ImplicitFilter(field, level, opts.get("variant", "network"))
+
+
+def add_cluster_args(p: argparse.ArgumentParser) -> None:
+    """--parts, --scheduler, --workers: the command as a partitioned job (``ple.app.jobs``)."""
+    p.add_argument("--parts", metavar="URL", help="write the result as parts of a job to a folder or fsspec URL "
+                   "(a manifest records each part; a re-run skips the finished ones)")
+    p.add_argument("--scheduler", default="local", metavar="S",
+                   help="with --parts: local (an embedded Dask cluster, default), sync (this process) or a "
+                        "Dask scheduler address tcp://HOST:PORT")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="workers of the embedded local cluster (default: the cores)")
+
+
+def report_job(summary: dict) -> int:
+    """Print a job's summary; exit status 2 when some part failed (each named)."""
+    for name, failure in summary["failed"].items():
+        print(f"failed {name}: {failure['error']}", file=sys.stderr)
+    print(f"{summary['written']} part(s) written, {summary['skipped']} already there, {len(summary['failed'])} "
+          f"failed ({summary['seconds']:.1f} s); manifest {summary['manifest']}")
+    return 2 if summary["failed"] else 0

@@ -7,15 +7,18 @@ both of its nodes survive (thesis §9). ``--out`` ending in ``.npz`` evaluates i
 
 from __future__ import annotations
 
+from ..app.cluster import run_job
+from ..app.jobs import filter_job
 from ..app.progress import Progress
 from ..errors import PleError
 from ..filters.base import Filter, all_of
+from ..filters.ir import filter_to_dict
 from ..filters.lil import lil
 from ..io.chunks import DEFAULT_SLAB_GROUPS, stream_filter
 from ..io.files import save_npz
 from ..model.lattice import Lattice
 from ..program.sources import load_lattice
-from .common import add_lattice_args, lattice_from_args, parse_implicit, parse_stencil
+from .common import add_cluster_args, add_lattice_args, lattice_from_args, parse_implicit, parse_stencil, report_job
 from .eval import MAX_EVAL_GROUPS
 
 
@@ -40,6 +43,7 @@ def add_output_args(p) -> None:
                    help=f"node-groups per streamed slab (default {DEFAULT_SLAB_GROUPS})")
     p.add_argument("--method", choices=("auto", "elements", "biq"), default="auto",
                    help="LiL test against the coarsest level (default auto)")
+    add_cluster_args(p)
 
 
 def load_coarse(text: str):
@@ -65,6 +69,10 @@ def build(args, lat: Lattice, parts: list[Filter]) -> Lattice:
 
 
 def write(args, lat: Lattice) -> int:
+    if args.parts:  # one .npz part per slab, on Dask workers; the filter travels as data
+        spec = None if lat.filter is None else filter_to_dict(lat.filter)  # the program's and the flags'
+        job = filter_job(args.lattice, args.param, args.region, args.slab_groups, spec)
+        return report_job(run_job(job, args.parts, args.scheduler, args.workers))
     region = lat.region(args.region)
     total = f"of {region.groups * len(lat.nodes):,} nodes"
     if args.out is None or args.out.endswith(".npz"):
@@ -85,7 +93,7 @@ def write(args, lat: Lattice) -> int:
 
 
 def run(args) -> int:
-    if args.out is None:
-        raise PleError("--out is required (a .npz file or a directory for streamed chunks)")
+    if args.out is None and args.parts is None:
+        raise PleError("--out is required (a .npz file or a directory for streamed chunks), or --parts URL")
     lat = lattice_from_args(args)
     return write(args, build(args, lat, []))

@@ -8,13 +8,15 @@ import time
 import numpy as np
 
 from ..algebra.elements import beam_distance
+from ..app.cluster import run_job
+from ..app.jobs import assemble_stl, mesh_job
 from ..errors import PleError
 from ..io.export import export_mesh, write_beam_lattice_3mf, write_mesh
 from ..io.formats import mesh_format
 from ..measure.integrals import lattice_volume
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
 from ..meshing.tessellate import tessellate
-from .common import add_lattice_args, lattice_from_args
+from .common import add_cluster_args, add_lattice_args, lattice_from_args, report_job
 
 MAX_MESH_GROUPS = 20_000_000  # streamed binary STL
 MAX_MEMORY_GROUPS = 500_000  # formats built in memory (trimesh), --check and --beam-lattice
@@ -29,7 +31,10 @@ def register(sub) -> None:
     p.add_argument("--levels", type=int, default=None, help="refinement levels of 'refined' (default 4)")
     p.add_argument("--segments", type=int, default=None, help="generators per circle of 'chocc' (default 16)")
     p.add_argument("--region", help="I0:I1,J0:J1,K0:K1 (half-open); default: the whole lattice")
-    p.add_argument("--out", required=True, help="output .stl, .3mf, .ply, .obj or .glb")
+    p.add_argument("--out", help="output .stl, .3mf, .ply, .obj or .glb (with --parts: the assembled .stl)")
+    p.add_argument("--box-groups", type=int, default=1 << 14, metavar="N",
+                   help="with --parts: node-groups per part (default 16384)")
+    add_cluster_args(p)
     p.add_argument("--beam-lattice", action="store_true",
                    help="3MF only: write balls and beams with the Beam Lattice extension, no triangles")
     p.add_argument("--check", action="store_true",
@@ -38,6 +43,10 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    if args.parts:
+        return run_parts(args)
+    if not args.out:
+        raise PleError("give --out FILE (or --parts URL for a partitioned mesh)")
     fmt = mesh_format(args.out)
     lat = lattice_from_args(args)
     region = lat.region(args.region)
@@ -57,7 +66,6 @@ def run(args) -> int:
         return 0
     if args.check:
         mesh = tessellate(lat, region, args.style, args.levels, args.segments)
-
         export_mesh(mesh, args.out)
         n = len(mesh.faces)
     else:
@@ -67,6 +75,23 @@ def run(args) -> int:
     if args.check:
         print(json.dumps(check_report(lat, region, mesh), indent=1))
     return 0
+
+
+def run_parts(args) -> int:
+    """The mesh as binary-STL parts, one per box of node-groups, computed by Dask workers;
+    with --out, assembled into one STL."""
+    if args.check or args.beam_lattice:
+        raise PleError("--parts writes triangle parts: --check and --beam-lattice need a single file")
+    if args.out and mesh_format(args.out) != "stl":
+        raise PleError(f"--out {args.out}: a partitioned mesh assembles into binary .stl")
+    if args.box_groups < 1:
+        raise PleError(f"--box-groups must be at least 1, got {args.box_groups}")
+    job = mesh_job(args.lattice, args.param, args.style, args.levels, args.region, args.box_groups)
+    status = report_job(run_job(job, args.parts, args.scheduler, args.workers))
+    if status == 0 and args.out:
+        n = assemble_stl(args.parts, args.out)
+        print(f"wrote {args.out}: {n:,} triangles from {len(job.parts)} parts")
+    return status
 
 
 def check_report(lat, region, mesh) -> dict:

@@ -21,7 +21,7 @@ from ..meshing.connectors import constant_radius_connectors
 from ..meshing.tessellate import iter_triangles, tessellate
 from ..model.lattice import Lattice
 from .files import atomic_path, atomic_write_text
-from .formats import mesh_format
+from .formats import format_named, mesh_format
 
 STL_RECORD = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
 STL_MAX_TRIANGLES = 2**32 - 1
@@ -100,8 +100,16 @@ def export_mesh(mesh: trimesh.Trimesh, path) -> None:
         write_stl(path, [np.asarray(mesh.triangles)])
         return
     with atomic_path(path) as tmp:
-        data = trimesh.exchange.export.export_mesh(mesh, None, file_type=fmt)
-        tmp.write_bytes(data if isinstance(data, bytes) else data.encode())
+        tmp.write_bytes(mesh_bytes(mesh, fmt))
+
+
+def mesh_bytes(mesh: trimesh.Trimesh, fmt: str) -> bytes:
+    """The file contents of a mesh in format ``fmt`` (for writers to other places: job parts)."""
+    if format_named(fmt) == "stl":
+        rec = stl_records(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+        return b"PLE mesh".ljust(80, b" ") + np.uint32(len(rec)).tobytes() + rec.tobytes()
+    data = trimesh.exchange.export.export_mesh(mesh, None, file_type=fmt)
+    return data if isinstance(data, bytes) else data.encode()
 
 
 def beam_lattice_model_xml(center: np.ndarray, radius: np.ndarray, beam_nodes: np.ndarray,

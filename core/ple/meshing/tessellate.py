@@ -425,6 +425,18 @@ def _check_style(style: str, levels: int | None, segments: int | None) -> tuple[
     return levels, segments
 
 
+def tessellation_box(lat: Lattice, region, box, style: str = "refined", levels: int | None = None,
+                     segments: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) and faces (F, 3) of the hubs of one ``box`` of ``region`` (and of the
+    beams from them, capped where a beam leaves the region): a part of a partitioned mesh. Boxes
+    of one region close up exactly as the streamed tessellation's do (``iter_triangles``)."""
+    levels, segments = _check_style(style, levels, segments)
+    if style == "balls-beams":
+        raise PleError("boxes of a mesh need a closed style (refined, cnt or chocc)")
+    r = lat.region(region)
+    return _Tessellator(lat, r, style, levels, segments).build(lat.region(box))
+
+
 def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
                segments: int | None = None) -> trimesh.Trimesh:
     """The mesh of a region (default: the whole lattice) as one trimesh.

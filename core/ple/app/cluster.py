@@ -1,0 +1,119 @@
+"""Running the parts of a job (``ple.app.jobs``) on Dask: an embedded local cluster by default
+(one single-threaded worker process per core), a real one with ``--scheduler tcp://HOST:PORT``
+(started by ``dask scheduler`` / ``dask worker`` or any Dask deployment), or ``sync`` (in this
+process, one part after the other: the reference path).
+
+A worker killed in the middle of a part loses nothing: Dask reruns the part on another worker,
+and the part is written atomically, so no half-written part remains. A part that fails (a
+program that raises) is recorded by name in the manifest; the others go on.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import posixpath
+import sys
+import time
+from collections.abc import Iterator
+
+from ..errors import PleError
+from .jobs import FORMAT, MANIFEST, Job, compute_part, location, read_manifest, valid_parts, write_atomic
+from .progress import Progress
+
+CONNECT_TIMEOUT = 5  # seconds to reach a scheduler before giving up with a message
+RETRIES = 2  # reruns of a part whose worker died (Dask also reruns lost tasks by itself)
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None = "local", workers: int | None = None) -> Iterator:
+    """A ``dask.distributed.Client``: ``local`` (default) starts an embedded cluster of
+    ``workers`` processes (default: the cores), an address joins a running scheduler; ``sync``
+    yields None (no Dask)."""
+    scheduler = scheduler or "local"
+    if scheduler == "sync":
+        yield None
+        return
+    from dask.distributed import Client, LocalCluster  # optional: only distributed runs need Dask
+
+    if scheduler == "local":
+        n = max(1, int(workers or os.cpu_count() or 1))
+        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                          silence_logs=40) as cluster, Client(cluster) as client:
+            yield client
+        return
+    if "://" not in scheduler:
+        raise PleError(f"--scheduler {scheduler!r}: expected local, sync or an address such as tcp://HOST:8786")
+    try:
+        client = Client(scheduler, timeout=CONNECT_TIMEOUT)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise PleError(f"--scheduler {scheduler}: cannot reach the scheduler ({exc})") from None
+    with client:
+        yield client
+
+
+def run_job(job: Job, url: str, scheduler: str | None = "local", workers: int | None = None,
+            progress: bool | None = None, client=None) -> dict:
+    """Compute every part of ``job`` not already written and valid under ``url``; returns a
+    summary (written, skipped, failed, manifest, seconds). ``client``: an existing Dask client
+    (then ``scheduler`` is ignored)."""
+    t0 = time.perf_counter()
+    fs, root = location(url)
+    old = read_manifest(fs, root)
+    if old and (old.get("kind") != job.kind or old.get("settings") != job.settings):
+        raise PleError(f"{url}: holds the parts of another job ({old.get('kind')}, other settings); "
+                       "choose another --out or remove it")
+    done = valid_parts(fs, root, old) & {p.name for p in job.parts}
+    manifest = {"format": FORMAT, "kind": job.kind, "settings": job.settings, "order": [p.name for p in job.parts],
+                "parts": {n: e for n, e in old.get("parts", {}).items() if n in done}, "failures": {}}
+    todo = [p for p in job.parts if p.name not in done]
+    path = posixpath.join(root, MANIFEST)
+
+    def save() -> None:
+        write_atomic(fs, path, (json.dumps(manifest, indent=1) + "\n").encode())
+
+    save()
+    bar = Progress(len(todo), job.kind, enabled=progress)
+    if todo:
+        if client is not None:
+            _run_dask(client, job, todo, url, manifest, save, bar)
+        else:
+            with dask_client(scheduler, workers) as c:
+                if c is None:
+                    _run_sync(job, todo, url, manifest, save, bar)
+                else:
+                    if progress is not False and sys.stderr.isatty():
+                        print(f"dask dashboard: {c.dashboard_link}", file=sys.stderr)
+                    _run_dask(c, job, todo, url, manifest, save, bar)
+    bar.close()
+    return {"written": len(todo) - len(manifest["failures"]), "skipped": len(done), "failed": manifest["failures"],
+            "manifest": f"{url.rstrip('/')}/{MANIFEST}", "seconds": round(time.perf_counter() - t0, 3)}
+
+
+def _run_sync(job: Job, todo, url, manifest, save, bar) -> None:
+    for part in todo:
+        try:
+            manifest["parts"][part.name] = compute_part(job.kind, job.settings, part, url)
+        except PleError as exc:
+            manifest["failures"][part.name] = {"params": part.params, "error": str(exc)}
+        save()
+        bar.update(1, part.name)
+
+
+def _run_dask(client, job: Job, todo, url, manifest, save, bar) -> None:
+    from dask.distributed import as_completed  # optional: only distributed runs need Dask
+
+    futures = {client.submit(compute_part, job.kind, job.settings, part, url, key=f"ple-{job.kind}-{part.name}-"
+                             f"{os.getpid()}-{time.monotonic_ns()}", retries=RETRIES, pure=False): part
+               for part in todo}
+    for fut in as_completed(futures):
+        part = futures[fut]
+        try:
+            manifest["parts"][part.name] = fut.result()
+        except PleError as exc:
+            manifest["failures"][part.name] = {"params": part.params, "error": str(exc)}
+        except Exception as exc:  # a worker-side crash that is not a user error: reported by name
+            manifest["failures"][part.name] = {"params": part.params, "error": f"{type(exc).__name__}: {exc}"}
+        save()
+        bar.update(1, part.name)

@@ -1,0 +1,138 @@
+"""Partitioned jobs on Dask (issue 17): a scheduler and two workers started as separate processes
+on 127.0.0.1 give byte-identical parts to the embedded local cluster and to the single-process
+path; a worker killed mid-job changes nothing; a re-run recomputes nothing that was complete."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from ple.app.batch import plan
+from ple.app.cluster import run_job
+from ple.app.jobs import assemble_stl, filter_job, load_filter_parts, mesh_job, sweep_job
+from ple.cli.main import main
+from ple.errors import PleError
+from ple.filters.ir import filter_to_dict
+from ple.filters.stencil import Stencil
+from ple.meshing.tessellate import tessellate
+from ple.program.sources import load_lattice
+
+DASK = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory):
+    """``dask scheduler`` and two ``dask worker`` processes (no nanny: killing one kills it)."""
+    tmp = tmp_path_factory.mktemp("dask")
+    info = tmp / "scheduler.json"
+    env = dict(os.environ, DASK_DISTRIBUTED__WORKER__DAEMON="False")
+    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                               "--port", "0", "--no-dashboard", "--scheduler-file", str(info)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)]
+    deadline = time.monotonic() + 60
+    while not info.is_file() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    address = json.loads(info.read_text())["address"]
+    for n in range(2):
+        procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads",
+                                       "1", "--no-nanny", "--no-dashboard", "--name", f"w{n}"],
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env))
+    from dask.distributed import Client
+
+    with Client(address, timeout=30) as c:
+        c.wait_for_workers(2, timeout=60)
+    yield address, procs
+    for p in procs:
+        p.kill()
+        p.wait(timeout=30)
+
+
+def _hashes(folder: Path) -> dict:
+    manifest = json.loads((folder / "manifest.json").read_text())
+    return {name: e["sha256"] for name, e in manifest["parts"].items()}
+
+
+def test_mesh_parts_are_identical_on_every_path_and_close_up(tmp_path, cluster):
+    address, _ = cluster
+    job = mesh_job("fig6_3", [], "cnt", region="0:4,0:5,0:6", box_groups=24)
+    assert len(job.parts) > 3
+    sync = run_job(job, str(tmp_path / "sync"), "sync", progress=False)
+    local = run_job(job, str(tmp_path / "local"), "local", workers=2, progress=False)
+    remote = run_job(job, str(tmp_path / "remote"), address, progress=False)
+    assert sync["written"] == local["written"] == remote["written"] == len(job.parts)
+    h = _hashes(tmp_path / "sync")
+    assert h == _hashes(tmp_path / "local") == _hashes(tmp_path / "remote")
+    n = assemble_stl(str(tmp_path / "remote"), tmp_path / "all.stl")
+    import trimesh
+
+    mesh = trimesh.load(tmp_path / "all.stl")
+    ref = tessellate(load_lattice("fig6_3"), "0:4,0:5,0:6", "cnt")
+    assert n == len(ref.faces) and mesh.is_watertight and np.isclose(mesh.volume, ref.volume, rtol=1e-6)
+    again = run_job(job, str(tmp_path / "remote"), address, progress=False)  # resume: nothing recomputed
+    assert again["written"] == 0 and again["skipped"] == len(job.parts)
+    (tmp_path / "remote" / job.parts[1].name).write_bytes(b"damaged")
+    again = run_job(job, str(tmp_path / "remote"), address, progress=False)
+    assert again["written"] == 1 and _hashes(tmp_path / "remote") == h
+
+
+def test_a_killed_worker_loses_nothing(tmp_path, cluster):
+    address, procs = cluster
+    job = mesh_job("octet", ["n=4"], "refined", levels=2, box_groups=4)
+    out = tmp_path / "killed"
+    result = {}
+    thread = threading.Thread(target=lambda: result.update(run_job(job, str(out), address, progress=False)))
+    thread.start()
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not (out / "manifest.json").is_file():
+        time.sleep(0.05)
+    while time.monotonic() < deadline and not json.loads((out / "manifest.json").read_text())["parts"]:
+        time.sleep(0.05)
+    procs[1].send_signal(signal.SIGKILL)  # one worker dies in the middle of the job
+    thread.join(timeout=600)
+    assert result["written"] == len(job.parts) and not result["failed"]
+    assert not list(out.glob("*.tmp-*"))  # no half-written part
+    ref = run_job(job, str(tmp_path / "ref"), "sync", progress=False)
+    assert ref["written"] == len(job.parts) and _hashes(out) == _hashes(tmp_path / "ref")
+
+
+def test_sweep_and_filter_jobs(tmp_path):
+    _, variants = plan("cubic", ["n=0,2,3"], "stl")
+    job = sweep_job("cubic", variants, "cnt", "stl")
+    res = run_job(job, str(tmp_path / "sweep"), "local", workers=2, progress=False)
+    assert res["written"] == 2 and list(res["failed"]) == ["cubic__n-0.stl"]  # reported by name, others written
+    assert "count" in res["failed"]["cubic__n-0.stl"]["error"]
+    lat = load_lattice("cubic", ["n=7"]).with_filter(Stencil.named("faces", 3))
+    job = filter_job("cubic", ["n=7"], None, 20, filter_to_dict(lat.filter))
+    run_job(job, str(tmp_path / "filter"), "sync", progress=False)
+    ev, want = load_filter_parts(str(tmp_path / "filter")), lat.evaluate()
+    assert np.array_equal(ev.node_index, want.node_index) and np.array_equal(ev.beam_index, want.beam_index)
+    assert np.array_equal(ev.center[ev.beam_nodes], want.center[want.beam_nodes])
+
+
+def test_cli_doors_and_bad_input(tmp_path, capsys):
+    assert main(["mesh", "cubic", "--param", "n=4", "--style", "cnt", "--parts", str(tmp_path / "p"),
+                 "--scheduler", "sync", "--box-groups", "16", "--out", str(tmp_path / "m.stl")]) == 0
+    assert main(["assemble", str(tmp_path / "p"), "--out", str(tmp_path / "m2.stl")]) == 0
+    assert (tmp_path / "m.stl").read_bytes() == (tmp_path / "m2.stl").read_bytes()
+    lil = ["lil", "cubic", "--param", "n=9", "--coarse", "lil_regular_coarse", "--stencil", "checker:2"]
+    assert main([*lil, "--parts", str(tmp_path / "l"), "--scheduler", "sync", "--slab-groups", "50"]) == 0
+    assert main([*lil, "--out", str(tmp_path / "l.npz")]) == 0
+    assert main(["assemble", str(tmp_path / "l"), "--out", str(tmp_path / "l2.npz")]) == 0
+    with np.load(tmp_path / "l.npz") as a, np.load(tmp_path / "l2.npz") as b:
+        assert 0 < len(a["node_index"]) and all(np.array_equal(a[k], b[k]) for k in a.files)
+    t0 = time.monotonic()
+    assert main(["mesh", "cubic", "--parts", str(tmp_path / "x"), "--scheduler", "tcp://127.0.0.1:9"]) == 2
+    assert time.monotonic() - t0 < 60 and "cannot reach the scheduler" in capsys.readouterr().err
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(PleError, match="is a file"):
+        run_job(mesh_job("cubic", [], "cnt"), str(tmp_path / "file"), "sync")
+    with pytest.raises(PleError, match="another job"):
+        run_job(mesh_job("cubic", ["n=3"], "cnt"), str(tmp_path / "p"), "sync")
