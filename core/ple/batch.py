@@ -23,11 +23,12 @@ from pathlib import Path
 import numpy as np
 
 from .errors import PleError
-from .files import atomic_write_text
+from .files import atomic_write_text, check_output_dir, write_marker
 from .program import Param, load_program_file, parse_param_value, resolve_source
 
 FORMATS = ("stl", "3mf", "ply", "obj", "glb")
 STYLES = ("balls-beams", "chocc", "cnt", "refined")
+KIND = "ple-batch"  # the output-folder marker's kind
 
 
 @dataclass(frozen=True)
@@ -125,9 +126,15 @@ def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", f
         raise PleError(f"--style {style!r}: expected one of {', '.join(STYLES)}")
     path, variants = plan(source, sweeps, fmt)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     manifest_path = out / "manifest.json"
+    if not _legacy_batch_folder(manifest_path):  # written before output markers existed
+        check_output_dir(out, KIND)
     manifest = read_manifest(manifest_path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise PleError(f"--out {out}: cannot create the folder ({exc.strerror})") from None
+    write_marker(out, KIND, "ple batch")
     done = {e["file"] for e in manifest["outputs"] if (out / e["file"]).is_file()}
     todo = [v for v in variants if v.filename not in done]
     manifest.update({"program": path, "style": style, "format": fmt, "region": region})
@@ -154,15 +161,26 @@ def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", f
             "manifest": str(manifest_path), "seconds": time.perf_counter() - t0}
 
 
+def _legacy_batch_folder(manifest_path: Path) -> bool:
+    try:
+        return json.loads(manifest_path.read_text()).get("format") == "ple-batch/1"
+    except (OSError, ValueError, RecursionError, AttributeError):
+        return False
+
+
 def read_manifest(path: Path) -> dict:
     if not path.is_file():
         return {"format": "ple-batch/1", "outputs": []}
     try:
         data = json.loads(path.read_text())
-    except json.JSONDecodeError:
+    except (ValueError, RecursionError, OSError):
         raise PleError(f"{path}: existing manifest is not valid JSON; move it away to start afresh") from None
     if not isinstance(data, dict) or not isinstance(data.get("outputs"), list):
         raise PleError(f"{path}: existing manifest has no 'outputs' list")
+    for n, entry in enumerate(data["outputs"]):
+        if not isinstance(entry, dict) or not isinstance(entry.get("file"), str) or "/" in entry["file"]:
+            raise PleError(f"{path}: outputs[{n}] is not an entry with a 'file' name; move the manifest away "
+                           "to start afresh")
     return data
 
 

@@ -966,12 +966,13 @@ def export_connectors(lat: Lattice, folder, radius: float, beam_radius: float | 
 
     import trimesh
 
-    from .files import atomic_path, atomic_write_text
+    from .files import atomic_path, atomic_write_text, check_output_dir, write_marker
 
     folder = Path(folder)
-    if not folder.is_dir():
-        raise PleError(f"{folder}: output folder does not exist")
+    check_output_dir(folder, "ple-connectors")  # ours, new or empty: never another folder's files
     classes, beams = constant_radius_connectors(lat, radius, beam_radius, grow, region)
+    folder.mkdir(exist_ok=True)
+    write_marker(folder, "ple-connectors", "ple becots connectors")
     summary = {"classes": [], "beams": len(beams["start"]), "radius": radius, "beam_radius": beams["radius"]}
     for n, cls in enumerate(classes):
         path = folder / f"connector_{n}.stl"

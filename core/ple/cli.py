@@ -13,6 +13,7 @@ import sys
 
 from . import commands
 from .errors import PleError
+from .files import install_signal_handlers
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -28,17 +29,22 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    install_signal_handlers()  # SIGTERM/SIGHUP unwind like Ctrl-C: temporaries are removed
     try:
         return int(args.func(args) or 0)
     except PleError as exc:
         print(f"ple {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except MemoryError:
+        print(f"ple {args.command}: error: out of memory; choose a smaller --region or raise --max-memory",
+              file=sys.stderr)
+        return 2
     except BrokenPipeError:  # output piped into e.g. `head`
         sys.stderr.close()
         return 0
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM/SIGHUP (files.Terminated)
         print(f"ple {args.command}: interrupted", file=sys.stderr)
-        return 130
+        return 128 + getattr(exc, "signum", 2)
 
 
 def run() -> None:

@@ -18,17 +18,18 @@ from __future__ import annotations
 import json
 import shutil
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
 from .errors import PleError
+from .files import check_output_dir, make_temp_dir, remove_stale_temporaries, replace_dir, write_marker
 from .filters import FilteredLattice, beams_between
 from .lattice import Evaluation
 
 FORMAT = "ple-chunks/1"
+KIND = "ple-chunks"  # the output-folder marker's kind
 DEFAULT_SLAB_GROUPS = 1 << 18
 
 
@@ -66,28 +67,22 @@ def stream_filter(flat: FilteredLattice, out_dir, region=None, slab_groups: int 
     """Write the surviving nodes and beams of ``region`` (default: all) as chunks in ``out_dir``.
 
     Returns the manifest. The directory appears complete or not at all (written beside it,
-    then renamed); an existing chunk directory is replaced, any other non-empty one refused."""
+    then renamed); a chunk directory written by PLE (its ``.ple-output.json`` marker) is
+    replaced, an empty one used, any other refused (``ple.files.check_output_dir``)."""
     out = Path(out_dir)
-    if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (out / "manifest.json").exists())):
-        raise PleError(f"--out {out}: exists and is not a chunk directory (no manifest.json); not overwriting")
+    check_output_dir(out, KIND)
     parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        raise PleError(f"--out {out}: folder {parent} does not exist")
     if int(slab_groups) < 1:
         raise PleError(f"slab size must be at least 1 node-group, got {slab_groups}")
     lat = flat.lattice
     lat.validate()
     r = lat.region(region)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
+    remove_stale_temporaries(parent)
+    tmp = make_temp_dir(parent, out.name)
     try:
         manifest = _write_chunks(flat, r, tmp, int(slab_groups), progress)
-        if out.exists():
-            trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=parent))
-            out.rename(trash / "old")
-            tmp.rename(out)
-            shutil.rmtree(trash)
-        else:
-            tmp.rename(out)
+        write_marker(tmp, KIND, "ple filter")
+        replace_dir(tmp, out)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp)

@@ -36,7 +36,7 @@ def register(sub) -> None:
     c.add_argument("--radius", type=float, required=True, help="common node radius")
     c.add_argument("--beam-radius", type=float, help="common beam (rod) radius (default radius / 2)")
     c.add_argument("--region", help="I0:I1,J0:J1,K0:K1 (default: the whole lattice)")
-    c.add_argument("--out", required=True, help="existing output folder")
+    c.add_argument("--out", required=True, help="output folder (new, empty, or written before by this command)")
     c.set_defaults(func=run)
 
 

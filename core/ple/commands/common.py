@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import zipfile
 
 import numpy as np
 
@@ -27,8 +28,10 @@ def lattice_from_args(args) -> Lattice:
 
 
 def save_npz(path, arrays: dict) -> None:
-    """Write arrays to ``path`` (.npz) atomically."""
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
+    """Write arrays to ``path`` (.npz, as ``np.savez``) atomically. The zip is closed before its
+    file, also when interrupted (``np.savez`` on a handle leaves that to the garbage collector)."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh, zipfile.ZipFile(fh, "w", allowZip64=True) as zf:
+        for name, arr in arrays.items():
+            with zf.open(f"{name}.npy", "w", force_zip64=True) as member:
+                np.lib.format.write_array(member, np.asanyarray(arr), allow_pickle=False)
 
