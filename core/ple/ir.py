@@ -13,12 +13,13 @@ from pathlib import Path
 import numpy as np
 
 from .errors import PleError
+from .budget import check_finite
 from .files import atomic_write_text
 from .lattice import Direction, Lattice
+from .schema import check_ir, read_json
 from .similarity import Similarity, similarity_from_dict
 
 FORMAT = "ple-lattice/1"
-TOP_KEYS = {"format", "nodes", "beams", "U", "V", "W", "placement", "becots", "description", "meta"}
 
 
 def _num(x, where: str) -> float:
@@ -63,9 +64,7 @@ def lattice_from_dict(data) -> Lattice:
         raise PleError("lattice file: expected a JSON object at the top level")
     if data.get("format") != FORMAT:
         raise PleError(f"format: expected {FORMAT!r}, got {data.get('format')!r}")
-    unknown = sorted(set(data) - TOP_KEYS)
-    if unknown:
-        raise PleError(f"{unknown[0]}: unknown field (expected some of {', '.join(sorted(TOP_KEYS))})")
+    check_ir(data)  # the one schema: unknown keys, types, ranges, sizes (ple.schema)
     lat = Lattice()
     nodes = data.get("nodes")
     if not isinstance(nodes, list) or not nodes:
@@ -134,20 +133,14 @@ def lattice_from_dict(data) -> Lattice:
         becots_from_ir(lat, data["becots"], "becots")
     if "description" in data:
         lat.meta["description"] = str(data["description"])
+    check_finite(lat)
     return lat
 
 
 def load_ir(path) -> Lattice:
     """Load and validate a ``ple-lattice/1`` file."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise PleError(f"{path}: cannot read ({exc.strerror})") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise PleError(f"{path}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+    data = read_json(path, "lattice file")
     try:
         return lattice_from_dict(data)
     except PleError as exc:

@@ -208,6 +208,9 @@ def preset_names() -> list[str]:
 
 
 def preset_path(name: str) -> Path | None:
+    """The file of a preset; only plain names, so a name cannot reach outside the presets."""
+    if not name or not all(c.isalnum() or c in "_-" for c in name) or name.startswith(("_", "-")):
+        return None
     for ext in (".py", ".json"):
         entry = preset_dir() / (name + ext)
         if entry.is_file():
@@ -225,10 +228,13 @@ def preset_description(name: str) -> str:
 
 
 def load_program_file(path: Path) -> Program:
+    from .schema import read_input_file
+
+    raw = read_input_file(path, "program file")
     try:
-        text = Path(path).read_text()
-    except OSError as exc:
-        raise PleError(f"{path}: cannot read ({exc.strerror})") from None
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise PleError(f"{path}: not UTF-8 text (byte {exc.start})") from None
     return compile_program(text, str(path))
 
 
@@ -236,8 +242,9 @@ def resolve_source(source: str) -> Path:
     """A program ``.py``, an IR ``.json`` or a preset name, to a file path."""
     p = Path(source)
     if p.suffix in (".py", ".json"):
-        if not p.is_file():
-            raise PleError(f"{source}: no such file")
+        from .schema import check_input_file
+
+        check_input_file(p, f"{p.suffix} file")
         return p
     found = preset_path(source)
     if found is None:

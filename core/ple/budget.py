@@ -1,0 +1,153 @@
+"""Work budget: what a command will produce, estimated from the program before allocating
+(docs/reliability.md), and the finiteness of a lattice's extremes.
+
+Every command that allocates in proportion to its output calls ``require`` with an estimate
+of its peak memory; beyond ``--max-memory`` (default: a quarter of the machine's RAM, or the
+``PLE_MAX_MEMORY`` environment variable) it is refused with the estimate and the flag.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from itertools import product
+
+import numpy as np
+
+from .errors import PleError
+from .lattice import Lattice, Region
+
+ENV = "PLE_MAX_MEMORY"
+DEFAULT_FRACTION = 0.25
+_UNITS = {"": 1, "B": 1, "K": 1 << 10, "KB": 1 << 10, "M": 1 << 20, "MB": 1 << 20, "G": 1 << 30,
+          "GB": 1 << 30, "T": 1 << 40, "TB": 1 << 40}
+
+
+def physical_memory() -> int:
+    """Bytes of RAM (sysconf; 8 GiB if unknown)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return 8 << 30
+
+
+def parse_size(text: str, flag: str = "--max-memory") -> int:
+    """``2G``, ``512M``, ``1.5GB``, ``1000000`` to bytes."""
+    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*([KMGT]?B?)\s*", str(text), re.IGNORECASE)
+    if not m:
+        raise PleError(f"{flag} {text!r}: expected a size such as 2G, 512M or 1.5GB")
+    value = float(m.group(1)) * _UNITS[m.group(2).upper()]
+    if not math.isfinite(value) or value < 1 << 20:
+        raise PleError(f"{flag} {text!r}: expected at least 1M")
+    return int(value)
+
+
+def default_max_memory() -> int:
+    env = os.environ.get(ENV)
+    if env:
+        return parse_size(env, ENV)
+    return int(physical_memory() * DEFAULT_FRACTION)
+
+
+def max_memory(args=None) -> int:
+    """The limit of a command: its ``--max-memory``, else the default."""
+    text = getattr(args, "max_memory", None)
+    return parse_size(text) if text else default_max_memory()
+
+
+def add_budget_args(p) -> None:
+    p.add_argument("--max-memory", metavar="SIZE",
+                   help=f"refuse work estimated beyond SIZE (e.g. 4G; default a quarter of RAM or ${ENV})")
+
+
+def human(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if abs(n) < 1024 or unit == "PiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} PiB"  # pragma: no cover
+
+
+def require(estimate: float, what: str, limit: int, hint: str = "") -> None:
+    """Refuse work whose estimated peak memory exceeds ``limit``."""
+    if estimate > limit:
+        raise PleError(f"{what} needs about {human(estimate)} (estimated before starting), more than the "
+                       f"limit {human(limit)}; {hint + ', or ' if hint else ''}raise it with --max-memory")
+
+
+# ----- counts from the program alone -------------------------------------------------------------
+def region_nodes(lat: Lattice, r: Region) -> int:
+    return r.groups * len(lat.nodes)
+
+
+def region_beams(lat: Lattice, r: Region) -> int:
+    """Beams with both ends in the region (exact: a product per beam-pattern)."""
+    return sum(math.prod(max(0, n - abs(d)) for n, d in zip(r.shape, b.offset)) for b in lat.beams)
+
+
+EVAL_NODE_BYTES = 4 * 8 + 3 * 8 + 8  # node_index, center, radius
+EVAL_BEAM_BYTES = 4 * 8 + 2 * 8
+PEAK_FACTOR = 3  # temporaries while building the arrays (meshgrids, sort permutations)
+
+
+def evaluation_bytes(lat: Lattice, r: Region) -> float:
+    """Peak bytes of ``Lattice.evaluate(r)`` (and of its ``.npz``)."""
+    return PEAK_FACTOR * (region_nodes(lat, r) * EVAL_NODE_BYTES + region_beams(lat, r) * EVAL_BEAM_BYTES)
+
+
+def hub_triangles(degree: float, style: str, levels: int, segments: int) -> float:
+    """Estimate (from above, measured within 2x on the presets) of the triangles of one hub of
+    ``degree`` beams with half of each of its beam strips. CNT: 2d - 4 hub triangles and d
+    corridor quads (CHoCC paper 001_ §5); each refinement level splits every hub triangle in
+    4 and doubles every ring of a beam strip (§6)."""
+    d = max(degree, 1.0)
+    if style == "balls-beams":
+        return 80 + 10 * d
+    if style == "chocc":
+        return 2 * d + 4 + 1.5 * d * segments
+    lv = levels if style == "refined" else 0
+    return (4 * d + 4) * 4.0 ** lv + 6 * d * 2.0 ** lv
+
+
+MESH_TRIANGLE_BYTES = 200  # in memory while building: vertices, faces, triangles, normals, copies
+
+
+def mean_degree(lat: Lattice) -> float:
+    return 2 * len(lat.beams) / max(len(lat.nodes), 1)
+
+
+def mesh_triangles(lat: Lattice, r: Region, style: str, levels: int, segments: int) -> float:
+    return region_nodes(lat, r) * hub_triangles(mean_degree(lat), style, levels, segments)
+
+
+# ----- finiteness --------------------------------------------------------------------------------
+def check_finite(lat: Lattice, what: str = "the lattice") -> None:
+    """Every corner group's similarity and balls are finite and the radii positive; the powers of
+    the similarities are monotone in scale, so an overflow shows at a corner. Raises PleError
+    naming the direction whose powers overflow."""
+    if not lat.nodes:
+        return
+    corners = [(0, n - 1) if n > 1 else (0,) for n in lat.counts]
+    idx = np.array(list(product(*corners)), dtype=np.int64)
+    with np.errstate(all="ignore"):
+        factors = lat.group_factors(idx[:, 0], idx[:, 1], idx[:, 2])
+        mats = lat.group_matrices(idx[:, 0], idx[:, 1], idx[:, 2])
+        ok = np.isfinite(mats).all(axis=(1, 2)) & np.isfinite(factors) & (factors > 0)
+        if ok.all():
+            nn = len(lat.nodes)
+            full = np.column_stack([np.repeat(idx, nn, axis=0), np.tile(np.arange(nn), len(idx))])
+            centers, radii = lat.node_balls(full)
+            ok = np.isfinite(centers).all() and np.isfinite(radii).all() and (radii > 0).all()
+            if ok and np.abs(centers).max() < 1e150 and radii.max() < 1e150:
+                return
+    blame = []
+    for name, d, n in (("U", lat.u, lat.u.count), ("V", lat.v, lat.v.count), ("W", lat.w, lat.w.count)):
+        f = d.incremental.factor
+        with np.errstate(all="ignore"):
+            m = d.incremental.power_matrices(np.array([n - 1, 0]))
+            fn = np.float64(f) ** (n - 1)
+        if not np.isfinite(m).all() or not np.isfinite(fn) or fn == 0 or np.abs(m).max() > 1e150:
+            blame.append(f"{name} (factor {f:.6g} over {n} steps)")
+    cause = f"the powers of {', '.join(blame)}" if blame else "the template or placement"
+    raise PleError(f"{what} overflows: {cause} give infinite, zero or huge (>1e150) coordinates or radii")
