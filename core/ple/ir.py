@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import PleError
 from .budget import check_finite
+from .errors import PleError
 from .files import atomic_write_text
 from .lattice import Direction, Lattice
 from .schema import check_ir, read_json

@@ -259,4 +259,5 @@ def read_json(path, what: str = "JSON file", max_depth: int = MAX_DEPTH):
     return data
 
 
-__all__ = ["MAX_DEPTH", "SCHEMA", "check_input_file", "check_ir", "check_object", "nearest", "read_input_file", "read_json"]
+__all__ = ["MAX_DEPTH", "SCHEMA", "check_input_file", "check_ir", "check_object", "nearest", "read_input_file",
+           "read_json"]
