@@ -104,6 +104,8 @@ class Program:
             lat = self.function(**params)
         except PleError as exc:
             raise PleError(f"{self.name}: {exc}") from None
+        except MemoryError:
+            raise  # reported with the memory limit (ple.runner, ple.cli)
         except Exception as exc:  # the program is user code: report where it failed
             line = _program_line(exc, self.name)
             raise PleError(f"{self.name}{line}: program raised {type(exc).__name__}: {exc}") from None

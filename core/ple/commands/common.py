@@ -10,7 +10,8 @@ import numpy as np
 from ..files import atomic_path
 from ..filters import evaluate_lattice  # noqa: F401 - re-exported for the commands
 from ..lattice import Lattice
-from ..program import load_lattice
+from ..budget import add_budget_args, max_memory
+from ..runner import DEFAULT_TIMEOUT, run_program
 
 
 def register(sub) -> None:  # this module adds no command
@@ -21,10 +22,23 @@ def add_lattice_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("lattice", metavar="LATTICE", help="a program .py, an IR .json, or a preset name")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="set a program input (repeatable)")
+    add_program_limits(p)
+
+
+def add_program_limits(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT, metavar="SECONDS",
+                   help=f"time limit of the program (default {DEFAULT_TIMEOUT:g} s)")
+    add_budget_args(p)
 
 
 def lattice_from_args(args) -> Lattice:
-    return load_lattice(args.lattice, args.param)
+    """The lattice of a command's LATTICE, its program contained (``ple.runner``)."""
+    return run_program(args.lattice, args.param, args.timeout, max_memory(args))
+
+
+def contained(args):
+    """``source, params -> Lattice`` with the command's limits (for --coarse lattices)."""
+    return lambda source, params=None: run_program(source, params, args.timeout, max_memory(args))
 
 
 def save_npz(path, arrays: dict) -> None:

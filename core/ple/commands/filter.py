@@ -12,7 +12,7 @@ from ..filters import Filter, FilteredLattice, Stencil, lil
 from ..implicit import parse_implicit
 from ..program import load_lattice
 from ..stream import DEFAULT_SLAB_GROUPS, stream_filter
-from .common import add_lattice_args, lattice_from_args, save_npz
+from .common import add_lattice_args, contained, lattice_from_args, save_npz
 from .eval import MAX_EVAL_GROUPS
 
 
@@ -39,12 +39,12 @@ def add_output_args(p) -> None:
                    help="LiL test against the coarsest level (default auto)")
 
 
-def load_coarse(text: str):
+def load_coarse(text: str, load=load_lattice):
     """``SOURCE[:NAME=VALUE,...]``: a preset, program or IR with optional program inputs."""
     source, sep, rest = text.partition(":")
     if sep and "=" in rest:
-        return load_lattice(source, [x for x in rest.split(",") if x])
-    return load_lattice(text)
+        return load(source, [x for x in rest.split(",") if x])
+    return load(text)
 
 
 def build(args, lat, parts: list[Filter]) -> FilteredLattice:
@@ -59,7 +59,8 @@ def build(args, lat, parts: list[Filter]) -> FilteredLattice:
         for f in parts[1:]:
             extra = extra & f
     if args.coarse:
-        return lil(lat, *(load_coarse(c) for c in args.coarse), extra=extra, method=args.method)
+        load = contained(args) if hasattr(args, "timeout") else load_lattice
+        return lil(lat, *(load_coarse(c, load) for c in args.coarse), extra=extra, method=args.method)
     if extra is None:
         raise PleError("no filter given: use --stencil, --implicit or --coarse")
     return FilteredLattice(lat, extra)
