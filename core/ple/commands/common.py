@@ -7,10 +7,10 @@ import zipfile
 
 import numpy as np
 
+from ..budget import add_budget_args, max_memory
 from ..files import atomic_path
 from ..filters import evaluate_lattice  # noqa: F401 - re-exported for the commands
 from ..lattice import Lattice
-from ..budget import add_budget_args, max_memory
 from ..runner import DEFAULT_TIMEOUT, run_program
 
 
