@@ -151,3 +151,55 @@ def check_finite(lat: Lattice, what: str = "the lattice") -> None:
             blame.append(f"{name} (factor {f:.6g} over {n} steps)")
     cause = f"the powers of {', '.join(blame)}" if blame else "the template or placement"
     raise PleError(f"{what} overflows: {cause} give infinite, zero or huge (>1e150) coordinates or radii")
+
+
+# ----- cheap answers for huge lattices -----------------------------------------------------------
+MONOTONE_KINDS = ("identity", "translation", "scaling")
+MAX_SCAN_GROUPS = 1 << 20
+
+
+def axis_samples(lat: Lattice, max_groups: int = MAX_SCAN_GROUPS) -> tuple[list[np.ndarray], bool]:
+    """Indices per axis whose groups bound the whole lattice, and whether that is exact.
+
+    Node-group (i, j, k) is G W^k V^j U^i N (SPEC §3): every index enters through its own power
+    only, so where that similarity is a translation or a scaling each coordinate (and the
+    radius) is affine in i, resp. in s^i, monotone in i: the two end indices bound the axis
+    exactly. Other axes are scanned whole when the product stays within ``max_groups``,
+    else sampled evenly (approximate)."""
+    dirs = (lat.U, lat.V, lat.W)
+    counts = lat.counts
+    samples: list[np.ndarray | None] = [None, None, None]
+    for a, (s, n) in enumerate(zip(dirs, counts)):
+        if s.kind in MONOTONE_KINDS or n <= 2:
+            samples[a] = np.unique([0, n - 1])
+    budget = max_groups // max(1, math.prod(len(x) for x in samples if x is not None))
+    free = [a for a in range(3) if samples[a] is None]
+    exact = True
+    for a in free:
+        share = max(2, int(budget ** (1 / len(free))))
+        n = counts[a]
+        if n <= share:
+            samples[a] = np.arange(n)
+        else:
+            samples[a] = np.unique(np.linspace(0, n - 1, share).round().astype(np.int64))
+            exact = False
+    return samples, exact
+
+
+def fast_bounds(lat: Lattice) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Axis-aligned bounds of all balls from the groups of ``axis_samples``: (min, max, exact)."""
+    lat.validate()
+    (si, sj, sk), exact = axis_samples(lat)
+    gi, gj, gk = (g.reshape(-1) for g in np.meshgrid(si, sj, sk, indexing="ij"))
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    nn = len(lat.nodes)
+    step = max(1, (1 << 18) // nn)
+    for s in range(0, len(gi), step):
+        sel = slice(s, s + step)
+        g = len(gi[sel])
+        idx = np.column_stack([np.repeat(np.column_stack([gi[sel], gj[sel], gk[sel]]), nn, axis=0),
+                               np.tile(np.arange(nn), g)])
+        c, r = lat.node_balls(idx)
+        lo = np.minimum(lo, (c - r[:, None]).min(axis=0))
+        hi = np.maximum(hi, (c + r[:, None]).max(axis=0))
+    return lo, hi, exact
