@@ -110,7 +110,8 @@ def hub_triangles(degree: float, style: str, levels: int, segments: int) -> floa
     return (4 * d + 4) * 4.0 ** lv + 6 * d * 2.0 ** lv
 
 
-MESH_TRIANGLE_BYTES = 200  # in memory while building: vertices, faces, triangles, normals, copies
+MESH_TRIANGLE_BYTES = 300  # peak per triangle while building (measured 120-240: vertices, faces, copies)
+CHECK_TRIANGLE_BYTES = 600  # with --check (trimesh's watertightness and volume; measured 545)
 
 
 def mean_degree(lat: Lattice) -> float:
@@ -203,3 +204,31 @@ def fast_bounds(lat: Lattice) -> tuple[np.ndarray, np.ndarray, bool]:
         lo = np.minimum(lo, (c - r[:, None]).min(axis=0))
         hi = np.maximum(hi, (c + r[:, None]).max(axis=0))
     return lo, hi, exact
+
+
+def estimate_hits(lat: Lattice, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """Approximate hits (nodes + beams) per query ball: the lattice's elements times the share
+    of its bounding box that the ball's box (grown by a cell and the largest ball) covers."""
+    lo, hi, _ = fast_bounds(lat)
+    extent = hi - lo
+    total = lat.node_count() + lat.beam_count()
+    cell = extent / max(1.0, lat.groups ** (1 / 3))
+    grow = radii[:, None] + cell[None] + float(lat.template_radii.max())
+    q_lo, q_hi = centers - grow, centers + grow
+    overlap = np.clip(np.minimum(q_hi, hi) - np.maximum(q_lo, lo), 0, None)
+    share = np.where(extent > 0, overlap / np.where(extent > 0, extent, 1), (overlap > 0) | (q_lo <= lo))
+    return total * np.prod(np.clip(share, 0, 1), axis=1)
+
+
+HIT_ARRAY_BYTES = 4 * 8 * 2  # one (i, j, k, n) row, and its sort copy
+HIT_LISTED_BYTES = 4 * 8 * 2 + 4 * 36 + 40  # plus the Python list of 4 ints and its JSON text
+
+
+def slab_groups_within(lat: Lattice, slab_groups: int, limit: int) -> int:
+    """The streamed slab size (node-groups) shrunk so that a slab and the few i-layers of row
+    maps kept for beams (``ple.stream``) fit in ``limit``; PleError if one group does not."""
+    per_group = 2 * PEAK_FACTOR * (len(lat.nodes) * EVAL_NODE_BYTES + len(lat.beams) * EVAL_BEAM_BYTES)
+    fit = limit // max(per_group, 1)
+    if fit < 1:
+        require(per_group, "one node-group", limit)
+    return int(max(1, min(int(slab_groups), fit)))

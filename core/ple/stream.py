@@ -31,6 +31,7 @@ from .lattice import Evaluation
 FORMAT = "ple-chunks/1"
 KIND = "ple-chunks"  # the output-folder marker's kind
 DEFAULT_SLAB_GROUPS = 1 << 18
+DISK_MARGIN = 256 << 20  # stop before the disk is full, not when it is
 
 
 class Progress:
@@ -107,6 +108,10 @@ def _write_chunks(flat: FilteredLattice, r, folder: Path, slab_groups: int, prog
         ends = np.concatenate([p[1] for p in parts])
         order = np.lexsort((idx[:, 3], idx[:, 2], idx[:, 1], idx[:, 0]))
         name = f"chunk_{n:06d}.npz"
+        need = nodes.center.nbytes * 3 + idx.nbytes * 2 + DISK_MARGIN
+        if shutil.disk_usage(folder).free < need:
+            raise PleError(f"the disk of {folder.parent} is nearly full after {n} chunks ({node_offset:,} nodes); "
+                           "nothing was written — free space or choose a smaller --region")
         with open(folder / name, "wb") as fh:
             np.savez(fh, node_index=nodes.node_index, center=nodes.center, radius=nodes.radius,
                      beam_index=idx[order], beam_nodes=ends[order])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from ..budget import evaluation_bytes, max_memory, region_beams, region_nodes, require
 from ..errors import PleError
 from .common import add_lattice_args, evaluate_lattice, lattice_from_args, save_npz
 
@@ -24,6 +25,8 @@ def run(args) -> int:
     if region.groups * len(lat.nodes) > MAX_EVAL_GROUPS:
         raise PleError(f"region {region} has {region.groups * len(lat.nodes):,} nodes; "
                        "choose a smaller --region (or stream with ple filter)")
+    require(evaluation_bytes(lat, region), f"region {region} ({region_nodes(lat, region):,} nodes, "
+            f"{region_beams(lat, region):,} beams)", max_memory(args), "choose a smaller --region")
     ev = evaluate_lattice(lat, region)
     save_npz(args.out, ev.arrays())
     print(f"wrote {args.out}: {len(ev.center):,} nodes, {len(ev.beam_nodes):,} beams")

@@ -7,6 +7,7 @@ both of its nodes survive (thesis §9). ``--out`` ending in ``.npz`` evaluates i
 
 from __future__ import annotations
 
+from ..budget import evaluation_bytes, max_memory, region_beams, region_nodes, require, slab_groups_within
 from ..errors import PleError
 from ..filters import Filter, FilteredLattice, Stencil, lil
 from ..implicit import parse_implicit
@@ -74,13 +75,16 @@ def write(args, flat: FilteredLattice) -> int:
         if region.groups * len(lat.nodes) > MAX_EVAL_GROUPS:
             raise PleError(f"region {region} has {region.groups * len(lat.nodes):,} nodes; "
                            "give --out a directory to stream chunks instead of one .npz")
+        require(2 * evaluation_bytes(lat, region), f"region {region} ({region_nodes(lat, region):,} nodes, "
+                f"{region_beams(lat, region):,} beams)", max_memory(args),
+                "choose a smaller --region or give --out a directory to stream chunks")
         ev = flat.evaluate(region)
         if args.out is not None:
             save_npz(args.out, ev.arrays())
         print(f"{'wrote ' + args.out if args.out else 'kept'}: {len(ev.center):,} nodes {total}, "
               f"{len(ev.beam_nodes):,} beams")
         return 0
-    manifest = stream_filter(flat, args.out, region, args.slab_groups)
+    manifest = stream_filter(flat, args.out, region, slab_groups_within(lat, args.slab_groups, max_memory(args)))
     print(f"wrote {args.out}/ ({len(manifest['chunks'])} chunks): {manifest['nodes']:,} nodes {total}, "
           f"{manifest['beams']:,} beams")
     return 0
