@@ -16,7 +16,7 @@ import math
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import BrokenExecutor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,6 +29,7 @@ from .program import Param, load_program_file, parse_param_value, resolve_source
 FORMATS = ("stl", "3mf", "ply", "obj", "glb")
 STYLES = ("balls-beams", "chocc", "cnt", "refined")
 KIND = "ple-batch"  # the output-folder marker's kind
+MAX_VARIANTS = 10_000  # per batch (the plan is listed before anything is written)
 
 
 @dataclass(frozen=True)
@@ -52,9 +53,14 @@ def parse_sweep(param: Param, text: str) -> list:
             raise PleError(f"--param {param.name}={text}: the count n must be an integer") from None
         if n < 1:
             raise PleError(f"--param {param.name}={text}: the count n must be at least 1")
+        if n > MAX_VARIANTS:
+            raise PleError(f"--param {param.name}={text}: the count n must be at most {MAX_VARIANTS:,}")
         values = np.linspace(float(lo), float(hi), n)
         return [int(round(v)) for v in values] if param.kind is int else [float(v) for v in values]
-    return [parse_param_value(param, p) for p in text.split(",")]
+    parts = text.split(",")
+    if len(parts) > MAX_VARIANTS:
+        raise PleError(f"--param {param.name}: more than {MAX_VARIANTS:,} values")
+    return [parse_param_value(param, p) for p in parts]
 
 
 def _value_text(v) -> str:
@@ -82,6 +88,9 @@ def plan(source: str, sweeps: list[str], fmt: str) -> tuple[str, list[Variant]]:
         if name not in known:
             raise PleError(f"--param {name}: unknown parameter (inputs: {', '.join(known) or 'none'})")
         axes[name] = parse_sweep(known[name], text)
+    total = math.prod(len(v) for v in axes.values())
+    if total > MAX_VARIANTS:
+        raise PleError(f"the sweep has {total:,} variants, more than {MAX_VARIANTS:,}; split it into several batches")
     variants = []
     for combo in itertools.product(*axes.values()):
         params = dict(zip(axes, combo))
@@ -106,11 +115,22 @@ def write_mesh_file(mesh, path: Path) -> None:
     export_mesh(mesh, path)
 
 
-def _run_variant(source: str, params: dict, style: str, levels, region, out: str) -> dict:
-    """Worker: build, mesh and write one variant; returns its manifest entry."""
-    from .program import load_lattice
+def _run_variant(source: str, params: dict, style: str, levels, region, out: str, limits=None) -> dict:
+    """Worker: build (contained, ``limits`` = (timeout, memory); ``ple.runner``), check the work
+    budget, mesh and write one variant; returns its manifest entry."""
+    from .budget import MESH_TRIANGLE_BYTES, default_max_memory, mesh_triangles, require
+    from .runner import DEFAULT_TIMEOUT, run_program
+    from .tessellate import _check_style
+
     t0 = time.perf_counter()
-    lat = load_lattice(source, params)
+    timeout, memory = limits or (DEFAULT_TIMEOUT, None)
+    memory = memory or default_max_memory()
+    lat = run_program(source, params, timeout, memory)
+    r = lat.region(region)
+    lv, seg = _check_style(style if style != "balls-beams" else "cnt", levels, None)
+    tris = mesh_triangles(lat, r, style, lv, seg)
+    require(tris * MESH_TRIANGLE_BYTES, f"{Path(out).name}: {tris:,.3g} triangles", memory,
+            "choose a smaller --region or fewer --levels")
     mesh = build_mesh(lat, style, levels, region)
     write_mesh_file(mesh, Path(out))
     return {"file": Path(out).name, "params": params, "triangles": int(len(mesh.faces)),
@@ -120,8 +140,9 @@ def _run_variant(source: str, params: dict, style: str, levels, region, out: str
 
 def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", fmt: str = "stl",
               levels: int | None = None, region: str | None = None, jobs: int | None = None,
-              progress=True) -> dict:
-    """Export every variant of a sweep; skip those already in the manifest with their file."""
+              progress=True, limits: tuple | None = None) -> dict:
+    """Export every variant of a sweep; skip those already in the manifest with their file.
+    ``limits``: (timeout s, memory bytes) of each variant's program and mesh (``ple.runner``)."""
     if style not in STYLES:
         raise PleError(f"--style {style!r}: expected one of {', '.join(STYLES)}")
     path, variants = plan(source, sweeps, fmt)
@@ -144,14 +165,16 @@ def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", f
     t0 = time.perf_counter()
     if todo:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(_run_variant, path, v.params, style, levels, region, str(out / v.filename)): v
-                       for v in todo}
+            futures = {pool.submit(_run_variant, path, v.params, style, levels, region, str(out / v.filename),
+                                   limits): v for v in todo}
             for n, fut in enumerate(as_completed(futures), 1):
                 v = futures[fut]
                 try:
                     manifest["outputs"].append(fut.result())
                 except PleError as exc:
                     failures.append({"file": v.filename, "params": v.params, "error": str(exc)})
+                except BrokenExecutor as exc:  # a worker died (killed, crashed outside a program)
+                    failures.append({"file": v.filename, "params": v.params, "error": f"worker died: {exc}"})
                 atomic_write_text(manifest_path, json.dumps(manifest, indent=1) + "\n")
                 if progress:
                     progress_bar(n, len(todo), time.perf_counter() - t0)

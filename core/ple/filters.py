@@ -26,6 +26,8 @@ QUERY_CHUNK = 1 << 17  # query balls per vectorized batch (bounds the candidate-
 THREADS = min(4, os.cpu_count() or 1)
 MAX_CELL_ENTRIES = 4_000_000  # (grid cell, element) candidates before the exact reach test
 
+MAX_STENCIL_CELLS = 10**8  # a named stencil's period box (a Boolean array of this size)
+
 
 # ----- the filter model ------------------------------------------------------------------------
 class Filter(ABC):
@@ -228,6 +230,8 @@ class Stencil(Filter):
         if int(width) != width or width < 1:
             raise PleError(f"stencil width must be a positive integer, got {width!r}")
         x, y, z = (int(p) for p in per)
+        if x * y * z > MAX_STENCIL_CELLS:
+            raise PleError(f"stencil period {x}x{y}x{z} has more than {MAX_STENCIL_CELLS:,} cells")
         i, j, k = np.meshgrid(np.arange(x), np.arange(y), np.arange(z), indexing="ij")
         on = [(i % x) < width, (j % y) < width, (k % z) < width]
         hits = on[0].astype(int) + on[1] + on[2]
@@ -249,12 +253,9 @@ class Stencil(Filter):
     def parse(text: str) -> Stencil:
         """``NAME[:P|PxQxR][:W]`` (a named stencil) or a ``.npy`` file holding a Boolean array."""
         if text.endswith(".npy"):
-            try:
-                return Stencil(np.load(text, allow_pickle=False))
-            except OSError as exc:
-                raise PleError(f"--stencil {text}: {exc.strerror or exc}") from None
-            except ValueError as exc:
-                raise PleError(f"--stencil {text}: {exc}") from None
+            from .schema import load_npy
+
+            return Stencil(load_npy(text, "--stencil"))
         parts = text.split(":")
         try:
             period = [int(p) for p in parts[1].split("x")] if len(parts) > 1 else [4]

@@ -16,6 +16,8 @@ import os
 import stat
 from pathlib import Path
 
+import numpy as np
+
 from .errors import PleError
 from .lattice import MAX_COUNT
 
@@ -259,5 +261,26 @@ def read_json(path, what: str = "JSON file", max_depth: int = MAX_DEPTH):
     return data
 
 
-__all__ = ["MAX_DEPTH", "SCHEMA", "check_input_file", "check_ir", "check_object", "nearest", "read_input_file",
-           "read_json"]
+MAX_NPY_BYTES = 1 << 30
+
+
+def load_npy(path: str, flag: str) -> np.ndarray:
+    """A ``.npy`` array given as input: a regular file of at most 1 GiB holding one array (not
+    an ``.npz`` archive, no pickles); the header is checked before the data is read."""
+    check_input_file(path, f"{flag} .npy file", MAX_NPY_BYTES)
+    try:
+        with open(path, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            shape, _, dtype = np.lib.format._read_array_header(fh, version, max_header_size=10_000)
+            if dtype.hasobject or math.prod(shape) * dtype.itemsize > MAX_NPY_BYTES:
+                raise ValueError(f"array {shape} of {dtype} is not a plain numeric array within 1 GiB")
+        arr = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError, TypeError) as exc:
+        raise PleError(f"{flag} {path}: cannot read a .npy array ({str(exc).splitlines()[0][:160]})") from None
+    if not isinstance(arr, np.ndarray):
+        raise PleError(f"{flag} {path}: expected a .npy array, got an archive")
+    return arr
+
+
+__all__ = ["MAX_DEPTH", "SCHEMA", "check_input_file", "check_ir", "check_object", "load_npy", "nearest",
+           "read_input_file", "read_json"]

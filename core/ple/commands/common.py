@@ -12,6 +12,7 @@ from ..files import atomic_path
 from ..filters import evaluate_lattice  # noqa: F401 - re-exported for the commands
 from ..lattice import Lattice
 from ..runner import DEFAULT_TIMEOUT, run_program
+from ..schema import load_npy  # noqa: F401 - re-exported for the commands
 
 
 def register(sub) -> None:  # this module adds no command
@@ -48,4 +49,5 @@ def save_npz(path, arrays: dict) -> None:
         for name, arr in arrays.items():
             with zf.open(f"{name}.npy", "w", force_zip64=True) as member:
                 np.lib.format.write_array(member, np.asanyarray(arr), allow_pickle=False)
+
 
