@@ -83,7 +83,10 @@ def _child(write_fd: int, source: str, params, memory: int | None) -> None:
         signal.signal(signal.SIGINT, signal.SIG_DFL)  # the parent reports Ctrl-C
         if memory:
             limit = _vm_size() + memory
-            resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+            hard = resource.getrlimit(resource.RLIMIT_AS)[1]
+            if hard != resource.RLIM_INFINITY:
+                limit = min(limit, hard)
+            resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
 
         def program_exit(code=0):
             raise _ProgramExit(code)
