@@ -15,11 +15,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from reliability_helpers import CORE, assert_clean_failure, ple
-
 from ple.cli import main
 from ple.errors import PleError
 from ple.files import MARKER, TMP_TAG, atomic_path, atomic_write_text, read_marker, remove_stale_temporaries
+from reliability_helpers import CORE, assert_clean_failure, ple
 
 
 def run(*args) -> int:

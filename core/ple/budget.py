@@ -19,6 +19,7 @@ from .errors import PleError
 from .lattice import Lattice, Region
 
 ENV = "PLE_MAX_MEMORY"
+HUGE = 1e100  # coordinates and radii beyond this are refused: volumes (cubes) must stay finite
 DEFAULT_FRACTION = 0.25
 _UNITS = {"": 1, "B": 1, "K": 1 << 10, "KB": 1 << 10, "M": 1 << 20, "MB": 1 << 20, "G": 1 << 30,
           "GB": 1 << 30, "T": 1 << 40, "TB": 1 << 40}
@@ -140,7 +141,7 @@ def check_finite(lat: Lattice, what: str = "the lattice") -> None:
             full = np.column_stack([np.repeat(idx, nn, axis=0), np.tile(np.arange(nn), len(idx))])
             centers, radii = lat.node_balls(full)
             ok = np.isfinite(centers).all() and np.isfinite(radii).all() and (radii > 0).all()
-            if ok and np.abs(centers).max() < 1e150 and radii.max() < 1e150:
+            if ok and np.abs(centers).max() < HUGE and radii.max() < HUGE:
                 return
     blame = []
     for name, d, n in (("U", lat.u, lat.u.count), ("V", lat.v, lat.v.count), ("W", lat.w, lat.w.count)):
@@ -148,10 +149,11 @@ def check_finite(lat: Lattice, what: str = "the lattice") -> None:
         with np.errstate(all="ignore"):
             m = d.incremental.power_matrices(np.array([n - 1, 0]))
             fn = np.float64(f) ** (n - 1)
-        if not np.isfinite(m).all() or not np.isfinite(fn) or fn == 0 or np.abs(m).max() > 1e150:
-            blame.append(f"{name} (factor {f:.6g} over {n} steps)")
+        if not np.isfinite(m).all() or not np.isfinite(fn) or fn == 0 or np.abs(m).max() > HUGE:
+            size = f"entries up to {np.abs(m).max():.3g}" if np.isfinite(m).all() else "non-finite entries"
+            blame.append(f"{name} ({d.incremental.kind}, factor {f:.6g}: {size} after {n - 1} steps)")
     cause = f"the powers of {', '.join(blame)}" if blame else "the template or placement"
-    raise PleError(f"{what} overflows: {cause} give infinite, zero or huge (>1e150) coordinates or radii")
+    raise PleError(f"{what} overflows: {cause} give infinite, zero or huge (> 1e100) coordinates or radii")
 
 
 # ----- cheap answers for huge lattices -----------------------------------------------------------

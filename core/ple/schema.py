@@ -26,7 +26,7 @@ MAX_DEPTH = 32
 MAX_NODES = 100_000
 MAX_BEAMS = 1_000_000
 MAX_TEXT = 100_000
-MAX_ABS = 1e150  # coordinates and similarity parameters: squares and products stay finite
+MAX_ABS = 1e100  # coordinates and similarity parameters: cubes (volumes) stay finite
 SIMILARITY_KINDS = {
     "identity": (), "translation": ("vector",), "rotation": ("angle", "axis", "point"),
     "scaling": ("factor", "point"), "swirl": ("angle", "axis", "point", "factor"),

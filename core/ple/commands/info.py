@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import json
+import math
 
 from ..budget import fast_bounds
+from ..errors import PleError
 from ..lattice import Lattice
 from ..measure import lattice_measures
 from .common import add_lattice_args, lattice_from_args
@@ -34,6 +36,9 @@ def lattice_info(lat: Lattice) -> dict:
         "mean_radius": lat.mean_radius(),
     }
     info.update(lattice_measures(lat))
+    for key in ("area", "volume", "mean_radius"):
+        if key in info and not math.isfinite(info[key]):
+            raise PleError(f"the lattice's {key} overflows ({info[key]}); its sizes are too large or too small")
     return info
 
 
