@@ -16,6 +16,7 @@ result is then checked as an IR file is (``ple.budget.check_finite``).
 
 from __future__ import annotations
 
+import faulthandler
 import io
 import os
 import pickle
@@ -81,6 +82,7 @@ def _child(write_fd: int, source: str, params, memory: int | None) -> None:
     status, payload = "error", "the program did not finish"
     try:
         signal.signal(signal.SIGINT, signal.SIG_DFL)  # the parent reports Ctrl-C
+        faulthandler.disable()  # a crash is reported once, by the parent
         if memory:
             limit = _vm_size() + memory
             hard = resource.getrlimit(resource.RLIMIT_AS)[1]
