@@ -9,13 +9,12 @@ import pickle
 
 import numpy as np
 import pytest
-from reliability_helpers import PEAK_LIMIT_BYTES, assert_clean_failure, ple
-
 from ple.cli import main
 from ple.errors import PleError
 from ple.filters import FilteredLattice
 from ple.program import load_lattice
 from ple.runner import _SafeUnpickler, run_program
+from reliability_helpers import PEAK_LIMIT_BYTES, assert_clean_failure, ple
 
 GOOD = "def lattice(n=3):\n    lat = Lattice()\n    lat.add_node(Pt(0, 0, 0), 0.1)\n    lat.set_u(n, Translation(Vec(1, 0, 0)))\n    return lat\n"
 
