@@ -16,7 +16,8 @@ from ple.program import load_lattice
 from ple.runner import _SafeUnpickler, run_program
 from reliability_helpers import PEAK_LIMIT_BYTES, assert_clean_failure, ple
 
-GOOD = "def lattice(n=3):\n    lat = Lattice()\n    lat.add_node(Pt(0, 0, 0), 0.1)\n    lat.set_u(n, Translation(Vec(1, 0, 0)))\n    return lat\n"
+GOOD = ("def lattice(n=3):\n    lat = Lattice()\n    lat.add_node(Pt(0, 0, 0), 0.1)\n"
+        "    lat.set_u(n, Translation(Vec(1, 0, 0)))\n    return lat\n")
 
 
 def program(tmp_path, body: str, name="p.py") -> str:
