@@ -18,6 +18,7 @@ import pytest
 from ple.cli import main
 from ple.errors import PleError
 from ple.files import MARKER, TMP_TAG, atomic_path, atomic_write_text, read_marker, remove_stale_temporaries
+from ple.program import load_lattice
 from reliability_helpers import CORE, assert_clean_failure, ple
 
 
@@ -235,13 +236,28 @@ def test_streamed_chunks_stop_before_the_disk_is_full(tmp_path, monkeypatch):
 
     from ple import stream
     from ple.filters import FilteredLattice, Stencil
-    from ple.program import load_lattice
 
     real = shutil.disk_usage
-    monkeypatch.setattr(stream.shutil, "disk_usage", lambda p: real(p)._replace(free=stream.DISK_MARGIN // 2))
+    calls = []
+
+    def disk(path):  # plenty for the up-front bound, then nearly full while writing
+        calls.append(path)
+        return real(path)._replace(free=10**15 if len(calls) == 1 else stream.DISK_MARGIN // 2)
+
+    monkeypatch.setattr(stream.shutil, "disk_usage", disk)
     flat = FilteredLattice(load_lattice("cubic"), Stencil(np.ones((1, 1, 1), bool)))
-    with pytest.raises(PleError, match="nearly full"):
+    with pytest.raises(PleError, match="nearly full after 0 chunks"):
+        stream.stream_filter(flat, tmp_path / "out", slab_groups=100, progress=False)
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.setattr(stream.shutil, "disk_usage", lambda p: real(p)._replace(free=10**6))
+    with pytest.raises(PleError, match="could stream up to"):
         stream.stream_filter(flat, tmp_path / "out", progress=False)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_streaming_a_huge_lattice_is_refused_before_it_fills_the_disk(tmp_path, capsys):
+    assert run("filter", "cubic", "--param", "n=10000", "--stencil", "edges", "--out", tmp_path / "c") == 2
+    assert "could stream up to" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
 
 

@@ -79,6 +79,7 @@ def stream_filter(flat: FilteredLattice, out_dir, region=None, slab_groups: int 
     lat.validate()
     r = lat.region(region)
     remove_stale_temporaries(parent)
+    _check_disk_bound(lat, r, parent)
     tmp = make_temp_dir(parent, out.name)
     try:
         manifest = _write_chunks(flat, r, tmp, int(slab_groups), progress)
@@ -88,6 +89,17 @@ def stream_filter(flat: FilteredLattice, out_dir, region=None, slab_groups: int 
         if tmp.exists():
             shutil.rmtree(tmp)
     return manifest
+
+
+def _check_disk_bound(lat, r, parent: Path) -> None:
+    """Refuse a stream whose output, if every node and beam survived, could not fit on the disk."""
+    from .budget import EVAL_BEAM_BYTES, EVAL_NODE_BYTES, human, region_beams, region_nodes
+
+    bound = region_nodes(lat, r) * EVAL_NODE_BYTES + region_beams(lat, r) * EVAL_BEAM_BYTES
+    free = shutil.disk_usage(parent).free
+    if bound + DISK_MARGIN > free:
+        raise PleError(f"region {r} could stream up to {human(bound)} of chunks (if every node survives), more than "
+                       f"the {human(free)} free in {parent}; choose a smaller --region")
 
 
 def _write_chunks(flat: FilteredLattice, r, folder: Path, slab_groups: int, progress) -> dict:
