@@ -32,8 +32,9 @@ def main(argv: list[str] | None = None) -> int:
     install_signal_handlers()  # SIGTERM/SIGHUP unwind like Ctrl-C: temporaries are removed
     try:
         return int(args.func(args) or 0)
-    except PleError as exc:
-        print(f"ple {args.command}: error: {exc}", file=sys.stderr)
+    except PleError as exc:  # one line: control characters of the input (a key, a name) escaped
+        msg = "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(exc))
+        print(f"ple {args.command}: error: {msg}", file=sys.stderr)
         return 2
     except MemoryError:
         print(f"ple {args.command}: error: out of memory; choose a smaller --region or raise --max-memory",

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import faulthandler
 import io
+import math
 import os
 import pickle
 import resource
@@ -145,8 +146,10 @@ def run_program(source: str, params=None, timeout: float | None = DEFAULT_TIMEOU
     path = resolve_source(source)
     if path.suffix == ".json":
         return load_lattice(source, params)  # data only: nothing to contain
-    if timeout is not None and not (timeout > 0):
-        raise PleError(f"--timeout {timeout}: expected a positive number of seconds")
+    if timeout is not None and not (timeout > 0):  # NaN too
+        raise PleError(f"--timeout {timeout}: expected a positive number of seconds (inf: no limit)")
+    if timeout is not None and math.isinf(timeout):
+        timeout = None
     name = str(path)
     read_fd, write_fd = os.pipe()
     sys.stdout.flush()
