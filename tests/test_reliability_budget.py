@@ -4,13 +4,11 @@ the listed inputs run under a memory watchdog (peak RSS < 2 GB, exit 0 or 2, no 
 from __future__ import annotations
 
 import pytest
-from reliability_helpers import PEAK_LIMIT_BYTES, ple
-
-from ple.budget import (evaluation_bytes, mesh_triangles, parse_size, region_beams, region_nodes,
-                        slab_groups_within)
+from ple.budget import evaluation_bytes, mesh_triangles, parse_size, region_beams, region_nodes, slab_groups_within
 from ple.errors import PleError
 from ple.program import load_lattice
 from ple.tessellate import tessellate
+from reliability_helpers import PEAK_LIMIT_BYTES, ple
 
 MANY_BEAMS = """
 def lattice(n=368):
