@@ -35,7 +35,7 @@ def build_zip(tmp: Path) -> Path:
 
 
 def run(args) -> int:
-    from ple.app.batch import plan, read_manifest
+    from ple.app.batch import plan, prepare_output_dir
     from ple.app.progress import Progress
     from ple.errors import PleError
     from ple.io.files import atomic_write_text
@@ -45,9 +45,8 @@ def run(args) -> int:
             raise PleError(f"--style {args.style!r}: expected one of {', '.join(STYLES)}")
         source, variants = plan(args.program, args.param, args.format)
         out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
         manifest_path = out / "manifest.json"
-        manifest = read_manifest(manifest_path)
+        manifest = prepare_output_dir(out, "python -m ple_addon.batch")
     except PleError as exc:
         print(f"ple_addon.batch: error: {exc}", file=sys.stderr)
         return 2

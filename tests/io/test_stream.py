@@ -94,7 +94,7 @@ def test_no_partial_output(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x"]
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "notes.txt").write_text("keep")
-    with pytest.raises(PleError, match="not a chunk directory"):
+    with pytest.raises(PleError, match="not a ple-chunks output"):
         stream_filter(FilteredLattice(fine, Stencil(np.ones((1, 1, 1), bool))), tmp_path / "mine", progress=False)
     assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
     with pytest.raises(PleError):

@@ -288,8 +288,13 @@ def Identity() -> Similarity:  # noqa: N802
 
 def Translation(vec) -> Similarity:  # noqa: N802
     v = Vec(vec)
-    n = float(np.linalg.norm(v))
-    return Similarity() if n == 0.0 else Similarity(1.0, 0.0, tuple(v / n), (0.0, 0.0, 0.0), n)
+    scale = float(np.abs(v).max())
+    if scale == 0.0:
+        return Similarity()
+    n = scale * float(np.linalg.norm(v / scale))  # scaled first: |(1e200, 0, 0)|² would overflow
+    if not math.isfinite(n):
+        raise PleError(f"translation vector {list(v)} is too long")
+    return Similarity(1.0, 0.0, tuple(v / n), (0.0, 0.0, 0.0), n)
 
 
 def _angle(angle) -> float:

@@ -30,10 +30,13 @@ def Vec(x, y=None, z=None) -> np.ndarray:  # noqa: N802 - thesis API name
 def unit(v, what: str = "axis") -> np.ndarray:
     """``v`` normalized; a zero (or non-finite) vector is a user error naming ``what``."""
     v = _as3(v, what)
-    n = float(np.linalg.norm(v))
-    if n < 1e-12:
+    scale = float(np.abs(v).max())
+    if not np.isfinite(scale):
+        raise PleError(f"{what}: must be finite, got {v.tolist()}")
+    if scale * float(np.linalg.norm(v / scale if scale > 0 else v)) < 1e-12:
         raise PleError(f"{what}: zero vector has no direction")
-    return v / n
+    v = v / scale  # first: the norm of [1e308, 1e308, 0] would overflow
+    return v / np.linalg.norm(v)
 
 
 def rotation_matrices(axis: np.ndarray, angles: np.ndarray) -> np.ndarray:

@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import BrokenExecutor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,13 +23,18 @@ import numpy as np
 
 from ..errors import PleError
 from ..io.export import export_mesh
-from ..io.files import atomic_write_text
+from ..io.files import atomic_write_text, check_output_dir, write_marker
 from ..io.formats import format_named
 from ..meshing.styles import style as style_named
-from ..meshing.tessellate import tessellate
+from ..meshing.tessellate import _check_style, tessellate
+from ..model.budget import MESH_TRIANGLE_BYTES, default_max_memory, mesh_triangles, require
+from ..program.runner import DEFAULT_TIMEOUT, run_program
 from ..program.runtime import Param, load_program_file, parse_param_value
-from ..program.sources import load_lattice, resolve_source
+from ..program.sources import resolve_source
 from .progress import Progress
+
+KIND = "ple-batch"  # the output-folder marker's kind
+MAX_VARIANTS = 10_000  # per batch (the plan is listed before anything is written)
 
 
 @dataclass(frozen=True)
@@ -52,9 +58,14 @@ def parse_sweep(param: Param, text: str) -> list:
             raise PleError(f"--param {param.name}={text}: the count n must be an integer") from None
         if n < 1:
             raise PleError(f"--param {param.name}={text}: the count n must be at least 1")
+        if n > MAX_VARIANTS:
+            raise PleError(f"--param {param.name}={text}: the count n must be at most {MAX_VARIANTS:,}")
         values = np.linspace(float(lo), float(hi), n)
         return [int(round(v)) for v in values] if param.kind is int else [float(v) for v in values]
-    return [parse_param_value(param, p) for p in text.split(",")]
+    parts = text.split(",")
+    if len(parts) > MAX_VARIANTS:
+        raise PleError(f"--param {param.name}: more than {MAX_VARIANTS:,} values")
+    return [parse_param_value(param, p) for p in parts]
 
 
 def _value_text(v) -> str:
@@ -81,6 +92,9 @@ def plan(source: str, sweeps: list[str], fmt: str) -> tuple[str, list[Variant]]:
         if name not in known:
             raise PleError(f"--param {name}: unknown parameter (inputs: {', '.join(known) or 'none'})")
         axes[name] = parse_sweep(known[name], text)
+    total = math.prod(len(v) for v in axes.values())
+    if total > MAX_VARIANTS:
+        raise PleError(f"the sweep has {total:,} variants, more than {MAX_VARIANTS:,}; split it into several batches")
     variants = []
     for combo in itertools.product(*axes.values()):
         params = dict(zip(axes, combo))
@@ -96,10 +110,18 @@ def build_mesh(lat, style: str, levels: int | None = None, region=None):
     return tessellate(lat, region=region, style=style, **kwargs)
 
 
-def _run_variant(source: str, params: dict, style: str, levels, region, out: str) -> dict:
-    """Worker: build, mesh and write one variant; returns its manifest entry."""
+def _run_variant(source: str, params: dict, style: str, levels, region, out: str, limits=None) -> dict:
+    """Worker: build (contained, ``limits`` = (timeout, memory); ``ple.program.runner``), check
+    the work budget, mesh and write one variant; returns its manifest entry."""
     t0 = time.perf_counter()
-    lat = load_lattice(source, params)
+    timeout, memory = limits or (DEFAULT_TIMEOUT, None)
+    memory = memory or default_max_memory()
+    lat = run_program(source, params, timeout, memory)
+    r = lat.region(region)
+    lv, seg = _check_style(style if style != "balls-beams" else "cnt", levels, None)
+    tris = mesh_triangles(lat, r, style, lv, seg)
+    require(tris * MESH_TRIANGLE_BYTES, f"{Path(out).name}: {tris:,.3g} triangles", memory,
+            "choose a smaller --region or fewer --levels")
     mesh = build_mesh(lat, style, levels, region)
     export_mesh(mesh, Path(out))
     return {"file": Path(out).name, "params": params, "triangles": int(len(mesh.faces)),
@@ -109,14 +131,15 @@ def _run_variant(source: str, params: dict, style: str, levels, region, out: str
 
 def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", fmt: str = "stl",
               levels: int | None = None, region: str | None = None, jobs: int | None = None,
-              progress=True) -> dict:
-    """Export every variant of a sweep; skip those already in the manifest with their file."""
+              progress=True, limits: tuple | None = None) -> dict:
+    """Export every variant of a sweep; skip those already in the manifest with their file.
+    ``limits``: (timeout s, memory bytes) of each variant's program and mesh
+    (``ple.program.runner``)."""
     style_named(style)
     path, variants = plan(source, sweeps, fmt)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     manifest_path = out / "manifest.json"
-    manifest = read_manifest(manifest_path)
+    manifest = prepare_output_dir(out, "ple batch")
     done = {e["file"] for e in manifest["outputs"] if (out / e["file"]).is_file()}
     todo = [v for v in variants if v.filename not in done]
     manifest.update({"program": path, "style": style, "format": fmt, "region": region})
@@ -127,14 +150,16 @@ def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", f
     bar = Progress(len(todo), "batch", enabled=None if progress else False)
     if todo:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(_run_variant, path, v.params, style, levels, region, str(out / v.filename)): v
-                       for v in todo}
+            futures = {pool.submit(_run_variant, path, v.params, style, levels, region, str(out / v.filename),
+                                   limits): v for v in todo}
             for fut in as_completed(futures):
                 v = futures[fut]
                 try:
                     manifest["outputs"].append(fut.result())
                 except PleError as exc:
                     failures.append({"file": v.filename, "params": v.params, "error": str(exc)})
+                except BrokenExecutor as exc:  # a worker died (killed, crashed outside a program)
+                    failures.append({"file": v.filename, "params": v.params, "error": f"worker died: {exc}"})
                 atomic_write_text(manifest_path, json.dumps(manifest, indent=1) + "\n")
                 if bar:
                     bar.update(1, v.filename)
@@ -146,13 +171,39 @@ def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", f
             "manifest": str(manifest_path), "seconds": time.perf_counter() - t0}
 
 
+def prepare_output_dir(out: Path, command: str) -> dict:
+    """Check, create and mark a batch output folder (ours, new or empty; never another folder's
+    files: ``ple.io.files.check_output_dir``); returns its manifest (empty when new)."""
+    manifest_path = out / "manifest.json"
+    if not _legacy_batch_folder(manifest_path):  # written before output markers existed
+        check_output_dir(out, KIND)
+    manifest = read_manifest(manifest_path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise PleError(f"--out {out}: cannot create the folder ({exc.strerror})") from None
+    write_marker(out, KIND, command)
+    return manifest
+
+
+def _legacy_batch_folder(manifest_path: Path) -> bool:
+    try:
+        return json.loads(manifest_path.read_text()).get("format") == "ple-batch/1"
+    except (OSError, ValueError, RecursionError, AttributeError):
+        return False
+
+
 def read_manifest(path: Path) -> dict:
     if not path.is_file():
         return {"format": "ple-batch/1", "outputs": []}
     try:
         data = json.loads(path.read_text())
-    except json.JSONDecodeError:
+    except (ValueError, RecursionError, OSError):
         raise PleError(f"{path}: existing manifest is not valid JSON; move it away to start afresh") from None
     if not isinstance(data, dict) or not isinstance(data.get("outputs"), list):
         raise PleError(f"{path}: existing manifest has no 'outputs' list")
+    for n, entry in enumerate(data["outputs"]):
+        if not isinstance(entry, dict) or not isinstance(entry.get("file"), str) or "/" in entry["file"]:
+            raise PleError(f"{path}: outputs[{n}] is not an entry with a 'file' name; move the manifest away "
+                           "to start afresh")
     return data

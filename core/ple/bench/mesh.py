@@ -14,6 +14,7 @@ import time
 import numpy as np
 import trimesh
 
+from ..errors import PleError
 from ..io.export import write_stl
 from ..meshing.tessellate import tessellate
 from ..program.sources import load_lattice
@@ -90,6 +91,9 @@ def _manifold_union(lat, segments: int = 16) -> tuple[float, float, int]:
 
 
 def run(args) -> dict:
+    for flag, n in (("--big", args.big), ("--region", args.region)):
+        if not 2 <= n <= 1000:
+            raise PleError(f"{flag} {n}: expected 2..1000")
     lat = load_lattice(args.lattice)
     big = _big(args.lattice, args.big, args.style)  # first: a forked child starts with its parent's RSS
     region = lat.with_counts(args.region, args.region, args.region)

@@ -7,6 +7,7 @@ import json
 from ..app.batch import run_batch
 from ..io.formats import FORMAT_NAMES
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
+from .common import add_program_limits, max_memory
 
 
 def register(sub) -> None:
@@ -20,11 +21,12 @@ def register(sub) -> None:
     p.add_argument("--region", help="I0:I1,J0:J1,K0:K1 to mesh (default: whole lattice)")
     p.add_argument("--jobs", type=int, help="worker processes (default: all cores)")
     p.add_argument("--out", required=True, help="output folder (manifest.json is written there)")
+    add_program_limits(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     result = run_batch(args.lattice, args.param, args.out, args.style, args.format, args.levels, args.region,
-                       args.jobs)
+                       args.jobs, limits=(args.timeout, max_memory(args)))
     print(json.dumps(result, indent=1))
     return 2 if result["failed"] else 0  # a variant the program rejects is bad input

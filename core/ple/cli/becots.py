@@ -4,14 +4,17 @@ connectors (thesis §4.3.5, §4.5.3)."""
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 
 from ..errors import PleError
 from ..io.export import export_connectors
 from ..io.files import atomic_path, atomic_write_text
+from ..io.inputs import load_npy
 from ..model.becots import BeCOTSField
-from .common import add_lattice_args, lattice_from_args
+from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, region_beams, region_nodes, require
+from .common import add_lattice_args, lattice_from_args, max_memory
 
 
 def register(sub) -> None:
@@ -37,7 +40,7 @@ def register(sub) -> None:
     c.add_argument("--radius", type=float, required=True, help="common node radius")
     c.add_argument("--beam-radius", type=float, help="common beam (rod) radius (default radius / 2)")
     c.add_argument("--region", help="I0:I1,J0:J1,K0:K1 (default: the whole lattice)")
-    c.add_argument("--out", required=True, help="existing output folder")
+    c.add_argument("--out", required=True, help="output folder (new, empty, or written before by this command)")
     c.set_defaults(func=run)
 
 
@@ -66,10 +69,7 @@ def _branch(text: str) -> tuple[int, int]:
 
 
 def _load(path: str, cols: int, flag: str) -> np.ndarray:
-    try:
-        arr = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise PleError(f"{flag} {path}: cannot read a .npy array ({exc})") from None
+    arr = load_npy(path, flag)
     if arr.ndim != 2 or arr.shape[1] != cols or not np.issubdtype(arr.dtype, np.number):
         raise PleError(f"{flag} {path}: expected a numeric array of shape (n, {cols}), got {arr.shape}")
     arr = arr.astype(float)
@@ -80,7 +80,15 @@ def _load(path: str, cols: int, flag: str) -> np.ndarray:
 
 def run(args) -> int:
     if args.becots_cmd == "connectors":
+        for flag, value in (("--radius", args.radius), ("--beam-radius", args.beam_radius)):
+            if value is not None and not (math.isfinite(value) and 0 < value < 1e150):
+                raise PleError(f"{flag} {value}: expected a positive finite number")
         lat = lattice_from_args(args)
+        region = lat.region(args.region)
+        beams = region_beams(lat, region)
+        require(2 * evaluation_bytes(lat, region) + beams * 48 * MESH_TRIANGLE_BYTES,
+                f"the connectors of region {region} ({region_nodes(lat, region):,} nodes, {beams:,} beams)",
+                max_memory(args), "choose a smaller --region")
         summary = export_connectors(lat, args.out, args.radius, args.beam_radius, region=args.region)
         print(f"wrote {len(summary['classes'])} connector classes and {summary['beams']} beams to {args.out}")
         return 0
@@ -89,12 +97,20 @@ def run(args) -> int:
         if not args.out.endswith(".npy"):
             raise PleError(f"--out {args.out}: expected a .npy file")
         uv = _load(args.uv, 2, "--uv")
-        pts = fld.points(uv[:, 0], uv[:, 1])
+        with np.errstate(all="ignore"):
+            pts = fld.points(uv[:, 0], uv[:, 1])
+        bad = ~np.isfinite(pts).all(axis=1)
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise PleError(f"--uv {args.uv}: row {row} {uv[row].tolist()} maps to a non-finite point "
+                           "(outside the field's domain or overflow); nothing written")
         with atomic_path(args.out) as tmp:
             with open(tmp, "wb") as fh:
                 np.save(fh, pts)
         print(f"wrote {args.out}: {len(pts)} points ({fld.kind} field)")
         return 0
+    if not (math.isfinite(args.tol) and args.tol >= 0):
+        raise PleError(f"--tol {args.tol}: expected a finite number >= 0")
     pts = _load(args.points, 3, "--points")
     answers = fld.inverse(pts, tol=args.tol)
     atomic_write_text(args.out, json.dumps([[list(xy) for xy in a] for a in answers]) + "\n")

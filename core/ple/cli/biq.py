@@ -8,8 +8,10 @@ import numpy as np
 
 from ..errors import PleError
 from ..io.files import atomic_write_text
+from ..io.inputs import load_npy
+from ..model.budget import HIT_ARRAY_BYTES, HIT_LISTED_BYTES, estimate_hits, require
 from ..queries.biq import query
-from .common import add_lattice_args, lattice_from_args
+from .common import add_lattice_args, lattice_from_args, max_memory
 
 
 def register(sub) -> None:
@@ -19,15 +21,14 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, help="output .json")
     p.add_argument("--method", choices=("auto", "naive", "rangefinder"), default="auto",
                    help="auto (RangeFinder) or the naive reference")
+    p.add_argument("--count", action="store_true",
+                   help="write only the number of node and beam hits per query (one query at a time in memory)")
     p.set_defaults(func=run)
 
 
 def load_queries(path: str) -> np.ndarray:
     """Read and check Q (q, 4): finite centres, radii >= 0."""
-    try:
-        q = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise PleError(f"--queries {path}: cannot read a .npy array ({exc})") from None
+    q = load_npy(path, "--queries")
     if q.ndim != 2 or q.shape[1] != 4:
         raise PleError(f"--queries {path}: expected shape (q, 4) of x, y, z, r, got {q.shape}")
     if not np.issubdtype(q.dtype, np.number):
@@ -45,6 +46,22 @@ def run(args) -> int:
         raise PleError(f"--out {args.out}: expected a .json file")
     q = load_queries(args.queries)
     lat = lattice_from_args(args)
+    est = estimate_hits(lat, q[:, :3], q[:, 3])
+    limit = max_memory(args)
+    if args.count:
+        most = float(est.max(initial=0))
+        require(most * HIT_ARRAY_BYTES, f"the largest query (about {most:,.3g} hits)", limit, "use smaller query balls")
+        counts, path = [], "-"
+        for row in q:
+            (r,) = query(lat, row[None, :3], row[3:4], method=args.method)
+            counts.append({"nodes": len(r.nodes), "beams": len(r.beams)})
+            path = r.path
+        atomic_write_text(args.out, json.dumps({"queries": counts}) + "\n")
+        hits = sum(c["nodes"] + c["beams"] for c in counts)
+        print(f"wrote {args.out}: {len(counts)} queries, {hits} hits counted (path {path})")
+        return 0
+    require(float(est.sum()) * HIT_LISTED_BYTES, f"listing about {est.sum():,.3g} hits of {len(q)} queries", limit,
+            "use --count for the numbers only, or smaller query balls")
     results = query(lat, q[:, :3], q[:, 3], method=args.method)
     doc = {"queries": [{"nodes": r.nodes.tolist(), "beams": r.beams.tolist()} for r in results]}
     atomic_write_text(args.out, json.dumps(doc) + "\n")

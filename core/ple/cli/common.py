@@ -1,40 +1,60 @@
-"""Argument helpers shared by sub-commands (not itself a command): the lattice argument and the
-small languages of ``--stencil`` and ``--implicit``."""
+"""Argument helpers shared by sub-commands (not itself a command): the lattice argument, the
+limits of a program and of the work (``--timeout``, ``--max-memory``; docs/reliability.md), and
+the small languages of ``--stencil`` and ``--implicit``."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
-import numpy as np
-
 from ..algebra.similarity import Translation
 from ..errors import PleError
 from ..filters.implicit import VARIANTS, Field, FourierField, ImplicitFilter, TPMSField
 from ..filters.stencil import Stencil
+from ..io.inputs import load_npy
+from ..model.budget import ENV, default_max_memory, parse_size
 from ..model.lattice import Lattice
-from ..program.sources import load_lattice
+from ..program.runner import DEFAULT_TIMEOUT, run_program
 
 
 def add_lattice_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("lattice", metavar="LATTICE", help="a program .py, an IR .json, or a preset name")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="set a program input (repeatable)")
+    add_program_limits(p)
+
+
+def add_budget_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--max-memory", metavar="SIZE",
+                   help=f"refuse work estimated beyond SIZE (e.g. 4G; default a quarter of RAM or ${ENV})")
+
+
+def add_program_limits(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT, metavar="SECONDS",
+                   help=f"time limit of the program (default {DEFAULT_TIMEOUT:g} s)")
+    add_budget_args(p)
+
+
+def max_memory(args=None) -> int:
+    """The limit of a command: its ``--max-memory``, else the default (``ple.model.budget``)."""
+    text = getattr(args, "max_memory", None)
+    return parse_size(text) if text else default_max_memory()
 
 
 def lattice_from_args(args) -> Lattice:
-    return load_lattice(args.lattice, args.param)
+    """The lattice of a command's LATTICE, its program contained (``ple.program.runner``)."""
+    return run_program(args.lattice, args.param, args.timeout, max_memory(args))
+
+
+def contained(args):
+    """``source, params -> Lattice`` with the command's limits (for --coarse lattices)."""
+    return lambda source, params=None: run_program(source, params, args.timeout, max_memory(args))
 
 
 def parse_stencil(text: str) -> Stencil:
     """``NAME[:P|PxQxR][:W]`` (a named stencil) or a ``.npy`` file holding a Boolean array."""
     if text.endswith(".npy"):
-        try:
-            return Stencil(np.load(text, allow_pickle=False))
-        except OSError as exc:
-            raise PleError(f"--stencil {text}: {exc.strerror or exc}") from None
-        except ValueError as exc:
-            raise PleError(f"--stencil {text}: {exc}") from None
+        return Stencil(load_npy(text, "--stencil"))
     parts = text.split(":")
     try:
         period = [int(p) for p in parts[1].split("x")] if len(parts) > 1 else [4]

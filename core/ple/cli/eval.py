@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from ..errors import PleError
 from ..io.files import save_npz
-from .common import add_lattice_args, lattice_from_args
+from ..model.budget import evaluation_bytes, region_beams, region_nodes, require
+from .common import add_lattice_args, lattice_from_args, max_memory
 
 MAX_EVAL_GROUPS = 50_000_000
 
@@ -25,6 +26,9 @@ def run(args) -> int:
     if region.groups * len(lat.nodes) > MAX_EVAL_GROUPS:
         raise PleError(f"region {region} has {region.groups * len(lat.nodes):,} nodes; "
                        "choose a smaller --region (or stream with ple filter)")
+    factor = 1 if lat.filter is None else 2  # a filter's masks and the kept copy
+    require(factor * evaluation_bytes(lat, region), f"region {region} ({region_nodes(lat, region):,} nodes, "
+            f"{region_beams(lat, region):,} beams)", max_memory(args), "choose a smaller --region")
     ev = lat.evaluate(region)
     save_npz(args.out, ev.arrays())
     print(f"wrote {args.out}: {len(ev.center):,} nodes, {len(ev.beam_nodes):,} beams")

@@ -2,7 +2,7 @@
 
 Filters combine with *and*: a node survives when every given filter keeps it; a beam when
 both of its nodes survive (thesis §9). ``--out`` ending in ``.npz`` evaluates in memory
-(arrays as ``ple eval``); any other ``--out`` is a directory of streamed chunks (ple.stream).
+(arrays as ``ple eval``); any other ``--out`` is a directory of streamed chunks (ple.io.chunks).
 """
 
 from __future__ import annotations
@@ -16,9 +16,19 @@ from ..filters.ir import filter_to_dict
 from ..filters.lil import lil
 from ..io.chunks import DEFAULT_SLAB_GROUPS, stream_filter
 from ..io.files import save_npz
+from ..model.budget import evaluation_bytes, region_beams, region_nodes, require, slab_groups_within
 from ..model.lattice import Lattice
 from ..program.sources import load_lattice
-from .common import add_cluster_args, add_lattice_args, lattice_from_args, parse_implicit, parse_stencil, report_job
+from .common import (
+    add_cluster_args,
+    add_lattice_args,
+    contained,
+    lattice_from_args,
+    max_memory,
+    parse_implicit,
+    parse_stencil,
+    report_job,
+)
 from .eval import MAX_EVAL_GROUPS
 
 
@@ -46,12 +56,12 @@ def add_output_args(p) -> None:
     add_cluster_args(p)
 
 
-def load_coarse(text: str):
+def load_coarse(text: str, load=load_lattice):
     """``SOURCE[:NAME=VALUE,...]``: a preset, program or IR with optional program inputs."""
     source, sep, rest = text.partition(":")
     if sep and "=" in rest:
-        return load_lattice(source, [x for x in rest.split(",") if x])
-    return load_lattice(text)
+        return load(source, [x for x in rest.split(",") if x])
+    return load(text)
 
 
 def build(args, lat: Lattice, parts: list[Filter]) -> Lattice:
@@ -62,7 +72,8 @@ def build(args, lat: Lattice, parts: list[Filter]) -> Lattice:
     parts += [parse_implicit(s) for s in getattr(args, "implicit", [])]
     extra = all_of(*parts)
     if args.coarse:
-        return lil(lat, *(load_coarse(c) for c in args.coarse), extra=extra, method=args.method)
+        load = contained(args) if hasattr(args, "timeout") else load_lattice
+        return lil(lat, *(load_coarse(c, load) for c in args.coarse), extra=extra, method=args.method)
     if extra is None and lat.filter is None:
         raise PleError("no filter given: use --stencil, --implicit or --coarse")
     return lat.with_filter(extra)
@@ -79,6 +90,9 @@ def write(args, lat: Lattice) -> int:
         if region.groups * len(lat.nodes) > MAX_EVAL_GROUPS:
             raise PleError(f"region {region} has {region.groups * len(lat.nodes):,} nodes; "
                            "give --out a directory to stream chunks instead of one .npz")
+        require(2 * evaluation_bytes(lat, region), f"region {region} ({region_nodes(lat, region):,} nodes, "
+                f"{region_beams(lat, region):,} beams)", max_memory(args),
+                "choose a smaller --region or give --out a directory to stream chunks")
         ev = lat.evaluate(region)
         if args.out is not None:
             save_npz(args.out, ev.arrays())
@@ -86,7 +100,8 @@ def write(args, lat: Lattice) -> int:
               f"{len(ev.beam_nodes):,} beams")
         return 0
     bar = Progress(region.groups, "filter")
-    manifest = stream_filter(lat, args.out, region, args.slab_groups, progress=bar)
+    manifest = stream_filter(lat, args.out, region, slab_groups_within(lat, args.slab_groups, max_memory(args)),
+                             progress=bar)
     print(f"wrote {args.out}/ ({len(manifest['chunks'])} chunks): {manifest['nodes']:,} nodes {total}, "
           f"{manifest['beams']:,} beams")
     return 0

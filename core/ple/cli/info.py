@@ -4,10 +4,13 @@ volume — of what the lattice keeps (its filter applied), in the whole index bo
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 
+from ..errors import PleError
 from ..measure.integrals import MAX_KEPT_NODES, kept_measures, lattice_measures
+from ..model.budget import fast_bounds
 from ..model.lattice import Lattice
 from .common import add_lattice_args, lattice_from_args
 
@@ -40,9 +43,11 @@ def lattice_info(lat: Lattice, region=None) -> dict:
         "mean_radius": lat.mean_radius(),
     }
     if lat.filter is None:
-        lo, hi = lat.bounds(r)
-        info.update(nodes=lat.node_count(r), beams=lat.beam_count(r), bounds={"min": lo.tolist(), "max": hi.tolist()})
+        lo, hi, exact = fast_bounds(lat, r)  # closed form or bounded scan: seconds even for 10^12 groups
+        info.update(nodes=lat.node_count(r), beams=lat.beam_count(r),
+                    bounds={"min": lo.tolist(), "max": hi.tolist(), "exact": exact})
         info.update(lattice_measures(lat) if whole else kept_measures(lat, r))
+        _check_finite_measures(info)
         return info
     info.update(program_nodes=lat.node_count(r), program_beams=lat.beam_count(r))
     if lat.node_count(r) > MAX_KEPT_NODES:
@@ -58,9 +63,16 @@ def lattice_info(lat: Lattice, region=None) -> dict:
             hi = np.maximum(hi, (ev.center + ev.radius[:, None]).max(axis=0))
     info.update(nodes=nodes, beams=beams)
     if nodes:
-        info["bounds"] = {"min": lo.tolist(), "max": hi.tolist()}
+        info["bounds"] = {"min": lo.tolist(), "max": hi.tolist(), "exact": True}
     info.update(kept_measures(lat, r))
+    _check_finite_measures(info)
     return info
+
+
+def _check_finite_measures(info: dict) -> None:
+    for key in ("area", "volume", "mean_radius"):
+        if key in info and not math.isfinite(info[key]):
+            raise PleError(f"the lattice's {key} overflows ({info[key]}); its sizes are too large or too small")
 
 
 def run(args) -> int:
@@ -85,7 +97,8 @@ def run(args) -> int:
         cum = " (given cumulatively)" if s["cumulative"] else ""
         print(f"{name}           {s['kind']}{cum}")
     if "bounds" in info:
-        print(f"bounds      {_fmt(info['bounds']['min'])} .. {_fmt(info['bounds']['max'])}")
+        approx = "" if info["bounds"]["exact"] else "  (approximate: sampled groups)"
+        print(f"bounds      {_fmt(info['bounds']['min'])} .. {_fmt(info['bounds']['max'])}{approx}")
     print(f"mean radius {info['mean_radius']:.6g}")
     for key in ("area", "volume"):
         if key in info:

@@ -13,6 +13,7 @@ import sys
 
 from .. import cli
 from ..errors import PleError
+from ..io.files import install_signal_handlers
 
 NOT_COMMANDS = {"main", "common", "__main__"}  # the modules of ple.cli that add no sub-command
 
@@ -39,17 +40,23 @@ def main(argv: list[str] | None = None) -> int:
     first = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(first if first in command_names() else None)
     args = parser.parse_args(argv)
+    install_signal_handlers()  # SIGTERM/SIGHUP unwind like Ctrl-C: temporaries are removed
     try:
         return int(args.func(args) or 0)
-    except PleError as exc:
-        print(f"ple {args.command}: error: {exc}", file=sys.stderr)
+    except PleError as exc:  # one line: control characters of the input (a key, a name) escaped
+        msg = "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(exc))
+        print(f"ple {args.command}: error: {msg}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print(f"ple {args.command}: error: out of memory; choose a smaller --region or raise --max-memory",
+              file=sys.stderr)
         return 2
     except BrokenPipeError:  # output piped into e.g. `head`
         sys.stderr.close()
         return 0
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM/SIGHUP (io.files.Terminated)
         print(f"ple {args.command}: interrupted", file=sys.stderr)
-        return 130
+        return 128 + getattr(exc, "signum", 2)
 
 
 def run() -> None:

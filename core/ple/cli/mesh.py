@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import shutil
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -15,8 +17,20 @@ from ..io.export import export_mesh, write_beam_lattice_3mf, write_mesh
 from ..io.formats import mesh_format
 from ..measure.integrals import lattice_volume
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
-from ..meshing.tessellate import tessellate
-from .common import add_cluster_args, add_lattice_args, lattice_from_args, report_job
+from ..meshing.tessellate import _check_style, tessellate
+from ..model.budget import (
+    CHECK_TRIANGLE_BYTES,
+    MESH_TRIANGLE_BYTES,
+    evaluation_bytes,
+    hub_triangles,
+    human,
+    mean_degree,
+    mesh_triangles,
+    region_beams,
+    region_nodes,
+    require,
+)
+from .common import add_cluster_args, add_lattice_args, lattice_from_args, max_memory, report_job
 
 MAX_MESH_GROUPS = 20_000_000  # streamed binary STL
 MAX_MEMORY_GROUPS = 500_000  # formats built in memory (trimesh), --check and --beam-lattice
@@ -56,6 +70,7 @@ def run(args) -> int:
     if in_memory and region.groups > MAX_MEMORY_GROUPS:
         raise PleError(f"region {region} has {region.groups:,} node-groups: too many to hold in memory for "
                        f".{fmt}{' with --check' if args.check else ''}; write .stl (streamed) or a smaller --region")
+    max_groups = _within_budget(args, lat, region, fmt, in_memory)
     t0 = time.perf_counter()
     if args.beam_lattice:
         if fmt != "3mf":
@@ -69,7 +84,7 @@ def run(args) -> int:
         export_mesh(mesh, args.out)
         n = len(mesh.faces)
     else:
-        n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments)
+        n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments, max_groups)
     dt = time.perf_counter() - t0
     print(f"wrote {args.out}: {n:,} triangles, style {args.style}, region {region}, {dt:.2f} s")
     if args.check:
@@ -92,6 +107,34 @@ def run_parts(args) -> int:
         n = assemble_stl(args.parts, args.out)
         print(f"wrote {args.out}: {n:,} triangles from {len(job.parts)} parts")
     return status
+
+
+def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
+    """Refuse a mesh whose estimated memory (or, streamed, file) exceeds the limits; returns the
+    node-groups per streamed box so that one box fits the memory limit."""
+    limit = max_memory(args)
+    levels, segments = _check_style(args.style, args.levels, args.segments)
+    what = f"region {region} ({region_nodes(lat, region):,} nodes)"
+    if args.beam_lattice:
+        require(evaluation_bytes(lat, region) + 150 * (region_nodes(lat, region) + region_beams(lat, region)),
+                f"the beam lattice of {what}", limit, "choose a smaller --region")
+        return 1 << 14
+    tris = mesh_triangles(lat, region, args.style, levels, segments)
+    if in_memory:
+        per = CHECK_TRIANGLE_BYTES if args.check else MESH_TRIANGLE_BYTES
+        require(tris * per + evaluation_bytes(lat, region),
+                f"{tris:,.3g} triangles ({args.style}) of {what} in memory for .{fmt}", limit,
+                "write .stl (streamed), choose a smaller --region or fewer --levels")
+        return 1 << 14
+    per_group = len(lat.nodes) * hub_triangles(mean_degree(lat), args.style, levels, segments) * MESH_TRIANGLE_BYTES
+    require(per_group, f"one node-group of {args.style} mesh", limit, "choose fewer --levels")
+    out_dir = Path(args.out).resolve().parent
+    free = shutil.disk_usage(out_dir).free if out_dir.is_dir() else None
+    if free is not None and tris * 50 > free:
+        raise PleError(f"{tris:,.3g} triangles ({args.style}) of {what} make a binary STL of about "
+                       f"{human(tris * 50)}, more than the {human(free)} free in {out_dir}; "
+                       "choose a smaller --region or fewer --levels")
+    return int(max(1, min(1 << 14, limit // per_group)))
 
 
 def check_report(lat, region, mesh) -> dict:

@@ -8,6 +8,7 @@ import numpy as np
 from ..errors import PleError
 from .base import Filter
 
+MAX_STENCIL_CELLS = 10**8  # a named stencil's period box (a Boolean array of this size)
 STENCIL_NAMES = ("corners", "edges", "faces", "checker", "layers")
 
 
@@ -47,6 +48,8 @@ class Stencil(Filter):
         if int(width) != width or width < 1:
             raise PleError(f"stencil width must be a positive integer, got {width!r}")
         x, y, z = (int(p) for p in per)
+        if x * y * z > MAX_STENCIL_CELLS:
+            raise PleError(f"stencil period {x}x{y}x{z} has more than {MAX_STENCIL_CELLS:,} cells")
         i, j, k = np.meshgrid(np.arange(x), np.arange(y), np.arange(z), indexing="ij")
         on = [(i % x) < width, (j % y) < width, (k % z) < width]
         hits = on[0].astype(int) + on[1] + on[2]

@@ -16,16 +16,19 @@ from __future__ import annotations
 
 import json
 import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import PleError
+from ..model.budget import EVAL_BEAM_BYTES, EVAL_NODE_BYTES, human, region_beams, region_nodes
 from ..model.lattice import Evaluation, Lattice
+from .files import check_output_dir, make_temp_dir, remove_stale_temporaries, replace_dir, write_marker
 
 FORMAT = "ple-chunks/1"
+KIND = "ple-chunks"  # the output-folder marker's kind
 DEFAULT_SLAB_GROUPS = 1 << 18
+DISK_MARGIN = 256 << 20  # stop before the disk is full, not when it is
 
 
 def stream_filter(lat: Lattice, out_dir, region=None, slab_groups: int = DEFAULT_SLAB_GROUPS,
@@ -34,38 +37,46 @@ def stream_filter(lat: Lattice, out_dir, region=None, slab_groups: int = DEFAULT
 
     ``progress``: an object with ``update(groups, note)`` and ``close()`` (e.g.
     ``ple.app.progress.Progress``), or None. Returns the manifest. The directory appears
-    complete or not at all (written beside it, then renamed); an existing chunk directory is
-    replaced, any other non-empty one refused."""
+    complete or not at all (written beside it, then renamed); a chunk directory written by PLE
+    (its ``.ple-output.json`` marker) is replaced, an empty one used, any other refused
+    (``ple.io.files.check_output_dir``)."""
     out = Path(out_dir)
-    if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (out / "manifest.json").exists())):
-        raise PleError(f"--out {out}: exists and is not a chunk directory (no manifest.json); not overwriting")
+    check_output_dir(out, KIND)
     parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        raise PleError(f"--out {out}: folder {parent} does not exist")
     if int(slab_groups) < 1:
         raise PleError(f"slab size must be at least 1 node-group, got {slab_groups}")
     lat.validate()
     r = lat.region(region)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
+    remove_stale_temporaries(parent)
+    _check_disk_bound(lat, r, parent)
+    tmp = make_temp_dir(parent, out.name)
     try:
         manifest = _write_chunks(lat, r, tmp, int(slab_groups), progress)
-        if out.exists():
-            trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=parent))
-            out.rename(trash / "old")
-            tmp.rename(out)
-            shutil.rmtree(trash)
-        else:
-            tmp.rename(out)
+        write_marker(tmp, KIND, "ple filter")
+        replace_dir(tmp, out)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp)
     return manifest
 
 
+def _check_disk_bound(lat: Lattice, r, parent: Path) -> None:
+    """Refuse a stream whose output, if every node and beam survived, could not fit on the disk."""
+    bound = region_nodes(lat, r) * EVAL_NODE_BYTES + region_beams(lat, r) * EVAL_BEAM_BYTES
+    free = shutil.disk_usage(parent).free
+    if bound + DISK_MARGIN > free:
+        raise PleError(f"region {r} could stream up to {human(bound)} of chunks (if every node survives), more than "
+                       f"the {human(free)} free in {parent}; choose a smaller --region")
+
+
 def _write_chunks(lat: Lattice, r, folder: Path, slab_groups: int, progress) -> dict:
     chunks, node_offset, beam_total = [], 0, 0
     for n, (slab, ev) in enumerate(lat.iter_evaluation(r, slab_groups)):
         name = f"chunk_{n:06d}.npz"
+        need = ev.center.nbytes * 3 + ev.beam_index.nbytes * 2 + DISK_MARGIN
+        if shutil.disk_usage(folder).free < need:
+            raise PleError(f"the disk of {folder.parent} is nearly full after {n} chunks ({node_offset:,} nodes); "
+                           "nothing was written — free space or choose a smaller --region")
         with open(folder / name, "wb") as fh:
             np.savez(fh, **ev.arrays())
         chunks.append({"file": name, "region": str(slab), "nodes": len(ev.node_index), "beams": len(ev.beam_index),

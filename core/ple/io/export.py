@@ -20,7 +20,7 @@ from ..errors import PleError
 from ..meshing.connectors import constant_radius_connectors
 from ..meshing.tessellate import iter_triangles, tessellate
 from ..model.lattice import Lattice
-from .files import atomic_path, atomic_write_text
+from .files import atomic_path, atomic_write_text, check_output_dir, write_marker
 from .formats import format_named, mesh_format
 
 STL_RECORD = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
@@ -182,9 +182,10 @@ def export_connectors(lat: Lattice, folder, radius: float, beam_radius: float | 
     """Write one mesh per connector class (``connector_<n>.stl``), the beams as constant-
     radius cylinders (``beams.stl``) and ``connectors.json`` (class keys, instance motions)."""
     folder = Path(folder)
-    if not folder.is_dir():
-        raise PleError(f"{folder}: output folder does not exist")
+    check_output_dir(folder, "ple-connectors")  # ours, new or empty: never another folder's files
     classes, beams = constant_radius_connectors(lat, radius, beam_radius, grow, region)
+    folder.mkdir(exist_ok=True)
+    write_marker(folder, "ple-connectors", "ple becots connectors")
     summary = {"classes": [], "beams": len(beams["start"]), "radius": radius, "beam_radius": beams["radius"]}
     for n, cls in enumerate(classes):
         path = folder / f"connector_{n}.stl"

@@ -1,10 +1,27 @@
-"""Atomic file output: write to a temporary sibling, then rename (no partial files)."""
+"""File output that never destroys what the user had (docs/reliability.md).
+
+* Regular files are written to a temporary sibling, then renamed over the destination: on any
+  error (or SIGINT/SIGTERM/SIGHUP) the destination is left as it was and the temporary removed.
+* A symlink is followed: its target is replaced, the link stays.
+* A destination that exists and is not a regular file is never replaced: a character device or
+  FIFO (``/dev/null``, ``/dev/stdout``, a pipe) is written directly, once the whole output is
+  ready; a folder, block device or socket is refused.
+* Output folders carry a marker (``.ple-output.json``: kind, version, command); a command
+  replaces a folder only when the marker says it wrote it, and refuses any other folder.
+* Temporaries are named ``.NAME.ple-tmp-PID-…``; a run removes those of dead processes (left by
+  a SIGKILL) from the folder it writes to.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import json
 import os
+import shutil
+import signal
+import stat
 import tempfile
+import zipfile
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -12,26 +29,127 @@ import numpy as np
 
 from ..errors import PleError
 
+TMP_TAG = ".ple-tmp-"
+MARKER = ".ple-output.json"
+MARKER_VERSION = 1
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised like Ctrl-C so that every ``finally`` removes its temporaries."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _raise_terminated(signum, frame) -> None:
+    raise Terminated(signum)
+
+
+def install_signal_handlers() -> None:
+    """SIGTERM and SIGHUP unwind the stack as Ctrl-C does (main thread only)."""
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        with contextlib.suppress(ValueError, OSError):  # not the main thread / not allowed
+            signal.signal(sig, _raise_terminated)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's live process
+        return True
+    return True
+
+
+def remove_stale_temporaries(folder) -> list[Path]:
+    """Remove ``.*.ple-tmp-PID-*`` files and folders in ``folder`` whose process is gone (a run
+    killed by SIGKILL); returns what was removed."""
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for entry in entries:
+        name = entry.name
+        if not name.startswith(".") or TMP_TAG not in name:
+            continue
+        pid_text = name.split(TMP_TAG, 1)[1].split("-", 1)[0]
+        if not pid_text.isdigit() or int(pid_text) == os.getpid() or _alive(int(pid_text)):
+            continue
+        with contextlib.suppress(OSError):
+            if entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(entry.path)
+            else:
+                os.unlink(entry.path)
+            removed.append(Path(entry.path))
+    return removed
+
+
+def temp_prefix(name: str) -> str:
+    return f".{name}{TMP_TAG}{os.getpid()}-"
+
+
+def make_temp_dir(parent: Path, name: str) -> Path:
+    """A fresh temporary folder beside an output (removed by the next run if we are killed)."""
+    return Path(tempfile.mkdtemp(prefix=temp_prefix(name), dir=parent))
+
+
+def _destination(path: Path) -> tuple[Path, str]:
+    """(where to write, how): 'file' (atomic replace of a regular file or a new one) or 'direct'
+    (a character device or FIFO, written in place); anything else is refused."""
+    try:
+        st = os.stat(path)  # follows symlinks
+    except FileNotFoundError:
+        if path.is_symlink():  # a dangling link: create its target
+            return Path(os.path.realpath(path)), "file"
+        return path, "file"
+    except OSError as exc:
+        raise PleError(f"{path}: cannot write ({exc.strerror})") from None
+    if stat.S_ISREG(st.st_mode):
+        return Path(os.path.realpath(path)), "file"
+    if stat.S_ISCHR(st.st_mode) or stat.S_ISFIFO(st.st_mode):
+        return path, "direct"
+    what = ("a folder" if stat.S_ISDIR(st.st_mode) else "a block device" if stat.S_ISBLK(st.st_mode)
+            else "a socket" if stat.S_ISSOCK(st.st_mode) else "not a regular file")
+    raise PleError(f"{path}: is {what}; not writing over it (give a file name)")
+
 
 @contextlib.contextmanager
 def atomic_path(path) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; on success it replaces ``path``, on any
-    error it is removed and ``path`` is left as it was."""
+    """Yield a temporary path for the output ``path``; on success its content goes to ``path``
+    (renamed over a regular file, copied into a device or FIFO), on any error it is removed and
+    ``path`` is left as it was."""
     path = Path(path)
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
+    target, how = _destination(path)
+    parent = target.parent if str(target.parent) else Path(".")
+    if how == "direct":
+        parent = Path(tempfile.gettempdir())
+    elif not parent.is_dir():
         raise PleError(f"{path}: output folder {parent} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=parent)
+    if how == "file":
+        remove_stale_temporaries(parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=temp_prefix(target.name), suffix=target.suffix, dir=parent)
+    except OSError as exc:
+        raise PleError(f"{path}: cannot write in {parent} ({exc.strerror})") from None
     os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # a normal file's permissions, not mkstemp's private 0600
     tmp_path = Path(tmp)
     try:
+        if how == "file":
+            umask = os.umask(0)
+            os.umask(umask)
+            mode = stat.S_IMODE(os.stat(target).st_mode) if target.exists() else 0o666 & ~umask
+            os.chmod(tmp, mode)  # a normal file's permissions (or the replaced file's), not mkstemp's 0600
         yield tmp_path
-        os.replace(tmp_path, path)
+        if how == "file":
+            os.replace(tmp_path, target)
+        else:
+            with open(tmp_path, "rb") as src, open(path, "wb") as dst:
+                shutil.copyfileobj(src, dst, 1 << 20)
     finally:
-        if tmp_path.exists():
+        with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
 
 
@@ -46,7 +164,65 @@ def atomic_write_bytes(path, data: bytes) -> None:
 
 
 def save_npz(path, arrays: dict) -> None:
-    """Write arrays to ``path`` (.npz) atomically."""
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
+    """Write arrays to ``path`` (.npz, as ``np.savez``) atomically. The zip is closed before its
+    file, also when interrupted (``np.savez`` on a handle leaves that to the garbage collector)."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh, zipfile.ZipFile(fh, "w", allowZip64=True) as zf:
+        for name, arr in arrays.items():
+            with zf.open(f"{name}.npy", "w", force_zip64=True) as member:
+                np.lib.format.write_array(member, np.asanyarray(arr), allow_pickle=False)
+
+
+# ----- output folders ---------------------------------------------------------------------------
+def read_marker(folder) -> dict | None:
+    """The ``.ple-output.json`` marker of a folder, or None."""
+    try:
+        data = json.loads((Path(folder) / MARKER).read_text())
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def write_marker(folder, kind: str, command: str) -> None:
+    doc = {"kind": kind, "version": MARKER_VERSION, "command": command}
+    (Path(folder) / MARKER).write_text(json.dumps(doc) + "\n")
+
+
+def check_output_dir(path, kind: str, flag: str = "--out") -> bool:
+    """May ``kind`` write the folder ``path``? True when it exists with our marker (replace or
+    update it), False when it does not exist or is empty; otherwise PleError (nothing deleted)."""
+    path = Path(path)
+    if not os.path.lexists(path):
+        parent = path.parent if str(path.parent) else Path(".")
+        if not parent.is_dir():
+            raise PleError(f"{flag} {path}: folder {parent} does not exist")
+        return False
+    if not path.is_dir():
+        raise PleError(f"{flag} {path}: exists and is not a folder; not overwriting")
+    marker = read_marker(path)
+    if marker is not None and marker.get("kind") == kind:
+        return True
+    try:
+        empty = not any(path.iterdir())
+    except OSError as exc:
+        raise PleError(f"{flag} {path}: cannot read the folder ({exc.strerror})") from None
+    if empty:
+        return False
+    found = f"it was written by {marker.get('command', '?')!r}" if marker else "it has no PLE output marker"
+    raise PleError(f"{flag} {path}: folder exists and is not a {kind} output of PLE ({found}); "
+                   "not touching it — give a new or empty folder")
+
+
+def replace_dir(tmp: Path, out: Path) -> None:
+    """Put the finished folder ``tmp`` at ``out``, whose old content (checked by
+    ``check_output_dir``) is removed only after the new one is in place."""
+    if not os.path.lexists(out):
+        tmp.rename(out)
+        return
+    if out.is_dir() and not any(out.iterdir()):
+        out.rmdir()
+        tmp.rename(out)
+        return
+    trash = make_temp_dir(out.parent if str(out.parent) else Path("."), out.name + ".old")
+    out.rename(trash / "old")
+    tmp.rename(out)
+    shutil.rmtree(trash)

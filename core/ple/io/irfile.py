@@ -9,19 +9,13 @@ from ..errors import PleError
 from ..filters.ir import lattice_from_ir, lattice_to_ir
 from ..model.lattice import Lattice
 from .files import atomic_write_text
+from .inputs import read_json
 
 
 def load_ir(path) -> Lattice:
     """Load and validate a ``ple-lattice/1`` file."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise PleError(f"{path}: cannot read ({exc.strerror})") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise PleError(f"{path}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+    data = read_json(path, "lattice file")  # within limits: size, UTF-8, depth (ple.io.inputs)
     try:
         return lattice_from_ir(data)
     except PleError as exc:

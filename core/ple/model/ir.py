@@ -14,10 +14,11 @@ from ..algebra.similarity import Similarity, similarity_from_dict
 from ..algebra.vectors import _as3
 from ..errors import PleError
 from .becots import BeCOTSField, Stack
+from .budget import check_finite
 from .lattice import Lattice
+from .schema import check_ir
 
 FORMAT = "ple-lattice/1"
-TOP_KEYS = {"format", "nodes", "beams", "U", "V", "W", "placement", "becots", "description", "meta", "filter"}
 
 
 def _num(x, where: str) -> float:
@@ -64,9 +65,7 @@ def lattice_from_dict(data, filter_from_dict=None) -> Lattice:
         raise PleError("lattice file: expected a JSON object at the top level")
     if data.get("format") != FORMAT:
         raise PleError(f"format: expected {FORMAT!r}, got {data.get('format')!r}")
-    unknown = sorted(set(data) - TOP_KEYS)
-    if unknown:
-        raise PleError(f"{unknown[0]}: unknown field (expected some of {', '.join(sorted(TOP_KEYS))})")
+    check_ir(data)  # the one schema: unknown keys, types, ranges, sizes (ple.model.schema)
     lat = Lattice()
     nodes = data.get("nodes")
     if not isinstance(nodes, list) or not nodes:
@@ -133,7 +132,8 @@ def lattice_from_dict(data, filter_from_dict=None) -> Lattice:
         becots_from_ir(lat, data["becots"], "becots")
     if "description" in data:
         lat.meta["description"] = str(data["description"])
-    if "filter" in data:
+    check_finite(lat)
+    if "filter" in data:  # validated by filter_from_dict (ple.filters.ir), not by the schema
         if filter_from_dict is None:
             raise PleError("filter: this reader cannot apply filters (load the file with ple.io.irfile.load_ir)")
         lat.set_filter(filter_from_dict(data["filter"], "filter"))

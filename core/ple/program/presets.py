@@ -23,6 +23,9 @@ def preset_names() -> list[str]:
 
 
 def preset_path(name: str) -> Path | None:
+    """The file of a preset; only plain names, so a name cannot reach outside the presets."""
+    if not name or not all(c.isalnum() or c in "_-" for c in name) or name.startswith(("_", "-")):
+        return None
     for ext in (".py", ".json"):
         entry = preset_dir() / (name + ext)
         if entry.is_file():

@@ -25,6 +25,7 @@ from ..filters.base import FilteredLattice
 from ..filters.implicit import FourierField, ImplicitFilter, TPMSField
 from ..filters.lil import LiL
 from ..filters.stencil import Stencil
+from ..io.inputs import read_input_file
 from ..model.becots import BeCOTSField
 from ..model.becots_builders import becots_lattice, set_field, stack_lattice
 from ..model.lattice import Lattice
@@ -103,6 +104,8 @@ class Program:
             lat = self.function(**params)
         except PleError as exc:
             raise PleError(f"{self.name}: {exc}") from None
+        except MemoryError:
+            raise  # reported with the memory limit (ple.program.runner and the command line)
         except Exception as exc:  # the program is user code: report where it failed
             line = _program_line(exc, self.name)
             raise PleError(f"{self.name}{line}: program raised {type(exc).__name__}: {exc}") from None
@@ -194,8 +197,9 @@ def parse_params(program: Program, assignments: list[str]) -> dict:
 
 
 def load_program_file(path: Path) -> Program:
+    raw = read_input_file(path, "program file")
     try:
-        text = Path(path).read_text()
-    except OSError as exc:
-        raise PleError(f"{path}: cannot read ({exc.strerror})") from None
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise PleError(f"{path}: not UTF-8 text (byte {exc.start})") from None
     return compile_program(text, str(path))

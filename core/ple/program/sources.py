@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import PleError
+from ..io.inputs import check_input_file
 from ..io.irfile import load_ir
 from ..model.lattice import Lattice
 from .presets import preset_names, preset_path
@@ -15,8 +16,7 @@ def resolve_source(source: str) -> Path:
     """A program ``.py``, an IR ``.json`` or a preset name, to a file path."""
     p = Path(source)
     if p.suffix in (".py", ".json"):
-        if not p.is_file():
-            raise PleError(f"{source}: no such file")
+        check_input_file(p, f"{p.suffix} file")
         return p
     found = preset_path(source)
     if found is None:

@@ -1,0 +1,229 @@
+"""Work budget: what a command will produce, estimated from the program before allocating
+(docs/reliability.md), and the finiteness of a lattice's extremes.
+
+Every command that allocates in proportion to its output calls ``require`` with an estimate
+of its peak memory; beyond ``--max-memory`` (default: a quarter of the machine's RAM, or the
+``PLE_MAX_MEMORY`` environment variable) it is refused with the estimate and the flag. The
+flags themselves (``--max-memory``, ``--timeout``) belong to the CLI's shared arguments.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from itertools import product
+
+import numpy as np
+
+from ..errors import PleError
+from .lattice import Lattice, Region
+
+ENV = "PLE_MAX_MEMORY"
+HUGE = 1e100  # coordinates and radii beyond this are refused: volumes (cubes) must stay finite
+DEFAULT_FRACTION = 0.25
+_UNITS = {"": 1, "B": 1, "K": 1 << 10, "KB": 1 << 10, "M": 1 << 20, "MB": 1 << 20, "G": 1 << 30,
+          "GB": 1 << 30, "T": 1 << 40, "TB": 1 << 40}
+
+
+def physical_memory() -> int:
+    """Bytes of RAM (sysconf; 8 GiB if unknown)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return 8 << 30
+
+
+def parse_size(text: str, flag: str = "--max-memory") -> int:
+    """``2G``, ``512M``, ``1.5GB``, ``1000000`` to bytes."""
+    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*([KMGT]?B?)\s*", str(text), re.IGNORECASE)
+    if not m:
+        raise PleError(f"{flag} {text!r}: expected a size such as 2G, 512M or 1.5GB")
+    value = float(m.group(1)) * _UNITS[m.group(2).upper()]
+    if not math.isfinite(value) or value < 1 << 20:
+        raise PleError(f"{flag} {text!r}: expected at least 1M")
+    return int(value)
+
+
+def default_max_memory() -> int:
+    env = os.environ.get(ENV)
+    if env:
+        return parse_size(env, ENV)
+    return int(physical_memory() * DEFAULT_FRACTION)
+
+
+def human(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if abs(n) < 1024 or unit == "PiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} PiB"  # pragma: no cover
+
+
+def require(estimate: float, what: str, limit: int, hint: str = "") -> None:
+    """Refuse work whose estimated peak memory exceeds ``limit``."""
+    if estimate > limit:
+        raise PleError(f"{what} needs about {human(estimate)} (estimated before starting), more than the "
+                       f"limit {human(limit)}; {hint + ', or ' if hint else ''}raise it with --max-memory")
+
+
+# ----- counts from the program alone -------------------------------------------------------------
+def region_nodes(lat: Lattice, r: Region) -> int:
+    return r.groups * len(lat.nodes)
+
+
+def region_beams(lat: Lattice, r: Region) -> int:
+    """Beams with both ends in the region (exact: a product per beam-pattern)."""
+    return sum(math.prod(max(0, n - abs(d)) for n, d in zip(r.shape, b.offset)) for b in lat.beams)
+
+
+EVAL_NODE_BYTES = 4 * 8 + 3 * 8 + 8  # node_index, center, radius
+EVAL_BEAM_BYTES = 4 * 8 + 2 * 8
+PEAK_FACTOR = 3  # temporaries while building the arrays (meshgrids, sort permutations)
+
+
+def evaluation_bytes(lat: Lattice, r: Region) -> float:
+    """Peak bytes of ``Lattice.evaluate(r)`` (and of its ``.npz``)."""
+    return PEAK_FACTOR * (region_nodes(lat, r) * EVAL_NODE_BYTES + region_beams(lat, r) * EVAL_BEAM_BYTES)
+
+
+def hub_triangles(degree: float, style: str, levels: int, segments: int) -> float:
+    """Estimate (from above, measured within 2x on the presets) of the triangles of one hub of
+    ``degree`` beams with half of each of its beam strips. CNT: 2d - 4 hub triangles and d
+    corridor quads (CHoCC paper 001_ §5); each refinement level splits every hub triangle in
+    4 and doubles every ring of a beam strip (§6)."""
+    d = max(degree, 1.0)
+    if style == "balls-beams":
+        return 80 + 10 * d
+    if style == "chocc":
+        return 2 * d + 4 + 1.5 * d * segments
+    lv = levels if style == "refined" else 0
+    return (4 * d + 4) * 4.0 ** lv + 6 * d * 2.0 ** lv
+
+
+MESH_TRIANGLE_BYTES = 300  # peak per triangle while building (measured 120-240: vertices, faces, copies)
+CHECK_TRIANGLE_BYTES = 600  # with --check (trimesh's watertightness and volume; measured 545)
+
+
+def mean_degree(lat: Lattice) -> float:
+    return 2 * len(lat.beams) / max(len(lat.nodes), 1)
+
+
+def mesh_triangles(lat: Lattice, r: Region, style: str, levels: int, segments: int) -> float:
+    return region_nodes(lat, r) * hub_triangles(mean_degree(lat), style, levels, segments)
+
+
+# ----- finiteness --------------------------------------------------------------------------------
+def check_finite(lat: Lattice, what: str = "the lattice") -> None:
+    """Every corner group's similarity and balls are finite and the radii positive; the powers of
+    the similarities are monotone in scale, so an overflow shows at a corner. Raises PleError
+    naming the direction whose powers overflow."""
+    if not lat.nodes:
+        return
+    corners = [(0, n - 1) if n > 1 else (0,) for n in lat.counts]
+    idx = np.array(list(product(*corners)), dtype=np.int64)
+    with np.errstate(all="ignore"):
+        factors = lat.group_factors(idx[:, 0], idx[:, 1], idx[:, 2])
+        mats = lat.group_matrices(idx[:, 0], idx[:, 1], idx[:, 2])
+        ok = np.isfinite(mats).all(axis=(1, 2)) & np.isfinite(factors) & (factors > 0)
+        if ok.all():
+            nn = len(lat.nodes)
+            full = np.column_stack([np.repeat(idx, nn, axis=0), np.tile(np.arange(nn), len(idx))])
+            centers, radii = lat.node_balls(full)
+            ok = np.isfinite(centers).all() and np.isfinite(radii).all() and (radii > 0).all()
+            if ok and np.abs(centers).max() < HUGE and radii.max() < HUGE:
+                return
+    blame = []
+    for name, d, n in (("U", lat.u, lat.u.count), ("V", lat.v, lat.v.count), ("W", lat.w, lat.w.count)):
+        f = d.incremental.factor
+        with np.errstate(all="ignore"):
+            m = d.incremental.power_matrices(np.array([n - 1, 0]))
+            fn = np.float64(f) ** (n - 1)
+        if not np.isfinite(m).all() or not np.isfinite(fn) or fn == 0 or np.abs(m).max() > HUGE:
+            size = f"entries up to {np.abs(m).max():.3g}" if np.isfinite(m).all() else "non-finite entries"
+            blame.append(f"{name} ({d.incremental.kind}, factor {f:.6g}: {size} after {n - 1} steps)")
+    cause = f"the powers of {', '.join(blame)}" if blame else "the template or placement"
+    raise PleError(f"{what} overflows: {cause} give infinite, zero or huge (> 1e100) coordinates or radii")
+
+
+# ----- cheap answers for huge lattices -----------------------------------------------------------
+MONOTONE_KINDS = ("identity", "translation", "scaling")
+MAX_SCAN_GROUPS = 1 << 20
+
+
+def axis_samples(lat: Lattice, max_groups: int = MAX_SCAN_GROUPS, region=None) -> tuple[list[np.ndarray], bool]:
+    """Indices per axis whose groups bound the whole lattice (or ``region``), and whether that is
+    exact.
+
+    Node-group (i, j, k) is G W^k V^j U^i N (SPEC §3): every index enters through its own power
+    only, so where that similarity is a translation or a scaling each coordinate (and the
+    radius) is affine in i, resp. in s^i, monotone in i: the two end indices bound the axis
+    exactly. Other axes are scanned whole when the product stays within ``max_groups``,
+    else sampled evenly (approximate)."""
+    r = lat.region(region)
+    dirs = (lat.U, lat.V, lat.W)
+    ranges = ((r.i0, r.i1), (r.j0, r.j1), (r.k0, r.k1))
+    samples: list[np.ndarray | None] = [None, None, None]
+    for a, (s, (lo, hi)) in enumerate(zip(dirs, ranges)):
+        if s.kind in MONOTONE_KINDS or hi - lo <= 2:
+            samples[a] = np.unique([lo, hi - 1])
+    budget = max_groups // max(1, math.prod(len(x) for x in samples if x is not None))
+    free = [a for a in range(3) if samples[a] is None]
+    exact = True
+    for a in free:
+        share = max(2, int(budget ** (1 / len(free))))
+        lo, hi = ranges[a]
+        if hi - lo <= share:
+            samples[a] = np.arange(lo, hi)
+        else:
+            samples[a] = np.unique(np.linspace(lo, hi - 1, share).round().astype(np.int64))
+            exact = False
+    return samples, exact
+
+
+def fast_bounds(lat: Lattice, region=None) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Axis-aligned bounds of all balls of the program (before any filter) in ``region``
+    (default: all) from the groups of ``axis_samples``: (min, max, exact)."""
+    lat.validate()
+    (si, sj, sk), exact = axis_samples(lat, region=region)
+    gi, gj, gk = (g.reshape(-1) for g in np.meshgrid(si, sj, sk, indexing="ij"))
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    nn = len(lat.nodes)
+    step = max(1, (1 << 18) // nn)
+    for s in range(0, len(gi), step):
+        sel = slice(s, s + step)
+        g = len(gi[sel])
+        idx = np.column_stack([np.repeat(np.column_stack([gi[sel], gj[sel], gk[sel]]), nn, axis=0),
+                               np.tile(np.arange(nn), g)])
+        c, r = lat.node_balls(idx)
+        lo = np.minimum(lo, (c - r[:, None]).min(axis=0))
+        hi = np.maximum(hi, (c + r[:, None]).max(axis=0))
+    return lo, hi, exact
+
+
+def estimate_hits(lat: Lattice, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """Approximate hits (nodes + beams) per query ball: the lattice's elements times the share
+    of its bounding box that the ball's box (grown by a cell and the largest ball) covers."""
+    lo, hi, _ = fast_bounds(lat)
+    extent = hi - lo
+    total = lat.node_count() + lat.beam_count()
+    cell = extent / max(1.0, lat.groups ** (1 / 3))
+    grow = radii[:, None] + cell[None] + float(lat.template_radii.max())
+    q_lo, q_hi = centers - grow, centers + grow
+    overlap = np.clip(np.minimum(q_hi, hi) - np.maximum(q_lo, lo), 0, None)
+    share = np.where(extent > 0, overlap / np.where(extent > 0, extent, 1), (overlap > 0) | (q_lo <= lo))
+    return total * np.prod(np.clip(share, 0, 1), axis=1)
+
+
+HIT_ARRAY_BYTES = 4 * 8 * 2  # one (i, j, k, n) row, and its sort copy
+HIT_LISTED_BYTES = 4 * 8 * 2 + 4 * 36 + 40  # plus the Python list of 4 ints and its JSON text
+
+
+def slab_groups_within(lat: Lattice, slab_groups: int, limit: int) -> int:
+    """The streamed slab size (node-groups) shrunk so that a slab and the few i-layers of row
+    maps kept for beams (``ple.io.chunks``) fit in ``limit``; PleError if one group does not."""
+    per_group = 2 * PEAK_FACTOR * (len(lat.nodes) * EVAL_NODE_BYTES + len(lat.beams) * EVAL_BEAM_BYTES)
+    fit = limit // max(per_group, 1)
+    if fit < 1:
+        require(per_group, "one node-group", limit)
+    return int(max(1, min(int(slab_groups), fit)))
