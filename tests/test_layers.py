@@ -20,7 +20,8 @@ RANK = {"errors": 0, "algebra": 1, "model": 2, "queries": 3, "filters": 4, "meas
 LIBRARY = {"errors", "algebra", "model", "queries", "filters", "measure", "meshing", "io", "program", "app"}
 DOORS = ("cli", "bench")  # inside the package, above the library
 OUTSIDE = ("tools", "ple_addon")  # repository tools and the Blender add-on
-OPTIONAL = {"scipy", "manifold3d", "PIL", "lib3mf", "bpy", "mathutils", "addon_utils", "dask", "distributed", "fsspec"}
+OPTIONAL = {"scipy", "manifold3d", "PIL", "lib3mf", "bpy", "mathutils", "addon_utils", "dask", "distributed", "fsspec",
+            "resource"}  # resource: POSIX only (the runner falls back where it is missing)
 QUERY_DISPATCHER = "ple.queries.biq"
 DOOR_NAMES = re.compile(r"\bple\.(cli|bench)\b|\bple_addon\b|\btools\.\w")  # also in strings (subprocess)
 WRITES = {"write_text", "write_bytes", "savez", "savez_compressed", "save", "tofile", "export", "dump"}

@@ -83,6 +83,8 @@ WATCHED = [
     (["info", "cubic", "--param", "n=10000"], 0),
     (["biq", "cubic", "--param", "n=10000", "--queries", "small.npy", "--out", "h.json"], 0),
     (["biq", "cubic", "--param", "n=10000", "--queries", "big.npy", "--out", "h.json"], 2),
+    (["biq", "thesis_warped", "--param", "n=10000", "--queries", "small.npy", "--out", "h.json"], 2),  # "uv" path
+    (["biq", "thesis_warped", "--param", "n=300", "--queries", "small.npy", "--out", "h.json"], 0),
     (["biq", "cubic", "--param", "n=10000", "--queries", "big.npy", "--out", "h.json", "--count"], 2),
     (["batch", "cubic", "--param", "n=1:3:1000000000", "--out", "b"], 2),
     (["filter", "cubic", "--param", "n=10000", "--stencil", "edges", "--out", "chunks"], 2),
@@ -102,4 +104,6 @@ def test_listed_inputs_stay_under_2_gb(tmp_path, args, code):
     assert "Traceback" not in run.stderr
     if code == 2:
         assert "--max-memory" in run.stderr or "--region" in run.stderr or "at most" in run.stderr, run.stderr
+    if run.returncode == 0 and "--out" in args:
+        assert (tmp_path / args[args.index("--out") + 1]).exists()
     assert run.peak_rss < PEAK_LIMIT_BYTES, run.peak_rss

@@ -9,8 +9,9 @@ import numpy as np
 from ..errors import PleError
 from ..io.files import atomic_write_text
 from ..io.inputs import load_npy
-from ..model.budget import HIT_ARRAY_BYTES, HIT_LISTED_BYTES, estimate_hits, require
+from ..model.budget import HIT_ARRAY_BYTES, HIT_LISTED_BYTES, estimate_hits, rangefinder_bytes, require
 from ..queries.biq import query
+from ..queries.rangefinder import cached_plan
 from .common import add_lattice_args, lattice_from_args, max_memory
 
 
@@ -48,6 +49,11 @@ def run(args) -> int:
     lat = lattice_from_args(args)
     est = estimate_hits(lat, q[:, :3], q[:, 3])
     limit = max_memory(args)
+    if args.method != "naive" and lat.becots is None:
+        path = cached_plan(lat).path
+        require(rangefinder_bytes(lat, path, 1 if args.count else len(q)),
+                f"RangeFinder (path {path}) over {lat.counts[0]:,} x {lat.counts[1]:,} rows", limit,
+                "use --method naive (memory bounded by a slab, time by the lattice)")
     if args.count:
         most = float(est.max(initial=0))
         require(most * HIT_ARRAY_BYTES, f"the largest query (about {most:,.3g} hits)", limit, "use smaller query balls")

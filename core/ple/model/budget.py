@@ -227,3 +227,15 @@ def slab_groups_within(lat: Lattice, slab_groups: int, limit: int) -> int:
     if fit < 1:
         require(per_group, "one node-group", limit)
     return int(max(1, min(int(slab_groups), fit)))
+
+
+RANGEFINDER_ROW_BYTES = 600  # per row × element of the "u"/"uv" paths (measured 550 on thesis_warped)
+
+
+def rangefinder_bytes(lat: Lattice, path: str, queries: int) -> float:
+    """Peak bytes of a RangeFinder BIQ (§7.3.1): the "1" path works per query and element, the
+    "u" path per U index, the "uv" path per W-row (i, j) of the whole lattice."""
+    ne = len(lat.nodes) + len(lat.beams)
+    nu, nv, _ = lat.counts
+    rows = {"1": queries, "u": (queries + 1) * nu, "uv": nu * nv + queries * nu}.get(path, queries)
+    return float(rows) * ne * RANGEFINDER_ROW_BYTES

@@ -21,7 +21,6 @@ import io
 import math
 import os
 import pickle
-import resource
 import select
 import signal
 import sys
@@ -86,6 +85,8 @@ def _child(write_fd: int, source: str, params, memory: int | None) -> None:
         signal.signal(signal.SIGINT, signal.SIG_DFL)  # the parent reports Ctrl-C
         faulthandler.disable()  # a crash is reported once, by the parent
         if memory:
+            import resource
+
             limit = _vm_size() + memory
             hard = resource.getrlimit(resource.RLIMIT_AS)[1]
             if hard != resource.RLIM_INFINITY:
@@ -139,8 +140,8 @@ def run_program(source: str, params=None, timeout: float | None = DEFAULT_TIMEOU
     """Build the lattice of ``source`` (program, IR file or preset) contained in a child process:
     at most ``timeout`` seconds and ``memory`` bytes beyond what this process already maps."""
     path = resolve_source(source)
-    if path.suffix == ".json":
-        return load_lattice(source, params)  # data only: nothing to contain
+    if path.suffix == ".json" or not hasattr(os, "fork"):  # data only: nothing to contain (or no fork)
+        return load_lattice(source, params)
     if timeout is not None and not (timeout > 0):  # NaN too
         raise PleError(f"--timeout {timeout}: expected a positive number of seconds (inf: no limit)")
     if timeout is not None and math.isinf(timeout):
