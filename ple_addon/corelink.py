@@ -35,6 +35,7 @@ def optional(name: str) -> ModuleType | None:
 
 
 cage = core("cage")
+guard = core("guard")
 ir = core("ir")
 program = core("program")
 snippets = core("snippets")

@@ -10,8 +10,9 @@ import bpy
 import numpy as np
 from bpy.props import EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, IntVectorProperty, StringProperty
 
+from . import prefs
 from . import rig as rigmod
-from .corelink import PleError, core, ir, optional, program, snippets
+from .corelink import PleError, core, guard, ir, optional, program, snippets
 
 SNIPPET_TEXT = "PLE snippet"
 EXPORT_BOXES = 20  # an STL export streams the region in about this many boxes (progress steps)
@@ -38,12 +39,23 @@ class RigOperator:
 
     @classmethod
     def poll(cls, context):
-        return True
+        """True when the active object belongs to a rig (a rig named by ``rig`` is found even
+        if it is not active, but poll cannot see operator properties)."""
+        if rigmod.rig_of(getattr(context, "active_object", None)) is not None:
+            return True
+        cls.poll_message_set("select a PLE lattice object (or one of its frames)")
+        return False
 
     def execute(self, context):
         try:
-            return self.run(context, self.get_rig(context))
+            rig = self.get_rig(context)
         except PleError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        try:
+            return self.run(context, rig)
+        except PleError as exc:
+            rig.ple.status = str(exc)  # the panel's status line as well as the Info report
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
 
@@ -88,6 +100,10 @@ class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
     region: IntVectorProperty(name="Region", size=3, min=1, default=(3, 3, 3),
                               description="Node-groups per direction drawn in full")
 
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None
+
     def invoke(self, context, event):
         if self.source == "FILE" and not self.filepath:
             context.window_manager.fileselect_add(self)
@@ -95,13 +111,13 @@ class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
         return context.window_manager.invoke_props_dialog(self)
 
     def source_text(self):
-        """(Text datablock, kind, default name); a new Text for presets and files."""
+        """(Text datablock, kind, default name, file on disk or ""); a new Text for presets and files."""
         if self.source == "TEXT":
             text = bpy.data.texts.get(self.text)
             if text is None:
                 raise PleError(f"no text block named {self.text!r}")
             kind = "IR" if text.as_string().lstrip().startswith("{") else "PROGRAM"
-            return text, kind, Path(text.name).stem
+            return text, kind, Path(text.name).stem, ""
         if self.source == "PRESET":
             path = program.preset_path(self.preset)
             if path is None:
@@ -116,11 +132,12 @@ class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
             raise PleError(f"{path}: cannot read ({exc.strerror})") from None
         text = bpy.data.texts.new(path.name)
         text.from_string(body)
-        return text, ("IR" if path.suffix == ".json" else "PROGRAM"), path.stem
+        linked = str(path) if self.source == "FILE" else ""  # a preset is not the user's file
+        return text, ("IR" if path.suffix == ".json" else "PROGRAM"), path.stem, linked
 
     def execute(self, context):
         try:
-            text, kind, default_name = self.source_text()
+            text, kind, default_name, linked = self.source_text()
         except PleError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
@@ -129,6 +146,7 @@ class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
         except PleError as exc:
             self.report({"ERROR"}, f"{exc} (the program is kept in text block {text.name!r})")
             return {"CANCELLED"}
+        rig.ple.filepath = linked
         for obj in context.view_layer.objects:
             obj.select_set(False)
         context.view_layer.objects.active = rig
@@ -144,7 +162,8 @@ class PLE_OT_program_run(RigOperator, bpy.types.Operator):  # noqa: N801 - Blend
 
     def run(self, context, rig):
         rigmod.trust(rig)
-        rigmod._state.pop(rig.name_full, None)
+        st = rigmod.state_of(rig)  # keep what was drawn: frame moves made before this still count
+        st.program_key, st.topology = (), ()
         return self.refreshed(rig)
 
 
@@ -184,7 +203,8 @@ class PLE_OT_program_apply(RigOperator, bpy.types.Operator):  # noqa: N801 - Ble
         else:
             if not rigmod.trusted(rig):
                 raise PleError("the program is not trusted: press Run Program first")
-            new = snippets.apply_edits(text.as_string(), edits, rigmod.params_of(rig), name=text.name)
+            with guard.time_limit(prefs.get("program_seconds"), text.name):
+                new = snippets.apply_edits(text.as_string(), edits, rigmod.params_of(rig), name=text.name)
         text.from_string(new)
         rig.ple.edits = "[]"
         self.report({"INFO"}, f"{len(edits)} edit(s) written into {text.name}")
@@ -361,6 +381,12 @@ def mesh_from_arrays(name: str, verts, faces):
     return me
 
 
+def budget(lat, region, style: str, what: str):
+    """Refuse work beyond the add-on preferences' limits, with the estimate (``ple.guard``)."""
+    est = guard.estimate(lat, region, core_style(style))
+    return guard.check(est, max_bytes=prefs.max_bytes(), max_triangles=prefs.get("max_triangles"), what=what)
+
+
 class SteppedOperator(RigOperator):
     """Long work as steps: a subclass defines the generator ``steps(context, rig)`` yielding
     progress fractions; ``execute`` runs them all with progress; ``invoke`` (with a window)
@@ -381,9 +407,16 @@ class SteppedOperator(RigOperator):
             finally:
                 wm.progress_end()
         except PleError as exc:
-            self.report({"ERROR"}, str(exc))
+            self.fail(context, str(exc))
             return {"CANCELLED"}
         return {"FINISHED"}
+
+    def fail(self, context, message: str) -> None:
+        """Report to the Info editor and to the rig's status line (the panel)."""
+        self.report({"ERROR"}, message)
+        found = rigmod.rig_of(bpy.data.objects.get(self.rig) if self.rig else context.active_object)
+        if found is not None:
+            found.ple.status = message
 
     def invoke(self, context, event):
         if context.window is None or bpy.app.background:
@@ -414,7 +447,7 @@ class SteppedOperator(RigOperator):
             return {"FINISHED"}
         except PleError as exc:
             self.finish(context)
-            self.report({"ERROR"}, str(exc))
+            self.fail(context, str(exc))
             return {"CANCELLED"}
         return {"RUNNING_MODAL"}
 
@@ -438,6 +471,7 @@ class PLE_OT_tessellate(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Bl
         region = rigmod.region_of(rig, lat)
         if region is None:
             raise PleError("the region is empty: set Region from/to inside the repetition counts")
+        budget(lat, region, self.style, f"{self.style.lower()} tessellation of {region}")
         yield 0.0
         verts, faces = tessellation(lat, region, self.style)
         yield 0.8
@@ -476,6 +510,7 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
         if region is None:
             raise PleError("the region is empty: set Region from/to inside the repetition counts")
         tess, export = optional("tessellate"), optional("export")
+        budget(lat, region, self.style, f"export of {region}")
         yield 0.0
         if tess is not None and export is not None and path.suffix.lower() == ".stl":
             # binary STL streams box by box (thesis §6.2.2 hubs per box): progress and Esc per box
@@ -503,6 +538,106 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
         yield 1.0
 
 
+# ----- everyday actions: remove, duplicate, bake, program file ------------------------------------
+class PLE_OT_remove(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Delete the rig: the lattice object, its frames, nodes, cage and region (the program text is kept)"""
+
+    bl_idname = "ple.remove"
+    bl_label = "Remove Lattice"
+
+    def run(self, context, rig):
+        name = rig.name
+        rigmod.remove(rig)
+        self.report({"INFO"}, f"removed {name}")
+        return {"FINISHED"}
+
+
+class PLE_OT_duplicate(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Duplicate the rig with its own copy of the program text and its own trust"""
+
+    bl_idname = "ple.duplicate"
+    bl_label = "Duplicate Lattice"
+
+    def run(self, context, rig):
+        copy = rigmod.duplicate(context, rig)
+        for obj in context.view_layer.objects:
+            obj.select_set(False)
+        context.view_layer.objects.active = copy
+        copy.select_set(True)
+        return {"FINISHED"}
+
+
+class PLE_OT_bake(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Freeze the drawn region (balls and beams as Blender draws them) into a plain mesh object"""
+
+    bl_idname = "ple.bake"
+    bl_label = "Bake Region"
+
+    def run(self, context, rig):
+        region = rigmod.parts(rig).get("region")
+        if region is None or not len(region.data.vertices):
+            raise PleError("nothing to bake: the region is empty")
+        depsgraph = context.evaluated_depsgraph_get()
+        me = bpy.data.meshes.new_from_object(region.evaluated_get(depsgraph), preserve_all_data_layers=False,
+                                             depsgraph=depsgraph)
+        me.name = f"{rig.name}.baked"
+        obj = bpy.data.objects.new(me.name, me)
+        coll = context.scene.collection
+        coll.objects.link(obj)
+        obj.matrix_world = region.matrix_world
+        self.report({"INFO"}, f"{obj.name}: {len(me.polygons)} faces")
+        return {"FINISHED"}
+
+
+class PLE_OT_program_reload(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Read the program again from its file on disk (GUI edits not yet applied are kept)"""
+
+    bl_idname = "ple.program_reload"
+    bl_label = "Reload Program"
+
+    def run(self, context, rig):
+        path = linked_path(rig)
+        try:
+            body = path.read_text()
+        except OSError as exc:
+            raise PleError(f"{path}: cannot read ({exc.strerror})") from None
+        old = rig.ple.text.as_string()
+        rig.ple.text.from_string(body)
+        err = rigmod.refresh(rig, force=True)
+        if err:
+            rig.ple.text.from_string(old)
+            rigmod.refresh(rig, force=True)
+            raise PleError(f"{path}: {err} (the previous program is kept)")
+        self.report({"INFO"}, f"reloaded {path}")
+        return {"FINISHED"}
+
+
+class PLE_OT_program_save(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Write the program text back to its file on disk (atomically: a failed write leaves the file as it was)"""
+
+    bl_idname = "ple.program_save"
+    bl_label = "Save Program"
+
+    def run(self, context, rig):
+        path = linked_path(rig)
+        try:
+            with core("files").atomic_path(path) as tmp:
+                Path(tmp).write_text(rig.ple.text.as_string())
+        except OSError as exc:
+            raise PleError(f"{path}: cannot write ({exc.strerror})") from None
+        self.report({"INFO"}, f"saved {path}")
+        return {"FINISHED"}
+
+
+def linked_path(rig) -> Path:
+    if not rig.ple.filepath:
+        raise PleError("the program is not linked to a file (add the lattice from a .py or .json file)")
+    if rig.ple.text is None:
+        raise PleError(f"{rig.name}: the program text block is missing")
+    return Path(bpy.path.abspath(rig.ple.filepath))
+
+
 CLASSES = (PLE_OT_lattice_add, PLE_OT_program_run, PLE_OT_snippet_copy, PLE_OT_program_apply, PLE_OT_edits_clear,
            PLE_OT_node_add, PLE_OT_node_remove, PLE_OT_beam_add, PLE_OT_beam_remove, PLE_OT_lil_filter,
-           PLE_OT_stencil_filter, PLE_OT_tessellate, PLE_OT_export)
+           PLE_OT_stencil_filter, PLE_OT_tessellate, PLE_OT_export, PLE_OT_remove, PLE_OT_duplicate, PLE_OT_bake,
+           PLE_OT_program_reload, PLE_OT_program_save)
