@@ -16,7 +16,7 @@ from . import operators, prefs, props, rig, ui
 
 @persistent
 def on_depsgraph_update(scene, depsgraph):
-    rig.check_removed()  # parts of a rig whose lattice object was deleted go with it
+    rig.check_removed(scene)  # parts of a rig whose lattice object was deleted go with it
     for r in rig.rigs_in_updates(depsgraph):
         rig.refresh(r)
 

@@ -12,7 +12,7 @@ DEFAULTS = {"memory_gb": 2.0, "max_triangles": 10_000_000, "program_seconds": 10
 class PLE_AddonPreferences(bpy.types.AddonPreferences):  # noqa: N801 - Blender naming
     bl_idname = __package__
 
-    memory_gb: FloatProperty(name="Memory limit (GB)", min=0.01, default=DEFAULTS["memory_gb"],
+    memory_gb: FloatProperty(name="Memory limit (GB)", min=0.001, default=DEFAULTS["memory_gb"],
                              description="Drawing a region or tessellating is refused when its estimate "
                                          "(from counts and template, before any evaluation) exceeds this")
     max_triangles: IntProperty(name="Triangle limit", min=1000, default=DEFAULTS["max_triangles"],

@@ -524,8 +524,13 @@ def remove(rig) -> None:
 
 
 def remove_orphans() -> int:
-    """Delete parts whose rig is gone (the user deleted only the lattice object); returns how many."""
-    orphans = [o for o in bpy.data.objects if o.ple.role in PART_ROLES and rig_of(o) is None]
+    """Delete parts whose rig is gone (the user deleted only the lattice object: Blender keeps
+    it in memory, unlinked, while its parts point to it); returns how many objects went."""
+    gone = [o for o in bpy.data.objects if o.ple.role == "RIG" and not o.users_collection]
+    orphans = [o for o in bpy.data.objects if o.ple.role in PART_ROLES and (rig_of(o) is None or rig_of(o) in gone)]
+    for rig in gone:
+        _state.pop(rig.ple.uid, None)
+    orphans += gone
     if orphans:
         data = [o.data for o in orphans if o.data is not None and o.data.users <= 1]
         bpy.data.batch_remove(orphans + data)
@@ -700,10 +705,10 @@ def all_rigs() -> list:
 _object_count = [0]
 
 
-def check_removed() -> None:
-    """After objects were deleted: remove the parts of rigs whose lattice object is gone."""
-    n = len(bpy.data.objects)
+def check_removed(scene) -> None:
+    """After objects left the scene: remove the parts of rigs whose lattice object is gone."""
+    n = len(scene.objects)
     if n < _object_count[0]:
         remove_orphans()
-        n = len(bpy.data.objects)
+        n = len(scene.objects)
     _object_count[0] = n
