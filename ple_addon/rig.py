@@ -367,6 +367,9 @@ def sync_nodes(rig, lat, p: dict, st: RigState) -> None:
     want = len(lat.nodes) if rig.ple.show_template else 0
     stale = [obj for key, obj in p.items() if isinstance(key, tuple) and key[0] == "node" and key[1] >= want]
     if stale:
+        layer = bpy.context.view_layer
+        if layer is not None and layer.objects.active in stale:
+            layer.objects.active = rig  # the active node goes: the rig becomes active, not nothing
         bpy.data.batch_remove(stale)
     for key in [k for k in st.expected if isinstance(k, tuple) and k[0] == "node" and k[1] >= want]:
         del st.expected[key]

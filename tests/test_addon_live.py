@@ -654,8 +654,12 @@ def case_menu_keymap_prefs():
     ui.PLE_MT_add.draw(type("M", (), {"layout": Layout()})(), bpy.context)
     presets = [p for _, kw, p in ops if getattr(p, "source", "") == "PRESET"]
     assert {p.preset for p in presets} == set(core.program.preset_names())
-    with_thumb = [kw for _, kw, p in ops if kw.get("icon_value")]
-    assert len(with_thumb) >= len(presets) - 2, len(with_thumb)  # the thumbnails shipped in the zip
+    thumbs = ui._previews["presets"]  # the thumbnails shipped in the zip, loaded for the menu
+    shipped = {p.stem for p in (ple_ext.corelink.program.preset_dir() / "thumbnails").glob("*.png")}
+    assert len(shipped) >= len(presets) - 2 and set(thumbs.keys()) == shipped
+    assert all(thumbs[n].image_size[0] > 0 for n in shipped)
+    if not bpy.app.background:  # icons exist only with a user interface
+        assert all(kw.get("icon_value") for _, kw, p in ops if getattr(p, "preset", "") in shipped)
     assert {k for k, _, _ in init.KEYMAP} >= {"ple.program_run", "ple.program_apply", "ple.duplicate", "ple.remove"}
     prefs = bpy.context.preferences.addons["bl_ext.user_default.ple"].preferences
     assert prefs.memory_gb == 2.0 and prefs.max_triangles == 10_000_000 and prefs.program_seconds == 10.0
