@@ -473,7 +473,17 @@ class PLE_OT_tessellate(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Bl
             raise PleError("the region is empty: set Region from/to inside the repetition counts")
         budget(lat, region, self.style, f"{self.style.lower()} tessellation of {region}")
         yield 0.0
-        verts, faces = tessellation(lat, region, self.style)
+        tess = optional("tessellate")
+        if tess is not None and hasattr(tess, "weld_chunks"):
+            # box by box (progress, and Esc between boxes in the modal run), welded by the core
+            boxes = max(1, region.groups // EXPORT_BOXES)
+            chunks = []
+            for n, chunk in enumerate(tess.iter_triangles(lat, region, core_style(self.style), max_groups=boxes)):
+                chunks.append(chunk)
+                yield min(0.8, 0.8 * (n + 1) * boxes / region.groups)
+            verts, faces = tess.weld_chunks(chunks)
+        else:
+            verts, faces = tessellation(lat, region, self.style)
         yield 0.8
         me = mesh_from_arrays(f"{rig.name}.{self.style.lower()}", verts, faces)
         obj = bpy.data.objects.new(me.name, me)

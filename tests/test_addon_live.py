@@ -25,7 +25,7 @@ CASES = ["becots_redraw", "becots_apply_presets", "becots_named_return", "becots
          "move_before_run_program", "trust_survives_rename", "shift_d_copy", "duplicate_operator",
          "delete_root", "remove_operator", "cursor", "frame_precision", "apply_in_branch", "poll",
          "program_time_limit", "tessellate_budget", "bake", "materials_and_sizes", "render_colours",
-         "program_file", "menu_keymap_prefs"]
+         "program_file", "menu_keymap_prefs", "tessellate_steps"]
 
 
 @pytest.fixture(scope="module")
@@ -316,7 +316,7 @@ def case_region_budget():
     prefs = bpy.context.preferences.addons["bl_ext.user_default.ple"].preferences
     prefs.memory_gb = 0.001  # 1 MB: a 10^3 region (1000 balls, 2700 beams, about 1.2 MB) is refused
     rig.ple.region_max = (10, 10, 10)
-    assert "refused" in rig.ple.status and tuple(rig.ple.region_max) == (3, 3, 3), (rig.ple.status, tuple(rig.ple.region_max))
+    assert "refused" in rig.ple.status and tuple(rig.ple.region_max) == (3, 3, 3), rig.ple.status
     fails(bpy.ops.ple.lattice_add, "refused", source="PRESET", preset="cubic", region=(10, 10, 10))
 
 
@@ -538,6 +538,32 @@ def case_tessellate_budget():
     assert bpy.ops.ple.tessellate(style="CHOCC") == {"FINISHED"}  # small work goes through
 
 
+def case_tessellate_steps():
+    """Tessellation runs box by box: progress steps, Esc (closing the steps) leaves nothing
+    behind, and the finished mesh is the core's tessellation of the region (welded boxes)."""
+    import trimesh
+
+    rig = new_rig("fig6_3", region=(4, 4, 3))
+    meshes, objects = len(bpy.data.meshes), len(bpy.data.objects)
+    op = type("Op", (), {"style": "CHOCC", "rig": "", "report": lambda *a: None})()
+    steps = bpy.types.PLE_OT_tessellate.steps(op, bpy.context, rig)
+    fracs = [next(steps) for _ in range(3)]
+    assert fracs[0] == 0.0 and 0 < fracs[1] < fracs[2] < 1, fracs
+    steps.close()  # what Esc does in the modal run
+    assert (len(bpy.data.meshes), len(bpy.data.objects)) == (meshes, objects)
+    assert bpy.ops.ple.tessellate(style="CHOCC") == {"FINISHED"}
+    me = bpy.data.objects[f"{rig.name}.chocc"].data
+    lat = core.program.load_lattice("fig6_3")
+    want = core.tessellate.tessellate(lat, "0:4,0:4,0:3", "chocc")
+    co = np.zeros(len(me.vertices) * 3)
+    me.vertices.foreach_get("co", co)
+    tri = np.zeros(len(me.polygons) * 3, np.int64)
+    me.polygons.foreach_get("vertices", tri)
+    got = trimesh.Trimesh(co.reshape(-1, 3), tri.reshape(-1, 3), process=False)
+    assert len(got.vertices) == len(want.vertices) and len(got.faces) == len(want.faces)
+    assert got.is_watertight and np.isclose(got.volume, want.volume, rtol=1e-5)
+
+
 def case_bake():
     rig = new_rig("cubic", region=(2, 2, 2))
     select_only(rig)
@@ -674,7 +700,7 @@ def main(zip_path: str, case: str) -> None:
     import ple as _core
 
     bpy, core = _bpy, _core
-    for name in ("cage", "filters", "guard", "ir", "preview", "program", "similarity", "snippets"):
+    for name in ("cage", "filters", "guard", "ir", "preview", "program", "similarity", "snippets", "tessellate"):
         importlib.import_module(f"ple.{name}")
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)

@@ -17,6 +17,8 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 
+import numpy as np
+
 from .errors import PleError
 from .lattice import Lattice
 from .similarity import Similarity, similarity_from_dict
@@ -115,8 +117,8 @@ def time_limit(seconds: float | None, filename: str):
 
     def local(frame, event, arg):
         if time.monotonic() > deadline:
-            raise ProgramTimeoutError(f"stopped after the time limit of {seconds:g} s (a loop that never ends?); "
-                                 "raise the limit in the add-on preferences if the program needs longer")
+            raise ProgramTimeoutError(f"stopped after the time limit of {seconds:g} s (a loop that never ends? "
+                                      "a program that needs longer: raise the limit)")
         return local
 
     def outer(frame, event, arg):
@@ -136,11 +138,12 @@ def time_limit(seconds: float | None, filename: str):
 FLOAT32_TOL = 2.0 ** -22  # two units in the last place of a float32 (24-bit significand)
 
 
-def frame_number(x: float, scale: float = 1.0) -> float:
+def frame_number(x: float, scale: float = 1.0, rel: float = FLOAT32_TOL) -> float:
     """The shortest decimal within the precision a float32 frame carries: |result - x| <=
-    max(|x|, scale) * 2**-22; values below scale * 2**-22 are 0 (e.g. 0.300000014338 -> 0.3)."""
+    max(|x|, scale) * rel (rel = 2**-22 by default); values below scale * rel are 0
+    (e.g. 0.300000014338 -> 0.3)."""
     x = float(x)
-    tol = max(abs(x), float(scale)) * FLOAT32_TOL
+    tol = max(abs(x), float(scale)) * rel
     if abs(x) <= tol:
         return 0.0
     for digits in range(1, 18):
@@ -155,16 +158,26 @@ def frame_point(p, scale: float = 1.0) -> tuple:
 
 
 def frame_similarity(sim: Similarity, scale: float = 1.0) -> Similarity:
-    """``sim`` with every parameter at the precision of a float32 frame of size ``scale``
-    (positions and distances relative to ``scale``; angles, axes and factors relative to 1)."""
+    """``sim`` with its parameters as short as the precision of a float32 frame of size
+    ``scale`` allows: positions and distances relative to ``scale``; angles, axes and factors
+    relative to 1. The result's matrix stays within float32 precision of ``sim``'s (a swirl
+    whose fixed point lies far away is sensitive to its factor): where plain rounding would move
+    it more, fewer digits are dropped, down to none."""
     d = sim.to_dict()
-    out = {"kind": d["kind"]}
-    for key, val in d.items():
-        if key == "kind":
+    m0 = sim.matrix
+    limit = FLOAT32_TOL * np.array([[1.0] * 3 + [max(1.0, float(scale))]] * 3)
+    for rel in (FLOAT32_TOL, FLOAT32_TOL / 16, FLOAT32_TOL / 256, FLOAT32_TOL / 4096):
+        out = {"kind": d["kind"]}
+        for key, val in d.items():
+            if key == "kind":
+                continue
+            unit = scale if key in ("point", "vector", "distance") else 1.0
+            out[key] = ([frame_number(c, unit, rel) for c in val] if isinstance(val, list)
+                        else frame_number(val, unit, rel))
+        try:
+            got = similarity_from_dict(out)
+        except PleError:
             continue
-        unit = scale if key in ("point", "vector", "distance") else 1.0
-        out[key] = [frame_number(c, unit) for c in val] if isinstance(val, list) else frame_number(val, unit)
-    try:
-        return similarity_from_dict(out)
-    except PleError:
-        return sim
+        if np.all(np.abs(got.matrix[:3] - m0[:3]) <= limit):
+            return got
+    return sim

@@ -494,3 +494,20 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
     mesh = tessellate(lat, region, style, levels, segments)
     export_mesh(mesh, path)
     return len(mesh.faces)
+
+
+def weld_chunks(chunks) -> tuple[np.ndarray, np.ndarray]:
+    """One mesh (vertices (V, 3), faces (F, 3)) from the boxes of ``iter_triangles``: the hub
+    vertices repeated in neighbouring boxes are bit-identical and are merged; vertices no face
+    uses are dropped (the vertex set of ``tessellate`` for the same region)."""
+    chunks = [(np.asarray(v, dtype=float).reshape(-1, 3), np.asarray(f, dtype=np.int64).reshape(-1, 3))
+              for v, f in chunks]
+    if not chunks:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+    offsets = np.cumsum([0] + [len(v) for v, _ in chunks])[:-1]
+    verts = np.concatenate([v for v, _ in chunks])
+    faces = np.concatenate([f + o for (_, f), o in zip(chunks, offsets)])
+    unique, inverse = np.unique(verts, axis=0, return_inverse=True)
+    faces = inverse.reshape(-1)[faces]
+    used, faces = np.unique(faces, return_inverse=True)
+    return unique[used], faces.reshape(-1, 3)
