@@ -548,6 +548,20 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
         yield 1.0
 
 
+class PLE_OT_report(bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Put a message of live editing into the Info editor (run by the add-on itself)"""
+
+    bl_idname = "ple.report"
+    bl_label = "PLE Report"
+    bl_options = {"INTERNAL"}
+
+    message: StringProperty(name="Message")
+
+    def execute(self, context):
+        self.report({"WARNING"}, self.message)
+        return {"FINISHED"}
+
+
 # ----- everyday actions: remove, duplicate, bake, program file ------------------------------------
 class PLE_OT_remove(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
     """Delete the rig: the lattice object, its frames, nodes, cage and region (the program text is kept)"""
@@ -650,4 +664,4 @@ def linked_path(rig) -> Path:
 CLASSES = (PLE_OT_lattice_add, PLE_OT_program_run, PLE_OT_snippet_copy, PLE_OT_program_apply, PLE_OT_edits_clear,
            PLE_OT_node_add, PLE_OT_node_remove, PLE_OT_beam_add, PLE_OT_beam_remove, PLE_OT_lil_filter,
            PLE_OT_stencil_filter, PLE_OT_tessellate, PLE_OT_export, PLE_OT_remove, PLE_OT_duplicate, PLE_OT_bake,
-           PLE_OT_program_reload, PLE_OT_program_save)
+           PLE_OT_program_reload, PLE_OT_program_save, PLE_OT_report)

@@ -328,6 +328,8 @@ def refresh(rig, force: bool = False) -> str | None:
             lat = lattice_of(rig, st, new)  # new edits are kept only if the lattice they give is valid
             ev = evaluate_region(rig, lat, st)
         except PleError as exc:
+            if rig.ple.status != str(exc):
+                notify(rig, str(exc))
             rig.ple.status = str(exc)
             return str(exc)
         add_edits(rig, new)
@@ -589,6 +591,29 @@ def duplicate(context, rig):
     if err:
         raise PleError(err)
     return copy
+
+
+# ----- reports from handlers ---------------------------------------------------------------------
+_pending_reports: list[str] = []
+
+
+def notify(rig, message: str) -> None:
+    """A problem met outside an operator (live editing): besides the panel's status line it goes
+    to the Info editor, through the ``ple.report`` operator run from a timer right after the
+    handler (handlers cannot report; in background mode timers never fire: ``flush_reports``)."""
+    _pending_reports.append(f"{rig.name}: {message}")
+    if not bpy.app.background and not bpy.app.timers.is_registered(flush_reports):
+        bpy.app.timers.register(flush_reports, first_interval=0.0)
+
+
+def flush_reports():
+    while _pending_reports:
+        msg = _pending_reports.pop(0)
+        try:
+            bpy.ops.ple.report(message=msg)
+        except RuntimeError:
+            print(f"PLE: {msg}")
+    return None
 
 
 # ----- update callbacks and handlers ----------------------------------------------------------

@@ -25,7 +25,7 @@ CASES = ["becots_redraw", "becots_apply_presets", "becots_named_return", "becots
          "move_before_run_program", "trust_survives_rename", "shift_d_copy", "duplicate_operator",
          "delete_root", "remove_operator", "cursor", "frame_precision", "apply_in_branch", "poll",
          "program_time_limit", "tessellate_budget", "bake", "materials_and_sizes", "render_colours",
-         "program_file", "menu_keymap_prefs", "tessellate_steps"]
+         "program_file", "menu_keymap_prefs", "tessellate_steps", "live_errors_reported"]
 
 
 @pytest.fixture(scope="module")
@@ -562,6 +562,23 @@ def case_tessellate_steps():
     got = trimesh.Trimesh(co.reshape(-1, 3), tri.reshape(-1, 3), process=False)
     assert len(got.vertices) == len(want.vertices) and len(got.faces) == len(want.faces)
     assert got.is_watertight and np.isclose(got.volume, want.volume, rtol=1e-5)
+
+
+def case_live_errors_reported():
+    """A problem met while live editing (a degenerate frame) reaches the status line and is
+    queued for the Info editor, once per new problem."""
+    rig = new_rig("cubic", region=(2, 2, 2))
+    queue = ple_ext.rig._pending_reports
+    queue.clear()
+    part(rig, "u").scale = (1.0, 2.0, 1.0)
+    update()
+    assert "frame U" in rig.ple.status
+    assert len(queue) == 1 and "frame U" in queue[0] and rig.name in queue[0]
+    part(rig, "u").location = (1.1, 0, 0)  # the same problem again: not reported twice
+    update()
+    assert len(queue) == 1
+    ple_ext.rig.flush_reports()  # what the timer does in the user interface
+    assert queue == []
 
 
 def case_bake():
