@@ -507,7 +507,12 @@ def weld_chunks(chunks) -> tuple[np.ndarray, np.ndarray]:
     offsets = np.cumsum([0] + [len(v) for v, _ in chunks])[:-1]
     verts = np.concatenate([v for v, _ in chunks])
     faces = np.concatenate([f + o for (_, f), o in zip(chunks, offsets)])
-    unique, inverse = np.unique(verts, axis=0, return_inverse=True)
-    faces = inverse.reshape(-1)[faces]
-    used, faces = np.unique(faces, return_inverse=True)
-    return unique[used], faces.reshape(-1, 3)
+    _, first, inverse = np.unique(verts, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")  # vertices keep the order in which boxes produced them
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    faces = rank[inverse.reshape(-1)][faces]
+    used = np.zeros(len(order), dtype=bool)
+    used[faces.reshape(-1)] = True
+    renumber = np.cumsum(used) - 1
+    return verts[first[order]][used], renumber[faces]
