@@ -334,6 +334,8 @@ def refresh(rig, force: bool = False) -> str | None:
             return str(exc)
         add_edits(rig, new)
         st.lattice = lat
+        if not {"G", "u", "v", "w", "cage", "region"} <= set(parts(rig)):
+            build_parts(rig, lat)  # a copy (Shift+D) or a rig whose parts were deleted
         draw_rig(rig, lat, ev, st)
         st.signature = signature(rig)
         st.cumulative = tuple(rig.ple.cumulative)
@@ -458,22 +460,28 @@ def handle_size(lat) -> float:
 
 
 def build_parts(rig, lat) -> None:
-    """The frames G, U, V, W, the cage and the region of a rig (template nodes and BeCOTS
-    corners are made by the first drawing)."""
+    """The frames G, U, V, W, the cage and the region of a rig, those it lacks (template nodes
+    and BeCOTS corners are made by the drawing)."""
     name = rig.name
     size = handle_size(lat)
-    g = new_part(rig, f"{name}.G", None, "FRAME")
-    g.ple.frame, g.empty_display_type, g.empty_display_size = "G", "ARROWS", 1.5 * size
+    have = parts(rig)
+    g = have.get("G")
+    if g is None:
+        g = new_part(rig, f"{name}.G", None, "FRAME")
+        g.ple.frame, g.empty_display_type, g.empty_display_size = "G", "ARROWS", 1.5 * size
     for axis in "uvw":
-        f = new_part(rig, f"{name}.{axis.upper()}", None, "FRAME", parent=g)
-        f.ple.frame, f.empty_display_type, f.empty_display_size = axis, "ARROWS", size
-    cage_obj = new_part(rig, f"{name}.cage", draw.new_cage_curve(f"{name}.cage", lat), "CAGE")
-    region_obj = new_part(rig, f"{name}.region", draw.new_region_mesh(f"{name}.region"), "REGION")
-    for obj in (cage_obj, region_obj):
-        obj.hide_select = True
-    draw.add_balls_beams_modifier(region_obj)
-    draw.set_material(cage_obj, draw.CAGE_MATERIAL)
-    draw.set_material(region_obj, draw.REGION_MATERIAL)
+        if axis not in have:
+            f = new_part(rig, f"{name}.{axis.upper()}", None, "FRAME", parent=g)
+            f.ple.frame, f.empty_display_type, f.empty_display_size = axis, "ARROWS", size
+    if "cage" not in have:
+        cage_obj = new_part(rig, f"{name}.cage", draw.new_cage_curve(f"{name}.cage", lat), "CAGE")
+        cage_obj.hide_select = True
+        draw.set_material(cage_obj, draw.CAGE_MATERIAL)
+    if "region" not in have:
+        region_obj = new_part(rig, f"{name}.region", draw.new_region_mesh(f"{name}.region"), "REGION")
+        region_obj.hide_select = True
+        draw.add_balls_beams_modifier(region_obj)
+        draw.set_material(region_obj, draw.REGION_MATERIAL)
 
 
 def create(context, name: str, text, source_kind: str = "PROGRAM", region=(3, 3, 3), location=None):
@@ -568,13 +576,9 @@ def make_independent(rig, was_trusted: bool) -> None:
         rig.ple.text = rig.ple.text.copy()
     rig.ple.filepath = ""  # the copy's program is not the original's file on disk
     old = list(rig.children_recursive)  # duplicated parts (if they were selected) still point elsewhere
-    if old:
+    if old:  # the next drawing builds the copy's own parts (once its program may run)
         data = [o.data for o in old if o.data is not None and o.data.users <= 1]
         bpy.data.batch_remove(old + data)
-    st = _state.setdefault(rig.ple.uid, RigState())
-    lat = lattice_of(rig, st) if trusted(rig) else None
-    if lat is not None:
-        build_parts(rig, lat)
 
 
 def duplicate(context, rig):

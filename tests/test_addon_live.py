@@ -376,6 +376,20 @@ def case_shift_d_copy():
         assert "1.75" in copy.ple.text.as_string() and rig.ple.text.as_string() == source
         assert np.isclose(np.sort(region_arrays(copy)[0][:, 0])[-1], 1.75, atol=1e-5)
         assert np.isclose(np.sort(region_arrays(rig)[0][:, 0])[-1], 1.0, atol=1e-5)
+    # an untrusted original (a file from elsewhere): the copy is not trusted either and gets its
+    # parts once the user runs its program
+    ple_ext.rig._trusted.clear()
+    select_only(rig)
+    with bpy.context.temp_override(active_object=rig, selected_objects=[rig]):
+        assert bpy.ops.object.duplicate() == {"FINISHED"}
+    copy = next(o for o in bpy.context.selected_objects if o.ple.role == "RIG")
+    update()
+    assert "trust" in copy.ple.status and not ple_ext.rig.parts(copy)
+    select_only(copy)
+    assert bpy.ops.ple.program_run() == {"FINISHED"}
+    assert {"G", "u", "v", "w", "cage", "region"} <= set(ple_ext.rig.parts(copy))
+    assert_region_is(copy, core.program.load_lattice("cubic"), "0:2,0:2,0:2")
+    assert not ple_ext.rig.trusted(rig)
 
 
 def case_duplicate_operator():
