@@ -381,10 +381,12 @@ def mesh_from_arrays(name: str, verts, faces):
     return me
 
 
-def budget(lat, region, style: str, what: str):
-    """Refuse work beyond the add-on preferences' limits, with the estimate (``ple.guard``)."""
+def budget(lat, region, style: str, what: str, streamed: bool = False):
+    """Refuse work beyond the add-on preferences' limits, with the estimate (``ple.guard``).
+    A streamed STL export holds one box at a time: only its triangle count is limited."""
     est = guard.estimate(lat, region, core_style(style))
-    return guard.check(est, max_bytes=prefs.max_bytes(), max_triangles=prefs.get("max_triangles"), what=what)
+    return guard.check(est, max_bytes=None if streamed else prefs.max_bytes(),
+                       max_triangles=prefs.get("max_triangles"), what=what)
 
 
 class SteppedOperator(RigOperator):
@@ -520,7 +522,8 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
         if region is None:
             raise PleError("the region is empty: set Region from/to inside the repetition counts")
         tess, export = optional("tessellate"), optional("export")
-        budget(lat, region, self.style, f"export of {region}")
+        streamed = tess is not None and export is not None and path.suffix.lower() == ".stl"
+        budget(lat, region, self.style, f"export of {region}", streamed=streamed)
         yield 0.0
         if tess is not None and export is not None and path.suffix.lower() == ".stl":
             # binary STL streams box by box (thesis §6.2.2 hubs per box): progress and Esc per box

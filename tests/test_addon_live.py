@@ -718,6 +718,10 @@ def case_menu_keymap_prefs():
     if not bpy.app.background:  # icons exist only with a user interface
         assert all(kw.get("icon_value") for _, kw, p in ops if getattr(p, "preset", "") in shipped)
     assert {k for k, _, _ in init.KEYMAP} >= {"ple.program_run", "ple.program_apply", "ple.duplicate", "ple.remove"}
+    kc = bpy.context.window_manager.keyconfigs.addon
+    if kc is not None:  # registered in the add-on key configuration (absent in some background builds)
+        km = kc.keymaps.get("Object Mode")
+        assert km is not None and {k.idname for k in km.keymap_items} >= {k for k, _, _ in init.KEYMAP}
     prefs = bpy.context.preferences.addons["bl_ext.user_default.ple"].preferences
     assert prefs.memory_gb == 2.0 and prefs.max_triangles == 10_000_000 and prefs.program_seconds == 10.0
 
