@@ -534,7 +534,16 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
                 yield min(0.9, 0.9 * (n + 1) * boxes / region.groups)
             count = export.write_stl(path, chunks)
         else:
-            verts, faces = tessellation(lat, region, self.style)
+            if tess is not None and hasattr(tess, "weld_chunks") and self.style != "BALLS_BEAMS":
+                boxes = max(1, region.groups // EXPORT_BOXES)  # box by box: progress and Esc between boxes
+                chunks = []
+                for n, chunk in enumerate(tess.iter_triangles(lat, region, core_style(self.style),
+                                                              max_groups=boxes)):
+                    chunks.append(chunk)
+                    yield min(0.7, 0.7 * (n + 1) * boxes / region.groups)
+                verts, faces = tess.weld_chunks(chunks)
+            else:
+                verts, faces = tessellation(lat, region, self.style)
             yield 0.7
             count = len(faces)
             try:
