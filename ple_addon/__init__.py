@@ -22,6 +22,19 @@ def on_depsgraph_update(scene, depsgraph):
 
 
 @persistent
+def on_load(*_args):
+    """Trust belongs to the file it was given in: opening another .blend (even a copy holding the
+    same rig ids) trusts nothing; reopening the same file keeps it (Blender's own trust applies)."""
+    rig.forget_trust_of_other_files(bpy.data.filepath)
+    on_reset()
+
+
+@persistent
+def on_save(*_args):
+    rig.trusted_file(bpy.data.filepath)
+
+
+@persistent
 def on_reset(*_args):
     """After undo, redo or loading a file, positions are the saved state, not user moves
     (they are kept as the baseline, so moves made before Run Program still count)."""
@@ -34,7 +47,7 @@ def on_reset(*_args):
 
 
 HANDLERS = (("depsgraph_update_post", on_depsgraph_update), ("undo_post", on_reset), ("redo_post", on_reset),
-            ("load_post", on_reset))
+            ("load_post", on_load), ("save_post", on_save))
 
 
 def menu_add(self, context):

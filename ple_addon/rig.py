@@ -117,6 +117,20 @@ def trusted(rig) -> bool:
 
 def trust(rig) -> None:
     _trusted.add(uid(rig))
+    _trust_file[0] = bpy.data.filepath
+
+
+_trust_file = [""]  # the .blend the trusts were given in (a file saved under a new name carries them)
+
+
+def trusted_file(path: str) -> None:
+    _trust_file[0] = path
+
+
+def forget_trust_of_other_files(path: str) -> None:
+    if path != _trust_file[0]:
+        _trusted.clear()
+        _trust_file[0] = path
 
 
 def base_lattice(rig, st: RigState):

@@ -25,7 +25,7 @@ CASES = ["becots_redraw", "becots_apply_presets", "becots_named_return", "becots
          "move_before_run_program", "trust_survives_rename", "shift_d_copy", "duplicate_operator",
          "delete_root", "remove_operator", "cursor", "frame_precision", "apply_in_branch", "poll",
          "program_time_limit", "tessellate_budget", "bake", "materials_and_sizes", "render_colours",
-         "program_file", "menu_keymap_prefs", "tessellate_steps", "live_errors_reported"]
+         "program_file", "menu_keymap_prefs", "tessellate_steps", "live_errors_reported", "trust_per_file"]
 
 
 @pytest.fixture(scope="module")
@@ -348,6 +348,23 @@ def case_trust_survives_rename():
     rig.update_tag()
     update()
     assert rig.ple.status == "" and tuple(rig.ple.counts) == (4, 4, 4), rig.ple.status
+
+
+def case_trust_per_file():
+    """Trust given in one .blend does not carry into another file holding the same rig id (a
+    copy of the file edited elsewhere); reopening the file it was given in keeps it."""
+    import shutil
+
+    tmp = Path(tempfile.mkdtemp())
+    rig = new_rig("cubic", region=(2, 2, 2))
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "a.blend"))
+    bpy.ops.wm.open_mainfile(filepath=str(tmp / "a.blend"))
+    rig = bpy.data.objects["cubic"]
+    assert ple_ext.rig.trusted(rig) and rig.ple.status == ""
+    shutil.copy(tmp / "a.blend", tmp / "b.blend")
+    bpy.ops.wm.open_mainfile(filepath=str(tmp / "b.blend"))
+    rig = bpy.data.objects["cubic"]
+    assert not ple_ext.rig.trusted(rig) and "trust" in rig.ple.status, rig.ple.status
 
 
 def case_shift_d_copy():
