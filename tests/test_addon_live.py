@@ -651,8 +651,10 @@ def case_materials_and_sizes():
 
 
 def case_render_colours():
-    """F12 of the default rig shows the cage and the region in distinct colours."""
+    """F12 of the default rig shows the cage and the region in distinct colours, with the default
+    render engine (EEVEE, headless through EGL) and with Cycles."""
     scene = bpy.context.scene
+    default_engine = scene.render.engine
     rig = new_rig("cubic", region=(3, 3, 3))
     cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
     scene.collection.objects.link(cam)
@@ -662,20 +664,21 @@ def case_render_colours():
     sun = bpy.data.objects.new("sun", bpy.data.lights.new("sun", "SUN"))
     scene.collection.objects.link(sun)
     sun.rotation_euler = (0.6, 0.2, 0.5)
-    scene.render.engine = "CYCLES"
     scene.cycles.samples = 4
     scene.cycles.device = "CPU"
     scene.render.resolution_x = scene.render.resolution_y = 96
     scene.render.resolution_percentage = 100
-    out = Path(tempfile.mkdtemp()) / "f12.png"
-    scene.render.filepath = str(out)
-    bpy.ops.render.render(write_still=True)
-    img = bpy.data.images.load(str(out))
-    px = np.array(img.pixels[:]).reshape(-1, 4)[:, :3]
-    orange = (px[:, 0] > 1.6 * px[:, 2] + 0.05) & (px[:, 0] > px[:, 1])
-    blue = (px[:, 2] > 1.6 * px[:, 0] + 0.05) & (px[:, 2] > px[:, 1])
-    assert orange.sum() >= 5 and blue.sum() >= 20, (orange.sum(), blue.sum())
-    assert rig.ple.status == ""
+    for engine in (default_engine, "CYCLES"):
+        scene.render.engine = engine
+        out = Path(tempfile.mkdtemp()) / "f12.png"
+        scene.render.filepath = str(out)
+        bpy.ops.render.render(write_still=True)
+        img = bpy.data.images.load(str(out))
+        px = np.array(img.pixels[:]).reshape(-1, 4)[:, :3]
+        orange = (px[:, 0] > 1.6 * px[:, 2] + 0.05) & (px[:, 0] > px[:, 1])
+        blue = (px[:, 2] > 1.6 * px[:, 0] + 0.05) & (px[:, 2] > px[:, 1])
+        assert orange.sum() >= 5 and blue.sum() >= 20, (engine, orange.sum(), blue.sum())
+    assert default_engine.startswith("BLENDER_EEVEE") and rig.ple.status == ""
 
 
 def case_program_file():
