@@ -8,7 +8,15 @@ from pathlib import Path
 
 import bpy
 import numpy as np
-from bpy.props import EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, IntVectorProperty, StringProperty
+from bpy.props import (
+    BoolProperty,
+    EnumProperty,
+    FloatProperty,
+    FloatVectorProperty,
+    IntProperty,
+    IntVectorProperty,
+    StringProperty,
+)
 
 from . import prefs
 from . import rig as rigmod
@@ -381,12 +389,20 @@ def mesh_from_arrays(name: str, verts, faces):
     return me
 
 
-def budget(lat, region, style: str, what: str, streamed: bool = False):
-    """Refuse work beyond the add-on preferences' limits, with the estimate (``ple.guard``).
-    A streamed STL export holds one box at a time: only its triangle count is limited."""
+def budget(lat, region, style: str, what: str, streamed: bool = False, beyond: bool = False):
+    """Refuse work beyond the add-on preferences' limits, with the estimate (``ple.guard``),
+    unless the user said to go ``beyond`` them. A streamed STL export holds one box at a time:
+    only its triangle count is limited."""
     est = guard.estimate(lat, region, core_style(style))
+    if beyond:
+        return est
     return guard.check(est, max_bytes=None if streamed else prefs.max_bytes(),
                        max_triangles=prefs.get("max_triangles"), what=what)
+
+
+BEYOND = BoolProperty(name="Beyond the limit", default=False, options={"SKIP_SAVE"},
+                      description="Run even if the work estimate exceeds the limits of the add-on preferences "
+                                  "(invoked from the UI, PLE asks first)")
 
 
 class SteppedOperator(RigOperator):
@@ -425,8 +441,16 @@ class SteppedOperator(RigOperator):
             return self.execute(context)
         try:
             self._steps = self.steps(context, self.get_rig(context))
+            next(self._steps)  # the first step checks the work budget
+        except StopIteration:
+            return {"FINISHED"}
         except PleError as exc:
-            self.report({"ERROR"}, str(exc))
+            if "refused" in str(exc) and not self.beyond_limit:  # ask: beyond the limit?
+                self.beyond_limit = True
+                return context.window_manager.invoke_confirm(self, event, title="Beyond the work limit",
+                                                             message=str(exc), confirm_text="Run anyway",
+                                                             icon="WARNING")
+            self.fail(context, str(exc))
             return {"CANCELLED"}
         wm = context.window_manager
         wm.progress_begin(0, 100)
@@ -467,13 +491,15 @@ class PLE_OT_tessellate(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Bl
     bl_label = "Tessellate Region"
 
     style: EnumProperty(name="Style", items=STYLES, default="CHOCC")
+    beyond_limit: BEYOND
 
     def steps(self, context, rig):
         lat = rigmod.lattice_of(rig)
         region = rigmod.region_of(rig, lat)
         if region is None:
             raise PleError("the region is empty: set Region from/to inside the repetition counts")
-        budget(lat, region, self.style, f"{self.style.lower()} tessellation of {region}")
+        budget(lat, region, self.style, f"{self.style.lower()} tessellation of {region}",
+               beyond=self.beyond_limit)
         yield 0.0
         tess = optional("tessellate")
         if tess is not None and hasattr(tess, "weld_chunks"):
@@ -505,6 +531,7 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
     filepath: StringProperty(name="File", subtype="FILE_PATH")
     filter_glob: StringProperty(default="*.stl;*.3mf;*.ply;*.obj;*.glb", options={"HIDDEN"})
     style: EnumProperty(name="Style", items=EXPORT_STYLES, default="BALLS_BEAMS")
+    beyond_limit: BEYOND
 
     def invoke(self, context, event):
         if not self.filepath and context.window is not None and not bpy.app.background:
@@ -523,7 +550,7 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
             raise PleError("the region is empty: set Region from/to inside the repetition counts")
         tess, export = optional("tessellate"), optional("export")
         streamed = tess is not None and export is not None and path.suffix.lower() == ".stl"
-        budget(lat, region, self.style, f"export of {region}", streamed=streamed)
+        budget(lat, region, self.style, f"export of {region}", streamed=streamed, beyond=self.beyond_limit)
         yield 0.0
         if tess is not None and export is not None and path.suffix.lower() == ".stl":
             # binary STL streams box by box (thesis §6.2.2 hubs per box): progress and Esc per box

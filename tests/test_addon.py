@@ -515,7 +515,8 @@ def case_export():
         assert len(trimesh.load(tmp / "c.ply").faces) == len(tessellate(lat, "0:3,0:3,0:2", "cnt").faces)
     assert rig.ple.status == "" and sorted(p.name for p in tmp.iterdir() if p.name.startswith(".")) == []
     # Esc in the modal run closes the step generator between steps: nothing is written
-    op = type("Op", (), {"filepath": str(tmp / "cancelled.stl"), "style": "CHOCC", "report": print})()
+    op = type("Op", (), {"filepath": str(tmp / "cancelled.stl"), "style": "CHOCC", "beyond_limit": False,
+                         "report": print})()
     steps = bpy.types.PLE_OT_export.steps(op, bpy.context, rig)
     first, second = next(steps), next(steps)
     assert first == 0.0 and 0.0 < second < 1.0  # progress of the first box

@@ -567,6 +567,13 @@ def case_tessellate_budget():
     assert not list(tmp.iterdir())
     rig.ple.region_max = (2, 2, 2)
     assert bpy.ops.ple.tessellate(style="CHOCC") == {"FINISHED"}  # small work goes through
+    prefs.max_triangles = 1000  # 2x2x2 CHoCC: about 1,500 triangles estimated
+    n = len(bpy.data.objects)
+    fails(bpy.ops.ple.tessellate, "refused", style="CHOCC")
+    assert len(bpy.data.objects) == n
+    assert bpy.ops.ple.tessellate(style="CHOCC", beyond_limit=True) == {"FINISHED"}  # the user said yes
+    new = [o for o in bpy.data.objects if o.name.startswith(f"{rig.name}.chocc.")]
+    assert len(bpy.data.objects) == n + 1 and len(new) == 1 and len(new[0].data.polygons) > 1000
 
 
 def case_tessellate_steps():
@@ -576,7 +583,7 @@ def case_tessellate_steps():
 
     rig = new_rig("fig6_3", region=(4, 4, 3))
     meshes, objects = len(bpy.data.meshes), len(bpy.data.objects)
-    op = type("Op", (), {"style": "CHOCC", "rig": "", "report": lambda *a: None})()
+    op = type("Op", (), {"style": "CHOCC", "rig": "", "beyond_limit": False, "report": lambda *a: None})()
     steps = bpy.types.PLE_OT_tessellate.steps(op, bpy.context, rig)
     fracs = [next(steps) for _ in range(3)]
     assert fracs[0] == 0.0 and 0 < fracs[1] < fracs[2] < 1, fracs
