@@ -238,6 +238,12 @@ def case_cumulative_off_then_counts():
     x2 = np.sort(region_arrays(rig)[0][:, 0])
     assert np.allclose(x2, [0, 1.5, 3.0, 4.5], atol=1e-5), x2
     assert not ple_ext.rig.edits_of(rig)[-1].cumulative
+    # the other way: cumulative on keeps the span from group 0 to the last group (4.5 over 3 steps)
+    rig.ple.cumulative = (True, False, False)
+    assert np.allclose(matrix(fu)[:3, 3], [4.5, 0, 0], atol=1e-5)
+    rig.ple.counts = (10, 10, 10)
+    x3 = np.sort(region_arrays(rig)[0][:, 0])
+    assert np.allclose(x3, [0, 0.5, 1.0, 1.5], atol=1e-5), x3
 
 
 def case_lil_follows_coarse():
