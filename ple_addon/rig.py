@@ -602,7 +602,9 @@ def duplicate(context, rig):
     for coll in rig.users_collection:
         coll.objects.link(copy)
     copy.parent = rig.parent
-    copy.location = rig.location + Vector((handle_size(lat) * 5, 0, 0))
+    cage_obj = parts(rig).get("cage")
+    width = cage_obj.dimensions.x if cage_obj is not None and cage_obj.dimensions.x > 0 else 5 * handle_size(lat)
+    copy.location = rig.location + Vector((1.25 * width, 0, 0))  # beside the original, not on it
     make_independent(copy, was_trusted=trusted(rig))
     _state.pop(copy.ple.uid, None)
     err = refresh(copy, force=True)
