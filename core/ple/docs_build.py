@@ -28,7 +28,7 @@ RENDER = DOCS / "tools" / "render_mesh.py"
 THUMBS = ROOT / "presets" / "thumbnails"
 API_MODULES = ["similarity", "geometry", "lattice", "program", "ir", "elements", "rangefinder", "biq", "measure",
                "filters", "implicit", "stream", "chocc", "achocc", "tessellate", "export", "becots",
-               "becots_rangefinder", "cage", "snippets", "batch", "preview"]
+               "becots_rangefinder", "cage", "snippets", "batch", "preview", "guard"]
 THUMB_MAX_GROUPS = 64_000  # a thumbnail of a larger lattice shows a corner region of it
 
 
