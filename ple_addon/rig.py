@@ -466,11 +466,15 @@ def set_params(rig, prog) -> None:
 
 
 def handle_size(lat) -> float:
-    """Display size of frame handles: a fifth of the lattice's step (the mean length of U, V,
-    W's translation at the cage point), at least twice the mean ball radius."""
+    """Display size of frame handles, readable on the whole lattice: half the mean U, V, W step
+    (their translation at the cage point), at least 3 % of the cage's extent, at most two steps,
+    and at least twice the mean ball radius."""
     steps = [np.linalg.norm(cage.direction_frame(lat, a)[:3, 3] - cage.base_frame(lat)[:3, 3]) for a in "uvw"]
     step = float(np.mean([x for x in steps if x > 0])) if any(x > 0 for x in steps) else 1.0
-    return max(0.2 * step, 2.0 * float(lat.template_radii.mean()), 1e-3)
+    pts = np.concatenate(cage.cage_curves(lat, interior=0))
+    extent = float(np.ptp(pts, axis=0).max()) if len(pts) else step
+    size = min(max(0.5 * step, 0.03 * extent), 2.0 * step)
+    return max(size, 2.0 * float(lat.template_radii.mean()), 1e-3)
 
 
 def build_parts(rig, lat) -> None:

@@ -651,7 +651,6 @@ def case_bake():
 
 def case_materials_and_sizes():
     rig = new_rig("thesis_regular", region=(2, 2, 2))
-    lat = core.program.load_lattice("thesis_regular")
     cage, region = part(rig, "cage"), part(rig, "region")
     assert cage.data.bevel_depth > 0 and cage.data.materials[0].name == "PLE cage"
     dg = bpy.context.evaluated_depsgraph_get()
@@ -661,9 +660,16 @@ def case_materials_and_sizes():
     assert mats == {"PLE region"}, mats
     ev_cage = cage.evaluated_get(dg).to_mesh()
     assert len(ev_cage.polygons) > 0  # a bevelled curve has faces: it renders
-    step = np.linalg.norm(lat.U.apply_points(np.zeros((1, 3)))[0])
-    size = part(rig, "u").empty_display_size
-    assert 0.1 * step <= size <= 0.5 * step, (size, step)
+    for preset in ("thesis_regular", "fig6_3", "cubic"):  # 74, 30 and 9 units across
+        r = new_rig(preset, region=(2, 2, 2))
+        lat = core.program.load_lattice(preset)
+        pts = np.concatenate([np.array([tuple(q.co)[:3] for q in sp.points]) for sp in part(r, "cage").data.splines])
+        extent = np.ptp(pts, axis=0).max()
+        steps = [np.linalg.norm(getattr(lat, a).apply_points(np.zeros((1, 3)))[0]) for a in "UVW"]
+        step = np.mean(steps)
+        size = part(r, "u").empty_display_size
+        assert size >= min(0.025 * extent, 1.9 * step) and 0.4 * step <= size <= 2.1 * step, (preset, size, step,
+                                                                                              extent)
 
 
 def case_render_colours():
