@@ -34,10 +34,12 @@ def needs(name: str) -> ModuleType:
 
 cage = core("model.cage")
 ir = core("filters.ir")  # ple-lattice/1 data with filters
+precision = core("algebra.precision")  # numbers read off float32 frames
 presets = core("program.presets")
-program = core("program.runtime")
+program = core("program.runtime")  # also the program time limit
 snippets = core("program.snippets")
-styles = core("meshing.styles")
+styles = core("meshing.styles")  # also the triangle estimate of a style
+work = core("model.work")  # the work estimate of a region and its limits
 PleError = ple.PleError
 Lattice = ple.Lattice
 Similarity = ple.Similarity

@@ -45,11 +45,48 @@ def region_mesh(me, ev) -> None:
     me.update()
 
 
-def new_cage_curve(name: str):
+def new_cage_curve(name: str, lat=None):
+    """The cage's curve, bevelled to a third of the smallest ball radius (a curve without
+    bevel never renders)."""
     cu = bpy.data.curves.new(name, "CURVE")
     cu.dimensions = "3D"
-    cu.bevel_depth = 0.0
+    radius = float(lat.template_radii.min()) if lat is not None and len(lat.nodes) else 0.05
+    cu.bevel_depth = max(radius / 3.0, 1e-4)
+    cu.bevel_resolution = 1
     return cu
+
+
+# name, base colour (linear RGBA): the cage orange, the region blue, distinct in any render
+CAGE_MATERIAL = ("PLE cage", (0.9, 0.35, 0.05, 1.0))
+REGION_MATERIAL = ("PLE region", (0.1, 0.3, 0.9, 1.0))
+
+
+def material(spec):
+    """A shared material (created once): Principled BSDF base colour and viewport colour."""
+    name, color = spec
+    mat = bpy.data.materials.get(name)
+    if mat is None:
+        mat = bpy.data.materials.new(name)
+        mat.diffuse_color = color
+        mat.use_nodes = True
+        bsdf = mat.node_tree.nodes.get("Principled BSDF")
+        if bsdf is not None:
+            bsdf.inputs["Base Color"].default_value = color
+            bsdf.inputs["Roughness"].default_value = 0.4
+    return mat
+
+
+def set_material(obj, spec) -> None:
+    """Give the object's data the material; for the region also the balls-and-beams modifier's
+    Material input (geometry made by nodes carries no material of its own)."""
+    mat = material(spec)
+    if obj.data is not None and mat.name not in obj.data.materials:
+        obj.data.materials.append(mat)
+    mod = obj.modifiers.get("PLE balls and beams")
+    if mod is not None and mod.node_group is not None:
+        for item in mod.node_group.interface.items_tree:
+            if getattr(item, "in_out", None) == "INPUT" and item.name == "Material":
+                mod[item.identifier] = mat
 
 
 def cage_curve(cu, curves) -> None:
@@ -79,6 +116,7 @@ def balls_beams_group():
     detail.default_value, detail.min_value, detail.max_value = 1, 0, 4
     sides = ng.interface.new_socket("Beam sides", in_out="INPUT", socket_type="NodeSocketInt")
     sides.default_value, sides.min_value, sides.max_value = 8, 3, 64
+    ng.interface.new_socket("Material", in_out="INPUT", socket_type="NodeSocketMaterial")
     ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
     nodes, links = ng.nodes, ng.links
     gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
@@ -106,7 +144,10 @@ def balls_beams_group():
     links.new(radius.outputs["Attribute"], beams.inputs["Scale"])
     links.new(balls.outputs["Instances"], join.inputs["Geometry"])
     links.new(beams.outputs["Mesh"], join.inputs["Geometry"])
-    links.new(join.outputs["Geometry"], gout.inputs[0])
+    set_mat = nodes.new("GeometryNodeSetMaterial")
+    links.new(join.outputs["Geometry"], set_mat.inputs["Geometry"])
+    links.new(gin.outputs["Material"], set_mat.inputs["Material"])
+    links.new(set_mat.outputs["Geometry"], gout.inputs[0])
     return ng
 
 

@@ -8,10 +8,19 @@ from pathlib import Path
 
 import bpy
 import numpy as np
-from bpy.props import EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, IntVectorProperty, StringProperty
+from bpy.props import (
+    BoolProperty,
+    EnumProperty,
+    FloatProperty,
+    FloatVectorProperty,
+    IntProperty,
+    IntVectorProperty,
+    StringProperty,
+)
 
+from . import prefs
 from . import rig as rigmod
-from .corelink import PleError, ir, needs, presets, snippets, styles
+from .corelink import PleError, core, ir, needs, presets, program, snippets, styles, work
 
 SNIPPET_TEXT = "PLE snippet"
 EXPORT_BOXES = 20  # an STL export streams the region in about this many boxes (progress steps)
@@ -38,12 +47,23 @@ class RigOperator:
 
     @classmethod
     def poll(cls, context):
-        return True
+        """True when the active object belongs to a rig (a rig named by ``rig`` is found even
+        if it is not active, but poll cannot see operator properties)."""
+        if rigmod.rig_of(getattr(context, "active_object", None)) is not None:
+            return True
+        cls.poll_message_set("select a PLE lattice object (or one of its frames)")
+        return False
 
     def execute(self, context):
         try:
-            return self.run(context, self.get_rig(context))
+            rig = self.get_rig(context)
         except PleError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        try:
+            return self.run(context, rig)
+        except PleError as exc:
+            rig.ple.status = str(exc)  # the panel's status line as well as the Info report
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
 
@@ -88,6 +108,10 @@ class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
     region: IntVectorProperty(name="Region", size=3, min=1, default=(3, 3, 3),
                               description="Node-groups per direction drawn in full")
 
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None
+
     def invoke(self, context, event):
         if self.source == "FILE" and not self.filepath:
             context.window_manager.fileselect_add(self)
@@ -95,13 +119,13 @@ class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
         return context.window_manager.invoke_props_dialog(self)
 
     def source_text(self):
-        """(Text datablock, kind, default name); a new Text for presets and files."""
+        """(Text datablock, kind, default name, file on disk or ""); a new Text for presets and files."""
         if self.source == "TEXT":
             text = bpy.data.texts.get(self.text)
             if text is None:
                 raise PleError(f"no text block named {self.text!r}")
             kind = "IR" if text.as_string().lstrip().startswith("{") else "PROGRAM"
-            return text, kind, Path(text.name).stem
+            return text, kind, Path(text.name).stem, ""
         if self.source == "PRESET":
             path = presets.preset_path(self.preset)
             if path is None:
@@ -116,11 +140,12 @@ class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
             raise PleError(f"{path}: cannot read ({exc.strerror})") from None
         text = bpy.data.texts.new(path.name)
         text.from_string(body)
-        return text, ("IR" if path.suffix == ".json" else "PROGRAM"), path.stem
+        linked = str(path) if self.source == "FILE" else ""  # a preset is not the user's file
+        return text, ("IR" if path.suffix == ".json" else "PROGRAM"), path.stem, linked
 
     def execute(self, context):
         try:
-            text, kind, default_name = self.source_text()
+            text, kind, default_name, linked = self.source_text()
         except PleError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
@@ -129,6 +154,7 @@ class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
         except PleError as exc:
             self.report({"ERROR"}, f"{exc} (the program is kept in text block {text.name!r})")
             return {"CANCELLED"}
+        rig.ple.filepath = linked
         for obj in context.view_layer.objects:
             obj.select_set(False)
         context.view_layer.objects.active = rig
@@ -144,7 +170,8 @@ class PLE_OT_program_run(RigOperator, bpy.types.Operator):  # noqa: N801 - Blend
 
     def run(self, context, rig):
         rigmod.trust(rig)
-        rigmod._state.pop(rig.name_full, None)
+        st = rigmod.state_of(rig)  # keep what was drawn: frame moves made before this still count
+        st.program_key, st.topology = (), ()
         return self.refreshed(rig)
 
 
@@ -184,7 +211,8 @@ class PLE_OT_program_apply(RigOperator, bpy.types.Operator):  # noqa: N801 - Ble
         else:
             if not rigmod.trusted(rig):
                 raise PleError("the program is not trusted: press Run Program first")
-            new = snippets.apply_edits(text.as_string(), edits, rigmod.params_of(rig), name=text.name)
+            with program.time_limit(prefs.get("program_seconds"), text.name):
+                new = snippets.apply_edits(text.as_string(), edits, rigmod.params_of(rig), name=text.name)
         text.from_string(new)
         rig.ple.edits = "[]"
         self.report({"INFO"}, f"{len(edits)} edit(s) written into {text.name}")
@@ -333,12 +361,6 @@ def core_style(style: str) -> str:
     return style.lower().replace("_", "-")
 
 
-def tessellation(lat, region, style: str):
-    """Vertices (V, 3) and triangles (F, 3) of a region from the core (``ple.tessellate``)."""
-    mesh = needs("meshing.tessellate").tessellate(lat, region, core_style(style))
-    return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
-
-
 def mesh_from_arrays(name: str, verts, faces):
     me = bpy.data.meshes.new(name)
     me.vertices.add(len(verts))
@@ -349,6 +371,22 @@ def mesh_from_arrays(name: str, verts, faces):
     me.polygons.foreach_set("loop_start", np.arange(0, 3 * len(faces), 3, dtype=np.int32))
     me.update(calc_edges=True)
     return me
+
+
+def budget(lat, region, style: str, what: str, streamed: bool = False, beyond: bool = False):
+    """Refuse work beyond the add-on preferences' limits, with the estimate
+    (``meshing.styles.mesh_estimate``), unless the user said to go ``beyond`` them. A streamed
+    STL export holds one box at a time: only its triangle count is limited."""
+    est = styles.mesh_estimate(lat, region, core_style(style))
+    if beyond:
+        return est
+    return work.check(est, max_bytes=None if streamed else prefs.max_bytes(),
+                       max_triangles=prefs.get("max_triangles"), what=what)
+
+
+BEYOND = BoolProperty(name="Beyond the limit", default=False, options={"SKIP_SAVE"},
+                      description="Run even if the work estimate exceeds the limits of the add-on preferences "
+                                  "(invoked from the UI, PLE asks first)")
 
 
 class SteppedOperator(RigOperator):
@@ -371,17 +409,32 @@ class SteppedOperator(RigOperator):
             finally:
                 wm.progress_end()
         except PleError as exc:
-            self.report({"ERROR"}, str(exc))
+            self.fail(context, str(exc))
             return {"CANCELLED"}
         return {"FINISHED"}
+
+    def fail(self, context, message: str) -> None:
+        """Report to the Info editor and to the rig's status line (the panel)."""
+        self.report({"ERROR"}, message)
+        found = rigmod.rig_of(bpy.data.objects.get(self.rig) if self.rig else context.active_object)
+        if found is not None:
+            found.ple.status = message
 
     def invoke(self, context, event):
         if context.window is None or bpy.app.background:
             return self.execute(context)
         try:
             self._steps = self.steps(context, self.get_rig(context))
+            next(self._steps)  # the first step checks the work budget
+        except StopIteration:
+            return {"FINISHED"}
         except PleError as exc:
-            self.report({"ERROR"}, str(exc))
+            if "refused" in str(exc) and not self.beyond_limit:  # ask: beyond the limit?
+                self.beyond_limit = True
+                return context.window_manager.invoke_confirm(self, event, title="Beyond the work limit",
+                                                             message=str(exc), confirm_text="Run anyway",
+                                                             icon="WARNING")
+            self.fail(context, str(exc))
             return {"CANCELLED"}
         wm = context.window_manager
         wm.progress_begin(0, 100)
@@ -404,7 +457,7 @@ class SteppedOperator(RigOperator):
             return {"FINISHED"}
         except PleError as exc:
             self.finish(context)
-            self.report({"ERROR"}, str(exc))
+            self.fail(context, str(exc))
             return {"CANCELLED"}
         return {"RUNNING_MODAL"}
 
@@ -422,14 +475,24 @@ class PLE_OT_tessellate(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Bl
     bl_label = "Tessellate Region"
 
     style: EnumProperty(name="Style", items=STYLES, default="CHOCC")
+    beyond_limit: BEYOND
 
     def steps(self, context, rig):
         lat = rigmod.shown_lattice(rig)  # the panel's filter too: what is drawn is what is meshed
         region = rigmod.region_of(rig, lat)
         if region is None:
             raise PleError("the region is empty: set Region from/to inside the repetition counts")
+        budget(lat, region, self.style, f"{self.style.lower()} tessellation of {region}",
+               beyond=self.beyond_limit)
         yield 0.0
-        verts, faces = tessellation(lat, region, self.style)
+        tess = needs("meshing.tessellate")
+        # box by box (progress, and Esc between boxes in the modal run), welded by the core
+        boxes = max(1, region.groups // EXPORT_BOXES)
+        chunks = []
+        for n, chunk in enumerate(tess.iter_triangles(lat, region, core_style(self.style), max_groups=boxes)):
+            chunks.append(chunk)
+            yield min(0.8, 0.8 * (n + 1) * boxes / region.groups)
+        verts, faces = tess.weld_chunks(chunks)
         yield 0.8
         me = mesh_from_arrays(f"{rig.name}.{self.style.lower()}", verts, faces)
         obj = bpy.data.objects.new(me.name, me)
@@ -449,6 +512,7 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
     filepath: StringProperty(name="File", subtype="FILE_PATH")
     filter_glob: StringProperty(default="*.stl;*.3mf;*.ply;*.obj;*.glb", options={"HIDDEN"})
     style: EnumProperty(name="Style", items=EXPORT_STYLES, default="BALLS_BEAMS")
+    beyond_limit: BEYOND
 
     def invoke(self, context, event):
         if not self.filepath and context.window is not None and not bpy.app.background:
@@ -466,24 +530,136 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
         if region is None:
             raise PleError("the region is empty: set Region from/to inside the repetition counts")
         tess, export = needs("meshing.tessellate"), needs("io.export")
+        streamed = path.suffix.lower() == ".stl"
+        budget(lat, region, self.style, f"export of {region}", streamed=streamed, beyond=self.beyond_limit)
         yield 0.0
-        if path.suffix.lower() == ".stl":
-            # binary STL streams box by box (thesis §6.2.2 hubs per box): progress and Esc per box
-            boxes = max(1, region.groups // EXPORT_BOXES)
-            chunks = []
-            for n, chunk in enumerate(tess.iter_triangles(lat, region, core_style(self.style), max_groups=boxes)):
-                chunks.append(chunk)
-                yield min(0.9, 0.9 * (n + 1) * boxes / region.groups)
-            count = export.write_stl(path, chunks)
-        else:
-            mesh = tess.tessellate(lat, region, core_style(self.style))
-            yield 0.7
-            count = len(mesh.faces)
-            export.export_mesh(mesh, path)
+        # box by box (thesis §6.2.2 hubs per box): progress and Esc between boxes; binary STL
+        # streams the boxes, other formats are welded into one mesh by the core
+        boxes = max(1, region.groups // EXPORT_BOXES)
+        chunks = []
+        for n, chunk in enumerate(tess.iter_triangles(lat, region, core_style(self.style), max_groups=boxes)):
+            chunks.append(chunk)
+            yield min(0.8, 0.8 * (n + 1) * boxes / region.groups)
+        yield 0.8
+        count = export.write_stl(path, chunks) if streamed else export.write_chunks(path, chunks)
         self.report({"INFO"}, f"{count} triangles written to {path}")
         yield 1.0
 
 
+class PLE_OT_report(bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Put a message of live editing into the Info editor (run by the add-on itself)"""
+
+    bl_idname = "ple.report"
+    bl_label = "PLE Report"
+    bl_options = {"INTERNAL"}
+
+    message: StringProperty(name="Message")
+
+    def execute(self, context):
+        self.report({"WARNING"}, self.message)
+        return {"FINISHED"}
+
+
+# ----- everyday actions: remove, duplicate, bake, program file ------------------------------------
+class PLE_OT_remove(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Delete the rig: the lattice object, its frames, nodes, cage and region (the program text is kept)"""
+
+    bl_idname = "ple.remove"
+    bl_label = "Remove Lattice"
+
+    def run(self, context, rig):
+        name = rig.name
+        rigmod.remove(rig)
+        self.report({"INFO"}, f"removed {name}")
+        return {"FINISHED"}
+
+
+class PLE_OT_duplicate(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Duplicate the rig with its own copy of the program text and its own trust"""
+
+    bl_idname = "ple.duplicate"
+    bl_label = "Duplicate Lattice"
+
+    def run(self, context, rig):
+        copy = rigmod.duplicate(context, rig)
+        for obj in context.view_layer.objects:
+            obj.select_set(False)
+        context.view_layer.objects.active = copy
+        copy.select_set(True)
+        return {"FINISHED"}
+
+
+class PLE_OT_bake(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Freeze the drawn region (balls and beams as Blender draws them) into a plain mesh object"""
+
+    bl_idname = "ple.bake"
+    bl_label = "Bake Region"
+
+    def run(self, context, rig):
+        region = rigmod.parts(rig).get("region")
+        if region is None or not len(region.data.vertices):
+            raise PleError("nothing to bake: the region is empty")
+        depsgraph = context.evaluated_depsgraph_get()
+        me = bpy.data.meshes.new_from_object(region.evaluated_get(depsgraph), preserve_all_data_layers=False,
+                                             depsgraph=depsgraph)
+        me.name = f"{rig.name}.baked"
+        obj = bpy.data.objects.new(me.name, me)
+        coll = context.scene.collection
+        coll.objects.link(obj)
+        obj.matrix_world = region.matrix_world
+        self.report({"INFO"}, f"{obj.name}: {len(me.polygons)} faces")
+        return {"FINISHED"}
+
+
+class PLE_OT_program_reload(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Read the program again from its file on disk (GUI edits not yet applied are kept)"""
+
+    bl_idname = "ple.program_reload"
+    bl_label = "Reload Program"
+
+    def run(self, context, rig):
+        path = linked_path(rig)
+        try:
+            body = path.read_text()
+        except OSError as exc:
+            raise PleError(f"{path}: cannot read ({exc.strerror})") from None
+        old = rig.ple.text.as_string()
+        rig.ple.text.from_string(body)
+        err = rigmod.refresh(rig, force=True)
+        if err:
+            rig.ple.text.from_string(old)
+            rigmod.refresh(rig, force=True)
+            raise PleError(f"{path}: {err} (the previous program is kept)")
+        self.report({"INFO"}, f"reloaded {path}")
+        return {"FINISHED"}
+
+
+class PLE_OT_program_save(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Write the program text back to its file on disk (atomically: a failed write leaves the file as it was)"""
+
+    bl_idname = "ple.program_save"
+    bl_label = "Save Program"
+
+    def run(self, context, rig):
+        path = linked_path(rig)
+        try:
+            with core("io.files").atomic_path(path) as tmp:
+                Path(tmp).write_text(rig.ple.text.as_string())
+        except OSError as exc:
+            raise PleError(f"{path}: cannot write ({exc.strerror})") from None
+        self.report({"INFO"}, f"saved {path}")
+        return {"FINISHED"}
+
+
+def linked_path(rig) -> Path:
+    if not rig.ple.filepath:
+        raise PleError("the program is not linked to a file (add the lattice from a .py or .json file)")
+    if rig.ple.text is None:
+        raise PleError(f"{rig.name}: the program text block is missing")
+    return Path(bpy.path.abspath(rig.ple.filepath))
+
+
 CLASSES = (PLE_OT_lattice_add, PLE_OT_program_run, PLE_OT_snippet_copy, PLE_OT_program_apply, PLE_OT_edits_clear,
            PLE_OT_node_add, PLE_OT_node_remove, PLE_OT_beam_add, PLE_OT_beam_remove, PLE_OT_lil_filter,
-           PLE_OT_stencil_filter, PLE_OT_tessellate, PLE_OT_export)
+           PLE_OT_stencil_filter, PLE_OT_tessellate, PLE_OT_export, PLE_OT_remove, PLE_OT_duplicate, PLE_OT_bake,
+           PLE_OT_program_reload, PLE_OT_program_save, PLE_OT_report)

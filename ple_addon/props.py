@@ -20,6 +20,12 @@ def _rig_changed(self, context):
     rig.on_settings_changed(self.id_data)
 
 
+def _cumulative_changed(self, context):
+    from . import rig
+
+    rig.on_cumulative_changed(self.id_data)
+
+
 def _counts_changed(self, context):
     from . import rig
 
@@ -53,7 +59,8 @@ class PLE_ObjectSettings(bpy.types.PropertyGroup):  # noqa: N801 - Blender namin
                           description="GUI edits not yet written into the program (JSON)")
     counts: IntVectorProperty(name="Repetition counts", size=3, min=1, default=(1, 1, 1), update=_counts_changed,
                               description="Repetition counts of U, V and W (node-groups per steady row)")
-    cumulative: BoolVectorProperty(name="Cumulative", size=3, default=(False, False, False), update=_rig_changed,
+    cumulative: BoolVectorProperty(name="Cumulative", size=3, default=(False, False, False),
+                                   update=_cumulative_changed,
                                    description="Frames show the cumulative similarity (group 0 to the last "
                                                "group of the row) instead of the incremental one")
     region_min: IntVectorProperty(name="Region from", size=3, min=0, default=(0, 0, 0), update=_rig_changed,
@@ -76,6 +83,10 @@ class PLE_ObjectSettings(bpy.types.PropertyGroup):  # noqa: N801 - Blender namin
                                  description="0/1 per stencil cell in (i, j, k) order, k fastest")
     snippet_digits: IntProperty(name="Digits", min=1, max=15, default=6,
                                 description="Decimals in copied snippets (applying always writes 12)")
+    uid: StringProperty(name="Id", options={"HIDDEN"},
+                        description="Stable id of the lattice object (trust and state survive renaming)")
+    filepath: StringProperty(name="Program file", subtype="FILE_PATH",
+                             description="The file on disk the program text was loaded from (Reload / Save)")
     status: StringProperty(name="Status", description="Last problem met while evaluating the lattice")
 
 

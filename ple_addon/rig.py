@@ -11,19 +11,21 @@ computed by the core; this module only moves numbers between Blender and ``ple``
 from __future__ import annotations
 
 import json
+import uuid
 from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
-from mathutils import Matrix
+from mathutils import Matrix, Vector
 
-from . import draw
-from .corelink import PleError, cage, core, ir, program, snippets
+from . import draw, prefs
+from .corelink import PleError, cage, core, ir, precision, program, snippets, work
 
 PARAM_PREFIX = "ple:"
 FRAME_NAMES = ("G", "u", "v", "w")
 MOVE_TOL = 1e-6  # a frame or node counts as moved by the user beyond this (float32 matrices)
-_trusted: set[str] = set()  # rigs whose program the user ran explicitly in this session
+_trusted: set[str] = set()  # stable ids (obj.ple.uid) of rigs whose program the user ran in this session
+_owner: dict[str, int] = {}  # stable id -> session_uid of the object that holds it (a copy has another)
 _busy = False  # set while the add-on itself writes to the rig (update callbacks stay quiet)
 
 
@@ -38,6 +40,8 @@ class RigState:
     expected: dict = field(default_factory=dict)
     signature: tuple = ()
     topology: tuple = ()  # (key, Evaluation) of the last unfiltered region drawn
+    cumulative: tuple = (False, False, False)  # the Cumulative toggles when last drawn
+    region: tuple = ()  # (region_min, region_max) last drawn without error
 
 
 _state: dict[str, RigState] = {}
@@ -46,6 +50,28 @@ _state: dict[str, RigState] = {}
 def clear_state() -> None:
     """Forget drawn state (after undo or file load: positions are then not user moves)."""
     _state.clear()
+    _owner.clear()
+
+
+def uid(rig) -> str:
+    """The rig's stable id (kept through renames and file saves; a duplicate gets its own)."""
+    if not rig.ple.uid:
+        rig.ple.uid = uuid.uuid4().hex
+    return rig.ple.uid
+
+
+def state_of(rig) -> RigState:
+    return _state.setdefault(uid(rig), RigState())
+
+
+def baseline(rig) -> None:
+    """Take the parts' current matrices as what was drawn (after loading a file or undo), so
+    that moves made before the program can run are still read as user moves later."""
+    st = state_of(rig)
+    for key, obj in parts(rig).items():
+        if key in FRAME_NAMES or (isinstance(key, tuple) and key[0] in ("node", "corner")):
+            st.expected[key] = _flat(obj.matrix_basis)
+    st.cumulative = tuple(rig.ple.cumulative)
 
 
 def is_rig(obj) -> bool:
@@ -85,12 +111,26 @@ def params_of(rig) -> dict:
 
 def trusted(rig) -> bool:
     """Programs run only if Blender trusts scripts or the user ran this one explicitly (SPEC §9)."""
-    return (rig.ple.source_kind == "IR" or rig.name_full in _trusted
+    return (rig.ple.source_kind == "IR" or uid(rig) in _trusted
             or bpy.context.preferences.filepaths.use_scripts_auto_execute)
 
 
 def trust(rig) -> None:
-    _trusted.add(rig.name_full)
+    _trusted.add(uid(rig))
+    _trust_file[0] = bpy.data.filepath
+
+
+_trust_file = [""]  # the .blend the trusts were given in (a file saved under a new name carries them)
+
+
+def trusted_file(path: str) -> None:
+    _trust_file[0] = path
+
+
+def forget_trust_of_other_files(path: str) -> None:
+    if path != _trust_file[0]:
+        _trusted.clear()
+        _trust_file[0] = path
 
 
 def base_lattice(rig, st: RigState):
@@ -113,9 +153,11 @@ def base_lattice(rig, st: RigState):
     else:
         if not trusted(rig):
             raise PleError(f"{text.name}: not run because Blender does not trust scripts "
-                           "(enable Auto Run Python Scripts, or press Run Program)")
-        prog = program.compile_program(source, text.name)
-        base = prog.run(**params)
+                           "(enable Auto Run Python Scripts, or press Run Program; frame moves are "
+                           "kept until then)")
+        with program.time_limit(prefs.get("program_seconds"), text.name):  # the program's own frames
+            prog = program.compile_program(source, text.name)
+            base = prog.run(**params)
     st.program_key, st.program, st.base = key, prog, base
     return base
 
@@ -132,7 +174,7 @@ def add_edits(rig, new) -> None:
 def lattice_of(rig, st: RigState | None = None, new=()):
     """The rig's current lattice: program (or IR) with its inputs, then the GUI edits (and
     ``new`` ones not yet stored)."""
-    st = st if st is not None else _state.setdefault(rig.name_full, RigState())
+    st = st if st is not None else state_of(rig)
     return snippets.apply_to_lattice(base_lattice(rig, st), edits_of(rig) + list(new))
 
 
@@ -171,11 +213,11 @@ def filtered(rig, lat, space=None, _seen=()):
     coarse = rig.ple.coarse
     if not is_rig(coarse):
         raise PleError("LiL filter: choose a coarse PLE lattice object")
-    if coarse.name_full in _seen or coarse == rig:
+    if uid(coarse) in _seen or coarse == rig:
         raise PleError(f"LiL filter: {coarse.name} is coarse for itself through a cycle of LiL filters")
     space = rig if space is None else space
     coarse_lat = in_rig_space(space, coarse, lattice_of(coarse))
-    inner = filtered(coarse, coarse_lat, space, (*_seen, rig.name_full))
+    inner = filtered(coarse, coarse_lat, space, (*_seen, uid(rig)))
     return filters.LiL(coarse_lat.with_filter(inner))
 
 
@@ -186,6 +228,7 @@ def evaluate_region(rig, lat, st: RigState | None = None):
     r = region_of(rig, lat)
     if r is None:
         return None
+    work.check(work.estimate(lat, r), max_bytes=prefs.max_bytes(), what=f"drawing region {r}")
     panel = filtered(rig, lat)
     if lat.filter is None and panel is None:
         key = (str(r), len(lat.nodes), tuple((b.n1, b.n2, b.di, b.dj, b.dk) for b in lat.beams))
@@ -230,17 +273,21 @@ def user_edits(rig, st: RigState) -> list:
         if obj is None or not _moved(obj, st.expected, key):
             continue
         m = np.array(obj.matrix_basis)
+        scale = max(1.0, float(np.abs(m[:3, 3]).max()))  # numbers keep the precision the frame carries
         if key == "G":
-            out.append(snippets.SetPlacement(cage.placement_from_frame(m, lat.placement)))
+            sim = precision.frame_similarity(cage.placement_from_frame(m, lat.placement), scale)
+            out.append(snippets.SetPlacement(sim))
             continue
         axis_n = "uvw".index(key)
         cum = cage.shows_cumulative(lat, key, rig.ple.cumulative[axis_n])
-        out.append(snippets.SetDirection(key, None, cage.direction_from_frame(lat, key, m, cum), cum))
+        sim = precision.frame_similarity(cage.direction_from_frame(lat, key, m, cum), scale)
+        out.append(snippets.SetDirection(key, None, sim, cum))
     corners = becots_corners(lat)
     if corners and any(p.get(("corner", c)) is not None and _moved(p[("corner", c)], st.expected, ("corner", c))
                        for c in "ABCD"):
         moved = [tuple(p[("corner", c)].matrix_basis.translation) for c in "ABCD"]
-        out.append(snippets.SetBecots(tuple(moved), tuple(lat.becots.counts)))
+        scale = max(1.0, float(np.abs(moved).max()))
+        out.append(snippets.SetBecots(tuple(precision.frame_point(c, scale) for c in moved), tuple(lat.becots.counts)))
     for n in range(len(lat.nodes)):
         obj = p.get(("node", n))
         if obj is None or not _moved(obj, st.expected, ("node", n)):
@@ -250,18 +297,25 @@ def user_edits(rig, st: RigState) -> list:
         if np.abs(s - s.mean()).max() > 1e-4 * abs(s.mean()) or s.mean() <= 0:
             raise PleError(f"template node {n}: scale it uniformly (the scale is the ball's radius)")
         node = lat.nodes[n]
+        loc = precision.frame_point(loc, max(1.0, float(np.abs(np.array(loc)).max())))
         center = tuple(loc) if np.abs(np.array(loc) - node.center).max() > MOVE_TOL else None
-        radius = float(s.mean()) if abs(s.mean() - node.radius) > MOVE_TOL * max(1.0, node.radius) else None
+        moved_radius = abs(s.mean() - node.radius) > MOVE_TOL * max(1.0, node.radius)
+        radius = precision.frame_number(s.mean()) if moved_radius else None
         if center is not None or radius is not None:
             out.append(snippets.MoveNode(n, center, radius))
     return out
 
 
 # ----- drawing --------------------------------------------------------------------------------
-def signature(rig) -> tuple:
+def signature(rig, _seen=()) -> tuple:
+    """Everything the drawing depends on; for a LiL filter that includes the coarse rig's
+    own signature and its placement (so the fine rig follows its coarse rig)."""
     p = rig.ple
     text = p.text.as_string() if p.text is not None else None
-    coarse = p.coarse.name_full if p.coarse is not None else None
+    coarse = None
+    if p.filter_kind == "LIL" and is_rig(p.coarse) and p.coarse != rig and uid(p.coarse) not in _seen:
+        coarse = (uid(p.coarse), _flat(rig.matrix_world.inverted() @ p.coarse.matrix_world),
+                  signature(p.coarse, (*_seen, uid(rig))))
     return (text, tuple(sorted((k, repr(v)) for k, v in params_of(rig).items())), p.edits, tuple(p.region_min),
             tuple(p.region_max), tuple(p.cumulative), p.cage_interior, p.filter_kind, coarse,
             tuple(p.stencil_shape), p.stencil_bits, p.show_template, p.source_kind)
@@ -275,10 +329,13 @@ def refresh(rig, force: bool = False) -> str | None:
     global _busy
     if _busy:
         return None
-    st = _state.setdefault(rig.name_full, RigState())
+    claim(rig)
+    st = state_of(rig)
     _busy = True
     try:
         try:
+            if st.lattice is None and st.expected:  # moves made before the program could run
+                st.lattice = lattice_of(rig, st)
             new = user_edits(rig, st)
             if not new and not force and signature(rig) == st.signature and st.lattice is not None:
                 if rig.ple.status:  # e.g. a degenerate frame was put back: nothing is wrong now
@@ -287,12 +344,18 @@ def refresh(rig, force: bool = False) -> str | None:
             lat = lattice_of(rig, st, new)  # new edits are kept only if the lattice they give is valid
             ev = evaluate_region(rig, lat, st)
         except PleError as exc:
+            if rig.ple.status != str(exc):
+                notify(rig, str(exc))
             rig.ple.status = str(exc)
             return str(exc)
         add_edits(rig, new)
         st.lattice = lat
+        if not {"G", "u", "v", "w", "cage", "region"} <= set(parts(rig)):
+            build_parts(rig, lat)  # a copy (Shift+D) or a rig whose parts were deleted
         draw_rig(rig, lat, ev, st)
         st.signature = signature(rig)
+        st.cumulative = tuple(rig.ple.cumulative)
+        st.region = (tuple(rig.ple.region_min), tuple(rig.ple.region_max))
         if rig.ple.status:
             rig.ple.status = ""
         return None
@@ -324,8 +387,11 @@ def sync_nodes(rig, lat, p: dict, st: RigState) -> None:
     want = len(lat.nodes) if rig.ple.show_template else 0
     stale = [obj for key, obj in p.items() if isinstance(key, tuple) and key[0] == "node" and key[1] >= want]
     if stale:
+        layer = bpy.context.view_layer
+        if layer is not None and layer.objects.active in stale:
+            layer.objects.active = rig  # the active node goes: the rig becomes active, not nothing
         bpy.data.batch_remove(stale)
-    for key in [k for k in st.expected if isinstance(k, tuple) and k[1] >= want]:
+    for key in [k for k in st.expected if isinstance(k, tuple) and k[0] == "node" and k[1] >= want]:
         del st.expected[key]
     for n in range(want):
         obj = p.get(("node", n))
@@ -359,12 +425,14 @@ def sync_corners(rig, lat, p: dict, st: RigState) -> None:
     stale = [obj for key, obj in p.items() if isinstance(key, tuple) and key[0] == "corner" and not corners]
     if stale:
         bpy.data.batch_remove(stale)
+        for label in "ABCD":
+            st.expected.pop(("corner", label), None)
     for label, c in zip("ABCD", corners):
         obj = p.get(("corner", label))
         if obj is None:
             obj = new_part(rig, f"{rig.name}.{label}", None, "CORNER", parent=p.get("G"))
             obj.empty_display_type = "CUBE"
-            obj.empty_display_size = 0.1
+            obj.empty_display_size = 0.5 * handle_size(lat)
             obj.ple.frame = label
         m = np.eye(4)
         m[:3, 3] = c
@@ -399,44 +467,76 @@ def set_params(rig, prog) -> None:
             ui.update(**opts)
 
 
-def create(context, name: str, text, source_kind: str = "PROGRAM", region=(3, 3, 3)):
-    """Build a rig for ``text`` (a Text datablock); raises PleError before creating anything
-    if the program or IR is bad."""
+def handle_size(lat) -> float:
+    """Display size of frame handles, readable on the whole lattice: half the mean U, V, W step
+    (their translation at the cage point), at least 3 % of the cage's extent, at most two steps,
+    and at least twice the mean ball radius."""
+    steps = [np.linalg.norm(cage.direction_frame(lat, a)[:3, 3] - cage.base_frame(lat)[:3, 3]) for a in "uvw"]
+    step = float(np.mean([x for x in steps if x > 0])) if any(x > 0 for x in steps) else 1.0
+    pts = np.concatenate(cage.cage_curves(lat, interior=0))
+    extent = float(np.ptp(pts, axis=0).max()) if len(pts) else step
+    size = min(max(0.5 * step, 0.03 * extent), 2.0 * step)
+    return max(size, 2.0 * float(lat.template_radii.mean()), 1e-3)
+
+
+def build_parts(rig, lat) -> None:
+    """The frames G, U, V, W, the cage and the region of a rig, those it lacks (template nodes
+    and BeCOTS corners are made by the drawing)."""
+    name = rig.name
+    size = handle_size(lat)
+    have = parts(rig)
+    g = have.get("G")
+    if g is None:
+        g = new_part(rig, f"{name}.G", None, "FRAME")
+        g.ple.frame, g.empty_display_type, g.empty_display_size = "G", "ARROWS", 1.5 * size
+    for axis in "uvw":
+        if axis not in have:
+            f = new_part(rig, f"{name}.{axis.upper()}", None, "FRAME", parent=g)
+            f.ple.frame, f.empty_display_type, f.empty_display_size = axis, "ARROWS", size
+    if "cage" not in have:
+        cage_obj = new_part(rig, f"{name}.cage", draw.new_cage_curve(f"{name}.cage", lat), "CAGE")
+        cage_obj.hide_select = True
+        draw.set_material(cage_obj, draw.CAGE_MATERIAL)
+    if "region" not in have:
+        region_obj = new_part(rig, f"{name}.region", draw.new_region_mesh(f"{name}.region"), "REGION")
+        region_obj.hide_select = True
+        draw.add_balls_beams_modifier(region_obj)
+        draw.set_material(region_obj, draw.REGION_MATERIAL)
+
+
+def create(context, name: str, text, source_kind: str = "PROGRAM", region=(3, 3, 3), location=None):
+    """Build a rig for ``text`` (a Text datablock) at ``location`` (default: the 3D cursor);
+    raises PleError before creating anything if the program or IR is bad or the region is
+    beyond the work budget."""
     st = RigState()
     probe = bpy.data.objects.new("~ple probe", None)  # evaluate before building anything
     try:
         probe.ple.text, probe.ple.source_kind = text, source_kind
-        _trusted.add(probe.name_full)
+        _trusted.add(uid(probe))
         base = base_lattice(probe, st)
         prog = st.program
+        clamped = tuple(min(r, c) for r, c in zip(region, base.counts))
+        work.check(work.estimate(base, f"0:{clamped[0]},0:{clamped[1]},0:{clamped[2]}"),
+                    max_bytes=prefs.max_bytes(), what="drawing the region")
     finally:
-        _trusted.discard(probe.name_full)
+        _trusted.discard(uid(probe))
         bpy.data.objects.remove(probe)
     coll = bpy.data.collections.new(f"PLE {name}")
     context.scene.collection.children.link(coll)
     rig = bpy.data.objects.new(name, None)
     coll.objects.link(rig)
+    rig.location = context.scene.cursor.location if location is None else location
     rig.empty_display_type = "PLAIN_AXES"
-    rig.empty_display_size = 0.25
+    rig.empty_display_size = handle_size(base)
     rig.ple.role = "RIG"
     rig.ple.text, rig.ple.source_kind = text, source_kind
-    rig.ple.region_max = tuple(min(r, c) for r, c in zip(region, base.counts))
+    rig.ple.region_max = clamped
     trust(rig)
+    claim(rig)
     if prog is not None:
         set_params(rig, prog)
-    g = new_part(rig, f"{name}.G", None, "FRAME")
-    g.ple.frame, g.empty_display_type = "G", "ARROWS"
-    size = max(0.2, 2.0 * float(base.template_radii.mean()))
-    for axis in "uvw":
-        f = new_part(rig, f"{name}.{axis.upper()}", None, "FRAME", parent=g)
-        f.ple.frame, f.empty_display_type, f.empty_display_size = axis, "ARROWS", size
-    g.empty_display_size = size * 1.5
-    cage_obj = new_part(rig, f"{name}.cage", draw.new_cage_curve(f"{name}.cage"), "CAGE")
-    region_obj = new_part(rig, f"{name}.region", draw.new_region_mesh(f"{name}.region"), "REGION")
-    for obj in (cage_obj, region_obj):
-        obj.hide_select = True
-    draw.add_balls_beams_modifier(region_obj)
-    _state[rig.name_full] = st
+    build_parts(rig, base)
+    _state[uid(rig)] = st
     err = refresh(rig, force=True)
     if err:
         raise PleError(err)
@@ -446,37 +546,197 @@ def create(context, name: str, text, source_kind: str = "PROGRAM", region=(3, 3,
 def remove(rig) -> None:
     """Delete a rig's objects and its own datablocks (meshes, curves), keeping the program text."""
     objs = [rig, *rig.children_recursive]
-    data = [o.data for o in objs if o.data is not None]
+    data = [o.data for o in objs if o.data is not None and o.data.users <= 1]
     colls = [c for c in rig.users_collection if c.name.startswith("PLE ")]
-    _state.pop(rig.name_full, None)
+    _state.pop(rig.ple.uid, None)
+    _owner.pop(rig.ple.uid, None)
     bpy.data.batch_remove(objs + data)
     for c in colls:
-        if not c.objects:
+        if not c.objects and not c.children:
             bpy.data.collections.remove(c)
+
+
+def remove_orphans() -> int:
+    """Delete parts whose rig is gone (the user deleted only the lattice object: Blender keeps
+    it in memory, unlinked, while its parts point to it); returns how many objects went."""
+    gone = [o for o in bpy.data.objects if o.ple.role == "RIG" and not o.users_collection]
+    orphans = [o for o in bpy.data.objects if o.ple.role in PART_ROLES and (rig_of(o) is None or rig_of(o) in gone)]
+    for rig in gone:
+        _state.pop(rig.ple.uid, None)
+    orphans += gone
+    if orphans:
+        data = [o.data for o in orphans if o.data is not None and o.data.users <= 1]
+        bpy.data.batch_remove(orphans + data)
+    return len(orphans)
+
+
+PART_ROLES = ("FRAME", "NODE", "CORNER", "CAGE", "REGION")
+
+
+def claim(rig) -> None:
+    """Register the rig's stable id; a rig holding another object's id is a copy (Shift+D):
+    it gets its own id, its own program text (a copy), the original's trust, and parts of its own."""
+    key = uid(rig)
+    owner = _owner.get(key)
+    if owner is None or owner == rig.session_uid:
+        _owner[key] = rig.session_uid
+        return
+    if not any(o.session_uid == owner and o.ple.uid == key for o in all_rigs()):
+        _owner[key] = rig.session_uid  # the holder is gone (deleted, or a new session)
+        return
+    make_independent(rig, was_trusted=key in _trusted)
+
+
+def make_independent(rig, was_trusted: bool) -> None:
+    rig.ple.uid = uuid.uuid4().hex
+    _owner[rig.ple.uid] = rig.session_uid
+    if was_trusted:
+        _trusted.add(rig.ple.uid)
+    if rig.ple.text is not None:
+        rig.ple.text = rig.ple.text.copy()
+    rig.ple.filepath = ""  # the copy's program is not the original's file on disk
+    old = list(rig.children_recursive)  # duplicated parts (if they were selected) still point elsewhere
+    if old:  # the next drawing builds the copy's own parts (once its program may run)
+        data = [o.data for o in old if o.data is not None and o.data.users <= 1]
+        bpy.data.batch_remove(old + data)
+
+
+def duplicate(context, rig):
+    """A copy of a rig with its own program text, trust and parts, one handle size along U."""
+    lat = lattice_of(rig)
+    copy = rig.copy()
+    for coll in rig.users_collection:
+        coll.objects.link(copy)
+    copy.parent = rig.parent
+    cage_obj = parts(rig).get("cage")
+    width = cage_obj.dimensions.x if cage_obj is not None and cage_obj.dimensions.x > 0 else 5 * handle_size(lat)
+    copy.location = rig.location + Vector((1.25 * width, 0, 0))  # beside the original, not on it
+    make_independent(copy, was_trusted=trusted(rig))
+    _state.pop(copy.ple.uid, None)
+    err = refresh(copy, force=True)
+    if err:
+        raise PleError(err)
+    return copy
+
+
+# ----- reports from handlers ---------------------------------------------------------------------
+_pending_reports: list[str] = []
+
+
+def notify(rig, message: str) -> None:
+    """A problem met outside an operator (live editing): besides the panel's status line it goes
+    to the Info editor, through the ``ple.report`` operator run from a timer right after the
+    handler (handlers cannot report; in background mode timers never fire: ``flush_reports``)."""
+    _pending_reports.append(f"{rig.name}: {message}")
+    if not bpy.app.background and not bpy.app.timers.is_registered(flush_reports):
+        bpy.app.timers.register(flush_reports, first_interval=0.0)
+
+
+def flush_reports():
+    while _pending_reports:
+        msg = _pending_reports.pop(0)
+        try:
+            bpy.ops.ple.report(message=msg)
+        except RuntimeError:
+            print(f"PLE: {msg}")
+    return None
 
 
 # ----- update callbacks and handlers ----------------------------------------------------------
 def on_settings_changed(rig) -> None:
-    if not _busy and is_rig(rig):
-        refresh(rig)
+    """A setting of the panel changed; a region beyond the work budget (or otherwise bad) is
+    refused: the region settings go back to the last drawn ones, the error is the status."""
+    if _busy or not is_rig(rig):
+        return
+    st = state_of(rig)
+    err = refresh(rig)
+    if err and st.region and (tuple(rig.ple.region_min), tuple(rig.ple.region_max)) != st.region:
+        _set_quietly(rig, region_min=st.region[0], region_max=st.region[1])
+        refresh(rig, force=True)
+        rig.ple.status = err
+    refresh_dependents(rig)
+
+
+def _set_quietly(rig, **settings) -> None:
+    global _busy
+    was, _busy = _busy, True
+    try:
+        for k, v in settings.items():
+            setattr(rig.ple, k, v)
+    finally:
+        _busy = was
+
+
+def on_cumulative_changed(rig) -> None:
+    """The Cumulative toggle only changes what a frame shows; a stored frame edit is re-expressed
+    in the shown form (incremental <-> cumulative), so a later count change keeps what the
+    user sees (the step, or the span from group 0 to the last group)."""
+    if _busy or not is_rig(rig):
+        return
+    st = state_of(rig)
+    lat = st.lattice
+    if lat is not None:
+        try:
+            edits = edits_of(rig)
+            for n, axis in enumerate("uvw"):
+                flag = bool(rig.ple.cumulative[n])
+                for i, e in enumerate(edits):
+                    if (isinstance(e, snippets.SetDirection) and e.axis == axis and e.similarity is not None
+                            and e.cumulative != flag):
+                        count = getattr(lat, axis).count
+                        sim = cage.direction_similarity(lat, axis, flag)
+                        edits[i] = snippets.SetDirection(axis, e.count, sim, flag and count > 1)
+            _set_quietly(rig, edits=snippets.edits_to_json(edits))
+        except PleError as exc:
+            rig.ple.status = str(exc)
+    on_settings_changed(rig)
 
 
 def on_counts_changed(rig) -> None:
-    """The counts slider: a count-only set_u/v/w edit per changed direction."""
-    st = _state.get(rig.name_full)
-    if _busy or not is_rig(rig) or st is None or st.lattice is None:
+    """The counts slider: a count-only set_u/v/w edit per changed direction. Counts the core
+    refuses (absurd, or a region beyond the work budget) are not stored: the slider goes back
+    and the reason is the status."""
+    if _busy or not is_rig(rig):
         return
-    edits = [snippets.SetDirection(axis, int(c)) for axis, c, old in zip("uvw", rig.ple.counts, st.lattice.counts)
+    st = state_of(rig)
+    if st.lattice is None:
+        return
+    old_counts = st.lattice.counts
+    edits = [snippets.SetDirection(axis, int(c)) for axis, c, old in zip("uvw", rig.ple.counts, old_counts)
              if int(c) != old]
     try:
+        lat = lattice_of(rig, st, edits)
+        lat.validate()
+        r = region_of(rig, lat)
+        if r is not None:
+            work.check(work.estimate(lat, r), max_bytes=prefs.max_bytes(), what=f"drawing region {r}")
         add_edits(rig, edits)
     except PleError as exc:
-        rig.ple.status = str(exc)
+        _set_quietly(rig, counts=old_counts)
+        rig.ple.status = f"counts {tuple(int(c) for c in rig.ple.counts)} kept: {exc}"
         return
     refresh(rig)
+    refresh_dependents(rig)
+
+
+def dependents(rig, _seen=()) -> list:
+    """Rigs whose LiL filter uses ``rig`` as coarse lattice, directly or through a cascade."""
+    out = []
+    for other in all_rigs():
+        if (other != rig and other.ple.filter_kind == "LIL" and other.ple.coarse == rig
+                and uid(other) not in _seen):
+            out.append(other)
+            out.extend(dependents(other, (*_seen, uid(rig), uid(other))))
+    return out
+
+
+def refresh_dependents(rig) -> None:
+    for dep in dependents(rig):
+        refresh(dep)
 
 
 def rigs_in_updates(depsgraph) -> list:
+    """Rigs touched by an update, then the rigs whose LiL filter depends on them."""
     found = {}
     for u in depsgraph.updates:
         obj = u.id.original if isinstance(u.id, bpy.types.Object) else None
@@ -484,9 +744,25 @@ def rigs_in_updates(depsgraph) -> list:
             continue
         rig = rig_of(obj)
         if rig is not None:
-            found[rig.name_full] = rig
+            found[rig.as_pointer()] = rig
+    for rig in list(found.values()):
+        for dep in dependents(rig):
+            found.pop(dep.as_pointer(), None)
+            found[dep.as_pointer()] = dep  # after its coarse rig
     return list(found.values())
 
 
 def all_rigs() -> list:
     return [o for o in bpy.data.objects if o.ple.role == "RIG"]
+
+
+_object_count = [0]
+
+
+def check_removed(scene) -> None:
+    """After objects left the scene: remove the parts of rigs whose lattice object is gone."""
+    n = len(scene.objects)
+    if n < _object_count[0]:
+        remove_orphans()
+        n = len(scene.objects)
+    _object_count[0] = n

@@ -6,7 +6,52 @@ from __future__ import annotations
 import bpy
 
 from . import rig as rigmod
-from .corelink import PleError, snippets
+from .corelink import PleError, presets, snippets
+
+_previews = {}
+
+
+def load_previews() -> None:
+    """Preset thumbnails (shipped in presets/thumbnails) for the Add menu."""
+    import bpy.utils.previews
+
+    coll = bpy.utils.previews.new()
+    thumbs = presets.preset_dir() / "thumbnails"
+    for name in presets.preset_names():
+        png = thumbs / f"{name}.png"
+        if png.is_file():
+            coll.load(name, str(png), "IMAGE")
+    _previews["presets"] = coll
+
+
+def free_previews() -> None:
+    import bpy.utils.previews
+
+    coll = _previews.pop("presets", None)
+    if coll is not None:
+        bpy.utils.previews.remove(coll)
+
+
+def preset_icon(name: str) -> int:
+    coll = _previews.get("presets")
+    return coll[name].icon_id if coll is not None and name in coll else 0
+
+
+class PLE_MT_add(bpy.types.Menu):  # noqa: N801 - Blender naming
+    """Add › PLE Lattice: a preset (with its thumbnail) or a program / IR file"""
+
+    bl_idname = "PLE_MT_add"
+    bl_label = "PLE Lattice"
+
+    def draw(self, context):
+        layout = self.layout
+        for name in presets.preset_names():
+            icon = preset_icon(name)
+            kw = {"icon_value": icon} if icon else {"icon": "LIGHTPROBE_VOLUME"}
+            op = layout.operator("ple.lattice_add", text=name, **kw)
+            op.source, op.preset = "PRESET", name
+        layout.separator()
+        layout.operator("ple.lattice_add", text="From File…", icon="FILE_SCRIPT").source = "FILE"
 
 
 class PLE_PT_base:  # noqa: N801 - Blender naming
@@ -42,6 +87,11 @@ class PLE_PT_program(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender nami
         row = layout.row(align=True)
         row.operator("ple.program_run", icon="PLAY")
         row.operator("ple.program_apply", icon="FILE_REFRESH")
+        if p.filepath:
+            row = layout.row(align=True)
+            row.label(text=p.filepath, icon="FILE")
+            row.operator("ple.program_reload", text="", icon="FILE_REFRESH")
+            row.operator("ple.program_save", text="", icon="FILE_TICK")
         row = layout.row(align=True)
         row.operator("ple.snippet_copy", icon="COPYDOWN")
         row.prop(p, "snippet_digits")
@@ -52,6 +102,10 @@ class PLE_PT_program(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender nami
         row = layout.row()
         row.label(text=f"{n} GUI edit(s) not in the program")
         row.operator("ple.edits_clear", text="", icon="X")
+        row = layout.row(align=True)
+        row.operator("ple.duplicate", icon="DUPLICATE")
+        row.operator("ple.bake", icon="MESH_DATA")
+        row.operator("ple.remove", icon="TRASH")
         if p.status:
             layout.label(text=p.status, icon="ERROR")
 
@@ -96,7 +150,7 @@ class PLE_PT_template(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender nam
         row.operator("ple.node_add", icon="ADD")
         row.operator("ple.node_remove", icon="REMOVE")
         layout.operator("ple.beam_add", icon="ADD")
-        st = rigmod._state.get(rig.name_full)
+        st = rigmod._state.get(rig.ple.uid)
         if st is not None and st.lattice is not None:
             for b, beam in enumerate(st.lattice.beams):
                 row = layout.row()
@@ -132,4 +186,4 @@ class PLE_PT_output(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender namin
         layout.operator("ple.export", icon="EXPORT")
 
 
-CLASSES = (PLE_PT_program, PLE_PT_frames, PLE_PT_region, PLE_PT_template, PLE_PT_filters, PLE_PT_output)
+CLASSES = (PLE_MT_add, PLE_PT_program, PLE_PT_frames, PLE_PT_region, PLE_PT_template, PLE_PT_filters, PLE_PT_output)

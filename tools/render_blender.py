@@ -1,8 +1,10 @@
 """Render the add-on's rig for the docs: ``python -m tools.render_blender`` writes
 ``docs/img/addon_rig.png`` (Workbench, headless through EGL, in a subprocess).
 
-The picture shows the thesis Fig. 6.3 lattice as the extension draws it: the cage (isocurves
-of the steady 3-map, blue) and a fully drawn region (balls and cone-beams, orange).
+The picture shows the default rig of the thesis Fig. 6.3 lattice exactly as the extension
+makes it (no overrides): the cage (isocurves of the steady 3-map, bevelled, material
+"PLE cage", orange) and the default 3x3x3 region (balls and cone-beams, "PLE region", blue),
+in the Workbench engine with material colours (what the viewport shows).
 """
 
 from __future__ import annotations
@@ -31,15 +33,12 @@ def render(out: Path, preset: str, region: tuple, size: tuple) -> None:
     bpy.ops.ple.lattice_add(source="PRESET", preset=preset, region=region)
     r = bpy.context.active_object
     p = rig.parts(r)
-    p["cage"].data.bevel_depth = 0.02
-    p["cage"].color = (0.15, 0.35, 0.85, 1.0)
-    p["region"].color = (0.95, 0.55, 0.15, 1.0)
     bpy.context.view_layer.update()
     scene = bpy.context.scene
     scene.render.engine = "BLENDER_WORKBENCH"
     scene.render.resolution_x, scene.render.resolution_y = size
     shading = scene.display.shading
-    shading.light, shading.color_type, shading.show_cavity = "STUDIO", "OBJECT", True
+    shading.light, shading.color_type, shading.show_cavity = "STUDIO", "MATERIAL", True
     scene.world = bpy.data.worlds.new("w")
     pts = np.concatenate([np.array([tuple(q.co)[:3] for q in s.points]) for s in p["cage"].data.splines])
     centre, extent = pts.mean(axis=0), float(np.linalg.norm(pts.max(0) - pts.min(0)))
@@ -60,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(ROOT / "docs" / "img" / "addon_rig.png"))
     ap.add_argument("--preset", default="fig6_3")
-    ap.add_argument("--region", default="4,6,5", help="node-groups drawn in full per direction")
+    ap.add_argument("--region", default="3,3,3", help="node-groups drawn in full per direction (the default rig's)")
     ap.add_argument("--size", default="960x600")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)

@@ -12,8 +12,8 @@ import trimesh
 from lxml import etree
 from ple.cli.main import main
 from ple.errors import PleError
-from ple.io.export import NS_BALLS, NS_BEAM, NS_CORE, export_mesh, write_beam_lattice_3mf, write_stl
-from ple.meshing.tessellate import tessellate
+from ple.io.export import NS_BALLS, NS_BEAM, NS_CORE, export_mesh, write_beam_lattice_3mf, write_chunks, write_stl
+from ple.meshing.tessellate import iter_triangles, tessellate
 from ple.program.sources import load_lattice
 
 
@@ -61,6 +61,16 @@ def test_mesh_formats_round_trip(tmp_path, fmt):
     back = trimesh.load(path, force="mesh")
     assert len(back.faces) == len(mesh.faces)
     assert back.volume == pytest.approx(mesh.volume, rel=1e-5)
+
+
+@pytest.mark.parametrize("fmt", ["ply", "3mf", "obj"])
+def test_boxes_written_as_one_mesh(tmp_path, fmt):
+    lat = load_lattice("cubic")
+    want = tessellate(lat, "0:3,0:2,0:2", "cnt")
+    count = write_chunks(tmp_path / f"m.{fmt}", iter_triangles(lat, "0:3,0:2,0:2", "cnt", max_groups=2))
+    got = trimesh.load(tmp_path / f"m.{fmt}", force="mesh")
+    assert count == len(want.faces) == len(got.faces) and got.is_watertight
+    assert np.isclose(got.volume, want.volume, rtol=1e-6)
 
 
 def test_beam_lattice_3mf(tmp_path):

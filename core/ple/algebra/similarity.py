@@ -134,7 +134,10 @@ class Similarity:
         if abs(s - 1.0) <= NEAR_UNIT_FACTOR:
             return _screw_from(axis, angle, b)
         # swirl / pure dilation: the unique fixed point solves (I - A) P = b (s != 1)
-        fixed = np.linalg.solve(np.eye(3) - a, b)
+        try:
+            fixed = np.linalg.solve(np.eye(3) - a, b)
+        except np.linalg.LinAlgError:  # s within float noise of 1 (e.g. a float32 rotation matrix)
+            return _screw_from(axis, angle, b)
         if angle == 0.0:
             axis = np.array([0.0, 0.0, 1.0])
         return Similarity(s, angle, tuple(axis), tuple(fixed), 0.0)

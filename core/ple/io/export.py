@@ -18,7 +18,7 @@ import trimesh
 
 from ..errors import PleError
 from ..meshing.connectors import constant_radius_connectors
-from ..meshing.tessellate import iter_triangles, tessellate
+from ..meshing.tessellate import iter_triangles, tessellate, weld_chunks
 from ..model.lattice import Lattice
 from .files import atomic_path, atomic_write_text, check_output_dir, write_marker
 from .formats import format_named, mesh_format
@@ -101,6 +101,15 @@ def export_mesh(mesh: trimesh.Trimesh, path) -> None:
         return
     with atomic_path(path) as tmp:
         tmp.write_bytes(mesh_bytes(mesh, fmt))
+
+
+def write_chunks(path, chunks: Iterable) -> int:
+    """Write the boxes of ``iter_triangles`` (pairs vertices, faces) as one mesh, welded by
+    ``weld_chunks``, in the format of ``path``'s suffix; returns the number of triangles. (Binary
+    STL needs no weld: ``write_stl`` streams the boxes.)"""
+    verts, faces = weld_chunks(chunks)
+    export_mesh(trimesh.Trimesh(verts, faces, process=False), path)
+    return len(faces)
 
 
 def mesh_bytes(mesh: trimesh.Trimesh, fmt: str) -> bytes:

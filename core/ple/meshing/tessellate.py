@@ -476,3 +476,25 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
             done = pending.result()
             pending = pool.submit(tess.build, nxt) if nxt is not None else None
             yield done
+
+
+def weld_chunks(chunks) -> tuple[np.ndarray, np.ndarray]:
+    """One mesh (vertices (V, 3), faces (F, 3)) from the boxes of ``iter_triangles``: the hub
+    vertices repeated in neighbouring boxes are bit-identical and are merged; vertices no face
+    uses are dropped (the vertex set of ``tessellate`` for the same region)."""
+    chunks = [(np.asarray(v, dtype=float).reshape(-1, 3), np.asarray(f, dtype=np.int64).reshape(-1, 3))
+              for v, f in chunks]
+    if not chunks:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+    offsets = np.cumsum([0] + [len(v) for v, _ in chunks])[:-1]
+    verts = np.concatenate([v for v, _ in chunks])
+    faces = np.concatenate([f + o for (_, f), o in zip(chunks, offsets)])
+    _, first, inverse = np.unique(verts, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")  # vertices keep the order in which boxes produced them
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    faces = rank[inverse.reshape(-1)][faces]
+    used = np.zeros(len(order), dtype=bool)
+    used[faces.reshape(-1)] = True
+    renumber = np.cumsum(used) - 1
+    return verts[first[order]][used], renumber[faces]

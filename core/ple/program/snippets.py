@@ -22,7 +22,7 @@ from ..algebra.similarity import Similarity, similarity_from_dict
 from ..algebra.vectors import Pt
 from ..errors import PleError
 from ..model.lattice import Lattice
-from .runtime import compile_program
+from .runtime import compile_program, trace_program
 
 DIGITS = 12  # decimals written for numbers: far below the 1e-9 round-trip tolerance
 
@@ -304,18 +304,57 @@ def apply_edits(source: str, edits, params: dict | None = None, digits: int = DI
     code reads what it replaced), the edits are appended instead.
     """
     edits = coalesce(edits)
+    source = _named_return(source)
     prog = compile_program(source, name)
+    executed = _executed_lines(prog, name, params or {})
     expected = apply_to_lattice(prog.run(**(params or {})), edits)
     candidates = [True, False] if in_place else [False]
     for use_in_place in candidates:
-        text = _rewrite(source, edits, digits, use_in_place)
+        text = _rewrite(source, edits, digits, use_in_place, executed)
         got = compile_program(text, name).run(**(params or {}))
         if lattices_close(got, expected):
             return text
     raise PleError(f"{name}: applying the edits does not reproduce the GUI state; copy the snippet instead")
 
 
-def _rewrite(source: str, edits, digits: int, in_place: bool) -> str:
+def _named_return(source: str) -> str:
+    """``return <expression>`` at the end of lattice() becomes ``lat = <expression>`` and
+    ``return lat`` (a fresh name if ``lat`` is taken), so edits have a lattice to act on."""
+    try:
+        fn = _lattice_function(ast.parse(source))
+    except (SyntaxError, PleError):
+        return source  # reported as usual by compile_program / _rewrite
+    ret = fn.body[-1] if fn.body else None
+    if not isinstance(ret, ast.Return) or ret.value is None or isinstance(ret.value, ast.Name):
+        return source
+    used = {n.id for n in ast.walk(fn) if isinstance(n, ast.Name)} | {a.arg for a in ast.walk(fn)
+                                                                       if isinstance(a, ast.arg)}
+    var = next(v for v in ("lat", "lattice_", *(f"lat{n}" for n in range(1, 100))) if v not in used)
+    src = _Source(source)
+    start, end = src.span(ret)
+    indent = " " * ret.col_offset
+    return source[:start] + f"{var} = {src.segment(ret.value)}\n{indent}return {var}" + source[end:]
+
+
+def _executed_lines(prog, name: str, params: dict) -> set[int] | None:
+    """Line numbers of lattice() that run with ``params`` (which branch holds the live calls);
+    None if tracing is not possible."""
+    lines: set[int] = set()
+
+    def local(frame, event, arg):
+        if event == "line":
+            lines.add(frame.f_lineno)
+        return local
+
+    try:
+        with trace_program(name, local):
+            prog.run(**params)
+    except PleError:
+        return None
+    return lines
+
+
+def _rewrite(source: str, edits, digits: int, in_place: bool, executed: set[int] | None = None) -> str:
     tree = ast.parse(source)
     fn = _lattice_function(tree)
     ret = fn.body[-1] if fn.body else None
@@ -326,9 +365,18 @@ def _rewrite(source: str, edits, digits: int, in_place: bool) -> str:
     calls = [n for n in ast.walk(fn) if isinstance(n, ast.Call)]
     top = {id(s.value): s for s in fn.body if isinstance(s, (ast.Expr, ast.Assign)) and isinstance(s.value, ast.Call)}
 
-    def only_top_call(method: str):
+    statements = {id(s.value) for s in ast.walk(fn) if isinstance(s, ast.Expr) and isinstance(s.value, ast.Call)}
+
+    def live_calls(method: str) -> list:
+        """The calls to rewrite in place: the one top-level call, or else the statement calls
+        (in branches, loops) that run with the given inputs; [] if any is used as a value."""
         found = [c for c in calls if _is_call(c, var, method)]
-        return found[0] if len(found) == 1 and id(found[0]) in top else None
+        if len(found) == 1 and id(found[0]) in top:
+            return found
+        if not found or any(id(c) not in statements for c in found):
+            return []
+        live = [c for c in found if executed is None or c.lineno in executed]
+        return live if live and executed is not None else []
 
     replacements: dict[tuple[int, int], str] = {}  # by span: a later edit of the same span wins
     appended: list[str] = []
@@ -336,31 +384,34 @@ def _rewrite(source: str, edits, digits: int, in_place: bool) -> str:
     nodes_in_place = in_place and all(id(c) in top for c in node_calls)
     shifted = False  # after a node is added or removed, node indices no longer match calls
     for e in edits:
-        call = None
+        live: list = []
         if in_place and isinstance(e, SetDirection):
-            call = only_top_call(f"set_{e.axis}")
+            live = live_calls(f"set_{e.axis}")
         elif in_place and isinstance(e, SetPlacement):
-            call = only_top_call("set_placement")
+            live = live_calls("set_placement")
         elif in_place and isinstance(e, SetBecots):
-            call = only_top_call("set_becots")
-            if call is not None:
-                replacements[src.span(call)] = e.code(var, digits)
+            live = live_calls("set_becots")
+            if live:
+                for call in live:
+                    replacements[src.span(call)] = e.code(var, digits)
                 continue
-        if call is not None and not call.keywords and len(call.args) == 1 and isinstance(e, SetPlacement):
-            replacements[src.span(call.args[0])] = e.similarity.to_code(digits)
+        if live and isinstance(e, SetPlacement) and all(not c.keywords and len(c.args) == 1 for c in live):
+            for call in live:
+                replacements[src.span(call.args[0])] = e.similarity.to_code(digits)
             continue
-        if call is not None and isinstance(e, SetDirection) and 2 <= len(call.args) + len(call.keywords) <= 3 \
-                and len(call.args) >= 2:
-            count = str(e.count) if e.count is not None else src.segment(call.args[0])
-            if e.similarity is None:
-                rest = ", ".join([src.segment(a) for a in call.args[1:]]
-                                 + [src.segment(k) for k in call.keywords])
-            else:
-                rest = e.similarity.to_code(digits) + (", cumulative=True" if e.cumulative else "")
-            start, _ = src.span(call.args[0])
-            last = (call.keywords or call.args)[-1]
-            _, end = src.span(last)
-            replacements[(start, end)] = f"{count}, {rest}"
+        if live and isinstance(e, SetDirection) and all(
+                2 <= len(c.args) + len(c.keywords) <= 3 and len(c.args) >= 2 for c in live):
+            for call in live:
+                count = str(e.count) if e.count is not None else src.segment(call.args[0])
+                if e.similarity is None:
+                    rest = ", ".join([src.segment(a) for a in call.args[1:]]
+                                     + [src.segment(k) for k in call.keywords])
+                else:
+                    rest = e.similarity.to_code(digits) + (", cumulative=True" if e.cumulative else "")
+                start, _ = src.span(call.args[0])
+                last = (call.keywords or call.args)[-1]
+                _, end = src.span(last)
+                replacements[(start, end)] = f"{count}, {rest}"
             continue
         if isinstance(e, (AddNode, RemoveNode)):
             shifted = True
