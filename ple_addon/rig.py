@@ -628,6 +628,7 @@ def notify(rig, message: str) -> None:
     to the Info editor, through the ``ple.report`` operator run from a timer right after the
     handler (handlers cannot report; in background mode timers never fire: ``flush_reports``)."""
     _pending_reports.append(f"{rig.name}: {message}")
+    del _pending_reports[:-50]  # background sessions never flush: keep only the latest
     if not bpy.app.background and not bpy.app.timers.is_registered(flush_reports):
         bpy.app.timers.register(flush_reports, first_interval=0.0)
 
