@@ -15,7 +15,6 @@ import json
 import math
 import os
 import time
-from concurrent.futures import BrokenExecutor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,6 +30,7 @@ from ..model.budget import MESH_TRIANGLE_BYTES, default_max_memory, mesh_triangl
 from ..program.runner import DEFAULT_TIMEOUT, run_program
 from ..program.runtime import Param, load_program_file, parse_param_value
 from ..program.sources import resolve_source
+from .cluster import dask_client, run_tasks
 from .progress import Progress
 
 KIND = "ple-batch"  # the output-folder marker's kind
@@ -131,10 +131,12 @@ def _run_variant(source: str, params: dict, style: str, levels, region, out: str
 
 def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", fmt: str = "stl",
               levels: int | None = None, region: str | None = None, jobs: int | None = None,
-              progress=True, limits: tuple | None = None) -> dict:
+              progress=True, limits: tuple | None = None, scheduler: str | None = "local") -> dict:
     """Export every variant of a sweep; skip those already in the manifest with their file.
     ``limits``: (timeout s, memory bytes) of each variant's program and mesh
-    (``ple.program.runner``)."""
+    (``ple.program.runner``). The variants run on Dask (``ple.app.cluster.dask_client``: an
+    embedded cluster of ``jobs`` workers by default, ``sync`` in this process, or a scheduler
+    address); a variant whose worker dies is rerun, then reported by name."""
     style_named(style)
     path, variants = plan(source, sweeps, fmt)
     out = Path(out_dir)
@@ -149,17 +151,14 @@ def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", f
     t0 = time.perf_counter()
     bar = Progress(len(todo), "batch", enabled=None if progress else False)
     if todo:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(_run_variant, path, v.params, style, levels, region, str(out / v.filename),
-                                   limits): v for v in todo}
-            for fut in as_completed(futures):
-                v = futures[fut]
-                try:
-                    manifest["outputs"].append(fut.result())
-                except PleError as exc:
-                    failures.append({"file": v.filename, "params": v.params, "error": str(exc)})
-                except BrokenExecutor as exc:  # a worker died (killed, crashed outside a program)
-                    failures.append({"file": v.filename, "params": v.params, "error": f"worker died: {exc}"})
+        with dask_client(scheduler, jobs) as client:
+            for v, result in run_tasks(client, _run_variant, [(path, v.params, style, levels, region,
+                                                               str(out / v.filename), limits) for v in todo], todo):
+                if isinstance(result, Exception):
+                    error = str(result) if isinstance(result, PleError) else f"worker died: {result}"
+                    failures.append({"file": v.filename, "params": v.params, "error": error})
+                else:
+                    manifest["outputs"].append(result)
                 atomic_write_text(manifest_path, json.dumps(manifest, indent=1) + "\n")
                 if bar:
                     bar.update(1, v.filename)

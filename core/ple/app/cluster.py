@@ -53,6 +53,27 @@ def dask_client(scheduler: str | None = "local", workers: int | None = None) -> 
         yield client
 
 
+def run_tasks(client, fn, args_list: list[tuple], items: list):
+    """Yield ``(item, result or exception)`` as the calls ``fn(*args)`` finish, on Dask
+    (``client``) or in this process (``client`` None). A PleError, or a task whose worker died
+    more than RETRIES times, comes back as its exception; nothing else stops the others."""
+    if client is None:
+        for item, args in zip(items, args_list):
+            try:
+                yield item, fn(*args)
+            except PleError as exc:
+                yield item, exc
+        return
+    from dask.distributed import as_completed  # optional: only distributed runs need Dask
+
+    futures = {client.submit(fn, *args, retries=RETRIES, pure=False): item for item, args in zip(items, args_list)}
+    for fut in as_completed(futures):
+        try:
+            yield futures[fut], fut.result()
+        except Exception as exc:  # PleError from the task, or KilledWorker: reported by name
+            yield futures[fut], exc
+
+
 def run_job(job: Job, url: str, scheduler: str | None = "local", workers: int | None = None,
             progress: bool | None = None, client=None) -> dict:
     """Compute every part of ``job`` not already written and valid under ``url``; returns a
@@ -77,43 +98,25 @@ def run_job(job: Job, url: str, scheduler: str | None = "local", workers: int | 
     bar = Progress(len(todo), job.kind, enabled=progress)
     if todo:
         if client is not None:
-            _run_dask(client, job, todo, url, manifest, save, bar)
+            _run_parts(client, job, todo, url, manifest, save, bar)
         else:
             with dask_client(scheduler, workers) as c:
-                if c is None:
-                    _run_sync(job, todo, url, manifest, save, bar)
-                else:
-                    if progress is not False and sys.stderr.isatty():
-                        print(f"dask dashboard: {c.dashboard_link}", file=sys.stderr)
-                    _run_dask(c, job, todo, url, manifest, save, bar)
+                if c is not None and progress is not False and sys.stderr.isatty():
+                    print(f"dask dashboard: {c.dashboard_link}", file=sys.stderr)
+                _run_parts(c, job, todo, url, manifest, save, bar)
     bar.close()
     return {"written": len(todo) - len(manifest["failures"]), "skipped": len(done), "failed": manifest["failures"],
             "manifest": f"{url.rstrip('/')}/{MANIFEST}", "seconds": round(time.perf_counter() - t0, 3)}
 
 
-def _run_sync(job: Job, todo, url, manifest, save, bar) -> None:
-    for part in todo:
-        try:
-            manifest["parts"][part.name] = compute_part(job.kind, job.settings, part, url)
-        except PleError as exc:
-            manifest["failures"][part.name] = {"params": part.params, "error": str(exc)}
-        save()
-        bar.update(1, part.name)
-
-
-def _run_dask(client, job: Job, todo, url, manifest, save, bar) -> None:
-    from dask.distributed import as_completed  # optional: only distributed runs need Dask
-
-    futures = {client.submit(compute_part, job.kind, job.settings, part, url, key=f"ple-{job.kind}-{part.name}-"
-                             f"{os.getpid()}-{time.monotonic_ns()}", retries=RETRIES, pure=False): part
-               for part in todo}
-    for fut in as_completed(futures):
-        part = futures[fut]
-        try:
-            manifest["parts"][part.name] = fut.result()
-        except PleError as exc:
-            manifest["failures"][part.name] = {"params": part.params, "error": str(exc)}
-        except Exception as exc:  # a worker-side crash that is not a user error: reported by name
-            manifest["failures"][part.name] = {"params": part.params, "error": f"{type(exc).__name__}: {exc}"}
+def _run_parts(client, job: Job, todo, url, manifest, save, bar) -> None:
+    """Every part of ``todo`` through ``run_tasks``; the manifest is saved after each one."""
+    args = [(job.kind, job.settings, part, url) for part in todo]
+    for part, result in run_tasks(client, compute_part, args, todo):
+        if isinstance(result, Exception):
+            error = str(result) if isinstance(result, PleError) else f"{type(result).__name__}: {result}"
+            manifest["failures"][part.name] = {"params": part.params, "error": error}
+        else:
+            manifest["parts"][part.name] = result
         save()
         bar.update(1, part.name)

@@ -19,7 +19,11 @@ def register(sub) -> None:
     p.add_argument("--levels", type=int, help="refinement levels for --style refined")
     p.add_argument("--format", default="stl", choices=FORMAT_NAMES)
     p.add_argument("--region", help="I0:I1,J0:J1,K0:K1 to mesh (default: whole lattice)")
-    p.add_argument("--jobs", type=int, help="worker processes (default: all cores)")
+    p.add_argument("--jobs", "--workers", dest="jobs", type=int,
+                   help="workers of the embedded Dask cluster (default: all cores)")
+    p.add_argument("--scheduler", default="local", metavar="S",
+                   help="local (an embedded Dask cluster, default), sync (this process) or a Dask scheduler "
+                        "address tcp://HOST:PORT")
     p.add_argument("--out", required=True, help="output folder (manifest.json is written there)")
     add_program_limits(p)
     p.set_defaults(func=run)
@@ -27,6 +31,6 @@ def register(sub) -> None:
 
 def run(args) -> int:
     result = run_batch(args.lattice, args.param, args.out, args.style, args.format, args.levels, args.region,
-                       args.jobs, limits=(args.timeout, max_memory(args)))
+                       args.jobs, limits=(args.timeout, max_memory(args)), scheduler=args.scheduler)
     print(json.dumps(result, indent=1))
     return 2 if result["failed"] else 0  # a variant the program rejects is bad input
