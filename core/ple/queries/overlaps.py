@@ -35,7 +35,8 @@ from .biq import query as biq_query
 
 CLEAN_TOL = 1e-9  # overlap depth, relative to the larger radius of the pair, below which elements only touch
 WORST = 10  # worst offenders listed
-MAX_ANCHOR_FRACTION = 0.25  # steady path only when the anchors are at most this share of all groups
+MAX_ANCHOR_FRACTION = 0.02  # "auto" takes the steady path when the anchors are at most this share of all groups
+MAX_EXPLICIT = 2_000_000  # ... or when more elements than this would be evaluated
 PAIR_CHUNK = 1 << 18  # candidate pairs per vectorized block
 QUERY_CHUNK = 1 << 12  # anchor elements per RangeFinder batch
 KINDS = ("ball_ball", "ball_beam", "beam_beam")
@@ -115,12 +116,13 @@ def _explicit(ev: Evaluation, margin: float) -> dict:
     ends = np.concatenate([np.repeat(np.arange(nn)[:, None], 2, axis=1), ev.beam_nodes]).astype(np.int64)
     kinds = np.concatenate([np.zeros(nn, np.int64), np.ones(nb, np.int64)])
     labels = np.concatenate([np.concatenate([ev.node_index, ev.beam_index]), kinds[:, None]], axis=1)
-    cen, rad = enclosing_ball(ev.center[ends[:, 0]], ev.radius[ends[:, 0]], ev.center[ends[:, 1]],
-                              ev.radius[ends[:, 1]])
+    ca, ra, cb, rb = ev.center[ends[:, 0]], ev.radius[ends[:, 0]], ev.center[ends[:, 1]], ev.radius[ends[:, 1]]
+    box_lo = np.minimum(ca - ra[:, None], cb - rb[:, None])
+    box_hi = np.maximum(ca + ra[:, None], cb + rb[:, None])
     edge_keys = np.sort(np.concatenate([ev.beam_nodes[:, 0] * nn + ev.beam_nodes[:, 1],
                                         ev.beam_nodes[:, 1] * nn + ev.beam_nodes[:, 0]]))
     result = _Collector(margin)
-    for i, j in grid_pairs(cen, rad, margin):
+    for i, j in grid_pairs(box_lo, box_hi, margin):
         ia, ib = ends[i], ends[j]
         shared = (ia[:, :1] == ib).any(axis=1) | (ia[:, 1:] == ib).any(axis=1)
         both_balls = (kinds[i] == 0) & (kinds[j] == 0)
@@ -142,40 +144,55 @@ def _explicit(ev: Evaluation, margin: float) -> dict:
     return out
 
 
-def grid_pairs(center: np.ndarray, radius: np.ndarray, margin: float):
-    """Index pairs (i < j) of balls whose distance is at most r_i + r_j + margin, found in a uniform
-    grid of cell 2·max r + margin (each ball in its centre's cell; 13 forward neighbour offsets and
-    the own cell), yielded in blocks of at most PAIR_CHUNK candidates before the exact test."""
-    n = len(radius)
+def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float):
+    """Index pairs (i < j) of axis-aligned boxes closer than ``margin`` (each grown by margin / 2).
+    Each box is entered in every cell of a uniform grid (cell: the median box diagonal) it
+    overlaps; a pair is reported by the one cell holding the larger of the two lower corners (no
+    duplicates). Yielded in blocks of about PAIR_CHUNK cell entries."""
+    n = len(box_lo)
     if n < 2:
         return
-    h = 2 * float(radius.max()) + margin
-    h = h if h > 0 else 1.0
-    cell = np.floor((center - center.min(axis=0)) / h).astype(np.int64)
-    dims = cell.max(axis=0) + 3
-    key = ((cell[:, 0] + 1) * dims[1] + (cell[:, 1] + 1)) * dims[2] + (cell[:, 2] + 1)
-    order = np.argsort(key, kind="stable")
-    skey = key[order]
-    offsets = [(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1) if (a, b, c) >= (0, 0, 0)]
-    step = max(1, PAIR_CHUNK // 64)
-    for s in range(0, n, step):
-        rows = np.arange(s, min(n, s + step))
-        for off in offsets:
-            nk = key[rows] + (off[0] * dims[1] + off[1]) * dims[2] + off[2]
-            lo, hi = np.searchsorted(skey, nk, "left"), np.searchsorted(skey, nk, "right")
-            cnt = hi - lo
-            if not cnt.sum():
-                continue
-            i = np.repeat(rows, cnt)
-            j = order[np.repeat(lo, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
-            if off == (0, 0, 0):
-                keep = i < j
-                i, j = i[keep], j[keep]
-            d = np.linalg.norm(center[i] - center[j], axis=1)
-            near = d <= radius[i] + radius[j] + margin
-            a, b = np.minimum(i[near], j[near]), np.maximum(i[near], j[near])
-            if len(a):
-                yield a, b
+    blo, bhi = box_lo - margin / 2, box_hi + margin / 2
+    h = max(float(np.median(np.max(bhi - blo, axis=1))), 1e-12)
+    origin = blo.min(axis=0)
+    lo = np.floor((blo - origin) / h).astype(np.int64)
+    hi = np.floor((bhi - origin) / h).astype(np.int64)
+    dims = hi.max(axis=0) + 1
+    span = hi - lo + 1
+    per = np.prod(span, axis=1)
+    key_all, owner_all = _cell_entries(lo, span, dims, np.arange(n))
+    sort = np.argsort(key_all, kind="stable")
+    table = (key_all[sort], owner_all[sort])
+    bounds = np.searchsorted(np.cumsum(per), np.arange(0, int(per.sum()), max(1, PAIR_CHUNK // 32)), "right")
+    edges = np.unique(np.concatenate([[0], bounds, [n]]))
+    for start, stop in zip(edges[:-1], edges[1:]):
+        key, owner = _cell_entries(lo, span, dims, np.arange(start, stop))
+        a, b = np.searchsorted(table[0], key, "left"), np.searchsorted(table[0], key, "right")
+        cnt = b - a
+        i = np.repeat(owner, cnt)
+        cell = np.repeat(key, cnt)
+        j = table[1][np.repeat(a, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
+        keep = i < j
+        i, j, cell = i[keep], j[keep], cell[keep]
+        corner = np.maximum(lo[i], lo[j])  # the one cell that reports the pair
+        keep = ((corner[:, 0] * dims[1] + corner[:, 1]) * dims[2] + corner[:, 2]) == cell
+        i, j = i[keep], j[keep]
+        near = np.all((blo[i] <= bhi[j]) & (blo[j] <= bhi[i]), axis=1)
+        if near.any():
+            yield i[near], j[near]
+
+
+def _cell_entries(lo, span, dims, rows):
+    """(cell key, element) for every grid cell each element's box covers."""
+    per = np.prod(span[rows], axis=1)
+    owner = np.repeat(rows, per)
+    local = np.arange(per.sum()) - np.repeat(np.cumsum(per) - per, per)
+    sp = span[owner]
+    cz = local % sp[:, 2]
+    cy = (local // sp[:, 2]) % sp[:, 1]
+    cx = local // (sp[:, 2] * sp[:, 1])
+    c = lo[owner] + np.stack([cx, cy, cz], axis=1)
+    return (c[:, 0] * dims[1] + c[:, 1]) * dims[2] + c[:, 2], owner
 
 
 class _Collector:
@@ -251,14 +268,15 @@ def _elements_at(lat: Lattice, kind, idx):
     return ca, ra, (cb, rb), nodes
 
 
-def _steady(lat: Lattice, margin: float):
+def _steady(lat: Lattice, margin: float, force: bool = False):
     sim = similar_axes(lat)
     rch = reach(lat)
     counts = np.array(lat.counts)
     rep = np.array([r if s and c > r + 1 else -1 for r, s, c in zip(rch, sim, counts)])  # -1: no similar copies
     anchors = [np.arange(min(c, r + 1)) if p >= 0 else np.arange(c) for c, r, p in zip(counts, rch, rep)]
     n_anchor = math.prod(len(a) for a in anchors)
-    if n_anchor > MAX_ANCHOR_FRACTION * lat.groups and lat.groups > 64:
+    elements = lat.node_count() + lat.beam_count()
+    if not force and n_anchor > MAX_ANCHOR_FRACTION * lat.groups and elements <= MAX_EXPLICIT:
         return None
     ext = np.where(rep >= 0, counts, 0)
     big = _extended(lat, ext)
@@ -364,7 +382,7 @@ def unclean_pairs(lat: Lattice, ev: Evaluation | None = None, margin: float = 0.
     if path not in ("auto", "steady", "explicit"):
         raise PleError(f"unclean-pair path {path!r}: expected auto, steady or explicit")
     if ev is None and path != "explicit" and lat.becots is None:
-        out = _steady(lat, float(margin))
+        out = _steady(lat, float(margin), force=path == "steady")
         if out is not None:
             return out
     if ev is None:
