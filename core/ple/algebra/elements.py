@@ -84,3 +84,57 @@ def enclosing_ball(a, ra, b, rb) -> tuple[np.ndarray, np.ndarray]:
     center = np.where(a_big[..., None], a, np.where(b_big[..., None], b, center))
     radius = np.where(a_big, ra, np.where(b_big, rb, radius))
     return center, radius
+
+
+GAP_ITERATIONS = 64  # golden-section steps of ``beam_beam_gap`` (interval 0.618^64 ≈ 4e-14 of the axis)
+
+
+def beam_beam_gap(a1, ra1, b1, rb1, a2, ra2, b2, rb2) -> np.ndarray:
+    """Distance between cone-beams hull(ball(a1, ra1), ball(b1, rb1)) and hull(ball(a2, ra2),
+    ball(b2, rb2)), 0 where they intersect (vectorized over leading axes).
+
+    Beam 1 is the union of the balls (a1 + t (b1 − a1), ra1 + t (rb1 − ra1)), t in [0, 1], so the
+    gap is min_t max(d₂(P(t)) − r(t), 0) with d₂ the signed distance to beam 2 (``beam_distance``:
+    exact outside, negative inside). That function is convex in t (a convex distance along a
+    segment minus a linear radius, clipped at 0), so a golden-section search finds its minimum."""
+    a1, b1, a2, b2 = (np.asarray(x, float) for x in (a1, b1, a2, b2))
+    ra1, rb1 = np.asarray(ra1, float), np.asarray(rb1, float)
+
+    def f(t):
+        p = a1 + t[..., None] * (b1 - a1)
+        return np.maximum(beam_distance(p, a2, ra2, b2, rb2) - (ra1 + t * (rb1 - ra1)), 0.0)
+
+    shape = np.broadcast_shapes(a1.shape[:-1], b1.shape[:-1], a2.shape[:-1], b2.shape[:-1], ra1.shape, rb1.shape,
+                                np.shape(ra2), np.shape(rb2))
+    g = (np.sqrt(5.0) - 1) / 2
+    lo, hi = np.zeros(shape), np.ones(shape)
+    x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
+    f1, f2 = f(x1), f(x2)
+    for _ in range(GAP_ITERATIONS):
+        left = f1 <= f2  # the minimum lies in [lo, x2], else in [x1, hi]
+        hi = np.where(left, x2, hi)
+        lo = np.where(left, lo, x1)
+        x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
+        f1, f2 = f(x1), f(x2)
+    return np.minimum.reduce([f1, f2, f(np.zeros(shape)), f(np.ones(shape))])
+
+
+def segment_distance(p1, q1, p2, q2) -> np.ndarray:
+    """Distance between segments [p1, q1] and [p2, q2] (vectorized), by the clamped closest-point
+    parameters of the two lines (parallel segments: the first parameter 0, then clamped)."""
+    p1, q1, p2, q2 = (np.asarray(x, float) for x in (p1, q1, p2, q2))
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a, e = np.sum(d1 * d1, axis=-1), np.sum(d2 * d2, axis=-1)
+    b, c, f = np.sum(d1 * d2, axis=-1), np.sum(d1 * r, axis=-1), np.sum(d2 * r, axis=-1)
+    sa, se = np.where(a > 0, a, 1.0), np.where(e > 0, e, 1.0)
+    denom = a * e - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(denom > 1e-14 * a * e, np.clip((b * f - c * e) / np.where(denom > 0, denom, 1.0), 0, 1), 0.0)
+    s = np.where(a > 0, s, 0.0)
+    t = np.where(e > 0, (b * s + f) / se, 0.0)
+    low, high = t < 0, t > 1
+    t = np.clip(t, 0, 1)
+    s = np.where(low, np.clip(-c / sa, 0, 1), np.where(high, np.clip((b - c) / sa, 0, 1), s))
+    s = np.where(a > 0, s, 0.0)
+    diff = p1 + s[..., None] * d1 - (p2 + t[..., None] * d2)
+    return np.sqrt(np.sum(diff * diff, axis=-1))

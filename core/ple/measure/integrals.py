@@ -301,11 +301,9 @@ def _rep_hubs(lat: Lattice, segs):
     return idx, wa[0][a] * wa[1][b] * wa[2][c], wv[0][a] * wv[1][b] * wv[2][c]
 
 
-def _hub_geometry(lat: Lattice, idx: np.ndarray, partners: bool = False):
-    """Per hub (H rows of (i, j, k, n)): its node radius, partner offsets (H, B, 3) and radii
-    (H, B) in the hub's own group frame (divided by the group's factor), presence mask (H, B)
-    and the group factor (H,); with ``partners``, also the partners' indices (H, B, 4).
-    Absent partners are extrapolated and masked."""
+def incidence_table(lat: Lattice):
+    """Per template node, its half-beam slots: partner group offsets (nn, B, 3), partner nodes
+    (nn, B) and which slots exist (nn, B) — the column order of every hub's half-beams."""
     incident = _incident(lat)
     nb = max(1, max(len(x) for x in incident))
     offs = np.zeros((len(lat.nodes), nb, 3), np.int64)
@@ -314,9 +312,21 @@ def _hub_geometry(lat: Lattice, idx: np.ndarray, partners: bool = False):
     for n, lst in enumerate(incident):
         for b, (off, p, _) in enumerate(lst):
             offs[n, b], partner[n, b], valid[n, b] = off, p, True
+    return offs, partner, valid
+
+
+def _hub_geometry(lat: Lattice, idx: np.ndarray, box=None, partners: bool = False):
+    """Per hub (H rows of (i, j, k, n)): its node radius, partner offsets (H, B, 3) and radii
+    (H, B) in the hub's own group frame (divided by the group's factor), presence mask (H, B)
+    and the group factor (H,); with ``partners``, also the partners' indices (H, B, 4). Absent
+    partners (outside the lattice, or outside ``box`` = (lo (3,), hi (3,)) half-open index
+    bounds when given) are extrapolated and masked."""
+    offs, partner, valid = incidence_table(lat)
+    nb = offs.shape[1]
     n = idx[:, 3]
     pidx = idx[:, None, :3] + offs[n]  # (H, B, 3)
-    present = valid[n] & np.all((pidx >= 0) & (pidx < np.array(lat.counts)), axis=2)
+    lo, hi = (np.zeros(3, np.int64), np.array(lat.counts)) if box is None else box
+    present = valid[n] & np.all((pidx >= lo) & (pidx < hi), axis=2)
     allidx = np.concatenate([idx[:, None, :], np.concatenate([pidx, partner[n][..., None]], axis=2)], axis=1)
     c, r = lat.node_balls(allidx.reshape(-1, 4))
     c, r = c.reshape(len(idx), nb + 1, 3), r.reshape(len(idx), nb + 1)
@@ -561,10 +571,10 @@ def _overlap_chunked(geos, rest, grid: int, chunk: int, turned: bool = False):
     return np.concatenate(out_a), np.concatenate(out_v)
 
 
-def _overlap_integrals(ra, e, length, rb, dirs, weights, vg, present):
-    """∫ (Σ_b f_b − f_max) dω for area (f = R²/(n·ω), 0 on a cut) and volume (f = R³/3), per
-    variant (geometry vg with beams ``present``). Computed in units of the node radius."""
-    m = len(dirs)
+def beam_exits(ra, e, length, rb, dirs):
+    """Per hub geometry g, half-beam b and direction m: the exit distance t (G, B, M) of ball(0, 1)
+    ∪ half-beam b, in units of the node radius ra[g], and the area integrand R²/(n·ω) there
+    (0 on the radical-plane cut disk), both float32. Shared by area/volume and the moments."""
     f32 = np.float32  # rays in single precision (1e-7 relative), sums in double
     lb = (length / ra[:, None])[..., None].astype(f32)  # (G, B, 1)
     rbb = (rb / ra[:, None])[..., None].astype(f32)
@@ -596,6 +606,14 @@ def _overlap_integrals(ra, e, length, rb, dirs, weights, vg, present):
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.where(cut, x_cut / mu, t)
     f_area[cut] = 0.0
+    return t, f_area
+
+
+def _overlap_integrals(ra, e, length, rb, dirs, weights, vg, present):
+    """∫ (Σ_b f_b − f_max) dω for area (f = R²/(n·ω), 0 on a cut) and volume (f = R³/3), per
+    variant (geometry vg with beams ``present``). Computed in units of the node radius."""
+    m = len(dirs)
+    t, f_area = beam_exits(ra, e, length, rb, dirs)
     ia = f_area.reshape(-1, m) @ weights  # per-beam integrals (G·B,)
     iv = (t * t * t).reshape(-1, m) @ weights / 3
     # the variants: absent beams fall back to the ball (t = 1, f = 1); the bounding beam per direction

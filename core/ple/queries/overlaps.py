@@ -1,0 +1,395 @@
+"""Unclean pairs and gaps between non-incident elements (CHoCC paper §1: a lattice is *clean* when
+its beams are disjoint unless they are incident on the same ball; we also flag a ball overlapping a
+beam or a ball it is not incident on, which breaks the hub decomposition of ``measure`` and the
+meshes of ``meshing`` alike).
+
+Two elements are *incident* when they share a ball (a beam and its end balls, two beams with a
+common end, two balls joined by a beam). A non-incident pair is *unclean* when the elements overlap
+by more than ``CLEAN_TOL`` of their size (touching is clean); its *gap* is their distance (0 when
+they meet). Pairs are found without all-pairs work:
+
+- ``steady`` path (an unfiltered steady lattice, not BeCOTS): overlap is invariant under
+  similarities, so along every direction whose similarity commutes with the later ones (W always,
+  §6.1.4; V, U as in ``similar_axes``) a pair whose lower element lies past the first ``reach``
+  indices is a similar copy of a pair anchored at index ``reach``. Only the elements of the anchor
+  groups (the base slab k ≤ reach for a general steady lattice; one corner block of groups when U,
+  V and W are all similar, as for regular lattices) are queried, with the RangeFinder (``biq``),
+  against the lattice extended by its own counts on both sides along those directions (so that
+  every partner of a moved pair is found), and each pair class is counted over the index interval
+  where both of its elements exist;
+- ``explicit`` path (filtered lattices, regions, BeCOTS slabs): the evaluated (kept) elements, their
+  bounding balls hashed in a uniform grid, candidate pairs from neighbouring cells only.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..algebra.elements import beam_beam_gap, beam_distance, enclosing_ball, segment_distance
+from ..algebra.similarity import commute
+from ..errors import PleError
+from ..model.lattice import Evaluation, Lattice
+from .biq import query as biq_query
+
+CLEAN_TOL = 1e-9  # overlap depth, relative to the larger radius of the pair, below which elements only touch
+WORST = 10  # worst offenders listed
+MAX_ANCHOR_FRACTION = 0.02  # "auto" takes the steady path when the anchors are at most this share of all groups
+MAX_EXPLICIT = 2_000_000  # ... or when more elements than this would be evaluated
+PAIR_CHUNK = 1 << 18  # candidate pairs per vectorized block
+QUERY_CHUNK = 1 << 12  # anchor elements per RangeFinder batch
+KINDS = ("ball_ball", "ball_beam", "beam_beam")
+
+
+def similar_axes(lat: Lattice) -> tuple[bool, bool, bool]:
+    """Directions along which the rows are similar copies of each other (hubs, element pairs): W
+    always; V if V and W commute; U if U commutes with V and W (or those are single, §3.6–3.7)."""
+    act = [c > 1 for c in lat.counts]
+    vw = not (act[1] and act[2]) or commute(lat.V, lat.W)
+    u = all(not (act[0] and act[x]) or commute(lat.U, s) for x, s in ((1, lat.V), (2, lat.W)))
+    return u, vw, True
+
+
+def reach(lat: Lattice) -> list[int]:
+    """Largest beam-pattern offset per direction."""
+    return [max([abs(b.offset[d]) for b in lat.beams], default=0) for d in range(3)]
+
+
+# ----- exact pair tests ------------------------------------------------------------------------------
+def pair_gaps(kind_a, ca, ra, ea, kind_b, cb, rb, eb, margin: float = math.inf):
+    """Gap (distance, 0 where they meet), overlap flag and overlap depth of element pairs. Element
+    data: kind 0 a ball (centre c, radius r), kind 1 a beam (c, r: start ball; e = (end centre, end
+    radius)). Beam pairs whose axes lie farther apart than their radii plus ``margin`` get a lower
+    bound of their gap (axis distance minus the largest radii) instead of the exact value."""
+    n = len(kind_a)
+    gap = np.empty(n)
+    over = np.zeros(n, bool)
+    depth = np.zeros(n)
+    scale = np.maximum(np.maximum(ra, rb), np.maximum(ea[1], eb[1]))
+    tol = CLEAN_TOL * scale
+    bb = (kind_a == 0) & (kind_b == 0)
+    if bb.any():
+        d = np.linalg.norm(ca[bb] - cb[bb], axis=1) - ra[bb] - rb[bb]
+        gap[bb], over[bb], depth[bb] = np.maximum(d, 0), d < -tol[bb], -d
+    for ball_first in (True, False):
+        sel = (kind_a == 0) & (kind_b == 1) if ball_first else (kind_a == 1) & (kind_b == 0)
+        if not sel.any():
+            continue
+        (c, r), (a, r1, (b, r2)) = ((ca, ra), (cb, rb, eb)) if ball_first else ((cb, rb), (ca, ra, ea))
+        d = beam_distance(c[sel], a[sel], r1[sel], b[sel], r2[sel]) - r[sel]
+        gap[sel], over[sel], depth[sel] = np.maximum(d, 0), d < -tol[sel], -d
+    ee = (kind_a == 1) & (kind_b == 1)
+    if ee.any():
+        bound = (segment_distance(ca[ee], ea[0][ee], cb[ee], eb[0][ee]) - np.maximum(ra[ee], ea[1][ee])
+                 - np.maximum(rb[ee], eb[1][ee]))
+        near = np.nonzero(ee)[0][bound <= margin]
+        gap[ee] = bound
+        ee = np.zeros_like(ee)
+        ee[near] = True
+    if ee.any():
+        args = (ca[ee], ra[ee], ea[0][ee], ea[1][ee], cb[ee], rb[ee], eb[0][ee], eb[1][ee])
+        g = beam_beam_gap(*args)
+        gap[ee] = g
+        meet = g <= 0
+        if meet.any():  # overlap or touch: the beams shrunk by the tolerance still meet when they overlap
+            shrunk = [x[meet] - (tol[ee][meet] if i % 2 else 0) for i, x in enumerate(args)]
+            over_ee = beam_beam_gap(*shrunk) <= 0
+            o = np.zeros(ee.sum(), bool)
+            o[meet] = over_ee
+            over[ee] = o
+            # depth estimate: how far the first beam's axis balls reach into the second beam
+            dep = np.zeros(ee.sum())
+            t = np.linspace(0, 1, 17)[:, None]
+            p = args[0][meet][None] + t[..., None] * (args[2][meet] - args[0][meet])[None]
+            rr = args[1][meet][None] + t * (args[3][meet] - args[1][meet])[None]
+            dep[meet] = np.max(rr - beam_distance(p, args[4][meet][None], args[5][meet][None], args[6][meet][None],
+                                                  args[7][meet][None]), axis=0)
+            depth[ee] = dep
+    depth = np.where(over, depth, 0.0)
+    return gap, over, depth
+
+
+# ----- explicit elements --------------------------------------------------------------------------------
+def _explicit(ev: Evaluation, margin: float) -> dict:
+    nn, nb = len(ev.radius), len(ev.beam_nodes)
+    ends = np.concatenate([np.repeat(np.arange(nn)[:, None], 2, axis=1), ev.beam_nodes]).astype(np.int64)
+    kinds = np.concatenate([np.zeros(nn, np.int64), np.ones(nb, np.int64)])
+    labels = np.concatenate([np.concatenate([ev.node_index, ev.beam_index]), kinds[:, None]], axis=1)
+    ca, ra, cb, rb = ev.center[ends[:, 0]], ev.radius[ends[:, 0]], ev.center[ends[:, 1]], ev.radius[ends[:, 1]]
+    box_lo = np.minimum(ca - ra[:, None], cb - rb[:, None])
+    box_hi = np.maximum(ca + ra[:, None], cb + rb[:, None])
+    edge_keys = np.sort(np.concatenate([ev.beam_nodes[:, 0] * nn + ev.beam_nodes[:, 1],
+                                        ev.beam_nodes[:, 1] * nn + ev.beam_nodes[:, 0]]))
+    result = _Collector(margin)
+    for i, j in grid_pairs(box_lo, box_hi, margin):
+        ia, ib = ends[i], ends[j]
+        shared = (ia[:, :1] == ib).any(axis=1) | (ia[:, 1:] == ib).any(axis=1)
+        both_balls = (kinds[i] == 0) & (kinds[j] == 0)
+        if both_balls.any() and len(edge_keys):
+            key = ia[:, 0] * nn + ib[:, 0]
+            pos = np.minimum(np.searchsorted(edge_keys, key), len(edge_keys) - 1)
+            shared |= both_balls & (edge_keys[pos] == key)
+        i, j, ia, ib = i[~shared], j[~shared], ia[~shared], ib[~shared]
+        if not len(i):
+            continue
+        ea = (ev.center[ia[:, 1]], ev.radius[ia[:, 1]])
+        eb = (ev.center[ib[:, 1]], ev.radius[ib[:, 1]])
+        gap, over, depth = pair_gaps(kinds[i], ev.center[ia[:, 0]], ev.radius[ia[:, 0]], ea,
+                                     kinds[j], ev.center[ib[:, 0]], ev.radius[ib[:, 0]], eb, margin)
+        result.add(kinds[i], kinds[j], gap, over, depth, labels[i], labels[j], np.ones(len(i), np.int64), gap)
+    out = result.report()
+    out["path"] = "explicit"
+    out["elements"] = int(nn + nb)
+    return out
+
+
+def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float):
+    """Index pairs (i < j) of axis-aligned boxes closer than ``margin`` (each grown by margin / 2).
+    Each box is entered in every cell of a uniform grid (cell: the median box diagonal) it
+    overlaps; a pair is reported by the one cell holding the larger of the two lower corners (no
+    duplicates). Yielded in blocks of about PAIR_CHUNK cell entries."""
+    n = len(box_lo)
+    if n < 2:
+        return
+    blo, bhi = box_lo - margin / 2, box_hi + margin / 2
+    h = max(float(np.median(np.max(bhi - blo, axis=1))), 1e-12)
+    origin = blo.min(axis=0)
+    lo = np.floor((blo - origin) / h).astype(np.int64)
+    hi = np.floor((bhi - origin) / h).astype(np.int64)
+    dims = hi.max(axis=0) + 1
+    span = hi - lo + 1
+    per = np.prod(span, axis=1)
+    key_all, owner_all = _cell_entries(lo, span, dims, np.arange(n))
+    sort = np.argsort(key_all, kind="stable")
+    table = (key_all[sort], owner_all[sort])
+    bounds = np.searchsorted(np.cumsum(per), np.arange(0, int(per.sum()), max(1, PAIR_CHUNK // 32)), "right")
+    edges = np.unique(np.concatenate([[0], bounds, [n]]))
+    for start, stop in zip(edges[:-1], edges[1:]):
+        key, owner = _cell_entries(lo, span, dims, np.arange(start, stop))
+        a, b = np.searchsorted(table[0], key, "left"), np.searchsorted(table[0], key, "right")
+        cnt = b - a
+        i = np.repeat(owner, cnt)
+        cell = np.repeat(key, cnt)
+        j = table[1][np.repeat(a, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
+        keep = i < j
+        i, j, cell = i[keep], j[keep], cell[keep]
+        corner = np.maximum(lo[i], lo[j])  # the one cell that reports the pair
+        keep = ((corner[:, 0] * dims[1] + corner[:, 1]) * dims[2] + corner[:, 2]) == cell
+        i, j = i[keep], j[keep]
+        near = np.all((blo[i] <= bhi[j]) & (blo[j] <= bhi[i]), axis=1)
+        if near.any():
+            yield i[near], j[near]
+
+
+def _cell_entries(lo, span, dims, rows):
+    """(cell key, element) for every grid cell each element's box covers."""
+    per = np.prod(span[rows], axis=1)
+    owner = np.repeat(rows, per)
+    local = np.arange(per.sum()) - np.repeat(np.cumsum(per) - per, per)
+    sp = span[owner]
+    cz = local % sp[:, 2]
+    cy = (local // sp[:, 2]) % sp[:, 1]
+    cx = local // (sp[:, 2] * sp[:, 1])
+    c = lo[owner] + np.stack([cx, cy, cz], axis=1)
+    return (c[:, 0] * dims[1] + c[:, 1]) * dims[2] + c[:, 2], owner
+
+
+class _Collector:
+    """Counts unclean pairs per kind, keeps the worst offenders and the smallest gap."""
+
+    def __init__(self, margin: float) -> None:
+        self.margin = margin
+        self.counts = dict.fromkeys(KINDS, 0)
+        self.worst: list[dict] = []
+        self.min_gap = (math.inf, None)
+
+    def add(self, ka, kb, gap, over, depth, ia, ib, count, min_gap):
+        kind = ka + kb  # 0 ball-ball, 1 ball-beam, 2 beam-beam
+        for k, name in enumerate(KINDS):
+            self.counts[name] += int(count[over & (kind == k)].sum())
+        bad = np.nonzero(over)[0]
+        bad = bad[np.argsort(-depth[bad])[:WORST]]
+        for t in bad:
+            self.worst.append({"kind": KINDS[kind[t]], "depth": float(depth[t]), "count": int(count[t]),
+                               "a": _label(ia[t]), "b": _label(ib[t])})
+        self.worst = sorted(self.worst, key=lambda w: -w["depth"])[:WORST]
+        ok = np.nonzero(~over & (min_gap <= self.margin))[0]
+        if len(ok):
+            t = ok[np.argmin(min_gap[ok])]
+            if min_gap[t] < self.min_gap[0]:
+                self.min_gap = (float(min_gap[t]), {"a": _label(ia[t]), "b": _label(ib[t])})
+
+    def report(self) -> dict:
+        total = sum(self.counts.values())
+        return {"clean": total == 0, "unclean_pairs": total, "pairs": dict(self.counts), "worst": self.worst,
+                "min_gap": None if self.min_gap[1] is None else self.min_gap[0], "min_gap_pair": self.min_gap[1],
+                "gap_search": self.margin}
+
+
+def _label(row) -> dict:
+    """{"ball": [i, j, k, n]} or {"beam": [i, j, k, pattern]} from (i, j, k, x, kind)."""
+    return {("ball", "beam")[int(row[4])]: [int(x) for x in row[:4]]}
+
+
+# ----- steady lattices: anchors and similar copies --------------------------------------------------------------
+def _extended(lat: Lattice, ext: np.ndarray) -> Lattice:
+    """The lattice extended by ``ext[d]`` groups on both sides of every similar direction d (its
+    group (i, j, k) is the extension's (i + ext_u, j + ext_v, k + ext_w))."""
+    out = lat.with_counts(*(int(c + 2 * e) for c, e in zip(lat.counts, ext)))
+    shift = lat.placement
+    for step, e in zip((lat.W, lat.V, lat.U), ext[::-1]):
+        if e:
+            shift = shift @ (step ** (-int(e)))
+    out.set_placement(shift)
+    out.set_filter(None)
+    return out
+
+
+def _exist(lat: Lattice, kind: np.ndarray, x: np.ndarray):
+    """Per element (ball n or beam pattern p): the index interval [lo, hi) (…, 3) of groups where it exists."""
+    counts = np.array(lat.counts)
+    off = np.array([b.offset for b in lat.beams], np.int64).reshape(-1, 3)
+    o = np.where(kind[:, None] == 1, off[np.where(kind == 1, x, 0)] if len(off) else 0, 0)
+    return np.maximum(0, -o), counts - np.maximum(0, o)
+
+
+def _elements_at(lat: Lattice, kind, idx):
+    """Start centre, start radius, (end centre, end radius) of elements (kind, (i, j, k, x)); balls
+    repeat themselves as the end."""
+    pats = np.array([(b.n1, b.n2, *b.offset) for b in lat.beams], np.int64).reshape(-1, 5)
+    p = pats[np.where(kind == 1, idx[:, 3], 0)] if len(pats) else np.zeros((len(kind), 5), np.int64)
+    start_n = np.where(kind == 1, p[:, 0], idx[:, 3])
+    end = idx[:, :3] + np.where(kind[:, None] == 1, p[:, 2:], 0)
+    end_n = np.where(kind == 1, p[:, 1], idx[:, 3])
+    ca, ra = lat.node_balls(np.concatenate([idx[:, :3], start_n[:, None]], axis=1))
+    cb, rb = lat.node_balls(np.concatenate([end, end_n[:, None]], axis=1))
+    nodes = (np.concatenate([idx[:, :3], start_n[:, None]], axis=1), np.concatenate([end, end_n[:, None]], axis=1))
+    return ca, ra, (cb, rb), nodes
+
+
+def _steady(lat: Lattice, margin: float, force: bool = False):
+    sim = similar_axes(lat)
+    rch = reach(lat)
+    counts = np.array(lat.counts)
+    rep = np.array([r if s and c > r + 1 else -1 for r, s, c in zip(rch, sim, counts)])  # -1: no similar copies
+    anchors = [np.arange(min(c, r + 1)) if p >= 0 else np.arange(c) for c, r, p in zip(counts, rch, rep)]
+    n_anchor = math.prod(len(a) for a in anchors)
+    elements = lat.node_count() + lat.beam_count()
+    if not force and n_anchor > MAX_ANCHOR_FRACTION * lat.groups and elements <= MAX_EXPLICIT:
+        return None
+    ext = np.where(rep >= 0, counts, 0)
+    big = _extended(lat, ext)
+    # the smallest factor a moved pair can have, relative to its anchor: gaps are searched that much wider
+    shrink = 1.0
+    for d, step in enumerate((lat.U, lat.V, lat.W)):
+        if rep[d] >= 0:
+            shrink *= min(1.0, step.factor ** (counts[d] - 1 - rep[d]))
+    search = margin / shrink
+    g = np.stack(np.meshgrid(*anchors, indexing="ij"), axis=-1).reshape(-1, 3)
+    nn, nb = len(lat.nodes), len(lat.beams)
+    gi = np.repeat(g, nn + nb, axis=0)
+    x = np.tile(np.concatenate([np.arange(nn), np.arange(nb)]), len(g))
+    kind = np.tile(np.concatenate([np.zeros(nn, np.int64), np.ones(nb, np.int64)]), len(g))
+    lo, hi = _exist(lat, kind, x)
+    alive = np.all((gi >= lo) & (gi < hi), axis=1)
+    kind, idx = kind[alive], np.concatenate([gi, x[:, None]], axis=1)[alive]
+    ca, ra, (cb, rb), nodes = _elements_at(lat, kind, idx)
+    qc, qr = enclosing_ball(ca, ra, cb, rb)
+    result = _Collector(margin)
+    queries = 0
+    for s in range(0, len(kind), QUERY_CHUNK):
+        part = slice(s, s + QUERY_CHUNK)
+        hits = biq_query(big, qc[part], qr[part] + search)
+        queries += len(hits)
+        qa, yk, yi = [], [], []
+        for q, h in enumerate(hits):
+            for k, arr in ((0, h.nodes), (1, h.beams)):
+                if len(arr):
+                    qa.append(np.full(len(arr), s + q))
+                    yk.append(np.full(len(arr), k))
+                    yi.append(arr)
+        if not qa:
+            continue
+        qa, yk, yi = np.concatenate(qa), np.concatenate(yk), np.concatenate(yi)
+        yi = yi - np.concatenate([ext, [0]])  # back to the lattice's own indices (possibly outside it)
+        _steady_pairs(lat, result, rep, counts, search, kind[qa], idx[qa], nodes[0][qa], nodes[1][qa], yk, yi)
+    out = result.report()
+    out["path"] = "steady (" + "".join(n for n, p in zip("UVW", rep) if p >= 0) + " similar)"
+    out["queries"] = queries
+    out["anchor_groups"] = int(n_anchor)
+    return out
+
+
+def _steady_pairs(lat, result, rep, counts, search, xk, xi, xs, xe, yk, yi):
+    """Exact tests and occurrence counts of ordered pairs (anchor X, partner Y)."""
+    same = (xk == yk) & np.all(xi == yi, axis=1)
+    ya, yr, (yc, yrr), ynodes = _elements_at(lat, yk, yi)
+    # incidence: shared node (group and node id), or two balls joined by a beam
+    xn = np.stack([xs, xe], axis=1)  # (P, 2, 4)
+    yn = np.stack(ynodes, axis=1)
+    shared = np.any(np.all(xn[:, :, None, :] == yn[:, None, :, :], axis=3), axis=(1, 2))
+    balls = (xk == 0) & (yk == 0)
+    if balls.any():
+        for b in lat.beams:
+            for n1, n2, sgn in ((b.n1, b.n2, 1), (b.n2, b.n1, -1)):
+                joined = balls & (xi[:, 3] == n1) & (yi[:, 3] == n2) & np.all(yi[:, :3] - xi[:, :3] == sgn * np.array(
+                    b.offset), axis=1)
+                shared |= joined
+    keep = ~same & ~shared
+    if not keep.any():
+        return
+    xk, xi, yk, yi = xk[keep], xi[keep], yk[keep], yi[keep]
+    xa, xr, xe_ = _elements_at(lat, xk, xi)[:3]
+    ya, yr, ye = ya[keep], yr[keep], (yc[keep], yrr[keep])
+    gap, over, depth = pair_gaps(xk, xa, xr, xe_, yk, ya, yr, ye, search)
+    # occurrences: groups g (X at g, Y at g + δ) with both existing; similar directions move the anchor
+    delta = yi[:, :3] - xi[:, :3]
+    xlo, xhi = _exist(lat, xk, xi[:, 3])
+    ylo, yhi = _exist(lat, yk, yi[:, 3])
+    lo = np.maximum(xlo, ylo - delta)
+    hi = np.minimum(xhi, yhi - delta)
+    moving = (rep >= 0)[None] & (xi[:, :3] == rep[None])
+    lo = np.where(moving, np.maximum(lo, xi[:, :3]), np.maximum(lo, xi[:, :3]))
+    hi = np.where(moving, hi, np.minimum(hi, xi[:, :3] + 1))
+    count = np.prod(np.maximum(hi - lo, 0), axis=1)
+    # the smallest gap over the occurrences: the factor changes monotonically along each direction
+    factors = np.array([lat.U.factor, lat.V.factor, lat.W.factor])
+    last = np.maximum(hi - 1, lo)
+    corner = np.where(factors[None] < 1, last, lo)
+    scale = np.prod(factors[None] ** (corner - xi[:, :3]), axis=1)
+    ok = count > 0
+    ia = np.concatenate([np.where(ok[:, None], np.concatenate([lo, xi[:, 3:]], axis=1), xi), xk[:, None]], axis=1)
+    ib = np.concatenate([ia[:, :3] + delta, yi[:, 3:], yk[:, None]], axis=1)
+    # each unordered pair is met twice, once from each element: only one orientation is kept
+    big = 3 * int(counts.max()) + 1
+    d_key = (delta[:, 0] * big + delta[:, 1]) * big + delta[:, 2]
+    first = (xk < yk) | ((xk == yk) & ((xi[:, 3] < yi[:, 3]) | ((xi[:, 3] == yi[:, 3]) & (d_key > 0))))
+    keep = ok & first
+    result.add(xk[keep], yk[keep], gap[keep], over[keep], depth[keep], ia[keep], ib[keep], count[keep],
+               gap[keep] * scale[keep])
+
+
+# ----- public API -----------------------------------------------------------------------------------------
+def unclean_pairs(lat: Lattice, ev: Evaluation | None = None, margin: float = 0.0, path: str = "auto") -> dict:
+    """Unclean pairs of a lattice, or of the elements ``ev`` (an evaluation of it: a region, or the
+    kept part of a filtered lattice): {"clean", "unclean_pairs", "pairs" per kind, "worst" offenders
+    (kind, depth, count of similar copies, both elements as {"ball"|"beam": [i, j, k, n|pattern]}),
+    "min_gap" among non-incident pairs closer than ``margin`` (None if none), "min_gap_pair",
+    "path"}. Without ``ev``: the whole unfiltered program (``path`` "auto" takes the steady path
+    when it applies, "explicit" evaluates the lattice)."""
+    lat.validate()
+    if path not in ("auto", "steady", "explicit"):
+        raise PleError(f"unclean-pair path {path!r}: expected auto, steady or explicit")
+    if ev is None and path != "explicit" and lat.becots is None:
+        out = _steady(lat, float(margin), force=path == "steady")
+        if out is not None:
+            return out
+    if ev is None:
+        ev = lat.evaluate()
+    return _explicit(ev, float(margin))
+
+
+def is_clean(lat: Lattice, ev: Evaluation | None = None) -> bool:
+    """Whether no two non-incident elements overlap (see ``unclean_pairs``)."""
+    return unclean_pairs(lat, ev)["clean"]

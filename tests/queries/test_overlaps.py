@@ -1,0 +1,117 @@
+"""Unclean pairs and gaps: the steady path (anchors moved by similarities) and the explicit grid path
+against a brute-force test of all element pairs; the exact beam–beam gap against dense sampling."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from ple.algebra.elements import beam_beam_gap, beam_distance, segment_distance
+from ple.algebra.similarity import Rotation, Scaling, Screw, Translation
+from ple.filters.stencil import Stencil
+from ple.model.lattice import Lattice
+from ple.program.sources import load_lattice
+from ple.queries.overlaps import KINDS, pair_gaps, unclean_pairs
+
+
+def test_beam_beam_gap_vs_sampling():
+    rng = np.random.default_rng(5)
+    t = np.linspace(0, 1, 1201)
+    for _ in range(40):
+        a1, b1, a2, b2 = rng.normal(size=(4, 3)) * 1.5
+        r = rng.uniform(0.05, 0.6, 4)
+        gap = float(beam_beam_gap(a1, r[0], b1, r[1], a2, r[2], b2, r[3]))
+        p = a1 + t[:, None] * (b1 - a1)
+        sampled = np.maximum(beam_distance(p, a2, r[2], b2, r[3]) - (r[0] + t * (r[1] - r[0])), 0).min()
+        assert gap <= sampled + 1e-12
+        assert gap == pytest.approx(sampled, abs=2e-5)
+        # the axis distance minus the largest radii never exceeds the gap (a safe lower bound)
+        assert segment_distance(a1, b1, a2, b2) - max(r[:2]) - max(r[2:]) <= gap + 1e-12
+
+
+def _brute(ev, margin):
+    """Every pair of elements of an evaluation: counts of overlapping non-incident pairs per kind
+    and the smallest gap below margin."""
+    nn, nb = len(ev.radius), len(ev.beam_nodes)
+    ends = np.concatenate([np.repeat(np.arange(nn)[:, None], 2, axis=1), ev.beam_nodes])
+    kinds = np.concatenate([np.zeros(nn, np.int64), np.ones(nb, np.int64)])
+    edges = {tuple(sorted(e)) for e in ev.beam_nodes.tolist()}
+    i, j = np.triu_indices(nn + nb, 1)
+    ia, ib = ends[i], ends[j]
+    shared = (ia[:, :1] == ib).any(axis=1) | (ia[:, 1:] == ib).any(axis=1)
+    joined = np.array([kinds[x] == 0 and kinds[y] == 0 and tuple(sorted((x, y))) in edges for x, y in zip(i, j)],
+                      bool).reshape(-1)
+    keep = ~shared & ~joined
+    i, j, ia, ib = i[keep], j[keep], ia[keep], ib[keep]
+    gap, over, _ = pair_gaps(kinds[i], ev.center[ia[:, 0]], ev.radius[ia[:, 0]],
+                             (ev.center[ia[:, 1]], ev.radius[ia[:, 1]]), kinds[j], ev.center[ib[:, 0]],
+                             ev.radius[ib[:, 0]], (ev.center[ib[:, 1]], ev.radius[ib[:, 1]]))
+    kind = kinds[i] + kinds[j]
+    counts = {name: int(np.sum(over & (kind == k))) for k, name in enumerate(KINDS)}
+    near = ~over & (gap <= margin)
+    return counts, (float(gap[near].min()) if near.any() else None)
+
+
+def _crossing(kind: str) -> Lattice:
+    """Lattices built to overlap: crossing face diagonals (beam–beam), a ball sitting on a strut
+    (ball–beam), fat balls of next neighbours (ball–ball), under several steady similarities."""
+    lat = Lattice()
+    a = lat.add_node([0, 0, 0], 0.12)
+    b = lat.add_node([0.5, 0.08, 0.0], 0.07)  # close to the x strut of its own group: overlaps it
+    lat.add_node([0.5, 0.5, 0.5], 0.3)  # two lone balls overlapping each other (ball–ball)
+    lat.add_node([0.5, 0.5, 0.95], 0.2)
+    lat.add_beam(a, a, 1, 0, 0)
+    lat.add_beam(a, a, 0, 1, 0)
+    lat.add_beam(a, a, 0, 0, 1)
+    lat.add_beam(a, a, 1, 1, 0)  # the two face diagonals cross at the face centre
+    lat.add_beam(a, a, -1, 1, 0)
+    lat.add_beam(b, a, 0, 1, 0)
+    if kind == "regular":
+        lat.set_u(3, Translation([1, 0, 0]))
+        lat.set_v(4, Translation([0, 1, 0]))
+        lat.set_w(3, Translation([0, 0, 1]))
+    elif kind == "steady":
+        lat.set_u(3, Rotation(0.05, [0, 1, 0], [0, 0, -10]))
+        lat.set_v(3, Screw(0.04, [1, 0, 0], [0, -8, 0], 1.0))
+        lat.set_w(4, Scaling(1.04, [0.3, 0.2, -15]))
+    else:  # commuting: rotation and screw about one axis, a translation along it
+        lat.set_u(3, Translation([1, 0, 0]))
+        lat.set_v(4, Rotation(0.09, [1, 0, 0], [0, -8, 0]))
+        lat.set_w(3, Screw(0.05, [1, 0, 0], [0, -8, 0], 1.0))
+    return lat
+
+
+@pytest.mark.parametrize("kind", ["regular", "steady", "commuting"])
+@pytest.mark.parametrize("path", ["steady", "explicit"])
+def test_unclean_pairs_vs_all_pairs(kind, path):
+    lat = _crossing(kind)
+    margin = 0.4
+    want, gap = _brute(lat.evaluate(), margin)
+    got = unclean_pairs(lat, margin=margin, path=path)
+    assert got["path"].startswith(path)
+    assert got["pairs"] == want
+    assert want["beam_beam"] and want["ball_beam"] and want["ball_ball"] and not got["clean"]
+    assert (got["min_gap"] is None) == (gap is None)
+    if gap is not None:
+        assert got["min_gap"] == pytest.approx(gap, rel=1e-9, abs=1e-12)
+    assert got["worst"] and all(w["depth"] > 0 for w in got["worst"])
+
+
+def test_filtered_and_region_use_the_kept_elements():
+    lat = _crossing("steady")
+    lat.set_filter(Stencil(np.array([[[1, 0], [1, 1]], [[0, 1], [1, 1]]])))
+    for region in (None, "1:3,0:3,1:4"):
+        ev = lat.evaluate(region)
+        want, gap = _brute(ev, 0.3)
+        got = unclean_pairs(lat, ev, margin=0.3)
+        assert got["pairs"] == want and got["path"] == "explicit"
+        assert got["min_gap"] == (pytest.approx(gap, rel=1e-9) if gap is not None else None)
+
+
+@pytest.mark.parametrize("name", ["cubic", "bcc", "fcc", "octet", "kagome", "becots_triangle", "fig6_3"])
+def test_clean_presets(name):
+    lat = load_lattice(name)
+    got = unclean_pairs(lat)
+    assert got["clean"], got["worst"][:3]
+    if lat.groups <= 1300:
+        want, _ = _brute(lat.evaluate(), 0.0) if lat.groups <= 300 else (dict.fromkeys(KINDS, 0), None)
+        assert got["pairs"] == want
