@@ -62,7 +62,7 @@ def _monte_carlo(elements, n: int, seed: int):
     return box * mean, box * sigma, origin
 
 
-def _assert_monte_carlo(props: dict, elements, n: int = 200_000, seed: int = 7):
+def _assert_monte_carlo(props: dict, elements, n: int = 120_000, seed: int = 7):
     est, sigma, origin = _monte_carlo(elements, n, seed)
     got = _matrix(props, origin)
     slack = 2 * props.get("quadrature_error", 0.0) / max(props["volume"], 1e-300) * np.abs(got) + 1e-12

@@ -10,9 +10,10 @@ import numpy as np
 
 from ..errors import PleError
 from ..model.lattice import Evaluation, Lattice
-from ..queries.overlaps import unclean_pairs
+from ..queries.overlaps import similar_axes, unclean_pairs
 
 MAX_CHECK_ELEMENTS = 20_000_000  # nodes + beams evaluated by one check (memory bound)
+QUICK_ELEMENTS = 300_000  # is_clean evaluates at most this many elements (a quick look)
 WORST = 10
 
 
@@ -25,18 +26,20 @@ def _evaluation(lat: Lattice, region) -> Evaluation:
     return lat.evaluate(r)
 
 
-def is_clean(lat: Lattice, region=None) -> bool | None:
-    """Whether the lattice (its kept part when filtered, or a region) has no unclean pair; None when
-    it is too large to check here (more than MAX_CHECK_ELEMENTS elements to evaluate and no steady
-    shortcut). For one-line warnings in ``ple info`` and ``ple mesh``."""
+def is_clean(lat: Lattice, region=None, max_elements: int = QUICK_ELEMENTS) -> bool | None:
+    """Whether the lattice (its kept part when filtered, or a region) has no unclean pair, for
+    one-line warnings in ``ple info`` and ``ple mesh``; None when the answer would cost more than
+    a quick look: the unfiltered whole lattice is checked through its anchors when U, V and W are
+    all similar (regular lattices, any size), anything else only when it has at most
+    ``max_elements`` nodes and beams to evaluate (``ple check`` always answers)."""
     lat.validate()
-    if lat.filter is None and region is None and lat.becots is None:
-        return unclean_pairs(lat)["clean"]
-    try:
-        ev = _evaluation(lat, region)
-    except PleError:
+    whole = lat.filter is None and region is None and lat.becots is None
+    if whole and all(similar_axes(lat)):
+        return unclean_pairs(lat, path="steady")["clean"]
+    r = lat.region(region)
+    if (r.groups * len(lat.nodes) + lat.beam_count() * r.groups / max(1, lat.groups)) > max_elements:
         return None
-    return unclean_pairs(lat, ev)["clean"]
+    return unclean_pairs(lat, lat.evaluate(r))["clean"]
 
 
 def _label(ev: Evaluation, kind: str, rows) -> list[dict]:

@@ -32,9 +32,10 @@ import numpy as np
 
 from ..algebra.elements import beam_distance
 from ..algebra.series import geometric_sum
-from ..algebra.similarity import Rotation, commute
+from ..algebra.similarity import Rotation
 from ..errors import PleError
 from ..model.lattice import Lattice
+from ..queries.overlaps import similar_axes
 
 HUB_GRID = 24  # direction cells per cube face side (6 faces), edge cells refined REFINE × REFINE
 REFINE = 8
@@ -276,12 +277,8 @@ def _series(s: float, power: int, start: int, stop: int, rep: int) -> float:
 
 
 def _similar_axes(lat: Lattice) -> tuple[bool, bool, bool]:
-    """Directions along which hubs (of equal beam presence) are similar copies: W always;
-    V if V and W commute; U if U commutes with V and W (or those are single)."""
-    act = [c > 1 for c in lat.counts]
-    vw = not (act[1] and act[2]) or commute(lat.V, lat.W)
-    u = all(not (act[0] and act[x]) or commute(lat.U, s) for x, s in ((1, lat.V), (2, lat.W)))
-    return u, vw, True
+    """Directions along which hubs (of equal beam presence) are similar copies (``similar_axes``)."""
+    return similar_axes(lat)
 
 
 def _rep_hubs(lat: Lattice, segs):

@@ -33,12 +33,12 @@ import numpy as np
 from ..algebra.series import operator_geometric_sum
 from ..errors import PleError
 from ..model.lattice import Lattice
+from ..queries.overlaps import reach, similar_axes
 from ..queries.plans import lattice_key
 from .integrals import (
     MAX_HUBS,
     _hub_geometry,
     _segments,
-    _similar_axes,
     beam_exits,
     incidence_table,
     single_beam_excess,
@@ -303,15 +303,11 @@ def mass_properties(lat: Lattice, region=None, method: str = "auto", grid: int =
     return dict(out)
 
 
-def _reach(lat: Lattice) -> list[int]:
-    return [max([abs(b.offset[d]) for b in lat.beams], default=0) for d in range(3)]
-
-
 def _unfiltered(lat: Lattice, box, method: str, grid: int) -> dict:
     lo, hi = box
-    similar = _similar_axes(lat) if method == "auto" else (False, False, False)
+    similar = similar_axes(lat) if method == "auto" else (False, False, False)
     segs = [[(a + x0, b + x0, rep + x0) for a, b, rep in _segments(int(x1 - x0), rch, sim)]
-            for x0, x1, rch, sim in zip(lo, hi, _reach(lat), similar)]
+            for x0, x1, rch, sim in zip(lo, hi, reach(lat), similar)]
     n_hubs = len(segs[0]) * len(segs[1]) * len(segs[2]) * len(lat.nodes)
     if n_hubs > MAX_HUBS:
         return {"method": f"skipped: {n_hubs} hub classes to measure (limit {MAX_HUBS})"}
@@ -370,13 +366,13 @@ def _filtered(lat: Lattice, r, box, method: str, grid: int) -> dict:
     rel = np.where(inside[..., None], pidx - lo, 0)
     present = inside & alive[rel[..., 0], rel[..., 1], rel[..., 2], partner[kept[:, 3]]]
     # representatives: hubs of the interior of similar directions share their geometry (§3.6)
-    similar = _similar_axes(lat) if method == "auto" else (False, False, False)
-    reach = _reach(lat)
+    similar = similar_axes(lat) if method == "auto" else (False, False, False)
+    rch = reach(lat)
     rep = kept.copy()
     for d in range(3):
-        if similar[d] and hi[d] - lo[d] > 2 * reach[d] + 1:
-            interior = (kept[:, d] >= lo[d] + reach[d]) & (kept[:, d] < hi[d] - reach[d])
-            rep[interior, d] = lo[d] + reach[d]
+        if similar[d] and hi[d] - lo[d] > 2 * rch[d] + 1:
+            interior = (kept[:, d] >= lo[d] + rch[d]) & (kept[:, d] < hi[d] - rch[d])
+            rep[interior, d] = lo[d] + rch[d]
     reps, hub_rep = np.unique(rep, axis=0, return_inverse=True)
     if len(reps) > MAX_HUBS:
         return {"method": f"skipped: {len(reps)} hub geometries to measure (limit {MAX_HUBS})"}

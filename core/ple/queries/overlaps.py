@@ -13,7 +13,7 @@ they meet). Pairs are found without all-pairs work:
   §6.1.4; V, U as in ``similar_axes``) a pair whose lower element lies past the first ``reach``
   indices is a similar copy of a pair anchored at index ``reach``. Only the elements of the anchor
   groups (the base slab k ≤ reach for a general steady lattice; one corner block of groups when U,
-  V and W are all similar, as for regular lattices) are queried, with the RangeFinder (``biq``),
+  V and W are all similar, as for regular lattices) are queried, with the RangeFinder,
   against the lattice extended by its own counts on both sides along those directions (so that
   every partner of a moved pair is found), and each pair class is counted over the index interval
   where both of its elements exist;
@@ -31,7 +31,7 @@ from ..algebra.elements import beam_beam_gap, beam_distance, enclosing_ball, seg
 from ..algebra.similarity import commute
 from ..errors import PleError
 from ..model.lattice import Evaluation, Lattice
-from .biq import query as biq_query
+from .rangefinder import lattice_hits
 
 CLEAN_TOL = 1e-9  # overlap depth, relative to the larger radius of the pair, below which elements only touch
 WORST = 10  # worst offenders listed
@@ -300,18 +300,13 @@ def _steady(lat: Lattice, margin: float, force: bool = False):
     queries = 0
     for s in range(0, len(kind), QUERY_CHUNK):
         part = slice(s, s + QUERY_CHUNK)
-        hits = biq_query(big, qc[part], qr[part] + search)
-        queries += len(hits)
-        qa, yk, yi = [], [], []
-        for q, h in enumerate(hits):
-            for k, arr in ((0, h.nodes), (1, h.beams)):
-                if len(arr):
-                    qa.append(np.full(len(arr), s + q))
-                    yk.append(np.full(len(arr), k))
-                    yi.append(arr)
-        if not qa:
+        node_hits, beam_hits, _ = lattice_hits(big, qc[part], qr[part] + search)
+        queries += len(qc[part])
+        if not len(node_hits) and not len(beam_hits):
             continue
-        qa, yk, yi = np.concatenate(qa), np.concatenate(yk), np.concatenate(yi)
+        qa = np.concatenate([node_hits[:, 0], beam_hits[:, 0]]) + s
+        yk = np.concatenate([np.zeros(len(node_hits), np.int64), np.ones(len(beam_hits), np.int64)])
+        yi = np.concatenate([node_hits[:, 1:], beam_hits[:, 1:]])
         yi = yi - np.concatenate([ext, [0]])  # back to the lattice's own indices (possibly outside it)
         _steady_pairs(lat, result, rep, counts, search, kind[qa], idx[qa], nodes[0][qa], nodes[1][qa], yk, yi)
     out = result.report()
