@@ -9,7 +9,9 @@ import math
 import numpy as np
 
 from ..errors import PleError
+from ..measure.check import is_clean
 from ..measure.integrals import MAX_KEPT_NODES, kept_measures, lattice_measures
+from ..measure.moments import mass_properties
 from ..model.budget import fast_bounds
 from ..model.lattice import Lattice
 from .common import add_lattice_args, lattice_from_args
@@ -48,7 +50,7 @@ def lattice_info(lat: Lattice, region=None) -> dict:
                     bounds={"min": lo.tolist(), "max": hi.tolist(), "exact": exact})
         info.update(lattice_measures(lat) if whole else kept_measures(lat, r))
         _check_finite_measures(info)
-        return info
+        return _moments_and_clean(lat, r, info)
     info.update(program_nodes=lat.node_count(r), program_beams=lat.beam_count(r))
     if lat.node_count(r) > MAX_KEPT_NODES:
         info["counts_method"] = (f"skipped: {lat.node_count(r):,} nodes to decide one by one (limit "
@@ -66,6 +68,17 @@ def lattice_info(lat: Lattice, region=None) -> dict:
         info["bounds"] = {"min": lo.tolist(), "max": hi.tolist(), "exact": True}
     info.update(kept_measures(lat, r))
     _check_finite_measures(info)
+    return _moments_and_clean(lat, r, info)
+
+
+def _moments_and_clean(lat: Lattice, r, info: dict) -> dict:
+    """Centroid and inertia (about the centroid, unit density) of what is kept, when its area and
+    volume were measured; ``clean``: True/False, or None when checking would cost more than a
+    quick look (``ple check`` gives the full report)."""
+    if "volume" in info and info["volume"] > 0:
+        props = mass_properties(lat, r)
+        info.update(centroid=np.asarray(props["centroid"]).tolist(), inertia=np.asarray(props["inertia"]).tolist())
+    info["clean"] = is_clean(lat, r)
     return info
 
 
@@ -103,6 +116,11 @@ def run(args) -> int:
     for key in ("area", "volume"):
         if key in info:
             print(f"{key:<11} {info[key]:.9g}")
+    if "centroid" in info:
+        print(f"centroid    {_fmt(info['centroid'])}")
+    if info.get("clean") is False:
+        print("not clean   some beams or balls overlap elements they share no ball with: area, volume and meshes "
+              "assume a clean lattice (ple check lists them)")
     return 0
 
 

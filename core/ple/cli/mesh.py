@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -15,6 +16,7 @@ from ..app.jobs import assemble_stl, mesh_job
 from ..errors import PleError
 from ..io.export import export_mesh, write_beam_lattice_3mf, write_mesh
 from ..io.formats import mesh_format
+from ..measure.check import is_clean
 from ..measure.integrals import lattice_volume
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
 from ..meshing.tessellate import _check_style, tessellate
@@ -87,6 +89,9 @@ def run(args) -> int:
         n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments, max_groups)
     dt = time.perf_counter() - t0
     print(f"wrote {args.out}: {n:,} triangles, style {args.style}, region {region}, {dt:.2f} s")
+    if is_clean(lat, region) is False:
+        print("warning: the lattice is not clean (elements overlap elements they share no ball with); the mesh "
+              "assumes a clean lattice — ple check lists the pairs", file=sys.stderr)
     if args.check:
         print(json.dumps(check_report(lat, region, mesh), indent=1))
     return 0
