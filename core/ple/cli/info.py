@@ -32,6 +32,9 @@ def lattice_info(lat: Lattice) -> dict:
         "bounds": {"min": lo.tolist(), "max": hi.tolist()},
         "mean_radius": lat.mean_radius(),
     }
+    if lat.group_map is not None:  # groups placed by a map, not by U, V, W similarities
+        info["group_map"] = lat.group_map.describe()
+        del info["similarities"], info["placement"]
     info.update(lattice_measures(lat))
     return info
 
@@ -44,7 +47,9 @@ def run(args) -> int:
     print(f"groups      {info['counts'][0]} x {info['counts'][1]} x {info['counts'][2]} = {info['groups']:,}")
     print(f"nodes       {info['nodes']:,} ({info['template_nodes']} per group)")
     print(f"beams       {info['beams']:,} ({info['beam_patterns']} beam-patterns)")
-    for name, s in info["similarities"].items():
+    if "group_map" in info:
+        print(f"groups by   {info['group_map']['kind']} map ({info['group_map']['note']})")
+    for name, s in info.get("similarities", {}).items():
         cum = " (given cumulatively)" if s["cumulative"] else ""
         print(f"{name}           {s['kind']}{cum}")
     print(f"bounds      {_fmt(info['bounds']['min'])} .. {_fmt(info['bounds']['max'])}")

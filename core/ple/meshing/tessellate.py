@@ -443,6 +443,9 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     chocc, cnt and refined; ``balls-beams`` is a preview."""
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
+    if lat.group_map is not None:  # groups not similar (Möbius, warps): the general per-hub path
+        lat = lat.explicit(r)
+        r = lat.region()
     if style == "balls-beams":
 
         ev = evaluate_lattice(lat, r)
@@ -459,6 +462,9 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
     (k, 3)); hubs next to a box boundary are repeated in both boxes (their vertices, not faces)."""
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
+    if lat.group_map is not None:  # groups not similar (Möbius, warps): the general per-hub path
+        lat = lat.explicit(r)
+        r = lat.region()
     if style == "balls-beams":
         mesh = tessellate(lat, r, style)
         yield np.asarray(mesh.vertices), np.asarray(mesh.faces)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..algebra.mobius import Cline, Mobius
 from ..algebra.similarity import Identity, Rotation, Scaling, Screw, Similarity, Swirl, Translation
 from ..algebra.vectors import Pt, Vec
 from ..errors import PleError
@@ -28,6 +29,7 @@ from ..filters.stencil import Stencil
 from ..model.becots import BeCOTSField
 from ..model.becots_builders import becots_lattice, set_field, stack_lattice
 from ..model.lattice import Lattice
+from ..model.mobius import TMIMap, mobius_frames_lattice, mobius_lattice
 
 
 @dataclass(frozen=True)
@@ -61,6 +63,9 @@ API = {
     "Stencil": Stencil, "LiL": LiL, "FilteredLattice": FilteredLattice, "ImplicitFilter": ImplicitFilter,
     "TPMSField": TPMSField, "FourierField": FourierField, "BeCOTSField": BeCOTSField,
     "becots_lattice": becots_lattice, "stack_lattice": stack_lattice, "set_field": set_field,
+    # Möbius patterns and TMI maps (§11)
+    "Mobius": Mobius, "Cline": Cline, "TMIMap": TMIMap, "mobius_lattice": mobius_lattice,
+    "mobius_frames_lattice": mobius_frames_lattice,
 }
 ROOT_PACKAGE = __package__.rsplit(".", 1)[0]  # "ple", or the vendored copy's full name in Blender
 
