@@ -4,6 +4,8 @@ evaluation, queries, measures and meshes (per-hub path) against brute force and 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from ple import Lattice, Pt
@@ -12,6 +14,7 @@ from ple.errors import PleError
 from ple.measure.integrals import lattice_measures
 from ple.meshing.tessellate import tessellate
 from ple.model.mobius import TMIMap, mobius_frames_lattice, mobius_lattice
+from ple.program.sources import load_lattice
 from ple.queries import biq
 
 FIVE = (0, 4, 0.5 + 4j, 4.5 + 5j, 2.2 - 0.6j)
@@ -125,3 +128,11 @@ def test_explicit_is_bounded():
     lat = mobius_lattice(_cell(0.01), Mobius.from_coefficients(1, 0.1, 0.0001, 1), None, None, (1000, 1000, 1))
     with pytest.raises(PleError, match="per-hub path"):
         lat.explicit()
+
+
+@pytest.mark.parametrize("name", ["tmi_slab", "mobius_slab"])
+@pytest.mark.parametrize("style,levels", [("cnt", None), ("chocc", None), ("refined", 1)])
+def test_presets_mesh_closed(name, style, levels):
+    lat = load_lattice(str(Path(__file__).parents[2] / "presets" / f"{name}.py"), {"nu": 3, "nv": 2})
+    mesh = tessellate(lat, style=style, levels=levels)
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
