@@ -30,6 +30,7 @@ from ..model.becots import BeCOTSField
 from ..model.becots_builders import becots_lattice, set_field, stack_lattice
 from ..model.lattice import Lattice
 from ..model.mobius import TMIMap, mobius_frames_lattice, mobius_lattice
+from ..model.warp import RectifiedWarp, rectified_warp
 
 
 @dataclass(frozen=True)
@@ -66,6 +67,8 @@ API = {
     # Möbius patterns and TMI maps (§11)
     "Mobius": Mobius, "Cline": Cline, "TMIMap": TMIMap, "mobius_lattice": mobius_lattice,
     "mobius_frames_lattice": mobius_frames_lattice,
+    # rectified steady warps (§3.1–3.4)
+    "RectifiedWarp": RectifiedWarp, "rectified_warp": rectified_warp,
 }
 ROOT_PACKAGE = __package__.rsplit(".", 1)[0]  # "ple", or the vendored copy's full name in Blender
 
