@@ -17,6 +17,7 @@ from .model.becots import BeCOTSField
 from .model.becots_builders import becots_lattice, set_field, stack_lattice
 from .model.lattice import BeamPattern, Direction, Evaluation, Lattice, Node, Region
 from .model.mobius import TMIMap, mobius_frames_lattice, mobius_lattice
+from .model.planar import ShapeOntoCone, SteadyMap2, snap_corner
 from .model.warp import RectifiedWarp, rectified_warp
 from .program.runtime import Range, compile_program
 from .program.sources import load_lattice
@@ -25,7 +26,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "BeCOTSField", "BeamPattern", "Cline", "Mobius", "TMIMap", "mobius_frames_lattice", "mobius_lattice",
-    "RectifiedWarp", "rectified_warp", "Direction", "Evaluation", "FilteredLattice", "FourierField", "Identity",
+    "RectifiedWarp", "rectified_warp", "ShapeOntoCone", "SteadyMap2", "snap_corner", "Direction", "Evaluation", "FilteredLattice", "FourierField", "Identity",
     "ImplicitFilter", "Lattice", "LiL", "Node", "PleError", "Pt", "Range", "Region", "Rotation", "Scaling", "Screw",
     "Similarity", "Stencil", "Swirl", "TPMSField", "Translation", "Vec", "becots_lattice", "compile_program",
     "evaluate_lattice", "lil", "load_ir", "load_lattice", "save_ir", "set_field", "stack_lattice",

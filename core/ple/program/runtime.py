@@ -30,6 +30,7 @@ from ..model.becots import BeCOTSField
 from ..model.becots_builders import becots_lattice, set_field, stack_lattice
 from ..model.lattice import Lattice
 from ..model.mobius import TMIMap, mobius_frames_lattice, mobius_lattice
+from ..model.planar import ShapeOntoCone, SteadyMap2, snap_corner
 from ..model.warp import RectifiedWarp, rectified_warp
 
 
@@ -69,6 +70,8 @@ API = {
     "mobius_frames_lattice": mobius_frames_lattice,
     # rectified steady warps (§3.1–3.4)
     "RectifiedWarp": RectifiedWarp, "rectified_warp": rectified_warp,
+    # five-point planar maps, shapes rolled onto cones, seamless snapping (§2.6.5, §4.3.2, §4.4.3)
+    "SteadyMap2": SteadyMap2, "ShapeOntoCone": ShapeOntoCone, "snap_corner": snap_corner,
 }
 ROOT_PACKAGE = __package__.rsplit(".", 1)[0]  # "ple", or the vendored copy's full name in Blender
 
