@@ -26,7 +26,8 @@ __version__ = "0.1.0"
 
 __all__ = [
     "BeCOTSField", "BeamPattern", "Cline", "Mobius", "TMIMap", "mobius_frames_lattice", "mobius_lattice",
-    "RectifiedWarp", "rectified_warp", "ShapeOntoCone", "SteadyMap2", "snap_corner", "Direction", "Evaluation", "FilteredLattice", "FourierField", "Identity",
+    "RectifiedWarp", "rectified_warp", "ShapeOntoCone", "SteadyMap2", "snap_corner",
+    "Direction", "Evaluation", "FilteredLattice", "FourierField", "Identity",
     "ImplicitFilter", "Lattice", "LiL", "Node", "PleError", "Pt", "Range", "Region", "Rotation", "Scaling", "Screw",
     "Similarity", "Stencil", "Swirl", "TPMSField", "Translation", "Vec", "becots_lattice", "compile_program",
     "evaluate_lattice", "lil", "load_ir", "load_lattice", "save_ir", "set_field", "stack_lattice",
