@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import trimesh
 
 from ..errors import PleError
 from ..filters.fit import fit_mesh
@@ -32,8 +33,6 @@ def register(sub) -> None:
 
 def load_mesh(path: str):
     """Vertices and faces of a mesh file (trimesh's readers), as one mesh."""
-    import trimesh
-
     try:
         mesh = trimesh.load(path, force="mesh", process=False)
     except (OSError, ValueError) as exc:
