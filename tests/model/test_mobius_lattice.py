@@ -136,3 +136,11 @@ def test_presets_mesh_closed(name, style, levels):
     lat = load_lattice(str(Path(__file__).parents[2] / "presets" / f"{name}.py"), {"nu": 3, "nv": 2})
     mesh = tessellate(lat, style=style, levels=levels)
     assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+
+
+def test_group_map_lattices_have_no_ir_form():
+    from ple.model.ir import lattice_to_dict
+
+    lat = TMIMap.from_five(*FIVE).lattice(_cell(), (2, 2))
+    with pytest.raises(PleError, match="no ple-lattice/1 form"):
+        lattice_to_dict(lat)

@@ -141,6 +141,9 @@ def _matrix_list(s: Similarity) -> list[list[float]]:
 def lattice_to_dict(lat: Lattice, resolved: bool = True) -> dict:
     """The IR of a lattice. ``resolved``: every U/V/W as its incremental 4x4 matrix (what
     ``ple ir`` writes); otherwise canonical similarities with their cumulative flags."""
+    if lat.group_map is not None:  # Möbius patterns, TMI maps: no similarities to write
+        raise PleError(f"a lattice placed by a {lat.group_map.kind} map has no ple-lattice/1 form "
+                       "(keep its program instead)")
     out: dict = {"format": FORMAT}
     if lat.meta.get("description"):
         out["description"] = lat.meta["description"]
