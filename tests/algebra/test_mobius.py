@@ -118,7 +118,8 @@ def test_cline_inversions():
     u = Mobius.from_coefficients(1 + 0.2j, 0.3, 0.1 - 0.05j, 1.1)
     r = Cline.circle(u.fixed_points()[0], 2.0)
     s = r @ Cline.circle(0, 1)  # any Möbius; conjugate U:
-    conj = Mobius.conjugated(u.similarity_part()[0], Cline.circle(u.fixed_points()[0], 1.0))
+    f = u.fixed_points()[0]
+    conj = Mobius.conjugated(u.similarity_part()[0], Cline.circle(f, np.sqrt(abs(f) ** 2 + 1)))
     assert conj.allclose(u)
     assert s is not None
 
@@ -158,3 +159,21 @@ def test_degenerate_inputs_are_named():
         Mobius.from_coefficients(1, 2, 2, 4)
     with pytest.raises(PleError, match="distinct"):
         Mobius.from_frame(0, 0, 1j)
+
+
+def test_powers_stay_accurate_near_parabolic_with_far_fixed_points():
+    """c tiny and a ≈ d: both fixed points far away; the conjugating inversion must stay well
+    conditioned (found by fuzzing: a unit-radius inversion lost 6+ digits here)."""
+    rng = np.random.default_rng(7)
+    z = np.array([0.3 + 0.2j, -0.5 + 0.1j])
+    worst = 0.0
+    for n in range(600):
+        a, b, c, d = rng.normal(size=4) + 1j * rng.normal(size=4)
+        c *= 10.0 ** -rng.uniform(0, 8)
+        if n % 2:
+            d = a + 10.0 ** -rng.uniform(4, 9)
+        u = Mobius.from_coefficients(a, b, c, d)
+        h, cube = u ** 0.5, u @ u @ u
+        for got, want in (((h @ h)(z), u(z)), ((u ** 3)(z), cube(z))):
+            worst = max(worst, float(np.abs(got - want).max() / max(1.0, np.abs(want).max())))
+    assert worst < 1e-8

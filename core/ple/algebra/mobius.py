@@ -197,8 +197,9 @@ class Mobius:
         if self.is_similarity:
             return None
         f = self.fixed_points()[0]
-        # R(z) = F + 1 / conj(z - F) = M_R(conj z) with M_R(w) = (F w + 1 - |F|^2) / (w - conj F)
-        return np.array([[f, 1 - abs(f) ** 2], [1, -f.conjugate()]], dtype=complex)
+        # R(z) = F + ρ² / conj(z - F) = M_R(conj z), M_R(w) = (F w + ρ² - |F|²) / (w - conj F); the
+        # radius ρ² = |F|² + 1 keeps M_R = [[F, 1], [1, -conj F]] well conditioned for any F
+        return np.array([[f, 1], [1, -f.conjugate()]], dtype=complex)
 
     def similarity_part(self) -> tuple[Similarity, np.ndarray | None]:
         """(S, M_R): S = R ∘ U ∘ R as a Similarity and the inversion's matrix (None if U is one)."""
