@@ -144,3 +144,14 @@ def test_group_map_lattices_have_no_ir_form():
     lat = TMIMap.from_five(*FIVE).lattice(_cell(), (2, 2))
     with pytest.raises(PleError, match="no ple-lattice/1 form"):
         lattice_to_dict(lat)
+
+
+def test_tmi_from_five_interpolates_e_for_random_configurations():
+    """§11.4.2 warns that angle jumps can break M(.5,0) = E; the branch is chosen so that it holds."""
+    rng = np.random.default_rng(3)
+    base = np.array([0, 1, 1j, 1 + 1j, 0.5])
+    for _ in range(300):
+        pts = base + (rng.normal(size=5) + 1j * rng.normal(size=5)) * 0.25
+        tmi = TMIMap.from_five(*pts)
+        got = tmi(np.array([0, 1, 0, 1, 0.5]), np.array([0, 0, 1, 1, 0]))
+        assert np.allclose(got, pts, atol=1e-8)

@@ -12,6 +12,9 @@ COTS map. ``TMIMap.from_six`` follows §11.4.1, ``TMIMap.from_five`` §11.4.2.
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
+
 import numpy as np
 
 from ..algebra.mobius import Cline, Mobius, _complex, map_balls
@@ -127,7 +130,18 @@ class TMIMap:
         swap = Mobius.between_frames((pa, pb, pc), (pd, pc, pb))  # I: {A,B,C} -> {D,C,B}
         pz = complex(swap(np.array([pe]))[0])  # Z = I(E) = M(.5, 1)
         six = TMIMap.from_six(pe, pa, pb, pz, pc, pd)  # its u runs A->C: swap the parameters
-        return TMIMap(six.v, six.u, six.origin)
+        u, v = six.v, six.u
+        # §11.4.2: the rotation angle of the COTS similarity may sit on the wrong side of ±π
+        # ("jumps" that break M(.5,0) = E); the corners hold for every branch, so keep the
+        # branch of U's angle that interpolates E
+        sim, mr = u.similarity_part()
+        if abs(abs(sim.r[2]) - 1) < 1e-12:  # a rotation about z: its angle has branches
+            # ±1 turn flips U**.5 by a half turn; ±2 turns would meet E again but wrap the map
+            cands = [Mobius(u.m, (replace(sim, angle=sim.angle + 2 * math.pi * k), mr)) for k in (0, -1, 1)]
+            errs = [abs(TMIMap(c, v, six.origin)(0.5, 0.0) - pe) for c in cands]
+            tol = 1e-9 * max(1.0, max(abs(p) for p in (pa, pb, pc, pd)))
+            u = next((c for c, e in zip(cands, errs) if e <= tol), cands[int(np.argmin(errs))])
+        return TMIMap(u, v, six.origin)
 
     def __call__(self, u, v) -> np.ndarray:
         """Complex points M(u, v) for arrays u, v (broadcast)."""
