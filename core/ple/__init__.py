@@ -7,6 +7,7 @@ lattice from a program, an IR file or a preset. Everything else is imported from
 e.g. ``from ple.queries import biq`` or ``from ple.meshing.tessellate import tessellate``.
 """
 
+from .algebra.mobius import Cline, Mobius
 from .algebra.similarity import Identity, Rotation, Scaling, Screw, Similarity, Swirl, Translation
 from .algebra.vectors import Pt, Vec
 from .errors import PleError
@@ -15,13 +16,18 @@ from .io.irfile import load_ir, save_ir
 from .model.becots import BeCOTSField
 from .model.becots_builders import becots_lattice, set_field, stack_lattice
 from .model.lattice import BeamPattern, Direction, Evaluation, Lattice, Node, Region
+from .model.mobius import TMIMap, mobius_frames_lattice, mobius_lattice
+from .model.planar import ShapeOntoCone, SteadyMap2, snap_corner
+from .model.warp import RectifiedWarp, rectified_warp
 from .program.runtime import Range, compile_program
 from .program.sources import load_lattice
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "BeCOTSField", "BeamPattern", "Direction", "Evaluation", "FilteredLattice", "FourierField", "Identity",
+    "BeCOTSField", "BeamPattern", "Cline", "Mobius", "TMIMap", "mobius_frames_lattice", "mobius_lattice",
+    "RectifiedWarp", "rectified_warp", "ShapeOntoCone", "SteadyMap2", "snap_corner",
+    "Direction", "Evaluation", "FilteredLattice", "FourierField", "Identity",
     "ImplicitFilter", "Lattice", "LiL", "Node", "PleError", "Pt", "Range", "Region", "Rotation", "Scaling", "Screw",
     "Similarity", "Stencil", "Swirl", "TPMSField", "Translation", "Vec", "becots_lattice", "compile_program",
     "lil", "load_ir", "load_lattice", "save_ir", "set_field", "stack_lattice",

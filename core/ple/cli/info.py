@@ -44,8 +44,14 @@ def lattice_info(lat: Lattice, region=None) -> dict:
         "placement": lat.placement.to_dict(),
         "mean_radius": lat.mean_radius(),
     }
+    if lat.group_map is not None:  # groups placed by a map, not by U, V, W similarities
+        info["group_map"] = lat.group_map.describe()
+        del info["similarities"], info["placement"]
     if lat.filter is None:
-        lo, hi, exact = fast_bounds(lat, r)  # closed form or bounded scan: seconds even for 10^12 groups
+        if lat.group_map is None:
+            lo, hi, exact = fast_bounds(lat, r)  # closed form or bounded scan: seconds even for 10^12 groups
+        else:
+            (lo, hi), exact = lat.bounds(r), True
         info.update(nodes=lat.node_count(r), beams=lat.beam_count(r),
                     bounds={"min": lo.tolist(), "max": hi.tolist(), "exact": exact})
         info.update(lattice_measures(lat) if whole else kept_measures(lat, r))
@@ -75,6 +81,9 @@ def _moments_and_clean(lat: Lattice, r, info: dict) -> dict:
     """Centroid and inertia (about the centroid, unit density) of what is kept, when its area and
     volume were measured; ``clean``: True/False, or None when checking would cost more than a
     quick look (``ple check`` gives the full report)."""
+    if lat.group_map is not None:  # no similar hubs to move moments with: ple check and moments skip it
+        info["clean"] = None
+        return info
     if "volume" in info and info["volume"] > 0:
         props = mass_properties(lat, r)
         info.update(centroid=np.asarray(props["centroid"]).tolist(), inertia=np.asarray(props["inertia"]).tolist())
@@ -106,7 +115,9 @@ def run(args) -> int:
         print(f"beams       {info['beams']:,}{kept} ({info['beam_patterns']} beam-patterns)")
     else:
         print(f"nodes       {info['counts_method']}")
-    for name, s in info["similarities"].items():
+    if "group_map" in info:
+        print(f"groups by   {info['group_map']['kind']} map ({info['group_map']['note']})")
+    for name, s in info.get("similarities", {}).items():
         cum = " (given cumulatively)" if s["cumulative"] else ""
         print(f"{name}           {s['kind']}{cum}")
     if "bounds" in info:

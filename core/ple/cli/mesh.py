@@ -47,6 +47,8 @@ def register(sub) -> None:
     p.add_argument("--levels", type=int, default=None, help="refinement levels of 'refined' (default 4)")
     p.add_argument("--segments", type=int, default=None, help="generators per circle of 'chocc' (default 16)")
     p.add_argument("--region", help="I0:I1,J0:J1,K0:K1 (half-open); default: the whole lattice")
+    p.add_argument("--fillet", type=float, default=None,
+                   help="'refined' only: junction fillet size in ball radii (CHoCC paper Eq. 6)")
     p.add_argument("--out", help="output .stl, .3mf, .ply, .obj or .glb (with --parts: the assembled .stl)")
     p.add_argument("--box-groups", type=int, default=1 << 14, metavar="N",
                    help="with --parts: node-groups per part (default 16384)")
@@ -82,11 +84,11 @@ def run(args) -> int:
         print(f"wrote {args.out}: beam lattice, {len(ev.center):,} balls, {len(ev.beam_nodes):,} beams")
         return 0
     if args.check:
-        mesh = tessellate(lat, region, args.style, args.levels, args.segments)
+        mesh = tessellate(lat, region, args.style, args.levels, args.segments, fillet=args.fillet)
         export_mesh(mesh, args.out)
         n = len(mesh.faces)
     else:
-        n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments, max_groups)
+        n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments, max_groups, fillet=args.fillet)
     dt = time.perf_counter() - t0
     print(f"wrote {args.out}: {n:,} triangles, style {args.style}, region {region}, {dt:.2f} s")
     if is_clean(lat, region) is False:

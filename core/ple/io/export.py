@@ -175,13 +175,13 @@ def write_beam_lattice_3mf(path, center, radius, beam_nodes) -> None:
 
 
 def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: int | None = None,
-               segments: int | None = None, max_groups: int = 1 << 14) -> int:
+               segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None) -> int:
     """Tessellate a region straight to ``path`` (format from the suffix); returns the number of
     triangles. Binary STL streams box by box (memory bounded by ``max_groups`` groups); the
     other formats build the mesh in memory and go through trimesh."""
     if mesh_format(path) == "stl":
-        return write_stl(path, iter_triangles(lat, region, style, levels, segments, max_groups))
-    mesh = tessellate(lat, region, style, levels, segments)
+        return write_stl(path, iter_triangles(lat, region, style, levels, segments, max_groups, fillet=fillet))
+    mesh = tessellate(lat, region, style, levels, segments, fillet=fillet)
     export_mesh(mesh, path)
     return len(mesh.faces)
 

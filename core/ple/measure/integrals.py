@@ -351,6 +351,11 @@ def lattice_measures(lat: Lattice, method: str = "closed", grid: int = 0, max_hu
     lat.validate()
     if lat.filter is not None:
         return kept_measures(lat, grid=grid)
+    if lat.group_map is not None:  # groups not similar: every hub measured on its own
+        if lat.node_count() > max_hubs:
+            return {"area_method": f"skipped: {lat.node_count()} hubs of a {lat.group_map.kind} lattice "
+                                   f"(limit {max_hubs})"}
+        return dict(lattice_measures(lat.explicit(), "sum", grid, max_hubs), area_method="sum over hubs (per-hub path)")
     if method not in ("closed", "sum"):
         raise PleError(f"unknown area/volume method {method!r} (closed or sum)")
     reach = [max([abs(b.offset[d]) for b in lat.beams], default=0) for d in range(3)]

@@ -34,6 +34,7 @@ from ..errors import PleError
 from ..model.lattice import Lattice, Region
 from .achocc import HubGeometry, hub_geometry
 from .chocc import ChoccMesh, cnt_segments, corridor_mesh, sampled_segments
+from .fillet import filleted
 from .preview import balls_beams_mesh
 from .styles import style as style_named
 
@@ -117,7 +118,7 @@ def _arc_mids(pa, pb, n, alpha, r_plus, frames, ci) -> np.ndarray:
 
 
 def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, levels: int,
-                 segments: int, hint=None) -> HubTemplate:
+                 segments: int, hint=None, fillet: float | None = None) -> HubTemplate:
     """Tessellate one junction: ball (center (3,), radius) with beams to the balls
     (neighbor_centers (S, 3), neighbor_radii (S,)), in the given style."""
     center = np.asarray(center, float)
@@ -127,6 +128,7 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
         raise PleError("a beam joins two balls with the same centre")
     dirs = vec / lengths[:, None]
     hub = hub_geometry(radius, dirs, np.asarray(neighbor_radii, float).reshape(-1), lengths, hint)
+    hub = filleted(hub, fillet)  # optional junction fillet (001_ §6 Eq. 6): projection onto the blend
     if style == "refined":
         base = corridor_mesh(hub.chocc, cnt_segments)
         verts, faces, rings = _refine(base, hub, levels)
@@ -186,8 +188,10 @@ def zipper(angles_a: np.ndarray, angles_b: np.ndarray) -> np.ndarray:
 class _Tessellator:
     """Builds region meshes box by box, caching hub templates and beam strips."""
 
-    def __init__(self, lat: Lattice, region: Region, style: str, levels: int, segments: int):
+    def __init__(self, lat: Lattice, region: Region, style: str, levels: int, segments: int,
+                 fillet: float | None = None):
         lat.validate()
+        self.fillet = fillet
         self.lat, self.region, self.style, self.levels, self.segments = lat, region, style, levels, segments
         nn = len(lat.nodes)
         # slots of template node n: (pattern, +1 outgoing | -1 incoming)
@@ -266,7 +270,7 @@ class _Tessellator:
                     hint_key = (n, have.tobytes())  # the last hub with these beams: likely the same hull
                     tpl = hub_template(lat.template_centers[n], lat.template_radii[n], local[u, have, :3],
                                        local[u, have, 3], self.style, self.levels, self.segments,
-                                       self.hints.get(hint_key))
+                                       self.hints.get(hint_key), self.fillet)
                     self.hints[hint_key] = tpl.geometry.base_triangles
                     slot_of = np.cumsum(have) - 1
                     self.templates[key] = (len(self.templates), tpl, np.where(have, slot_of, -1))
@@ -414,6 +418,13 @@ def _in(idx: np.ndarray, r: Region) -> np.ndarray:
             & (idx[:, 2] >= r.k0) & (idx[:, 2] < r.k1))
 
 
+def _check_fillet(fillet, style: str):
+    """A fillet (size in ball radii) shapes only the refined style's projected vertices."""
+    if fillet and style != "refined":
+        raise PleError(f"a fillet needs the refined style, not {style!r}")
+    return fillet or None
+
+
 def _check_style(style: str, levels: int | None, segments: int | None) -> tuple[int, int]:
     style_named(style)
     levels = DEFAULT_LEVELS if levels is None else int(levels)
@@ -438,7 +449,7 @@ def tessellation_box(lat: Lattice, region, box, style: str = "refined", levels: 
 
 
 def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
-               segments: int | None = None) -> trimesh.Trimesh:
+               segments: int | None = None, fillet: float | None = None) -> trimesh.Trimesh:
     """The mesh of a region (default: the whole lattice) as one trimesh.
 
     ``levels``: refinement levels of ``refined`` (default 4); ``segments``: generators per full
@@ -446,27 +457,33 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     chocc, cnt and refined; ``balls-beams`` is a preview."""
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
+    if lat.group_map is not None:  # groups not similar (Möbius, warps): the general per-hub path
+        lat = lat.explicit(r)
+        r = lat.region()
     if style == "balls-beams":
 
         ev = lat.evaluate(r)
         return balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
-    verts, faces = _Tessellator(lat, r, style, levels, segments).build(r)
+    verts, faces = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style)).build(r)
     mesh = trimesh.Trimesh(verts, faces, process=False)
     mesh.remove_unreferenced_vertices()
     return mesh
 
 
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
-                   segments: int | None = None, max_groups: int = 1 << 14):
+                   segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None):
     """Stream the region's mesh box by box (bounded memory) as pairs (vertices (V, 3), faces
     (k, 3)); hubs next to a box boundary are repeated in both boxes (their vertices, not faces)."""
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
+    if lat.group_map is not None:  # groups not similar (Möbius, warps): the general per-hub path
+        lat = lat.explicit(r)
+        r = lat.region()
     if style == "balls-beams":
         mesh = tessellate(lat, r, style)
         yield np.asarray(mesh.vertices), np.asarray(mesh.faces)
         return
-    tess = _Tessellator(lat, r, style, levels, segments)
+    tess = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style))
     boxes = list(lat.iter_slabs(max_groups=max_groups, region=r))
     # build the next box in a worker thread while the caller writes this one (numpy releases
     # the GIL in its large array operations): at most two boxes are held at a time

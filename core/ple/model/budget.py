@@ -122,6 +122,13 @@ def check_finite(lat: Lattice, what: str = "the lattice") -> None:
         return
     corners = [(0, n - 1) if n > 1 else (0,) for n in lat.counts]
     idx = np.array(list(product(*corners)), dtype=np.int64)
+    if lat.group_map is not None:  # groups placed by a map: check the corner groups' balls only
+        nn = len(lat.nodes)
+        with np.errstate(all="ignore"):
+            c, r = lat.node_balls(np.column_stack([np.repeat(idx, nn, axis=0), np.tile(np.arange(nn), len(idx))]))
+        if np.isfinite(c).all() and np.isfinite(r).all() and (r > 0).all() and np.abs(c).max() < HUGE:
+            return
+        raise PleError(f"{what} overflows: its {lat.group_map.kind} map gives infinite, zero or huge balls")
     with np.errstate(all="ignore"):
         factors = lat.group_factors(idx[:, 0], idx[:, 1], idx[:, 2])
         mats = lat.group_matrices(idx[:, 0], idx[:, 1], idx[:, 2])

@@ -149,6 +149,9 @@ def lattice_to_dict(lat: Lattice, resolved: bool = True, filter_to_dict=None) ->
     ``ple ir`` writes); otherwise canonical similarities with their cumulative flags. A filter is
     written by ``filter_to_dict(filter)`` (``ple.filters.ir``); without it a filtered lattice is
     refused rather than written unfiltered."""
+    if lat.group_map is not None:  # Möbius patterns, TMI maps: no similarities to write
+        raise PleError(f"a lattice placed by a {lat.group_map.kind} map has no ple-lattice/1 form "
+                       "(keep its program instead)")
     out: dict = {"format": FORMAT}
     if lat.meta.get("description"):
         out["description"] = lat.meta["description"]

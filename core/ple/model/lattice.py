@@ -19,9 +19,11 @@ from ..algebra.similarity import Similarity
 from ..algebra.vectors import Pt
 from ..errors import PleError
 from .becots import BeCOTS, BeCOTSField, Stack, becots_counts
+from .groupmap import GroupMap
 
 MAX_COUNT = 10**7  # per direction; beyond this a count is certainly a typo
 MAX_GROUPS = 10**13
+MAX_EXPLICIT_NODES = 200_000  # Lattice.explicit: one template node per node, per-hub work
 
 
 @dataclass
@@ -171,6 +173,7 @@ class Lattice:
         self.placement = Similarity()
         self.becots = None  # a BeCOTS description for corner-operated slabs (set_becots, set_field)
         self.filter = None  # an optional ple.filters.Filter deciding which nodes survive (thesis §9)
+        self.group_map = None  # a GroupMap placing the groups instead of U, V, W, G (Möbius, warps)
         self.meta: dict = {}
 
     # ----- building -----------------------------------------------------------------------
@@ -267,6 +270,21 @@ class Lattice:
         self.set_v(gv, info.V)
         self.becots = info
 
+    def set_group_map(self, gmap: GroupMap, counts=(1, 1, 1)) -> None:
+        """Place node-group (i, j, k) by ``gmap`` (a GroupMap: Möbius patterns, rectified warps)
+        instead of similarities; ``counts`` = (nu, nv[, nw]) groups. U, V, W become identities."""
+        if not isinstance(gmap, GroupMap):
+            raise PleError(f"group map must be a GroupMap, got {type(gmap).__name__}")
+        counts = tuple(counts)
+        if not 1 <= len(counts) <= 3:
+            raise PleError(f"group map counts {counts!r}: expected (nu, nv[, nw])")
+        nu, nv, nw = counts + (1,) * (3 - len(counts))
+        self.u, self.v, self.w = (self._direction(name, c, Similarity(), False)
+                                  for name, c in (("U", nu), ("V", nv), ("W", nw)))
+        self.placement, self.becots = Similarity(), None
+        self._check_size()
+        self.group_map = gmap
+
     def set_filter(self, node_filter) -> None:
         """Keep only the nodes a filter accepts (stencil, LiL, implicit field, … ; thesis §9);
         beams survive where both nodes do. The filter is part of the lattice: every evaluation,
@@ -300,6 +318,7 @@ class Lattice:
         other.beams = list(self.beams)
         other.u, other.v, other.w, other.placement = self.u, self.v, self.w, self.placement
         other.becots, other.filter, other.meta = self.becots, self.filter, dict(self.meta)
+        other.group_map = self.group_map
         return other
 
     # ----- shape ----------------------------------------------------------------------------
@@ -373,14 +392,21 @@ class Lattice:
         return r
 
     # ----- evaluation -------------------------------------------------------------------------
+    def _similarity_groups(self, what: str) -> None:
+        if self.group_map is not None:
+            raise PleError(f"{what}: this lattice's groups are placed by a {self.group_map.kind} map, "
+                           "not by similarities (use Lattice.explicit for per-hub work)")
+
     def group_matrices(self, i, j, k) -> np.ndarray:
         """Matrices of ``G ∘ W**k ∘ V**j ∘ U**i`` for index arrays, shape (N, 4, 4)."""
+        self._similarity_groups("group matrices")
         mu, mv, mw = (_power_table(s, np.asarray(x).reshape(-1))
                       for s, x in ((self.U, i), (self.V, j), (self.W, k)))
         return self.placement.matrix[None] @ (mw @ (mv @ mu))
 
     def group_factors(self, i, j, k) -> np.ndarray:
         """Dilation factor of group (i, j, k): s_G s_W**k s_V**j s_U**i, shape (N,)."""
+        self._similarity_groups("group factors")
         i, j, k = (np.asarray(x, dtype=float).reshape(-1) for x in (i, j, k))
         return (self.placement.factor * self.W.factor ** k * self.V.factor ** j * self.U.factor ** i)
 
@@ -388,6 +414,9 @@ class Lattice:
         """Centres (N, 3) and radii (N,) of nodes given as an (N, 4) array of (i, j, k, n)."""
         self.validate()
         idx = np.asarray(index, dtype=np.int64).reshape(-1, 4)
+        if self.group_map is not None:
+            return self.group_map.map_balls(idx[:, 0], idx[:, 1], idx[:, 2], self.template_centers[idx[:, 3]],
+                                            self.template_radii[idx[:, 3]])
         m = self.group_matrices(idx[:, 0], idx[:, 1], idx[:, 2])
         c = self.template_centers[idx[:, 3]]
         centers = np.einsum("nab,nb->na", m[:, :3, :3], c) + m[:, :3, 3]
@@ -398,6 +427,9 @@ class Lattice:
         """Centres (ni, nj, nk, nn, 3) and radii (ni, nj, nk, nn) of a region, vectorized."""
         self.validate()
         r = self.region(region)
+        if self.group_map is not None:
+            c, rad = self.node_balls(r.node_index(len(self.nodes)))
+            return c.reshape(*r.shape, len(self.nodes), 3), rad.reshape(*r.shape, len(self.nodes))
         ii, jj, kk = np.arange(r.i0, r.i1), np.arange(r.j0, r.j1), np.arange(r.k0, r.k1)
         mu = self.U.power_matrices(ii)
         # G ∘ W^k ∘ V^j for all (j, k): small (nj * nk matrices)
@@ -560,11 +592,38 @@ class Lattice:
         return lo, hi
 
     def mean_radius(self) -> float:
-        """Mean ball radius over the whole lattice, in closed form (geometric series)."""
+        """Mean ball radius over the whole lattice, in closed form (geometric series); with a
+        group map, streamed over slabs."""
+        if self.group_map is not None:
+            total = sum(float(self.region_balls(part)[1].sum()) for part in self.iter_slabs())
+            return total / self.node_count()
         f = 1.0
         for s, n in ((self.U, self.u.count), (self.V, self.v.count), (self.W, self.w.count)):
             f *= geometric_sum(s.factor, n) / n
         return float(self.placement.factor * f * self.template_radii.mean())
+
+    def explicit(self, region=None) -> Lattice:
+        """The region as a one-group lattice whose template holds every (filter-kept) node and
+        whose beam-patterns (offset 0) are the region's beams: the general per-hub form for
+        lattices whose groups are not similar (group maps). Bounded by MAX_EXPLICIT_NODES."""
+        r = self.region(region)
+        nn = len(self.nodes)
+        if r.groups * nn > MAX_EXPLICIT_NODES:
+            raise PleError(f"region {r} has {r.groups * nn:,} nodes; the per-hub path handles at most "
+                           f"{MAX_EXPLICIT_NODES:,}: choose a smaller region")
+        idx = r.node_index(nn)
+        c, rad = self.node_balls(idx)
+        keep = np.ones(len(idx), bool)
+        if self.filter is not None:
+            keep = np.asarray(self.filter.node_mask(self, idx, c, rad), dtype=bool)
+        row = np.cumsum(keep) - 1
+        out = Lattice()
+        out.nodes = [Node(c[q].copy(), float(rad[q])) for q in np.flatnonzero(keep)]
+        _, bn = self.region_beams(r)
+        bn = bn[keep[bn[:, 0]] & keep[bn[:, 1]]]
+        out.beams = [BeamPattern(int(row[a]), int(row[b]), 0, 0, 0) for a, b in bn]
+        out.meta = dict(self.meta, explicit_of=str(r))
+        return out
 
     def with_counts(self, nu: int, nv: int, nw: int) -> Lattice:
         """A copy with other repetition counts and the same incremental similarities."""

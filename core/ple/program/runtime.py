@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..algebra.mobius import Cline, Mobius
 from ..algebra.similarity import Identity, Rotation, Scaling, Screw, Similarity, Swirl, Translation
 from ..algebra.vectors import Pt, Vec
 from ..errors import PleError
@@ -31,6 +32,9 @@ from ..io.inputs import read_input_file
 from ..model.becots import BeCOTSField
 from ..model.becots_builders import becots_lattice, set_field, stack_lattice
 from ..model.lattice import Lattice
+from ..model.mobius import TMIMap, mobius_frames_lattice, mobius_lattice
+from ..model.planar import ShapeOntoCone, SteadyMap2, snap_corner
+from ..model.warp import RectifiedWarp, rectified_warp
 
 
 @dataclass(frozen=True)
@@ -64,6 +68,13 @@ API = {
     "Stencil": Stencil, "LiL": LiL, "FilteredLattice": FilteredLattice, "ImplicitFilter": ImplicitFilter,
     "TPMSField": TPMSField, "FourierField": FourierField, "BeCOTSField": BeCOTSField,
     "becots_lattice": becots_lattice, "stack_lattice": stack_lattice, "set_field": set_field,
+    # Möbius patterns and TMI maps (§11)
+    "Mobius": Mobius, "Cline": Cline, "TMIMap": TMIMap, "mobius_lattice": mobius_lattice,
+    "mobius_frames_lattice": mobius_frames_lattice,
+    # rectified steady warps (§3.1–3.4)
+    "RectifiedWarp": RectifiedWarp, "rectified_warp": rectified_warp,
+    # five-point planar maps, shapes rolled onto cones, seamless snapping (§2.6.5, §4.3.2, §4.4.3)
+    "SteadyMap2": SteadyMap2, "ShapeOntoCone": ShapeOntoCone, "snap_corner": snap_corner,
 }
 ROOT_PACKAGE = __package__.rsplit(".", 1)[0]  # "ple", or the vendored copy's full name in Blender
 

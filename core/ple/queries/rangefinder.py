@@ -36,6 +36,7 @@ import numpy as np
 
 from ..algebra.elements import ball_ball_interfere, ball_beam_interfere, beam_distance, enclosing_ball
 from ..algebra.similarity import Similarity, commute
+from ..errors import PleError
 from ..model.lattice import Lattice
 from .plans import cached
 
@@ -611,9 +612,18 @@ def _to_frame(lat: Lattice, c: np.ndarray, r: np.ndarray):
     return g.inverse().apply_points(c), r / g.factor
 
 
-def lattice_hits(lat: Lattice, c: np.ndarray, r: np.ndarray):
-    """RangeFinder BIQ: (node hits (N, 5), beam hits (M, 5), path) as (qid, i, j, k, x)."""
+PATH_ORDER = ("1", "u", "uv")  # §7.3.1: each path's conditions include the next one's
+
+
+def lattice_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, path: str | None = None):
+    """RangeFinder BIQ: (node hits (N, 5), beam hits (M, 5), path) as (qid, i, j, k, x).
+    ``path`` forces a slower path than the detected one ("u" or "uv"; benchmarks, Table 7.2)."""
     pl = cached_plan(lat)
+    if path is not None and path != pl.path:
+        if path not in PATH_ORDER or PATH_ORDER.index(path) < PATH_ORDER.index(pl.path):
+            raise PleError(f"path {path!r} is not available on this lattice (detected {pl.path!r}; "
+                           f"only slower paths {PATH_ORDER[PATH_ORDER.index(pl.path):]} can be forced)")
+        pl = _Plan(path, pl.maps, pl.elements)
     qc, qr = _to_frame(lat, c, r)
     node_parts, beam_parts = [], []
     for s in range(0, len(qc), QUERY_BATCH):

@@ -1,0 +1,52 @@
+"""The commands on lattices placed by group maps (TMI, Möbius) and on a rectified warp:
+eval, info, mesh --check, biq (naive path, named), ir (refused), bench seeds (small)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from ple.cli.main import main
+from ple.program.sources import load_lattice
+
+PRESETS = Path(__file__).resolve().parents[2] / "presets"
+
+
+def test_eval_info_mesh_biq_on_a_tmi_slab(tmp_path, capsys):
+    src = str(PRESETS / "tmi_slab.py")
+    lat = load_lattice(src, {"nu": 3, "nv": 3})
+    out = tmp_path / "e.npz"
+    assert main(["eval", src, "--param", "nu=3", "--param", "nv=3", "--out", str(out)]) == 0
+    with np.load(out) as z:
+        c, r = lat.node_balls(z["node_index"])
+        assert np.allclose(z["center"], c) and np.allclose(z["radius"], r) and len(z["beam_nodes"]) == 24
+    capsys.readouterr()
+    assert main(["info", src, "--param", "nu=3", "--param", "nv=3", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["group_map"]["kind"] == "Möbius" and "similarities" not in info
+    assert info["nodes"] == 16 and info["volume"] > 0 and "per-hub" in info["area_method"]
+    mesh = tmp_path / "m.stl"
+    assert main(["mesh", src, "--param", "nu=3", "--param", "nv=3", "--out", str(mesh), "--check"]) == 0
+    report = json.loads(capsys.readouterr().out.split("\n", 1)[1])
+    assert report["watertight"] and abs(report["relative_volume_error"]) < 0.01
+    q = tmp_path / "q.npy"
+    np.save(q, np.array([[0.0, 0.0, 0.0, 0.2], [2.0, 2.0, 0.0, 0.1]]))
+    res = tmp_path / "b.json"
+    assert main(["biq", src, "--param", "nu=3", "--param", "nv=3", "--queries", str(q), "--out", str(res)]) == 0
+    assert "path naive (group map)" in capsys.readouterr().out  # the cost is named
+    hits = json.loads(res.read_text())["queries"]
+    ev = lat.evaluate()
+    d = np.linalg.norm(ev.center - [0, 0, 0], axis=1) - ev.radius - 0.2
+    assert sorted(map(tuple, hits[0]["nodes"])) == sorted(map(tuple, ev.node_index[d <= 0].tolist()))
+    assert main(["ir", src, "--out", str(tmp_path / "x.json")]) == 2
+
+
+def test_bench_seeds_runs_small(capsys):
+    assert main(["bench", "seeds", "--queries", "3", "--naive-queries", "1", "--skip-lil"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert {r["lattice"] for r in out["table_7_2"]} == {"thesis_regular", "thesis_cylindrical", "thesis_warped"}
+    for row in out["table_7_2"]:
+        assert all(v.get("same_hits_as_best_path", True) for v in row["ours"].values())
+    assert set(out["table_7_2"][0]["ours"]) == {"1", "u", "uv", "naive"}
+    assert len(out["fig_21"]) == 2
