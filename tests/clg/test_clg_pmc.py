@@ -24,7 +24,7 @@ def random_pattern(rng, kind: str) -> dict:
     pat = {"format": "ple-lattice/1", "nodes": nodes, "beams": beams}
     if kind == "steady":
         pat["U"] = {"count": 3, "similarity": {"kind": "translation", "vector": [1.0, 0.1 * rng.standard_normal(), 0]}}
-        pat["V"] = {"count": 3, "similarity": {"kind": "translation", "vector": [0.1, 1.0, 0.2 * rng.standard_normal()]}}
+        pat["V"] = {"count": 3, "similarity": {"kind": "translation", "vector": [0.1, 1.0, 0.2 * rng.random()]}}
         pat["W"] = {"count": 2, "similarity": {"kind": "translation", "vector": [0, 0.1, 1.0]}}
     elif kind == "swirl":  # rotation about z and a swirl about the same axis commute
         pat["U"] = {"count": 4, "similarity": {"kind": "swirl", "angle": 0.5, "axis": [0, 0, 1], "point": [0, 0, 0],
