@@ -26,6 +26,7 @@ from ..errors import PleError
 from ..model.lattice import Lattice, Node
 from ..queries import biq
 from .model import CLG, ChunkRef, Op, Prim, leaves
+from .rays import next_crossing, ray_ball_interval, ray_beam_interval
 
 BATCH = 1 << 15  # query points per RangeFinder batch (memory stays bounded)
 
@@ -48,10 +49,14 @@ class Compiled:
                 self.children[prim] = (compiled(rep[0]), rep[1])
         # bounding balls of every leaf of every chunk at group 0, in the frame G⁻¹ (see module doc)
         ginv = lat.placement.inverse()
+        self.ginv = ginv.matrix
         nodes, owner = [], []
+        self.balls0 = {}
         for c, lv in enumerate(self.leaves):
             for p in lv:
                 ctr, rad = leaf_balls(lat, p, np.zeros((1, 3), np.int64))
+                self.balls0[p] = ((ctr[0][0], None if ctr[1] is None else ctr[1][0]),
+                                  (rad[0][0], None if rad[1] is None else rad[1][0]))
                 if p.b is None:
                     bc, br = ctr[0][0], rad[0][0]
                 else:
@@ -68,6 +73,7 @@ class Compiled:
         box.nodes = [nodes[m] for m in keep]
         self.lo, self.hi = box.bounds()
         self.scale = float(np.max(self.hi - self.lo))
+        self.step_radius = float(np.median([x.radius for x in nodes])) * lat.placement.factor
 
     # ----- values ------------------------------------------------------------------------------------
     def value(self, points, radii=None) -> np.ndarray:
@@ -83,23 +89,35 @@ class Compiled:
         """bool (q,): is each point in the solid (closed: on the surface counts)?"""
         return self.value(points) <= 0
 
-    def _value(self, p: np.ndarray, r: np.ndarray) -> np.ndarray:
+    def value_event(self, points, radii, dirs, tiny: float):
+        """Clipped values and, per point, the distance along ``dirs`` to the next boundary crossing
+        of a primitive within the query ball (inf when none; see ``ple.clg.rays``)."""
+        return self._value(np.asarray(points, float), np.asarray(radii, float), np.asarray(dirs, float), tiny)
+
+    def _value(self, p: np.ndarray, r: np.ndarray, d=None, tiny: float = 0.0):
         far = np.where(r > 0, r, np.inf)  # what a leaf beyond the query ball is known to be
         out = far.copy()
+        event = np.full(len(p), np.inf)
         near = np.all((p >= self.lo - r[:, None]) & (p <= self.hi + r[:, None]), axis=1)  # box bound first
         idx = np.nonzero(near)[0]
         if len(idx):
             q, g, c = self.candidates(p[idx], r[idx])
             unions = np.repeat(far[idx][:, None], len(self.names), axis=1)
+            ev = np.full(len(idx), np.inf)
             for ci in range(len(self.names)):
                 sel = c == ci
                 if not sel.any():
                     continue
                 qq = q[sel]
-                vals = self.chunk_value(ci, p[idx][qq], g[sel], r[idx][qq])
+                vals, evs = self.chunk_value(ci, p[idx][qq], g[sel], r[idx][qq],
+                                             None if d is None else d[idx][qq], tiny)
                 np.minimum.at(unions[:, ci], qq, vals)
+                if d is not None:
+                    np.minimum.at(ev, qq, evs)
             out[idx] = _combine(self.solid, unions)
-        return np.where(r > 0, np.clip(out, -r, r), out)
+            event[idx] = ev
+        out = np.where(r > 0, np.clip(out, -r, r), out)
+        return out if d is None else (out, event)
 
     def candidates(self, p: np.ndarray, r: np.ndarray):
         """Unique (query, group (m, 3), chunk) triples whose primitive bounds touch ball (p, r)."""
@@ -109,29 +127,48 @@ class Compiled:
             return np.zeros(0, np.int64), np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
         hits = np.concatenate([x.nodes for x in res if len(x.nodes)])
         q = np.repeat(np.arange(len(res)), counts)
-        rows = np.column_stack([q, hits[:, :3], self.owner[hits[:, 3]]])
-        rows = np.unique(rows, axis=0)
-        return rows[:, 0], rows[:, 1:4], rows[:, 4]
+        c = self.owner[hits[:, 3]]
+        dims = (len(res), *self.lat.counts, len(self.names))
+        key = np.unique(np.ravel_multi_index((q, hits[:, 0], hits[:, 1], hits[:, 2], c), dims))
+        q, i, j, k, c = np.unravel_index(key, dims)
+        return q, np.column_stack([i, j, k]), c
 
-    def chunk_value(self, ci: int, p: np.ndarray, g: np.ndarray, r: np.ndarray) -> np.ndarray:
-        """Value of the copy of chunk ``ci`` at groups ``g`` (m, 3) for points ``p`` (m, 3)."""
-        vals = [self.leaf_value(prim, p, g, r) for prim in self.leaves[ci]]
-        return _eval(self.trees[ci], vals)
+    def chunk_value(self, ci: int, p: np.ndarray, g: np.ndarray, r: np.ndarray, dirs=None, tiny: float = 0.0):
+        """(values, next crossings or None) of the copy of chunk ``ci`` at groups ``g`` (m, 3) for points ``p`` (m, 3)."""
+        copy = self.copies(g)
+        parts = [self.leaf_value(prim, p, copy, r, dirs, tiny) for prim in self.leaves[ci]]
+        vals = _eval(self.trees[ci], [x[0] for x in parts])
+        return vals, (None if dirs is None else np.minimum.reduce([x[1] for x in parts]))
 
-    def leaf_value(self, prim: Prim, p: np.ndarray, g: np.ndarray, r: np.ndarray) -> np.ndarray:
-        (ca, cb), (ra, rb) = leaf_balls(self.lat, prim, g)
+    def copies(self, g: np.ndarray):
+        """Linear parts (m, 3, 3), translations (m, 3) and factors (m,) of M_g ∘ G⁻¹ (module doc)."""
+        m = self.lat.group_matrices(g[:, 0], g[:, 1], g[:, 2]) @ self.ginv
+        return m[:, :3, :3], m[:, :3, 3], self.lat.group_factors(g[:, 0], g[:, 1], g[:, 2]) / self.lat.placement.factor
+
+    def leaf_value(self, prim: Prim, p: np.ndarray, copy, r: np.ndarray, dirs=None, tiny: float = 0.0):
+        """(signed value, next crossing along ``dirs`` or None) of a primitive's copies (``copies``)."""
+        lin, move, f = copy
+        (ca0, cb0), (ra0, rb0) = self.balls0[prim]
+        ca, ra = lin @ ca0 + move, f * ra0
+        cb, rb = (None, None) if cb0 is None else (lin @ cb0 + move, f * rb0)
         d = np.linalg.norm(p - ca, axis=1) - ra if prim.b is None else beam_distance(p, ca, ra, cb, rb)
+        ev = None
+        if dirs is not None:
+            t0, t1 = ray_ball_interval(p, dirs, ca, ra) if prim.b is None else ray_beam_interval(p, dirs, ca, ra, cb, rb)
+            ev = next_crossing(t0, t1, tiny)
         child = self.children.get(prim)
         if child is None:
-            return d
+            return d, ev
         sub, frame = child
         need = d <= r  # elsewhere max(d, ·) is already beyond the query ball
-        out = np.where(need, -np.inf, d)
+        out = d.copy()
         if need.any():
             loc, f = to_frame(frame, p[need], ca[need], ra[need], None if cb is None else cb[need])
             dl = sub.value(loc, r[need] / f) * f
             out[need] = np.maximum(d[need], dl)
-        return np.maximum(out, d)
+        if ev is not None:  # outside X: X ∩ L is not entered before X; inside: |value| is a safe bound
+            ev = np.where(d > 0, ev, np.maximum(np.abs(out), tiny))
+        return out, ev
 
 
 _CACHE: dict[int, tuple[CLG, Compiled]] = {}
@@ -258,6 +295,6 @@ def brute_force_value(clg: CLG, points) -> np.ndarray:
         qq = np.repeat(np.arange(len(ps)), len(groups))
         gg = np.tile(groups, (len(ps), 1))
         for ci in range(len(comp.names)):
-            v = comp.chunk_value(ci, ps[qq], gg, np.zeros(len(qq)))
+            v = comp.chunk_value(ci, ps[qq], gg, np.zeros(len(qq)))[0]
             unions[s:s + step, ci] = v.reshape(len(ps), len(groups)).min(axis=1)
     return _combine(comp.solid, unions)
