@@ -134,7 +134,7 @@ class Compiled:
         return q, np.column_stack([i, j, k]), c
 
     def chunk_value(self, ci: int, p: np.ndarray, g: np.ndarray, r: np.ndarray, dirs=None, tiny: float = 0.0):
-        """(values, next crossings or None) of the copy of chunk ``ci`` at groups ``g`` (m, 3) for points ``p`` (m, 3)."""
+        """(values, next crossings or None) of chunk ``ci``'s copies at groups ``g`` (m, 3), points ``p``."""
         copy = self.copies(g)
         parts = [self.leaf_value(prim, p, copy, r, dirs, tiny) for prim in self.leaves[ci]]
         vals = _eval(self.trees[ci], [x[0] for x in parts])
@@ -154,7 +154,8 @@ class Compiled:
         d = np.linalg.norm(p - ca, axis=1) - ra if prim.b is None else beam_distance(p, ca, ra, cb, rb)
         ev = None
         if dirs is not None:
-            t0, t1 = ray_ball_interval(p, dirs, ca, ra) if prim.b is None else ray_beam_interval(p, dirs, ca, ra, cb, rb)
+            t0, t1 = (ray_ball_interval(p, dirs, ca, ra) if prim.b is None
+                      else ray_beam_interval(p, dirs, ca, ra, cb, rb))
             ev = next_crossing(t0, t1, tiny)
         child = self.children.get(prim)
         if child is None:

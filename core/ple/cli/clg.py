@@ -13,10 +13,10 @@ from ..clg.grid import iter_slices, layer_grid, parse_bounds, voxelize
 from ..clg.query import compiled
 from ..clg.rays import render, trace
 from ..errors import PleError
-from ..meshing.clg import mesh_clg
 from ..io.export import export_mesh
 from ..io.files import atomic_path
 from ..io.slices import write_slices
+from ..meshing.clg import mesh_clg
 from ..program.clg_sources import load_clg
 
 
