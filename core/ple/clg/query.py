@@ -167,8 +167,8 @@ class Compiled:
             loc, f = to_frame(frame, p[need], ca[need], ra[need], None if cb is None else cb[need])
             dl = sub.value(loc, r[need] / f) * f
             out[need] = np.maximum(d[need], dl)
-        if ev is not None:  # outside X: X ∩ L is not entered before X; inside: |value| is a safe bound
-            ev = np.where(d > 0, ev, np.maximum(np.abs(out), tiny))
+        if ev is not None:  # X entered ahead: X ∩ L is not entered before; else |value| is a safe bound
+            ev = np.where(t0 > tiny, t0, np.maximum(np.abs(out), tiny))
         return out, ev
 
 
