@@ -8,10 +8,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from ple.cli.main import main
 from ple.clg.ir import clg_from_dict, clg_to_dict
 from ple.clg.query import compiled
+from ple.cli.main import main
 from ple.program.clg_sources import load_clg
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -10,12 +10,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from ple.algebra.elements import beam_distance
-from ple.cli.main import main
 from ple.clg.ir import clg_from_dict
 from ple.clg.query import brute_force_value, compiled
 from ple.clg.rays import ray_beam_interval, trace
+from ple.cli.main import main
 from ple.program.sources import load_lattice
 from ple.queries.biq import pmc as lattice_pmc
 
