@@ -46,7 +46,7 @@ def test_watertight_and_volume_matches_monte_carlo(name, counts):
     mesh = mesh_clg(clg, segments=48)
     assert mesh.is_watertight and mesh.is_volume
     vol, err = monte_carlo(clg, 600_000)
-    assert err < 0.003 * vol  # the estimate itself is good to 0.3 % (one sigma)
+    assert err < 0.005 * vol  # the estimate itself is good to 0.5 % (one sigma; fixed seed)
     assert abs(mesh.volume - vol) <= 0.01 * vol, (mesh.volume, vol, err)
 
 

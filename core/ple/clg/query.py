@@ -25,6 +25,7 @@ from ..algebra.vectors import cross
 from ..errors import PleError
 from ..model.lattice import Lattice, Node
 from ..queries import biq
+from ..queries.rangefinder import lattice_hits
 from .model import CLG, ChunkRef, Op, Prim, leaves
 from .rays import next_crossing, ray_ball_interval, ray_beam_interval
 
@@ -121,14 +122,19 @@ class Compiled:
 
     def candidates(self, p: np.ndarray, r: np.ndarray):
         """Unique (query, group (m, 3), chunk) triples whose primitive bounds touch ball (p, r)."""
-        res = biq.query(self.aux, p, r)
-        counts = np.fromiter((len(x.nodes) for x in res), dtype=np.int64, count=len(res))
-        if counts.sum() == 0:
+        if self.aux.becots is None:  # steady: the RangeFinder's flat hit rows (qid, i, j, k, n)
+            rows = np.asarray(lattice_hits(self.aux, p, r)[0], dtype=np.int64).reshape(-1, 5)
+            q, hits = rows[:, 0], rows[:, 1:]
+        else:
+            res = biq.query(self.aux, p, r)
+            counts = np.fromiter((len(x.nodes) for x in res), dtype=np.int64, count=len(res))
+            hits = (np.concatenate([x.nodes for x in res if len(x.nodes)]) if counts.sum()
+                    else np.zeros((0, 4), np.int64))
+            q = np.repeat(np.arange(len(res)), counts)
+        if len(q) == 0:
             return np.zeros(0, np.int64), np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
-        hits = np.concatenate([x.nodes for x in res if len(x.nodes)])
-        q = np.repeat(np.arange(len(res)), counts)
         c = self.owner[hits[:, 3]]
-        dims = (len(res), *self.lat.counts, len(self.names))
+        dims = (len(p), *self.lat.counts, len(self.names))
         key = np.unique(np.ravel_multi_index((q, hits[:, 0], hits[:, 1], hits[:, 2], c), dims))
         q, i, j, k, c = np.unravel_index(key, dims)
         return q, np.column_stack([i, j, k]), c

@@ -60,8 +60,16 @@ def compile_clg_program(source: str, name: str = "<program>") -> CLGProgram:
     return CLGProgram(source, name, ns)
 
 
-def clg_preset_names() -> list[str]:
+def clg_preset_folder():
+    """``presets/clg`` of the installed package, or of this checkout (core/ple/… → presets/clg)."""
     folder = preset_dir() / "clg"
+    if folder.is_dir():
+        return folder
+    return Path(__file__).resolve().parents[3] / "presets" / "clg"
+
+
+def clg_preset_names() -> list[str]:
+    folder = clg_preset_folder()
     if not folder.is_dir():
         return []
     return sorted(e.name.rsplit(".", 1)[0] for e in folder.iterdir()
@@ -75,7 +83,7 @@ def resolve_clg(source: str) -> Path:
             raise PleError(f"{source}: no such file")
         return p
     for ext in (".py", ".json"):
-        entry = preset_dir() / "clg" / (source + ext)
+        entry = clg_preset_folder() / (source + ext)
         if entry.is_file():
             return Path(str(entry))
     raise PleError(f"{source!r} is neither a .py CLG program, a .json ple-clg/1 file, nor a CLG preset "
