@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from ple.clg.ir import clg_from_dict
 from ple.clg.query import compiled
 from ple.meshing.clg import mesh_clg
