@@ -9,18 +9,21 @@ e.g. ``from ple.queries import biq`` or ``from ple.meshing.tessellate import tes
 
 from .algebra.similarity import Identity, Rotation, Scaling, Screw, Similarity, Swirl, Translation
 from .algebra.vectors import Pt, Vec
+from .clg.model import CLG
 from .errors import PleError
 from .filters import FilteredLattice, FourierField, ImplicitFilter, LiL, Stencil, TPMSField, evaluate_lattice, lil
 from .io.irfile import load_ir, save_ir
 from .model.becots import BeCOTSField
 from .model.becots_builders import becots_lattice, set_field, stack_lattice
 from .model.lattice import BeamPattern, Direction, Evaluation, Lattice, Node, Region
+from .program.clg_sources import load_clg
 from .program.runtime import Range, compile_program
 from .program.sources import load_lattice
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "CLG", "load_clg",
     "BeCOTSField", "BeamPattern", "Direction", "Evaluation", "FilteredLattice", "FourierField", "Identity",
     "ImplicitFilter", "Lattice", "LiL", "Node", "PleError", "Pt", "Range", "Region", "Rotation", "Scaling", "Screw",
     "Similarity", "Stencil", "Swirl", "TPMSField", "Translation", "Vec", "becots_lattice", "compile_program",
