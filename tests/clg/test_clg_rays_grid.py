@@ -114,3 +114,13 @@ def test_plain_lattice_slices(tmp_path):
     gx, gy = np.meshgrid(lo[0] + (np.arange(w) + 0.5) * 0.04, (lo[1] + (np.arange(h) + 0.5) * 0.04)[::-1])
     pts = np.column_stack([gx.reshape(-1), gy.reshape(-1), np.full(gx.size, man["z"][1])])
     assert np.array_equal(img.reshape(-1), lattice_pmc(lat, pts))
+
+
+@pytest.mark.parametrize("name", ["shelled.json", "plate.json", "beam_of_beams.json"])
+def test_voxelize_by_copies_equals_pmc_per_voxel(name):
+    from ple.clg.grid import voxelize, voxelize_clg
+    comp = compiled(clg_from_dict(json.loads((PRESETS / name).read_text())))
+    lo, hi = comp.lo - 0.05, comp.hi + 0.02
+    a = voxelize_clg(comp, lo, hi, (23, 19, 11))
+    b = voxelize(comp.pmc, lo, hi, (23, 19, 11))
+    assert a.any() and np.array_equal(a, b)

@@ -11,7 +11,7 @@ import tracemalloc
 
 import numpy as np
 
-from ..clg.grid import iter_slices, voxelize
+from ..clg.grid import iter_slices, voxelize, voxelize_clg
 from ..clg.ir import clg_from_dict
 from ..clg.query import brute_force_value, compiled
 from ..clg.rays import render
@@ -25,6 +25,7 @@ def add_arguments(p) -> None:
     p.add_argument("--points", type=int, default=100_000)
     p.add_argument("--brute-points", type=int, default=200, help="points timed by brute force (per-point rate)")
     p.add_argument("--voxels", type=int, default=256, help="voxel grid N (N³) of the shelled preset")
+    p.add_argument("--voxel-check", type=int, default=8, help="x-slabs voxelized by per-voxel PMC (baseline)")
     p.add_argument("--render-size", default="640,480")
     p.add_argument("--slice-n", type=int, default=322, help="cubic lattice n (3 n²(n−1) beams ≈ 10⁸ at 322)")
     p.add_argument("--slice-layers", type=int, default=2)
@@ -61,9 +62,15 @@ def run(args) -> dict:
     shelled = compiled(clg_from_dict(json.loads(resolve_clg("shelled").read_text())))
     n = args.voxels
     t0 = time.perf_counter()
-    vox = voxelize(shelled.pmc, shelled.lo, shelled.hi, (n, n, n))
-    out["voxelize"] = {"clg": "shelled preset", "grid": [n, n, n], "seconds": time.perf_counter() - t0,
-                       "inside": int(vox.sum()), "voxels_per_s": n ** 3 / (time.perf_counter() - t0)}
+    vox = voxelize_clg(shelled, shelled.lo, shelled.hi, (n, n, n))
+    secs = time.perf_counter() - t0
+    m = min(args.voxel_check, n)  # baseline: PMC per voxel centre on the first x-slabs, same run
+    t0 = time.perf_counter()
+    ref = voxelize(shelled.pmc, shelled.lo, shelled.hi, (n, n, n), slabs=m)
+    per_slab = (time.perf_counter() - t0) / m
+    out["voxelize"] = {"clg": "shelled preset", "grid": [n, n, n], "seconds": secs, "inside": int(vox.sum()),
+                       "pmc_per_voxel_s_extrapolated": per_slab * n, "pmc_per_voxel_timed_slabs": m,
+                       "agree_on_timed_slabs": bool(np.array_equal(ref, vox[:m]))}
     w, h = (int(x) for x in args.render_size.split(","))
     t0 = time.perf_counter()
     passes = []

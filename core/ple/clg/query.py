@@ -26,7 +26,7 @@ from ..errors import PleError
 from ..model.lattice import Lattice, Node
 from ..queries import biq
 from ..queries.rangefinder import lattice_hits
-from .model import CLG, ChunkRef, Op, Prim, leaves
+from .model import CLG, ChunkRef, Op, Prim, leaves, positive_leaves
 from .rays import next_crossing, ray_ball_interval, ray_beam_interval
 
 BATCH = 1 << 15  # query points per RangeFinder batch (memory stays bounded)
@@ -75,6 +75,8 @@ class Compiled:
         self.lo, self.hi = box.bounds()
         self.scale = float(np.max(self.hi - self.lo))
         self.step_radius = float(np.median([x.radius for x in nodes])) * lat.placement.factor
+        # per chunk: its distinct positive leaves (their union bounds the chunk)
+        self.positive = [list(dict.fromkeys(positive_leaves(clg.chunks[n]))) for n in self.names]
 
     # ----- values ------------------------------------------------------------------------------------
     def value(self, points, radii=None) -> np.ndarray:
@@ -85,6 +87,10 @@ class Compiled:
         for s in range(0, len(p), BATCH):
             out[s:s + BATCH] = self._value(p[s:s + BATCH], r[s:s + BATCH])
         return out
+
+    def combine_bool(self, unions: list) -> np.ndarray:
+        """The solid from chunk-union membership arrays (one per used chunk, any equal shapes)."""
+        return _eval(self.solid, [np.where(u, -1.0, 1.0) for u in unions]) <= 0
 
     def pmc(self, points) -> np.ndarray:
         """bool (q,): is each point in the solid (closed: on the surface counts)?"""

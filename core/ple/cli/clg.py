@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from ..app.progress import Progress
-from ..clg.grid import iter_slices, layer_grid, parse_bounds, voxelize
+from ..clg.grid import iter_slices, layer_grid, parse_bounds, voxelize_clg
 from ..clg.query import compiled
 from ..clg.rays import render, trace
 from ..errors import PleError
@@ -132,8 +132,8 @@ def run_voxelize(args) -> int:
         raise PleError(f"--out {args.out}: expected a .npy file")
     comp = _load(args)
     lo, hi = parse_bounds(args.bounds, comp.lo, comp.hi)
-    bar = Progress(shape[0], "voxelize")
-    vox = voxelize(comp.pmc, lo, hi, shape, bar.update)
+    bar = Progress(len(comp.names), "voxelize")
+    vox = voxelize_clg(comp, lo, hi, shape, bar.update)
     bar.close()
     _save_npy(args.out, vox)
     print(f"wrote {args.out}: {vox.shape} voxels, {int(vox.sum())} inside")
