@@ -68,6 +68,29 @@ def test_first_hits(name):
             assert comp.pmc((o[k] + (t[k] + 1e-9 * comp.scale) * d[k])[None])[0] or abs(v) < 1e-7
 
 
+@pytest.mark.parametrize("kind, seed", [("steady", 0), ("becots", 1), ("swirl", 2), ("becots", 3)])
+def test_first_hits_on_random_clgs(kind, seed):
+    from test_clg_pmc import random_clg
+    rng = np.random.default_rng(50 + seed)
+    data = random_clg(rng, kind, mat="m" if seed == 3 else None)
+    if seed == 3:
+        data["materials"] = {"m": {"replace": json.loads((PRESETS / "shelled.json").read_text()), "frame": "world"}}
+    clg = clg_from_dict(data)
+    comp = compiled(clg)
+    n = 40
+    target = comp.lo + rng.random((n, 3)) * (comp.hi - comp.lo)
+    o = target + rng.normal(size=(n, 3)) * comp.scale
+    d = target - o
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t = trace(comp, o, d)
+    ts = np.linspace(0, 1, 2001)
+    for k in range(n):
+        end = t[k] if np.isfinite(t[k]) else 3 * comp.scale
+        assert not comp.pmc(o[k] + (ts[:-1] * end)[:, None] * d[k]).any(), (k, t[k])
+        if np.isfinite(t[k]):
+            assert abs(brute_force_value(clg, (o[k] + t[k] * d[k])[None])[0]) < 1e-6 * comp.scale
+
+
 def test_voxelize_cli_matches_pmc_at_centres(tmp_path):
     out = tmp_path / "v.npy"
     src = str(PRESETS / "plate.json")
