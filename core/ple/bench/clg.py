@@ -60,7 +60,8 @@ def run(args) -> dict:
     t0 = time.perf_counter()
     brute = brute_force_value(clg, pts[:m]) <= 0
     slow = (time.perf_counter() - t0) / m * args.points
-    out["pmc"] = {"clg": "plate preset, template scaled to the cells", "counts": counts, "chunk_copies": clg.pattern.groups * 2,
+    out["pmc"] = {"clg": "plate preset, template scaled to the cells", "counts": counts,
+                  "chunk_copies": clg.pattern.groups * 2,
                   "points": args.points, "inside": int(inside.sum()), "prepare_s": prep, "clg_pmc_s": fast,
                   "brute_force_s_extrapolated": slow, "brute_force_timed_points": m,
                   "speedup": slow / fast, "agree_on_timed_points": bool(np.array_equal(brute, inside[:m]))}
