@@ -23,7 +23,7 @@ from tools.docs_pictures import build_pictures
 from tools.render import DOCS, ROOT, render
 
 THUMBS = ROOT / "presets" / "thumbnails"
-API_LAYERS = ["algebra", "model", "queries", "filters", "measure", "meshing", "io", "program", "app"]
+API_LAYERS = ["algebra", "model", "queries", "filters", "clg", "measure", "meshing", "io", "program", "app"]
 THUMB_MAX_GROUPS = 64_000  # a thumbnail of a larger lattice shows a corner region of it
 
 

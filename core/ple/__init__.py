@@ -10,6 +10,7 @@ e.g. ``from ple.queries import biq`` or ``from ple.meshing.tessellate import tes
 from .algebra.mobius import Cline, Mobius
 from .algebra.similarity import Identity, Rotation, Scaling, Screw, Similarity, Swirl, Translation
 from .algebra.vectors import Pt, Vec
+from .clg.model import CLG
 from .errors import PleError
 from .filters import FilteredLattice, FourierField, ImplicitFilter, LiL, Stencil, TPMSField, lil
 from .io.irfile import load_ir, save_ir
@@ -19,16 +20,17 @@ from .model.lattice import BeamPattern, Direction, Evaluation, Lattice, Node, Re
 from .model.mobius import TMIMap, mobius_frames_lattice, mobius_lattice
 from .model.planar import ShapeOntoCone, SteadyMap2, snap_corner
 from .model.warp import RectifiedWarp, rectified_warp
+from .program.clg_sources import load_clg
 from .program.runtime import Range, compile_program
 from .program.sources import load_lattice
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "BeCOTSField", "BeamPattern", "Cline", "Mobius", "TMIMap", "mobius_frames_lattice", "mobius_lattice",
-    "RectifiedWarp", "rectified_warp", "ShapeOntoCone", "SteadyMap2", "snap_corner",
-    "Direction", "Evaluation", "FilteredLattice", "FourierField", "Identity",
-    "ImplicitFilter", "Lattice", "LiL", "Node", "PleError", "Pt", "Range", "Region", "Rotation", "Scaling", "Screw",
-    "Similarity", "Stencil", "Swirl", "TPMSField", "Translation", "Vec", "becots_lattice", "compile_program",
-    "lil", "load_ir", "load_lattice", "save_ir", "set_field", "stack_lattice",
+    "CLG", "BeCOTSField", "BeamPattern", "Cline", "Direction", "Evaluation", "FilteredLattice", "FourierField",
+    "Identity", "ImplicitFilter", "Lattice", "LiL", "Mobius", "Node", "PleError", "Pt", "Range", "RectifiedWarp",
+    "Region", "Rotation", "Scaling", "Screw", "ShapeOntoCone", "Similarity", "Stencil", "SteadyMap2", "Swirl",
+    "TMIMap", "TPMSField", "Translation", "Vec", "becots_lattice", "compile_program", "lil", "load_clg", "load_ir",
+    "load_lattice", "mobius_frames_lattice", "mobius_lattice", "rectified_warp", "save_ir", "set_field",
+    "snap_corner", "stack_lattice",
 ]

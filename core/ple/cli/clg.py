@@ -1,0 +1,208 @@
+"""``ple clg info|pmc|voxelize|slice|ray|render|mesh SOURCE …``: Constructive Lattice Geometry
+(thesis §5, §10). SOURCE is a ``ple-clg/1`` file, a program defining ``clg(**params)`` or a CLG preset."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+
+from ..app.progress import Progress
+from ..clg.grid import iter_slices, layer_grid, parse_bounds, voxelize_clg
+from ..clg.query import compiled
+from ..clg.rays import render, trace
+from ..errors import PleError
+from ..io.export import export_mesh
+from ..io.files import atomic_path
+from ..io.slices import write_slices
+from ..meshing.clg import mesh_clg
+from ..program.clg_sources import load_clg
+
+
+def _source(p) -> None:
+    p.add_argument("source", metavar="SOURCE", help="a ple-clg/1 .json, a program .py defining clg(), or a preset")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help="a program input")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("clg", help="Constructive Lattice Geometry: PMC, voxels, slices, rays, renders, meshes")
+    cmds = p.add_subparsers(dest="clg_command", metavar="ACTION")
+    cmds.required = True
+    q = cmds.add_parser("info", help="chunks, primitives, materials, nesting depth and the box")
+    _source(q)
+    q.set_defaults(func=run_info)
+    q = cmds.add_parser("pmc", help="point membership of points (n, 3) .npy -> bool (n,) .npy")
+    _source(q)
+    q.add_argument("--points", required=True)
+    q.add_argument("--out", required=True)
+    q.set_defaults(func=run_pmc)
+    q = cmds.add_parser("voxelize", help="bool voxels (NX, NY, NZ) .npy of the voxel centres")
+    _source(q)
+    q.add_argument("--grid", required=True, metavar="NX,NY,NZ")
+    q.add_argument("--bounds", metavar="x0,y0,z0,x1,y1,z1", help="default: the solid's box")
+    q.add_argument("--out", required=True)
+    q.set_defaults(func=run_voxelize)
+    q = cmds.add_parser("slice", help="printer slices: one 1-bit PNG per layer + manifest.json")
+    _source(q)
+    add_slice_args(q)
+    q.set_defaults(func=run_slice)
+    q = cmds.add_parser("ray", help="first-hit distances of rays (n, 6) .npy -> (n,) .npy (inf: a miss)")
+    _source(q)
+    q.add_argument("--rays", required=True)
+    q.add_argument("--out", required=True)
+    q.set_defaults(func=run_ray)
+    q = cmds.add_parser("render", help="a shaded picture (progressive passes)")
+    _source(q)
+    q.add_argument("--out", required=True, help="output .png")
+    q.add_argument("--size", default="640,480", metavar="W,H")
+    q.add_argument("--view", default="35,25", metavar="AZIMUTH,ELEVATION", help="degrees")
+    q.add_argument("--passes", type=int, default=4)
+    q.set_defaults(func=run_render)
+    q = cmds.add_parser("mesh", help="a watertight mesh of the solid (manifold3d booleans)")
+    _source(q)
+    q.add_argument("--out", required=True, help="output mesh (.stl, .ply, .obj, .glb, .3mf)")
+    q.add_argument("--segments", type=int, default=32, help="circle segments of balls and beams")
+    q.set_defaults(func=run_mesh)
+
+
+def add_slice_args(q) -> None:
+    q.add_argument("--layer", type=float, required=True, help="layer height")
+    q.add_argument("--pixel", type=float, required=True, help="pixel size")
+    q.add_argument("--bounds", metavar="x0,y0,z0,x1,y1,z1", help="default: the solid's box")
+    q.add_argument("--out", required=True, help="output folder")
+
+
+def _load(args):
+    return compiled(load_clg(args.source, args.param))
+
+
+def _npy(path: str, what: str, cols: int) -> np.ndarray:
+    try:
+        a = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise PleError(f"{what} {path}: cannot read a .npy array ({exc})") from None
+    if a.ndim != 2 or a.shape[1] != cols or not np.issubdtype(a.dtype, np.number):
+        raise PleError(f"{what} {path}: expected a numeric array of shape (n, {cols}), got {a.shape}")
+    a = a.astype(float)
+    if not np.all(np.isfinite(a)):
+        raise PleError(f"{what} {path}: NaN or infinite values")
+    return a
+
+
+def _save_npy(path: str, arr) -> None:
+    if not path.endswith(".npy"):
+        raise PleError(f"--out {path}: expected a .npy file")
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.save(fh, arr)
+
+
+def run_info(args) -> int:
+    comp = _load(args)
+    clg = comp.clg
+    lat = clg.pattern
+    info = {"chunks": {n: len(comp.leaves[c]) for c, n in enumerate(comp.names)},
+            "unused_chunks": sorted(set(clg.chunks) - set(comp.names)), "primitives": clg.primitive_count(),
+            "materials": sorted(clg.materials), "depth": clg.depth, "counts": list(lat.counts),
+            "becots": lat.becots is not None, "chunk_copies": lat.groups * len(comp.names),
+            "box": [comp.lo.tolist(), comp.hi.tolist()]}
+    print(json.dumps(info, indent=1))
+    return 0
+
+
+def run_pmc(args) -> int:
+    pts = _npy(args.points, "--points", 3)
+    comp = _load(args)
+    t0 = time.perf_counter()
+    inside = comp.pmc(pts)
+    _save_npy(args.out, inside)
+    print(f"wrote {args.out}: {int(inside.sum())} of {len(pts)} points inside ({time.perf_counter() - t0:.2f} s)")
+    return 0
+
+
+def run_voxelize(args) -> int:
+    try:
+        shape = [int(x) for x in args.grid.split(",")]
+    except ValueError:
+        raise PleError(f"--grid {args.grid!r}: expected NX,NY,NZ integers") from None
+    if len(shape) != 3:
+        raise PleError(f"--grid {args.grid!r}: expected NX,NY,NZ")
+    if not args.out.endswith(".npy"):
+        raise PleError(f"--out {args.out}: expected a .npy file")
+    comp = _load(args)
+    lo, hi = parse_bounds(args.bounds, comp.lo, comp.hi)
+    bar = Progress(len(comp.names), "voxelize")
+    vox = voxelize_clg(comp, lo, hi, shape, bar.update)
+    bar.close()
+    _save_npy(args.out, vox)
+    print(f"wrote {args.out}: {vox.shape} voxels, {int(vox.sum())} inside")
+    return 0
+
+
+def slice_with(pmc, lo, hi, args) -> int:
+    zs, xs, ys = layer_grid(lo, hi, args.layer, args.pixel)
+    bar = Progress(len(zs), "slice")
+    meta = {"layer": args.layer, "pixel": args.pixel, "origin": [float(lo[0]), float(lo[1]), float(lo[2])],
+            "bounds": [lo.tolist(), hi.tolist()], "rows": "row 0 is the largest y"}
+    man = write_slices(args.out, iter_slices(pmc, lo, hi, args.layer, args.pixel), meta, bar.update)
+    bar.close()
+    print(f"wrote {args.out}: {man['layers']} layers of {man['image_size'][0]}x{man['image_size'][1]} pixels")
+    return 0
+
+
+def run_slice(args) -> int:
+    comp = _load(args)
+    lo, hi = parse_bounds(args.bounds, comp.lo, comp.hi)
+    return slice_with(comp.pmc, lo, hi, args)
+
+
+def run_ray(args) -> int:
+    rays = _npy(args.rays, "--rays", 6)
+    comp = _load(args)
+    bar = Progress(len(rays), "rays")
+    t = trace(comp, rays[:, :3], rays[:, 3:], progress=bar.update)
+    bar.close()
+    _save_npy(args.out, t)
+    print(f"wrote {args.out}: {int(np.isfinite(t).sum())} of {len(t)} rays hit")
+    return 0
+
+
+def _pair(text: str, what: str, kind=float):
+    try:
+        a, b = (kind(x) for x in text.split(","))
+    except ValueError:
+        raise PleError(f"{what} {text!r}: expected two numbers A,B") from None
+    return a, b
+
+
+def run_render(args) -> int:
+    try:
+        from PIL import Image
+    except ImportError:
+        raise PleError("render needs Pillow (pip install pillow)") from None
+    size = _pair(args.size, "--size", int)
+    view = _pair(args.view, "--view")
+    if args.passes < 1 or args.passes > 8:
+        raise PleError(f"--passes {args.passes}: expected 1..8")
+    comp = _load(args)
+    bar = Progress(size[0] * size[1], "render")
+
+    def show(k, img):
+        bar.update(0, f"pass {k + 1}/{args.passes}")
+    t0 = time.perf_counter()
+    img = render(comp, size, view, args.passes, bar.update, show)
+    bar.close()
+    with atomic_path(args.out) as tmp:
+        Image.fromarray(img).save(tmp, format="PNG")
+    print(f"wrote {args.out}: {size[0]}x{size[1]} in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def run_mesh(args) -> int:
+    comp = _load(args)
+    mesh = mesh_clg(comp.clg, segments=args.segments)
+    export_mesh(mesh, args.out)
+    print(f"wrote {args.out}: {len(mesh.faces)} triangles, volume {mesh.volume:.6g}, "
+          f"watertight {mesh.is_watertight}")
+    return 0

@@ -1,0 +1,42 @@
+"""Printer slices on disk: one 1-bit PNG per layer plus a JSON manifest, written layer by layer
+(each file atomically) so memory stays one layer whatever the part's height."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import PleError
+from .files import atomic_path, atomic_write_text
+
+SLICES_FORMAT = "ple-slices/1"
+
+
+def write_slices(out_dir, layers: Iterable, meta: dict, progress=None) -> dict:
+    """Write ``layer_00000.png`` … from (index, z, mask) items and ``manifest.json``; returns it."""
+    try:
+        from PIL import Image
+    except ImportError:
+        raise PleError("writing PNG slices needs Pillow (pip install pillow)") from None
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files, zs, filled = [], [], []
+    shape = None
+    for k, z, mask in layers:
+        name = f"layer_{k:05d}.png"
+        img = Image.fromarray(np.asarray(mask, bool)).convert("1")
+        with atomic_path(out / name) as tmp:
+            img.save(tmp, format="PNG")
+        files.append(name)
+        zs.append(z)
+        filled.append(int(np.count_nonzero(mask)))
+        shape = mask.shape
+        if progress is not None:
+            progress(1)
+    manifest = dict(meta, format=SLICES_FORMAT, layers=len(files), files=files, z=zs, filled_pixels=filled,
+                    image_size=[int(shape[1]), int(shape[0])] if shape else [0, 0])
+    atomic_write_text(out / "manifest.json", json.dumps(manifest, indent=1) + "\n")
+    return manifest

@@ -1,0 +1,100 @@
+"""Meshes of CLG solids (thesis §5): each template chunk is meshed once (balls and cone-beams as
+polyhedra, combined by its Boolean expression), its copies are placed by the similarity
+``M_g ∘ G⁻¹`` of each group, and chunk unions and the solid are combined by manifold3d's robust
+booleans, whose output is watertight and free of self-intersections by construction. A primitive
+with a replacing CLG becomes X ∩ mesh(L), L placed by its material's frame (§10.1).
+
+Polyhedra are scaled about their centres so that a meshed ball has the ball's exact volume (an
+inscribed polyhedron would lose ~1 % at 32 segments); beams are hulls of two such balls.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+from ..clg.model import CLG, Prim
+from ..clg.query import compiled, frame_of
+from ..errors import PleError
+
+MAX_TRIANGLES = 20_000_000  # estimated output size beyond which meshing is refused
+
+
+def _manifold():
+    try:
+        import manifold3d
+    except ImportError:
+        raise PleError("CLG meshing needs manifold3d (pip install manifold3d)") from None
+    return manifold3d
+
+
+def _unit_sphere(m, segments: int):
+    sph = m.Manifold.sphere(1.0, segments)
+    k = (4 / 3 * np.pi / sph.volume()) ** (1 / 3)  # same volume as the unit ball
+    return sph.scale([k, k, k])
+
+
+def _similarity_3x4(lin: np.ndarray, move: np.ndarray) -> np.ndarray:
+    return np.column_stack([lin, move])
+
+
+def _leaf(m, comp, prim: Prim, unit, segments: int):
+    (ca, cb), (ra, rb) = comp.balls0[prim]
+    ball_a = unit.scale([ra] * 3).translate(list(ca))
+    if cb is None:
+        x = ball_a
+    else:
+        x = m.Manifold.batch_hull([ball_a, unit.scale([rb] * 3).translate(list(cb))])
+    child = comp.children.get(prim)
+    if child is None:
+        return x
+    sub, frame = child
+    o, rot, f = frame_of(frame, ca[None], np.array([ra]), None if cb is None else cb[None])
+    inner = _solid_manifold(m, sub, segments).transform(_similarity_3x4(rot[0] * f[0], o[0]))
+    return x ^ inner
+
+
+def _expr(m, tree, parts):
+    if isinstance(tree, int):
+        return parts[tree]
+    kind, args = tree
+    vals = [_expr(m, a, parts) for a in args]
+    if kind == "union":
+        return m.Manifold.batch_boolean(vals, m.OpType.Add) if len(vals) > 1 else vals[0]
+    if kind == "intersection":
+        return m.Manifold.batch_boolean(vals, m.OpType.Intersect) if len(vals) > 1 else vals[0]
+    return m.Manifold.batch_boolean(vals, m.OpType.Subtract) if len(vals) > 1 else vals[0]
+
+
+def _solid_manifold(m, comp, segments: int):
+    unit = _unit_sphere(m, segments)
+    lat = comp.lat
+    nu, nv, nw = lat.counts
+    g = np.stack(np.meshgrid(np.arange(nu), np.arange(nv), np.arange(nw), indexing="ij"), -1).reshape(-1, 3)
+    lin, move, _ = comp.copies(g)
+    unions = []
+    for ci in range(len(comp.names)):
+        parts = [_leaf(m, comp, prim, unit, segments) for prim in comp.leaves[ci]]
+        template = _expr(m, comp.trees[ci], parts)
+        est = template.num_tri() * len(g)
+        if est > MAX_TRIANGLES:
+            raise PleError(f"chunk {comp.names[ci]!r}: about {est:.3g} triangles exceed the meshing limit "
+                           f"{MAX_TRIANGLES:.0e}; use fewer groups or --segments")
+        copies = [template.transform(_similarity_3x4(lin[n], move[n])) for n in range(len(g))]
+        unions.append(m.Manifold.batch_boolean(copies, m.OpType.Add) if len(copies) > 1 else copies[0])
+    return _expr(m, comp.solid, unions)
+
+
+def mesh_clg(clg: CLG, segments: int = 32):
+    """A watertight trimesh of the CLG solid."""
+    if segments < 8 or segments > 512:
+        raise PleError(f"--segments {segments}: expected 8..512")
+    m = _manifold()
+    solid = _solid_manifold(m, compiled(clg), segments)
+    out = solid.to_mesh()
+    verts = np.asarray(out.vert_properties, float)[:, :3]
+    faces = np.asarray(out.tri_verts, np.int64)
+    if len(faces) == 0:
+        raise PleError("the CLG solid is empty: nothing to mesh")
+    return trimesh.Trimesh(verts, faces, process=False)
+
