@@ -1,5 +1,9 @@
-"""Mesh and lattice export: binary STL (own numpy writer, streaming), PLY, OBJ, GLB, 3MF via
-trimesh, and 3MF with the Beam Lattice extension (balls and beams, no triangles).
+"""Mesh and lattice export: binary STL (own numpy writer, streaming), binary PLY and OBJ (own
+writers), GLB (trimesh), 3MF (own strict writer, ``ple.threemf``) and 3MF with the Beam Lattice
+extension (balls and beams beside the triangle mesh).
+
+Every mesh is snapped to a float32 grid and welded before writing (``ple.weld``), so the file
+reads back watertight; units are explicit (``unit``, default mm); glTF and OBJ are Y-up.
 
 Every write is atomic (``ple.files.atomic_path``): on any error no partial file is left.
 """
@@ -7,7 +11,6 @@ Every write is atomic (``ple.files.atomic_path``): on any error no partial file 
 from __future__ import annotations
 
 import struct
-import zipfile
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -16,13 +19,11 @@ import trimesh
 
 from .errors import PleError
 from .files import atomic_path
+from .threemf import NS_BALLS, NS_BEAM, NS_CORE  # noqa: F401 - re-exported
 
 MESH_FORMATS = ("stl", "ply", "obj", "glb", "3mf")
 STL_RECORD = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
 STL_MAX_TRIANGLES = 2**32 - 1
-NS_CORE = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
-NS_BEAM = "http://schemas.microsoft.com/3dmanufacturing/beamlattice/2017/02"
-NS_BALLS = "http://schemas.microsoft.com/3dmanufacturing/beamlattice/balls/2020/07"
 
 
 def mesh_format(path) -> str:
@@ -82,79 +83,129 @@ class StlWriter:
         self.fh.seek(0, 2)
 
 
-def write_stl(path, chunks: Iterable) -> int:
+def write_stl(path, chunks: Iterable, header: bytes = b"PLE binary STL", grid: float | None = None) -> int:
     """Write chunks to binary STL atomically; a chunk is triangles (k, 3, 3) or a pair
-    (vertices (V, 3), faces (k, 3)). Returns the number of triangles."""
+    (vertices (V, 3), faces (k, 3)). With ``grid`` every vertex is snapped to that float32 grid
+    (``ple.weld``; the same grid for every chunk) and triangles whose corners then coincide are
+    dropped. Returns the number of triangles."""
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        w = StlWriter(fh)
+        w = StlWriter(fh, header)
         for chunk in chunks:
-            if isinstance(chunk, tuple):
-                w.write(*chunk)
-            else:
-                w.write(chunk)
+            tri = chunk[0][chunk[1]] if isinstance(chunk, tuple) else np.asarray(chunk, float).reshape(-1, 3, 3)
+            if grid is not None:
+                from .weld import snap
+
+                tri = snap(tri, grid)
+                ne = [np.any(tri[:, a] != tri[:, b], axis=1) for a, b in ((0, 1), (1, 2), (2, 0))]
+                tri = tri[ne[0] & ne[1] & ne[2]]
+            w.write(tri)
         w.close()
     return w.count
 
 
-def export_mesh(mesh: trimesh.Trimesh, path) -> None:
-    """Write a mesh; the format follows the suffix (.stl by our writer, others by trimesh)."""
+UNITS = {"um": ("micron", 1e-6), "mm": ("millimeter", 1e-3), "cm": ("centimeter", 1e-2),
+         "in": ("inch", 0.0254), "ft": ("foot", 0.3048), "m": ("meter", 1.0)}
+DEFAULT_UNIT = "mm"
+Y_UP = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])  # (x, y, z) -> (x, z, -y): Z-up data in a Y-up file
+
+
+def unit_name(unit: str) -> str:
+    """The 3MF name of a unit ("mm" -> "millimeter")."""
+    if unit not in UNITS:
+        raise PleError(f"--unit {unit!r}: expected one of {', '.join(UNITS)}")
+    return UNITS[unit][0]
+
+
+def prepare(vertices, faces, fmt: str, unit: str = DEFAULT_UNIT, grid: float | None = None):
+    """Vertices and faces as they go into a file of format ``fmt``: turned Y-up for glTF and
+    OBJ, scaled to metres for glTF (its unit by specification), snapped to the float32 grid
+    and welded (``ple.weld``) so the file reads back with the topology it was checked with.
+    ``grid``: the snap grid (default: from these vertices' bounds; ignored for glTF, whose
+    coordinates are rescaled). Returns (vertices exactly in float32, faces, weld stats)."""
+    from .weld import grid_spacing, weld
+
+    unit_name(unit)
+    v = np.asarray(vertices, float).reshape(-1, 3)
+    f = np.asarray(faces, np.int64).reshape(-1, 3)
+    if fmt in ("glb", "obj"):
+        v = v @ Y_UP.T
+    if fmt == "glb":
+        v = v * UNITS[unit][1]
+        grid = None
+    if grid is None:
+        grid = grid_spacing(v.min(axis=0), v.max(axis=0)) if len(v) else 1.0
+    return weld(v, f, grid)
+
+
+def export_mesh(mesh: trimesh.Trimesh, path, unit: str = DEFAULT_UNIT, grid: float | None = None) -> dict:
+    """Write a mesh; the format follows the suffix. Coordinates are in ``unit`` (default mm:
+    written into 3MF, stated in the STL header, PLY and OBJ comments; glTF is converted to
+    metres, its unit). glTF and OBJ are Y-up (converted from our Z-up). Coordinates are
+    snapped to float32 and welded first (``prepare``); returns the weld statistics."""
     fmt = mesh_format(path)
+    v, f, stats = prepare(mesh.vertices, mesh.faces, fmt, unit, grid)
     if fmt == "stl":
-        write_stl(path, [np.asarray(mesh.triangles)])
-        return
+        write_stl(path, [(v, f)], header=stl_header(unit))
+    elif fmt == "3mf":
+        from .threemf import write_3mf
+
+        write_3mf(path, v, f, unit_name(unit))
+    elif fmt == "ply":
+        write_ply(path, v, f, unit)
+    elif fmt == "obj":
+        write_obj(path, v, f, unit)
+    else:
+        out = trimesh.Trimesh(v.astype(np.float32), f, process=False)
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(trimesh.exchange.gltf.export_glb(out, include_normals=False))
+    return stats
+
+
+def stl_header(unit: str) -> bytes:
+    return f"PLE binary STL, unit {unit}, Z up".encode()
+
+
+def write_ply(path, vertices, faces, unit: str = DEFAULT_UNIT) -> None:
+    """Binary little-endian PLY: float32 vertices, uchar-counted int32 faces; unit in a comment."""
+    v = np.ascontiguousarray(vertices, "<f4")
+    rec = np.empty(len(faces), np.dtype([("n", "u1"), ("f", "<i4", (3,))]))
+    rec["n"] = 3
+    rec["f"] = faces
+    header = ("ply\nformat binary_little_endian 1.0\n"
+              f"comment PLE lattice mesh, unit {unit}, Z up\n"
+              f"element vertex {len(v)}\nproperty float x\nproperty float y\nproperty float z\n"
+              f"element face {len(rec)}\nproperty list uchar int vertex_indices\nend_header\n")
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        fh.write(header.encode())
+        fh.write(v.tobytes())
+        fh.write(rec.tobytes())
+
+
+def write_obj(path, vertices, faces, unit: str = DEFAULT_UNIT) -> None:
+    """Wavefront OBJ (Y up, 9 significant digits: float32 values exactly); unit in a comment."""
+    import io
+
+    buf = io.StringIO()
+    buf.write(f"# PLE lattice mesh, unit {unit}, Y up\n")
+    if len(vertices):
+        np.savetxt(buf, np.asarray(vertices, np.float32).astype(float), fmt="v %.9g %.9g %.9g")
+    if len(faces):
+        np.savetxt(buf, np.asarray(faces, np.int64) + 1, fmt="f %d %d %d")
     with atomic_path(path) as tmp:
-        data = trimesh.exchange.export.export_mesh(mesh, None, file_type=fmt)
-        tmp.write_bytes(data if isinstance(data, bytes) else data.encode())
+        tmp.write_text(buf.getvalue())
 
 
-def beam_lattice_model_xml(center: np.ndarray, radius: np.ndarray, beam_nodes: np.ndarray,
-                           unit: str = "millimeter") -> str:
-    """3D/3dmodel.model text: one object whose mesh holds the ball centres as vertices, a
-    b:beamlattice of cone beams (r1, r2 = the end balls' radii) and b2:balls at every vertex."""
-    center = np.asarray(center, float).reshape(-1, 3)
-    radius = np.asarray(radius, float).reshape(-1)
-    beam_nodes = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
-    if len(center) == 0:
-        raise PleError("beam lattice 3MF: the region has no balls")
-    if not (np.all(np.isfinite(center)) and np.all(radius > 0)):
-        raise PleError("beam lattice 3MF: ball centres must be finite and radii positive")
-    lengths = np.linalg.norm(center[beam_nodes[:, 0]] - center[beam_nodes[:, 1]], axis=1) if len(beam_nodes) else []
-    min_length = max(1e-9, 0.5 * float(np.min(lengths))) if len(beam_nodes) else 1e-4
-    default_r = float(np.median(radius))
-    fmt = lambda a: np.char.mod("%.9g", a)  # noqa: E731
-    cx, cy, cz = fmt(center[:, 0]), fmt(center[:, 1]), fmt(center[:, 2])
-    verts = "".join(f'<vertex x="{x}" y="{y}" z="{z}"/>' for x, y, z in zip(cx, cy, cz))
-    r = fmt(radius)
-    beams = "".join(f'<b:beam v1="{a}" v2="{b}" r1="{r[a]}" r2="{r[b]}"/>' for a, b in beam_nodes)
-    balls = "".join(f'<b2:ball vindex="{i}" r="{ri}"/>' for i, ri in enumerate(r))
-    return (f'<?xml version="1.0" encoding="UTF-8"?>\n'
-            f'<model xmlns="{NS_CORE}" xmlns:b="{NS_BEAM}" xmlns:b2="{NS_BALLS}" unit="{unit}" '
-            f'xml:lang="en-US" requiredextensions="b b2">'
-            f'<resources><object id="1" type="model" name="PLE lattice"><mesh>'
-            f'<vertices>{verts}</vertices>'
-            f'<b:beamlattice minlength="{min_length:.9g}" radius="{default_r:.9g}" clippingmode="none" '
-            f'cap="sphere" b2:ballmode="mixed" b2:ballradius="{default_r:.9g}">'
-            f'<b:beams>{beams}</b:beams><b2:balls>{balls}</b2:balls></b:beamlattice>'
-            f'</mesh></object></resources><build><item objectid="1"/></build></model>\n')
+def write_beam_lattice_3mf(path, center, radius, beam_nodes, mesh=None, unit: str = DEFAULT_UNIT) -> None:
+    """A 3MF package with the Beam Lattice extension (balls and cone beams). With ``mesh``
+    (the lattice's watertight triangle mesh) the same object carries its triangles and the
+    extensions are not required, so consumers without beam support print the triangles;
+    without it the file holds beams only and requires the extensions."""
+    from .threemf import write_3mf
 
-
-CONTENT_TYPES = ('<?xml version="1.0" encoding="UTF-8"?>\n'
-                 '<Types xmlns="http://schemas.openxmlformats.org/package/2006/content-types">'
-                 '<Default Extension="rels" ContentType="application/vnd.openxmlformats-package.relationships+xml"/>'
-                 '<Default Extension="model" ContentType="application/vnd.ms-package.3dmanufacturing-3dmodel+xml"/>'
-                 '</Types>\n')
-RELS = ('<?xml version="1.0" encoding="UTF-8"?>\n'
-        '<Relationships xmlns="http://schemas.openxmlformats.org/package/2006/relationships">'
-        '<Relationship Target="/3D/3dmodel.model" Id="rel0" '
-        'Type="http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"/></Relationships>\n')
-
-
-def write_beam_lattice_3mf(path, center, radius, beam_nodes) -> None:
-    """A 3MF package with the Beam Lattice extension (balls and beams, no triangles)."""
     if mesh_format(path) != "3mf":
         raise PleError(f"{path}: a beam lattice is written as .3mf")
-    model = beam_lattice_model_xml(center, radius, beam_nodes)
-    with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-        z.writestr("[Content_Types].xml", CONTENT_TYPES)
-        z.writestr("_rels/.rels", RELS)
-        z.writestr("3D/3dmodel.model", model)
+    if mesh is None:
+        v, f = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    else:
+        v, f, _ = prepare(mesh.vertices, mesh.faces, "3mf", unit)
+    write_3mf(path, v, f, unit_name(unit), (center, radius, beam_nodes))

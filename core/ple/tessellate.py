@@ -33,6 +33,7 @@ from .achocc import HubGeometry, hub_geometry
 from .chocc import ChoccMesh, cnt_segments, corridor_mesh, sampled_segments
 from .errors import PleError
 from .lattice import Lattice, Region
+from .weld import COLLAPSE_GRIDS, collapse_short_edges, grid_spacing
 
 STYLES = ("refined", "chocc", "cnt", "balls-beams")
 DEFAULT_LEVELS = 4
@@ -122,9 +123,11 @@ def _arc_mids(pa, pb, n, alpha, r_plus, frames, ci) -> np.ndarray:
 
 
 def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, levels: int,
-                 segments: int, hint=None) -> HubTemplate:
+                 segments: int, hint=None, min_edge: float = 0.0) -> HubTemplate:
     """Tessellate one junction: ball (center (3,), radius) with beams to the balls
-    (neighbor_centers (S, 3), neighbor_radii (S,)), in the given style."""
+    (neighbor_centers (S, 3), neighbor_radii (S,)), in the given style. Edges shorter than
+    ``min_edge`` are collapsed (``ple.weld.collapse_short_edges``) so that the mesh keeps its
+    topology when written in float32."""
     center = np.asarray(center, float)
     vec = np.asarray(neighbor_centers, float).reshape(-1, 3) - center
     lengths = np.linalg.norm(vec, axis=1)
@@ -138,6 +141,8 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
     else:
         base = corridor_mesh(hub.chocc, cnt_segments if style == "cnt" else sampled_segments(segments))
         verts, faces, rings = base.vertices * hub.r_plus, base.faces, base.rings
+    if min_edge > 0:
+        faces, rings, _ = collapse_short_edges(verts, faces, rings, min_edge)
     axial = hub.r_plus * np.cos(hub.alphas)
     caps = []
     all_verts = [verts]
@@ -203,6 +208,14 @@ class _Tessellator:
         self.hints: dict = {}
         self.scale = lat.template_radii * KEY_QUANTUM
         self.node_filter = lat.filter  # thesis §9: only surviving nodes get hubs; beams need both ends
+        # float32-safe output: edges shorter than a few float32 grid steps of the region's size
+        # are collapsed in the hub templates (template units: divided by the smallest group scale)
+        self.grid = grid_spacing(*lat.bounds(region))
+        corners = np.array([[i, j, k] for i in (region.i0, max(region.i1 - 1, region.i0))
+                            for j in (region.j0, max(region.j1 - 1, region.j0))
+                            for k in (region.k0, max(region.k1 - 1, region.k0))])
+        fmin = float(np.min(lat.group_factors(corners[:, 0], corners[:, 1], corners[:, 2])))
+        self.min_edge = COLLAPSE_GRIDS * self.grid / fmin
 
     def kept(self, idx: np.ndarray) -> np.ndarray:
         """Which nodes idx (N, 4) survive the lattice's filter (all, without one)."""
@@ -279,7 +292,7 @@ class _Tessellator:
                     hint_key = (n, have.tobytes())  # the last hub with these beams: likely the same hull
                     tpl = hub_template(lat.template_centers[n], lat.template_radii[n], local[u, have, :3],
                                        local[u, have, 3], self.style, self.levels, self.segments,
-                                       self.hints.get(hint_key))
+                                       self.hints.get(hint_key), self.min_edge)
                     self.hints[hint_key] = tpl.geometry.base_triangles
                     slot_of = np.cumsum(have) - 1
                     self.templates[key] = (len(self.templates), tpl, np.where(have, slot_of, -1))
@@ -483,14 +496,18 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
 
 
 def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: int | None = None,
-               segments: int | None = None, max_groups: int = 1 << 14) -> int:
+               segments: int | None = None, max_groups: int = 1 << 14, unit: str = "mm") -> int:
     """Tessellate a region straight to ``path`` (format from the suffix); returns the number of
-    triangles. Binary STL streams box by box (memory bounded by ``max_groups`` groups); the
-    other formats build the mesh in memory and go through trimesh."""
-    from .export import export_mesh, mesh_format, write_stl
+    triangles. Binary STL streams box by box (memory bounded by ``max_groups`` groups), every
+    box snapped to the region's float32 grid; the other formats build the mesh in memory and go
+    through ``ple.export.export_mesh``. Coordinates are in ``unit`` (see there)."""
+    from .export import export_mesh, mesh_format, stl_header, unit_name, write_stl
 
+    unit_name(unit)
     if mesh_format(path) == "stl":
-        return write_stl(path, iter_triangles(lat, region, style, levels, segments, max_groups))
+        grid = grid_spacing(*lat.bounds(lat.region(region))) if style != "balls-beams" else None
+        return write_stl(path, iter_triangles(lat, region, style, levels, segments, max_groups),
+                         header=stl_header(unit), grid=grid)
     mesh = tessellate(lat, region, style, levels, segments)
-    export_mesh(mesh, path)
+    export_mesh(mesh, path, unit)
     return len(mesh.faces)
