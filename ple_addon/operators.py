@@ -474,7 +474,9 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
             for n, chunk in enumerate(tess.iter_triangles(lat, region, core_style(self.style), max_groups=boxes)):
                 chunks.append(chunk)
                 yield min(0.9, 0.9 * (n + 1) * boxes / region.groups)
-            count = export.write_stl(path, chunks)
+            # snapped to the region's float32 grid, as `ple mesh` writes it
+            grid = None if core_style(self.style) == "balls-beams" else export.region_grid(lat, region)
+            count = export.write_stl(path, chunks, header=export.stl_header(), grid=grid)
         else:
             mesh = tess.tessellate(lat, region, core_style(self.style))
             yield 0.7

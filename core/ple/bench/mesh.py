@@ -21,8 +21,8 @@ from ._timing import best_of
 
 CHILD = """
 import json, resource, sys, time
-from ple.program import load_lattice
-from ple.tessellate import write_mesh
+from ple.program.sources import load_lattice
+from ple.io.export import write_mesh
 lat = load_lattice(sys.argv[1]).with_counts(*[int(x) for x in sys.argv[2].split(",")])
 t0 = time.perf_counter()
 n = write_mesh(lat, sys.argv[3], style=sys.argv[4])

@@ -1,4 +1,4 @@
-"""``ple mesh LATTICE --style S [--levels N] [--region R] --out F [--beam-lattice] [--check]``."""
+"""``ple mesh LATTICE --style S [--levels N] [--region R] --out F [--unit U] [--beam-lattice] [--check]``."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from ..app.cluster import run_job
 from ..app.jobs import assemble_stl, mesh_job
 from ..errors import PleError
 from ..io.export import export_mesh, write_beam_lattice_3mf, write_mesh
-from ..io.formats import mesh_format
+from ..io.formats import DEFAULT_UNIT, UNITS, mesh_format
 from ..measure.integrals import lattice_volume
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
 from ..meshing.tessellate import tessellate
@@ -32,6 +32,8 @@ def register(sub) -> None:
     p.add_argument("--segments", type=int, default=None, help="generators per circle of 'chocc' (default 16)")
     p.add_argument("--region", help="I0:I1,J0:J1,K0:K1 (half-open); default: the whole lattice")
     p.add_argument("--out", help="output .stl, .3mf, .ply, .obj or .glb (with --parts: the assembled .stl)")
+    p.add_argument("--unit", choices=tuple(UNITS), default=DEFAULT_UNIT,
+                   help=f"unit of the coordinates, stated in the file (default {DEFAULT_UNIT}; glTF: metres)")
     p.add_argument("--box-groups", type=int, default=1 << 14, metavar="N",
                    help="with --parts: node-groups per part (default 16384)")
     add_cluster_args(p)
@@ -61,15 +63,15 @@ def run(args) -> int:
         if fmt != "3mf":
             raise PleError(f"--beam-lattice writes 3MF; --out {args.out} is .{fmt}")
         ev = lat.evaluate(region)
-        write_beam_lattice_3mf(args.out, ev.center, ev.radius, ev.beam_nodes)
+        write_beam_lattice_3mf(args.out, ev.center, ev.radius, ev.beam_nodes, unit=args.unit)
         print(f"wrote {args.out}: beam lattice, {len(ev.center):,} balls, {len(ev.beam_nodes):,} beams")
         return 0
     if args.check:
         mesh = tessellate(lat, region, args.style, args.levels, args.segments)
-        export_mesh(mesh, args.out)
+        export_mesh(mesh, args.out, args.unit)
         n = len(mesh.faces)
     else:
-        n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments)
+        n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments, unit=args.unit)
     dt = time.perf_counter() - t0
     print(f"wrote {args.out}: {n:,} triangles, style {args.style}, region {region}, {dt:.2f} s")
     if args.check:
@@ -82,6 +84,8 @@ def run_parts(args) -> int:
     with --out, assembled into one STL."""
     if args.check or args.beam_lattice:
         raise PleError("--parts writes triangle parts: --check and --beam-lattice need a single file")
+    if args.unit != DEFAULT_UNIT:
+        raise PleError(f"--parts writes STL parts in {DEFAULT_UNIT}; --unit {args.unit} needs a single file")
     if args.out and mesh_format(args.out) != "stl":
         raise PleError(f"--out {args.out}: a partitioned mesh assembles into binary .stl")
     if args.box_groups < 1:

@@ -36,6 +36,7 @@ from .achocc import HubGeometry, hub_geometry
 from .chocc import ChoccMesh, cnt_segments, corridor_mesh, sampled_segments
 from .preview import balls_beams_mesh
 from .styles import style as style_named
+from .weld import COLLAPSE_GRIDS, collapse_short_edges, grid_spacing
 
 DEFAULT_LEVELS = 4
 DEFAULT_SEGMENTS = 16
@@ -59,10 +60,18 @@ class HubTemplate:
 def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray, np.ndarray, list]:
     """§6 refinement on the unit-sphere CNT: ``levels`` 1-to-4 splits (a corridor quad,
     two triangles, becomes 8 around its centre), arc midpoints snapped to their circle, other
-    new vertices centrally projected. Returns vertices in hub units (centre at 0), faces, rings."""
+    new vertices centrally projected. Returns vertices in hub units (centre at 0), faces, rings.
+
+    A new vertex is first placed on the CHoCC hull itself — on a planar triangle, or on the
+    curved corridor at the mean of its corners' corridor coordinates (``ChoccMesh.corridor_point``)
+    — and then projected from the centre. A point of the planar CNT quad near a long arc's chord
+    lies in that circle's cone, and its projection would land on the beam beyond the contact
+    disk, folding into the beam's strip; a point of the hull never does (the centre is inside
+    the hull, so the cones over its faces, corridors and disks do not overlap)."""
     c = hub.chocc
     real = hub.slots
     r_plus = hub.r_plus
+    hull = mesh.vertices.copy()  # positions on the CHoCC hull (unit sphere scale)
     verts = mesh.vertices * r_plus
     circle = mesh.vertex_circle.copy()
     on_circle = circle < real
@@ -71,6 +80,8 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
         u = verts[off] / np.linalg.norm(verts[off], axis=1, keepdims=True)
         verts[off] = u * hub.exit_distance(u)[:, None]
     faces = mesh.faces
+    fcor = mesh.face_corridor if mesh.face_corridor is not None else np.full(len(faces), -1)
+    fpar = mesh.face_params if mesh.face_params is not None else np.zeros((len(faces), 3, 2))
     rings = [r.copy() for r in mesh.rings]
     frames = perpendicular_frames(c.normals)
     for _ in range(levels):
@@ -80,6 +91,20 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
         uniq, inv = np.unique(ekey, return_inverse=True)
         inv = inv.reshape(-1)
         ua, ub = uniq // nv, uniq % nv
+        # hull points of the face-edge midpoints: corridor coordinates on corridors, chords on triangles
+        ecor = np.tile(fcor, 3)
+        epar = 0.5 * (np.concatenate([fpar[:, 0], fpar[:, 1], fpar[:, 2]])
+                      + np.concatenate([fpar[:, 1], fpar[:, 2], fpar[:, 0]]))
+        hmid = 0.5 * (hull[e[:, 0]] + hull[e[:, 1]])
+        onc = np.flatnonzero(ecor >= 0)
+        if len(onc):
+            hmid[onc] = mesh.corridor_point(ecor[onc], epar[onc, 0], epar[onc, 1])
+        # one hull point per edge: a corridor's if any face on it is a corridor (they agree on
+        # the generators shared with triangles)
+        pick = np.full(len(uniq), -1)
+        order = np.argsort(ecor >= 0, kind="stable")  # triangles first, corridors overwrite
+        pick[inv[order]] = order
+        hnew = hmid[pick]
         mids = 0.5 * (verts[ua] + verts[ub])
         new_ids = nv + np.arange(len(uniq))
         is_arc = np.zeros(len(uniq), bool)
@@ -91,18 +116,25 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
             q = np.searchsorted(uniq, np.minimum(x, y) * nv + np.maximum(x, y))
             is_arc[q] = True
             mids[q] = _arc_mids(verts[x], verts[y], c.normals[ci], c.alphas[ci], r_plus, frames, ci)
+            hnew[q] = mids[q] / r_plus
             out = np.empty(2 * len(ring), np.int64)
             out[0::2], out[1::2] = ring, new_ids[q]
             rings[ci] = out
         proj = ~is_arc
         if proj.any():
-            u = mids[proj] / np.linalg.norm(mids[proj], axis=1, keepdims=True)
+            u = hnew[proj] / np.linalg.norm(hnew[proj], axis=1, keepdims=True)
             mids[proj] = u * hub.exit_distance(u)[:, None]
         verts = np.concatenate([verts, mids])
+        hull = np.concatenate([hull, hnew])
         m = new_ids[inv].reshape(3, -1).T  # midpoints of edges 01, 12, 20 per face
         v0, v1, v2 = faces.T
         faces = np.concatenate([np.stack([v0, m[:, 0], m[:, 2]], 1), np.stack([m[:, 0], v1, m[:, 1]], 1),
                                 np.stack([m[:, 2], m[:, 1], v2], 1), m])
+        p0, p1, p2 = fpar[:, 0], fpar[:, 1], fpar[:, 2]
+        p01, p12, p20 = 0.5 * (p0 + p1), 0.5 * (p1 + p2), 0.5 * (p2 + p0)
+        fpar = np.concatenate([np.stack([p0, p01, p20], 1), np.stack([p01, p1, p12], 1),
+                               np.stack([p20, p12, p2], 1), np.stack([p01, p12, p20], 1)])
+        fcor = np.tile(fcor, 4)
     return verts, faces, rings
 
 
@@ -117,9 +149,11 @@ def _arc_mids(pa, pb, n, alpha, r_plus, frames, ci) -> np.ndarray:
 
 
 def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, levels: int,
-                 segments: int, hint=None) -> HubTemplate:
+                 segments: int, hint=None, min_edge: float = 0.0) -> HubTemplate:
     """Tessellate one junction: ball (center (3,), radius) with beams to the balls
-    (neighbor_centers (S, 3), neighbor_radii (S,)), in the given style."""
+    (neighbor_centers (S, 3), neighbor_radii (S,)), in the given style. Edges shorter than
+    ``min_edge`` are collapsed (``ple.meshing.weld.collapse_short_edges``) so that the mesh keeps its
+    topology when written in float32."""
     center = np.asarray(center, float)
     vec = np.asarray(neighbor_centers, float).reshape(-1, 3) - center
     lengths = np.linalg.norm(vec, axis=1)
@@ -133,6 +167,8 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
     else:
         base = corridor_mesh(hub.chocc, cnt_segments if style == "cnt" else sampled_segments(segments))
         verts, faces, rings = base.vertices * hub.r_plus, base.faces, base.rings
+    if min_edge > 0:
+        faces, rings, _ = collapse_short_edges(verts, faces, rings, min_edge)
     axial = hub.r_plus * np.cos(hub.alphas)
     caps = []
     all_verts = [verts]
@@ -197,6 +233,14 @@ class _Tessellator:
         self.strips: dict = {}
         self.hints: dict = {}
         self.scale = lat.template_radii * KEY_QUANTUM
+        # float32-safe output: edges shorter than a few float32 grid steps of the region's size
+        # are collapsed in the hub templates (template units: divided by the smallest group scale)
+        self.grid = grid_spacing(*lat.bounds(region))
+        corners = np.array([[i, j, k] for i in (region.i0, max(region.i1 - 1, region.i0))
+                            for j in (region.j0, max(region.j1 - 1, region.j0))
+                            for k in (region.k0, max(region.k1 - 1, region.k0))])
+        fmin = float(np.min(lat.group_factors(corners[:, 0], corners[:, 1], corners[:, 2])))
+        self.min_edge = COLLAPSE_GRIDS * self.grid / fmin
 
     # ----- hubs -----------------------------------------------------------------------
     def _neighbors(self, idx: np.ndarray, n: int):
@@ -266,7 +310,7 @@ class _Tessellator:
                     hint_key = (n, have.tobytes())  # the last hub with these beams: likely the same hull
                     tpl = hub_template(lat.template_centers[n], lat.template_radii[n], local[u, have, :3],
                                        local[u, have, 3], self.style, self.levels, self.segments,
-                                       self.hints.get(hint_key))
+                                       self.hints.get(hint_key), self.min_edge)
                     self.hints[hint_key] = tpl.geometry.base_triangles
                     slot_of = np.cumsum(have) - 1
                     self.templates[key] = (len(self.templates), tpl, np.where(have, slot_of, -1))
