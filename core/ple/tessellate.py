@@ -247,6 +247,36 @@ class _Tessellator:
                             for k in (region.k0, max(region.k1 - 1, region.k0))])
         fmin = float(np.min(lat.group_factors(corners[:, 0], corners[:, 1], corners[:, 2])))
         self.min_edge = COLLAPSE_GRIDS * self.grid / fmin
+        self.excluded = None  # sorted linear keys of nodes meshed elsewhere (``ple.unclean``)
+
+    def _key(self, idx: np.ndarray) -> np.ndarray:
+        _, nv, nw = self.lat.counts
+        nn = len(self.lat.nodes)
+        return ((idx[..., 0] * nv + idx[..., 1]) * nw + idx[..., 2]) * nn + idx[..., 3]
+
+    def is_excluded(self, idx: np.ndarray) -> np.ndarray:
+        """Which nodes idx (..., 4) are left to the union of unclean neighbourhoods: for the fast
+        mesh they lie outside the region (their beams end in capped contact disks)."""
+        if self.excluded is None or idx.size == 0:
+            return np.zeros(idx.shape[:-1], bool)
+        return np.isin(self._key(idx), self.excluded)
+
+    def find_unclean(self):
+        """The region's unclean hubs (``ple.unclean.find_unclean``) with r⁺ and the ACHoCC's
+        clean flag of every hub from its template. Returns (report, evaluation)."""
+        from .filters import evaluate_lattice
+        from .unclean import find_unclean
+
+        ev = evaluate_lattice(self.lat, self.region)
+        idx = np.asarray(ev.node_index, np.int64)
+        if len(idx) == 0:
+            return find_unclean(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 2)), np.zeros(0)), ev
+        tids, _, _, _ = self.instances(idx)
+        by_id = {v[0]: v[1] for v in self.templates.values()}
+        rp_t = np.array([by_id[t].geometry.r_plus for t in range(len(by_id))])
+        clean_t = np.array([bool(by_id[t].geometry.clean) for t in range(len(by_id))])
+        f = self.lat.group_factors(idx[:, 0], idx[:, 1], idx[:, 2])
+        return find_unclean(ev.center, ev.radius, ev.beam_nodes, rp_t[tids] * f, ~clean_t[tids]), ev
 
     def kept(self, idx: np.ndarray) -> np.ndarray:
         """Which nodes idx (N, 4) survive the lattice's filter (all, without one)."""
@@ -273,7 +303,7 @@ class _Tessellator:
             exists[exists] = self.kept(nb[exists])  # a beam to a filtered-out node does not exist
         lo = np.array([r.i0, r.j0, r.k0])
         hi = np.array([r.i1, r.j1, r.k1])
-        inside = np.all((nb[..., :3] >= lo) & (nb[..., :3] < hi), axis=-1)
+        inside = np.all((nb[..., :3] >= lo) & (nb[..., :3] < hi), axis=-1) & ~self.is_excluded(nb)
         return nb, exists, inside
 
     def instances(self, idx: np.ndarray):
@@ -338,13 +368,13 @@ class _Tessellator:
         lat = self.lat
         nn = len(lat.nodes)
         own = box.node_index(nn)
-        own = own[self.kept(own)]
+        own = own[self.kept(own) & ~self.is_excluded(own)]
         # ghosts: the far ends of beams leaving the box but not the region
         ghosts = []
         for b in lat.beams:
             src = own[own[:, 3] == b.n1]
             dst = np.concatenate([src[:, :3] + [b.di, b.dj, b.dk], np.full((len(src), 1), b.n2)], axis=1)
-            ok = _in(dst, self.region) & ~_in(dst, box)
+            ok = _in(dst, self.region) & ~_in(dst, box) & ~self.is_excluded(dst)
             ok[ok] = self.kept(dst[ok])
             ghosts.append(dst[ok])
         ghosts = np.unique(np.concatenate(ghosts), axis=0) if ghosts else np.zeros((0, 4), np.int64)
@@ -395,7 +425,7 @@ class _Tessellator:
         for p, b in enumerate(lat.beams):
             src = np.flatnonzero(idx[:n_own, 3] == b.n1)
             dst_idx = np.concatenate([idx[src, :3] + [b.di, b.dj, b.dk], np.full((len(src), 1), b.n2)], axis=1)
-            ok = _in(dst_idx, self.region)
+            ok = _in(dst_idx, self.region) & ~self.is_excluded(dst_idx)
             ok[ok] = self.kept(dst_idx[ok])
             src, dst_idx = src[ok], dst_idx[ok]
             if len(src) == 0:
@@ -484,12 +514,16 @@ def _check_style(style: str, levels: int | None, segments: int | None) -> tuple[
 
 
 def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
-               segments: int | None = None) -> trimesh.Trimesh:
+               segments: int | None = None, check_clean: bool = True) -> trimesh.Trimesh:
     """The mesh of a region (default: the whole lattice) as one trimesh.
 
     ``levels``: refinement levels of ``refined`` (default 4); ``segments``: generators per full
     circle of ``chocc`` corridors (default 16). Watertight and consistently oriented for
-    chocc, cnt and refined; ``balls-beams`` is a preview."""
+    chocc, cnt and refined; ``balls-beams`` is a preview.
+
+    Unclean hubs (``ple.unclean``) are found first (``check_clean``); if there are any, the
+    clean rest is meshed on the fast path and united with their balls and beams by manifold3d;
+    ``mesh.metadata["ple_unclean"]`` holds the report (None when not checked)."""
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
     if style == "balls-beams":
@@ -498,9 +532,23 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
 
         ev = evaluate_lattice(lat, r)
         return balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
-    verts, faces = _Tessellator(lat, r, style, levels, segments).build(r)
+    tess = _Tessellator(lat, r, style, levels, segments)
+    report = None
+    if check_clean:
+        report, ev = tess.find_unclean()
+        if len(report.nodes):
+            tess.excluded = np.unique(tess._key(np.asarray(ev.node_index, np.int64)[report.nodes]))
+    verts, faces = tess.build(r)
+    if report is not None and len(report.nodes):
+        from .unclean import unite
+
+        used = np.unique(faces)
+        remap = np.full(len(verts), -1, np.int64)
+        remap[used] = np.arange(len(used))
+        verts, faces = unite(verts[used], remap[faces], ev.center, ev.radius, ev.beam_nodes, report.nodes)
     mesh = trimesh.Trimesh(verts, faces, process=False)
     mesh.remove_unreferenced_vertices()
+    mesh.metadata["ple_unclean"] = report
     return mesh
 
 
