@@ -328,8 +328,8 @@ class PLE_OT_stencil_filter(RigOperator, bpy.types.Operator):  # noqa: N801 - Bl
 STYLES = [("CHOCC", "CHoCC", "convex hulls of cospherical circles per hub (CHoCC paper)"),
           ("CNT", "CNT", "Crude Natural Tessellation"),
           ("REFINED", "Refined", "CNT refined towards the exact hub surfaces")]
-EXPORT_STYLES = [("BALLS_BEAMS", "Balls and beams", "preview: an icosphere per ball, a frustum per beam"),
-                 *STYLES]
+EXPORT_STYLES = [*STYLES, ("BALLS_BEAMS", "Balls and beams (preview)",
+                                       "preview only, not a closed solid: an icosphere per ball, a frustum per beam")]
 
 
 def core_style(style: str) -> str:
@@ -458,7 +458,7 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
 
     filepath: StringProperty(name="File", subtype="FILE_PATH")
     filter_glob: StringProperty(default="*.stl;*.3mf;*.ply;*.obj;*.glb", options={"HIDDEN"})
-    style: EnumProperty(name="Style", items=EXPORT_STYLES, default="BALLS_BEAMS")
+    style: EnumProperty(name="Style", items=EXPORT_STYLES, default="REFINED")
 
     def invoke(self, context, event):
         if not self.filepath and context.window is not None and not bpy.app.background:
@@ -484,7 +484,10 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
             for n, chunk in enumerate(tess.iter_triangles(lat, region, core_style(self.style), max_groups=boxes)):
                 chunks.append(chunk)
                 yield min(0.9, 0.9 * (n + 1) * boxes / region.groups)
-            count = export.write_stl(path, chunks)
+            if hasattr(tess, "output_grid") and self.style != "BALLS_BEAMS":  # float32-safe (ple.weld)
+                count = export.write_stl(path, chunks, grid=tess.output_grid(lat, region))
+            else:
+                count = export.write_stl(path, chunks)
         else:
             verts, faces = tessellation(lat, region, self.style)
             yield 0.7

@@ -96,6 +96,6 @@ def test_detection_of_parallel_beams():
         rep = find_unclean(c, np.full(4, r), beams, np.full(4, r))
         assert (len(rep.nodes) == 4) == unclean and (rep.pairs > 0) == unclean
     # a ball sitting on a beam it is not joined to
-    c2 = np.array([[0, 0, 0], [3, 0, 0], [1.5, 0.25, 0.0]])
+    c2 = np.array([[0, 0, 0], [3, 0, 0], [1.5, 0.15, 0.0]])  # 0.15 < 0.1 + 0.1
     rep = find_unclean(c2, np.full(3, 0.1), np.array([[0, 1]]), np.full(3, 0.1))
     assert set(rep.nodes.tolist()) == {0, 1, 2}

@@ -40,6 +40,7 @@ DEFAULT_LEVELS = 4
 DEFAULT_SEGMENTS = 16
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
 MAX_LEVELS = 6
+MAX_CHECK_GROUPS = 500_000  # streamed regions up to this size are checked for unclean hubs first
 
 
 @dataclass
@@ -553,7 +554,7 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
 
 
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
-                   segments: int | None = None, max_groups: int = 1 << 14):
+                   segments: int | None = None, max_groups: int = 1 << 14, _tess=None):
     """Stream the region's mesh box by box (bounded memory) as pairs (vertices (V, 3), faces
     (k, 3)); hubs next to a box boundary are repeated in both boxes (their vertices, not faces)."""
     levels, segments = _check_style(style, levels, segments)
@@ -562,7 +563,7 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
         mesh = tessellate(lat, r, style)
         yield np.asarray(mesh.vertices), np.asarray(mesh.faces)
         return
-    tess = _Tessellator(lat, r, style, levels, segments)
+    tess = _tess if _tess is not None else _Tessellator(lat, r, style, levels, segments)
     boxes = list(lat.iter_slabs(max_groups=max_groups, region=r))
     # build the next box in a worker thread while the caller writes this one (numpy releases
     # the GIL in its large array operations): at most two boxes are held at a time
@@ -574,19 +575,37 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
             yield done
 
 
+def output_grid(lat: Lattice, region=None) -> float:
+    """The float32 snap grid of a region's output (``ple.weld.grid_spacing`` of its bounds)."""
+    return grid_spacing(*lat.bounds(lat.region(region)))
+
+
 def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: int | None = None,
-               segments: int | None = None, max_groups: int = 1 << 14, unit: str = "mm") -> int:
+               segments: int | None = None, max_groups: int = 1 << 14, unit: str = "mm",
+               info: dict | None = None) -> int:
     """Tessellate a region straight to ``path`` (format from the suffix); returns the number of
     triangles. Binary STL streams box by box (memory bounded by ``max_groups`` groups), every
     box snapped to the region's float32 grid; the other formats build the mesh in memory and go
-    through ``ple.export.export_mesh``. Coordinates are in ``unit`` (see there)."""
+    through ``ple.export.export_mesh``. Coordinates are in ``unit`` (see there).
+
+    Regions up to MAX_CHECK_GROUPS groups are checked for unclean hubs first (``ple.unclean``);
+    an unclean one is meshed in memory with its unions. ``info["unclean"]`` gets the report."""
     from .export import export_mesh, mesh_format, stl_header, unit_name, write_stl
 
     unit_name(unit)
-    if mesh_format(path) == "stl":
-        grid = grid_spacing(*lat.bounds(lat.region(region))) if style != "balls-beams" else None
-        return write_stl(path, iter_triangles(lat, region, style, levels, segments, max_groups),
-                         header=stl_header(unit), grid=grid)
-    mesh = tessellate(lat, region, style, levels, segments)
+    levels_, segments_ = _check_style(style, levels, segments)
+    r = lat.region(region)
+    info = {} if info is None else info
+    if mesh_format(path) == "stl" and style != "balls-beams":
+        tess = _Tessellator(lat, r, style, levels_, segments_)
+        if r.groups <= MAX_CHECK_GROUPS:
+            info["unclean"], _ = tess.find_unclean()
+        if info.get("unclean") is None or not len(info["unclean"].nodes):
+            return write_stl(path, iter_triangles(lat, r, style, levels, segments, max_groups, _tess=tess),
+                             header=stl_header(unit), grid=tess.grid)
+    elif mesh_format(path) == "stl":
+        return write_stl(path, iter_triangles(lat, r, style, levels, segments, max_groups), header=stl_header(unit))
+    mesh = tessellate(lat, r, style, levels, segments)
+    info["unclean"] = mesh.metadata.get("ple_unclean")
     export_mesh(mesh, path, unit)
     return len(mesh.faces)

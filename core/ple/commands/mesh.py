@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from ..errors import PleError
-from ..export import mesh_format, write_beam_lattice_3mf
+from ..export import DEFAULT_UNIT, UNITS, mesh_format, write_beam_lattice_3mf
 from ..tessellate import STYLES, tessellate, write_mesh
 from .common import add_lattice_args, lattice_from_args
 
@@ -20,15 +20,21 @@ CHECK_SAMPLES = 400_000
 def register(sub) -> None:
     p = sub.add_parser("mesh", help="watertight mesh of a region (STL, 3MF, PLY, OBJ, GLB)")
     add_lattice_args(p)
-    p.add_argument("--style", choices=STYLES, default="refined", help="tessellation style (default: refined)")
+    p.add_argument("--style", choices=STYLES, default="refined",
+                   help="tessellation style (default: refined; balls-beams is a preview, not a closed solid)")
     p.add_argument("--levels", type=int, default=None, help="refinement levels of 'refined' (default 4)")
     p.add_argument("--segments", type=int, default=None, help="generators per circle of 'chocc' (default 16)")
     p.add_argument("--region", help="I0:I1,J0:J1,K0:K1 (half-open); default: the whole lattice")
     p.add_argument("--out", required=True, help="output .stl, .3mf, .ply, .obj or .glb")
+    p.add_argument("--unit", choices=list(UNITS), default=DEFAULT_UNIT,
+                   help="unit of the lattice's coordinates (default mm): written into 3MF, stated in STL/PLY/OBJ; "
+                        "glTF is converted to metres")
     p.add_argument("--beam-lattice", action="store_true",
-                   help="3MF only: write balls and beams with the Beam Lattice extension, no triangles")
+                   help="3MF only: balls and beams with the Beam Lattice extension beside the watertight "
+                        "triangle mesh of --style (extensions not required)")
     p.add_argument("--check", action="store_true",
-                   help="report watertightness, winding, Euler characteristic and volume vs the lattice's")
+                   help="report, on the file as written and read back: watertightness, winding, Euler "
+                        "characteristic, self-intersections and volume vs the lattice's")
     p.set_defaults(func=run)
 
 
@@ -43,36 +49,80 @@ def run(args) -> int:
         raise PleError(f"region {region} has {region.groups:,} node-groups: too many to hold in memory for "
                        f".{fmt}{' with --check' if args.check else ''}; write .stl (streamed) or a smaller --region")
     t0 = time.perf_counter()
+    if args.beam_lattice and fmt != "3mf":
+        raise PleError(f"--beam-lattice writes 3MF; --out {args.out} is .{fmt}")
+    info: dict = {}
     if args.beam_lattice:
-        if fmt != "3mf":
-            raise PleError(f"--beam-lattice writes 3MF; --out {args.out} is .{fmt}")
-        ev = lat.evaluate(region)
-        write_beam_lattice_3mf(args.out, ev.center, ev.radius, ev.beam_nodes)
-        print(f"wrote {args.out}: beam lattice, {len(ev.center):,} balls, {len(ev.beam_nodes):,} beams")
-        return 0
-    if args.check:
-        mesh = tessellate(lat, region, args.style, args.levels, args.segments)
+        from ..filters import evaluate_lattice
+
+        ev = evaluate_lattice(lat, region)
+        style = args.style if args.style != "balls-beams" else "refined"
+        mesh = tessellate(lat, region, style, args.levels, args.segments)
+        _say_unclean(mesh)
+        write_beam_lattice_3mf(args.out, ev.center, ev.radius, ev.beam_nodes, mesh=mesh, unit=args.unit)
+        print(f"wrote {args.out}: beam lattice, {len(ev.center):,} balls, {len(ev.beam_nodes):,} beams, "
+              f"with {len(mesh.faces):,} triangles ({style}), unit {args.unit}")
+    elif args.check:
         from ..export import export_mesh
 
-        export_mesh(mesh, args.out)
+        mesh = tessellate(lat, region, args.style, args.levels, args.segments)
+        _say_unclean(mesh)
+        export_mesh(mesh, args.out, args.unit)
         n = len(mesh.faces)
     else:
-        n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments)
+        n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments, unit=args.unit, info=info)
+        if info.get("unclean") is not None and len(info["unclean"].nodes):
+            print(info["unclean"].line())
     dt = time.perf_counter() - t0
-    print(f"wrote {args.out}: {n:,} triangles, style {args.style}, region {region}, {dt:.2f} s")
+    if not args.beam_lattice:
+        print(f"wrote {args.out}: {n:,} triangles, style {args.style}, region {region}, unit {args.unit}, "
+              f"{dt:.2f} s{' (balls-beams: a preview, not a closed solid)' if args.style == 'balls-beams' else ''}")
     if args.check:
-        print(json.dumps(check_report(lat, region, mesh), indent=1))
+        written = read_back(args.out, args.unit)
+        rep = mesh.metadata.get("ple_unclean")
+        print(json.dumps(check_report(lat, region, written, unclean=rep is not None and len(rep.nodes) > 0), indent=1))
     return 0
 
 
-def check_report(lat, region, mesh) -> dict:
-    """Watertight, winding, Euler characteristic, and mesh volume against the lattice volume
-    (``ple.measure.lattice_volume`` for the whole lattice when available, else a Monte Carlo
-    estimate of the union of balls and cone-beams in the region)."""
+def _say_unclean(mesh) -> None:
+    rep = mesh.metadata.get("ple_unclean")
+    if rep is not None and len(rep.nodes):
+        print(rep.line())
+
+
+def read_back(path, unit: str = DEFAULT_UNIT):
+    """A written mesh file as a consumer reads it: equal coordinates merged into one vertex;
+    glTF and OBJ turned back to Z-up and glTF back from metres to ``unit``."""
+    import trimesh
+
+    from ..export import UNITS, Y_UP
+
+    fmt = mesh_format(path)
+    m = trimesh.load(path, force="mesh", process=False)
+    v = np.asarray(m.vertices, float)
+    uniq, inv = np.unique(v, axis=0, return_inverse=True)
+    f = inv.reshape(-1)[np.asarray(m.faces)]
+    if fmt in ("glb", "obj"):
+        uniq = uniq @ Y_UP  # the inverse rotation
+    if fmt == "glb":
+        uniq = uniq / UNITS[unit][1]
+    return trimesh.Trimesh(uniq, f, process=False)
+
+
+def check_report(lat, region, mesh, unclean: bool = False) -> dict:
+    """Watertight, winding, Euler characteristic, self-intersections (exact test,
+    ``ple.selfcheck``) and mesh volume against the lattice volume (``ple.measure.lattice_volume``
+    for the whole lattice when available, else a Monte Carlo estimate of the union of balls and
+    cone-beams in the region, always for an ``unclean`` lattice, whose overlaps the closed form
+    would count twice)."""
+    from ..selfcheck import count_self_intersections
+
     rep = {"triangles": int(len(mesh.faces)), "watertight": bool(mesh.is_watertight),
            "winding_consistent": bool(mesh.is_winding_consistent),
-           "euler_characteristic": int(mesh.euler_number), "mesh_volume": float(mesh.volume)}
-    whole = region == lat.region() and lat.filter is None  # the closed form knows no filter
+           "euler_characteristic": int(mesh.euler_number)}
+    rep.update(count_self_intersections(mesh.vertices, mesh.faces))
+    rep["mesh_volume"] = float(mesh.volume)
+    whole = region == lat.region() and lat.filter is None and not unclean  # the closed form knows no filter
     exact = None
     if whole:
         from ..measure import lattice_volume
