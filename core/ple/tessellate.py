@@ -537,20 +537,27 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     report = None
     if check_clean:
         report, ev = tess.find_unclean()
-        if len(report.nodes):
-            tess.excluded = np.unique(tess._key(np.asarray(ev.node_index, np.int64)[report.nodes]))
-    verts, faces = tess.build(r)
     if report is not None and len(report.nodes):
-        from .unclean import unite
-
-        used = np.unique(faces)
-        remap = np.full(len(verts), -1, np.int64)
-        remap[used] = np.arange(len(used))
-        verts, faces = unite(verts[used], remap[faces], ev.center, ev.radius, ev.beam_nodes, report.nodes)
+        verts, faces = build_with_unions(tess, ev, report.nodes)
+    else:
+        verts, faces = tess.build(r)
     mesh = trimesh.Trimesh(verts, faces, process=False)
     mesh.remove_unreferenced_vertices()
     mesh.metadata["ple_unclean"] = report
     return mesh
+
+
+def build_with_unions(tess: _Tessellator, ev, nodes) -> tuple[np.ndarray, np.ndarray]:
+    """The region's mesh with the hubs ``nodes`` (rows of the evaluation ``ev``) left out of the
+    fast path and united with their balls and beams by manifold3d (``ple.unclean.unite``)."""
+    from .unclean import unite
+
+    tess.excluded = np.unique(tess._key(np.asarray(ev.node_index, np.int64)[nodes]))
+    verts, faces = tess.build(tess.region)
+    used = np.unique(faces)
+    remap = np.full(len(verts), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return unite(verts[used], remap[faces], ev.center, ev.radius, ev.beam_nodes, nodes)
 
 
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,

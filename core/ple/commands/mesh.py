@@ -106,7 +106,9 @@ def read_back(path, unit: str = DEFAULT_UNIT):
         uniq = uniq @ Y_UP  # the inverse rotation
     if fmt == "glb":
         uniq = uniq / UNITS[unit][1]
-    return trimesh.Trimesh(uniq, f, process=False)
+    out = trimesh.Trimesh(uniq, f, process=False)
+    out.remove_unreferenced_vertices()  # a beam-lattice 3MF also lists the ball centres
+    return out
 
 
 def check_report(lat, region, mesh, unclean: bool = False) -> dict:
