@@ -448,7 +448,7 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
 
     filepath: StringProperty(name="File", subtype="FILE_PATH")
     filter_glob: StringProperty(default="*.stl;*.3mf;*.ply;*.obj;*.glb", options={"HIDDEN"})
-    style: EnumProperty(name="Style", items=EXPORT_STYLES, default="BALLS_BEAMS")
+    style: EnumProperty(name="Style", items=EXPORT_STYLES, default="REFINED")
 
     def invoke(self, context, event):
         if not self.filepath and context.window is not None and not bpy.app.background:
@@ -474,8 +474,8 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
             for n, chunk in enumerate(tess.iter_triangles(lat, region, core_style(self.style), max_groups=boxes)):
                 chunks.append(chunk)
                 yield min(0.9, 0.9 * (n + 1) * boxes / region.groups)
-            # snapped to the region's float32 grid, as `ple mesh` writes it
-            grid = None if core_style(self.style) == "balls-beams" else export.region_grid(lat, region)
+            # snapped to the region's float32 grid, as `ple mesh` writes it (previews are not snapped)
+            grid = None if core_style(self.style) == "balls-beams" else tess.output_grid(lat, region)
             count = export.write_stl(path, chunks, header=export.stl_header(), grid=grid)
         else:
             mesh = tess.tessellate(lat, region, core_style(self.style))

@@ -23,11 +23,11 @@ import trimesh
 
 from ..errors import PleError
 from ..meshing.connectors import constant_radius_connectors
-from ..meshing.tessellate import iter_triangles, tessellate
+from ..meshing.tessellate import checked_stream, iter_triangles, output_grid, tessellate
 from ..meshing.weld import grid_spacing, snap_triangles, weld
 from ..model.lattice import Lattice
 from .files import atomic_path, atomic_write_text
-from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, mesh_format, to_file_axes, unit_name
+from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, from_file_axes, mesh_format, to_file_axes, unit_name
 from .threemf import NS_BALLS, NS_BEAM, NS_CORE, package_bytes, write_3mf  # noqa: F401 - NS_* re-exported
 
 STL_RECORD = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
@@ -158,6 +158,19 @@ def mesh_bytes(mesh: trimesh.Trimesh, fmt: str, unit: str = DEFAULT_UNIT, grid: 
     return encode_mesh(v, f, fmt, unit)
 
 
+def read_back(path, unit: str = DEFAULT_UNIT) -> trimesh.Trimesh:
+    """A written mesh file as a consumer reads it: equal coordinates merged into one vertex, in
+    PLE's axes and ``unit`` again (``ple.io.formats.from_file_axes``); vertices no face uses
+    (a beam-lattice 3MF also lists the ball centres) are dropped."""
+    fmt = mesh_format(path)
+    m = trimesh.load(path, force="mesh", process=False)
+    uniq, inv = np.unique(np.asarray(m.vertices, float), axis=0, return_inverse=True)
+    f = inv.reshape(-1)[np.asarray(m.faces)]
+    out = trimesh.Trimesh(from_file_axes(uniq, fmt, unit), f, process=False)
+    out.remove_unreferenced_vertices()
+    return out
+
+
 def ply_bytes(vertices, faces, unit: str = DEFAULT_UNIT) -> bytes:
     """Binary little-endian PLY: float32 vertices, uchar-counted int32 faces; unit in a comment."""
     v = np.ascontiguousarray(vertices, "<f4")
@@ -196,26 +209,31 @@ def write_beam_lattice_3mf(path, center, radius, beam_nodes, mesh=None, unit: st
     write_3mf(path, v, f, unit_name(unit), (center, radius, beam_nodes))
 
 
-def region_grid(lat: Lattice, region=None) -> float:
-    """The float32 snap grid of a lattice region (``ple.meshing.weld.grid_spacing`` of its
-    bounds): one grid for every streamed box or job part of the region, so they close up."""
-    return grid_spacing(*lat.bounds(lat.region(region)))
-
-
 def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: int | None = None,
-               segments: int | None = None, max_groups: int = 1 << 14, unit: str = DEFAULT_UNIT) -> int:
+               segments: int | None = None, max_groups: int = 1 << 14, unit: str = DEFAULT_UNIT,
+               info: dict | None = None) -> int:
     """Tessellate a region straight to ``path`` (format from the suffix); returns the number of
     triangles. Binary STL streams box by box (memory bounded by ``max_groups`` groups), every
     box snapped to the region's float32 grid; the other formats build the mesh in memory and go
-    through ``export_mesh``. Coordinates are in ``unit`` (see there)."""
+    through ``export_mesh``. Coordinates are in ``unit`` (see there).
+
+    Regions up to ``MAX_CHECK_GROUPS`` groups are checked for unclean hubs first
+    (``ple.meshing.tessellate.checked_stream``); an unclean one is meshed in memory with its
+    unions. ``info["unclean"]`` gets the report (None when not checked)."""
     unit_name(unit)
-    if mesh_format(path) == "stl":
-        grid = region_grid(lat, region) if style != "balls-beams" else None
-        return write_stl(path, iter_triangles(lat, region, style, levels, segments, max_groups),
-                         header=stl_header(unit), grid=grid)
-    mesh = tessellate(lat, region, style, levels, segments)
-    export_mesh(mesh, path, unit)
-    return len(mesh.faces)
+    fmt = mesh_format(path)
+    r = lat.region(region)
+    info = {} if info is None else info
+    if fmt == "stl" and style != "balls-beams":
+        info["unclean"], chunks = checked_stream(lat, r, style, levels, segments, max_groups)
+        if chunks is not None:
+            return write_stl(path, chunks, header=stl_header(unit), grid=output_grid(lat, r))
+    elif fmt == "stl":
+        return write_stl(path, iter_triangles(lat, r, style, levels, segments, max_groups), header=stl_header(unit))
+    mesh = tessellate(lat, r, style, levels, segments)
+    info["unclean"] = mesh.metadata.get("ple_unclean")
+    stats = export_mesh(mesh, path, unit)
+    return len(mesh.faces) - stats["dropped_faces"]  # as written (the weld may drop slivers)
 
 
 def export_connectors(lat: Lattice, folder, radius: float, beam_radius: float | None = None,

@@ -77,3 +77,16 @@ def to_file_axes(vertices: np.ndarray, fmt: str, unit: str = DEFAULT_UNIT) -> np
         unit_name(unit)
         v = v * (UNITS[unit][1] / UNITS[f.unit][1])
     return v
+
+
+def from_file_axes(vertices: np.ndarray, fmt: str, unit: str = DEFAULT_UNIT) -> np.ndarray:
+    """The inverse of ``to_file_axes``: vertices read from a file of format ``fmt`` back in
+    PLE's Z-up axes and in ``unit``."""
+    f = MESH_FORMATS[format_named(fmt)]
+    v = np.asarray(vertices, float).reshape(-1, 3)
+    if f.unit is not None:
+        unit_name(unit)
+        v = v * (UNITS[f.unit][1] / UNITS[unit][1])
+    if f.up == "Y":
+        v = v @ Y_UP  # the inverse rotation
+    return v

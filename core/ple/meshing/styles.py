@@ -23,8 +23,8 @@ STYLES = {s.name: s for s in (
     Style("refined", "Refined", "CNT refined towards the exact hub surfaces (CHoCC paper §6)", True),
     Style("cnt", "CNT", "convex-hull network tessellation: one triangle per CHoCC triangle, flat corridors", True),
     Style("chocc", "CHoCC", "convex hulls of cospherical circles per hub, sampled corridors (CHoCC paper)", True),
-    Style("balls-beams", "Balls and beams", "preview: an icosphere per ball, a frustum per beam (not a closed solid)",
-          False),
+    Style("balls-beams", "Balls and beams (preview)",
+          "preview: an icosphere per ball, a frustum per beam (not a closed solid)", False),
 )}
 STYLE_NAMES = tuple(STYLES)
 DEFAULT_STYLE = "refined"

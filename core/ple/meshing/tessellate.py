@@ -36,12 +36,14 @@ from .achocc import HubGeometry, hub_geometry
 from .chocc import ChoccMesh, cnt_segments, corridor_mesh, sampled_segments
 from .preview import balls_beams_mesh
 from .styles import style as style_named
+from .unclean import find_unclean, unite
 from .weld import COLLAPSE_GRIDS, collapse_short_edges, grid_spacing
 
 DEFAULT_LEVELS = 4
 DEFAULT_SEGMENTS = 16
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
 MAX_LEVELS = 6
+MAX_CHECK_GROUPS = 500_000  # streamed regions up to this size are checked for unclean hubs first
 
 
 @dataclass
@@ -235,12 +237,39 @@ class _Tessellator:
         self.scale = lat.template_radii * KEY_QUANTUM
         # float32-safe output: edges shorter than a few float32 grid steps of the region's size
         # are collapsed in the hub templates (template units: divided by the smallest group scale)
-        self.grid = grid_spacing(*lat.bounds(region))
+        self.grid = output_grid(lat, region)
         corners = np.array([[i, j, k] for i in (region.i0, max(region.i1 - 1, region.i0))
                             for j in (region.j0, max(region.j1 - 1, region.j0))
                             for k in (region.k0, max(region.k1 - 1, region.k0))])
         fmin = float(np.min(lat.group_factors(corners[:, 0], corners[:, 1], corners[:, 2])))
         self.min_edge = COLLAPSE_GRIDS * self.grid / fmin
+        self.excluded = None  # sorted linear keys of nodes meshed elsewhere (``ple.meshing.unclean``)
+
+    def _key(self, idx: np.ndarray) -> np.ndarray:
+        _, nv, nw = self.lat.counts
+        nn = len(self.lat.nodes)
+        return ((idx[..., 0] * nv + idx[..., 1]) * nw + idx[..., 2]) * nn + idx[..., 3]
+
+    def is_excluded(self, idx: np.ndarray) -> np.ndarray:
+        """Which nodes idx (..., 4) are left to the union of unclean neighbourhoods: for the fast
+        mesh they lie outside the region (their beams end in capped contact disks)."""
+        if self.excluded is None or idx.size == 0:
+            return np.zeros(idx.shape[:-1], bool)
+        return np.isin(self._key(idx), self.excluded)
+
+    def find_unclean(self):
+        """The region's unclean hubs (``ple.meshing.unclean.find_unclean``) with r⁺ and the ACHoCC's
+        clean flag of every hub from its template. Returns (report, evaluation)."""
+        ev = self.lat.evaluate(self.region)
+        idx = np.asarray(ev.node_index, np.int64)
+        if len(idx) == 0:
+            return find_unclean(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 2)), np.zeros(0)), ev
+        tids, _, _, _ = self.instances(idx)
+        by_id = {v[0]: v[1] for v in self.templates.values()}
+        rp_t = np.array([by_id[t].geometry.r_plus for t in range(len(by_id))])
+        clean_t = np.array([bool(by_id[t].geometry.clean) for t in range(len(by_id))])
+        f = self.lat.group_factors(idx[:, 0], idx[:, 1], idx[:, 2])
+        return find_unclean(ev.center, ev.radius, ev.beam_nodes, rp_t[tids] * f, ~clean_t[tids]), ev
 
     # ----- hubs -----------------------------------------------------------------------
     def _neighbors(self, idx: np.ndarray, n: int):
@@ -260,7 +289,7 @@ class _Tessellator:
             exists[exists] = lat.keeps(nb[exists])  # thesis §9: a beam to a filtered-out node does not exist
         lo = np.array([r.i0, r.j0, r.k0])
         hi = np.array([r.i1, r.j1, r.k1])
-        inside = np.all((nb[..., :3] >= lo) & (nb[..., :3] < hi), axis=-1)
+        inside = np.all((nb[..., :3] >= lo) & (nb[..., :3] < hi), axis=-1) & ~self.is_excluded(nb)
         return nb, exists, inside
 
     def instances(self, idx: np.ndarray):
@@ -325,13 +354,13 @@ class _Tessellator:
         lat = self.lat
         nn = len(lat.nodes)
         own = box.node_index(nn)
-        own = own[self.lat.keeps(own)]
+        own = own[self.lat.keeps(own) & ~self.is_excluded(own)]
         # ghosts: the far ends of beams leaving the box but not the region
         ghosts = []
         for b in lat.beams:
             src = own[own[:, 3] == b.n1]
             dst = np.concatenate([src[:, :3] + [b.di, b.dj, b.dk], np.full((len(src), 1), b.n2)], axis=1)
-            ok = _in(dst, self.region) & ~_in(dst, box)
+            ok = _in(dst, self.region) & ~_in(dst, box) & ~self.is_excluded(dst)
             ok[ok] = self.lat.keeps(dst[ok])
             ghosts.append(dst[ok])
         ghosts = np.unique(np.concatenate(ghosts), axis=0) if ghosts else np.zeros((0, 4), np.int64)
@@ -382,7 +411,7 @@ class _Tessellator:
         for p, b in enumerate(lat.beams):
             src = np.flatnonzero(idx[:n_own, 3] == b.n1)
             dst_idx = np.concatenate([idx[src, :3] + [b.di, b.dj, b.dk], np.full((len(src), 1), b.n2)], axis=1)
-            ok = _in(dst_idx, self.region)
+            ok = _in(dst_idx, self.region) & ~self.is_excluded(dst_idx)
             ok[ok] = self.lat.keeps(dst_idx[ok])
             src, dst_idx = src[ok], dst_idx[ok]
             if len(src) == 0:
@@ -482,26 +511,49 @@ def tessellation_box(lat: Lattice, region, box, style: str = "refined", levels: 
 
 
 def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
-               segments: int | None = None) -> trimesh.Trimesh:
+               segments: int | None = None, check_clean: bool = True) -> trimesh.Trimesh:
     """The mesh of a region (default: the whole lattice) as one trimesh.
 
     ``levels``: refinement levels of ``refined`` (default 4); ``segments``: generators per full
     circle of ``chocc`` corridors (default 16). Watertight and consistently oriented for
-    chocc, cnt and refined; ``balls-beams`` is a preview."""
+    chocc, cnt and refined; ``balls-beams`` is a preview.
+
+    Unclean hubs (``ple.meshing.unclean``) are found first (``check_clean``); if there are any, the
+    clean rest is meshed on the fast path and united with their balls and beams by manifold3d;
+    ``mesh.metadata["ple_unclean"]`` holds the report (None when not checked)."""
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
     if style == "balls-beams":
 
         ev = lat.evaluate(r)
         return balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
-    verts, faces = _Tessellator(lat, r, style, levels, segments).build(r)
+    tess = _Tessellator(lat, r, style, levels, segments)
+    report = None
+    if check_clean:
+        report, ev = tess.find_unclean()
+    if report is not None and len(report.nodes):
+        verts, faces = build_with_unions(tess, ev, report.nodes)
+    else:
+        verts, faces = tess.build(r)
     mesh = trimesh.Trimesh(verts, faces, process=False)
     mesh.remove_unreferenced_vertices()
+    mesh.metadata["ple_unclean"] = report
     return mesh
 
 
+def build_with_unions(tess: _Tessellator, ev, nodes) -> tuple[np.ndarray, np.ndarray]:
+    """The region's mesh with the hubs ``nodes`` (rows of the evaluation ``ev``) left out of the
+    fast path and united with their balls and beams by manifold3d (``ple.meshing.unclean.unite``)."""
+    tess.excluded = np.unique(tess._key(np.asarray(ev.node_index, np.int64)[nodes]))
+    verts, faces = tess.build(tess.region)
+    used = np.unique(faces)
+    remap = np.full(len(verts), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return unite(verts[used], remap[faces], ev.center, ev.radius, ev.beam_nodes, nodes)
+
+
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
-                   segments: int | None = None, max_groups: int = 1 << 14):
+                   segments: int | None = None, max_groups: int = 1 << 14, _tess=None):
     """Stream the region's mesh box by box (bounded memory) as pairs (vertices (V, 3), faces
     (k, 3)); hubs next to a box boundary are repeated in both boxes (their vertices, not faces)."""
     levels, segments = _check_style(style, levels, segments)
@@ -510,7 +562,7 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
         mesh = tessellate(lat, r, style)
         yield np.asarray(mesh.vertices), np.asarray(mesh.faces)
         return
-    tess = _Tessellator(lat, r, style, levels, segments)
+    tess = _tess if _tess is not None else _Tessellator(lat, r, style, levels, segments)
     boxes = list(lat.iter_slabs(max_groups=max_groups, region=r))
     # build the next box in a worker thread while the caller writes this one (numpy releases
     # the GIL in its large array operations): at most two boxes are held at a time
@@ -520,3 +572,27 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
             done = pending.result()
             pending = pool.submit(tess.build, nxt) if nxt is not None else None
             yield done
+
+
+def output_grid(lat: Lattice, region=None) -> float:
+    """The float32 snap grid of a region's output (``ple.meshing.weld.grid_spacing`` of its
+    bounds): one grid for every streamed box and every job part of the region, so they close up."""
+    return grid_spacing(*lat.bounds(lat.region(region)))
+
+
+def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
+                   segments: int | None = None, max_groups: int = 1 << 14):
+    """The streamed mesh of a region (``iter_triangles``) if it has no unclean hubs: (report,
+    chunks). Regions up to MAX_CHECK_GROUPS groups are checked first (``ple.meshing.unclean``;
+    the check's hub templates are reused by the stream); report is None for larger regions
+    (not checked). chunks is None when the region has unclean hubs: it must be meshed in memory
+    with its unions (``tessellate``)."""
+    levels, segments = _check_style(style, levels, segments)
+    if style == "balls-beams":
+        raise PleError("a checked stream needs a closed style (refined, cnt or chocc)")
+    r = lat.region(region)
+    tess = _Tessellator(lat, r, style, levels, segments)
+    report = tess.find_unclean()[0] if r.groups <= MAX_CHECK_GROUPS else None
+    if report is not None and len(report.nodes):
+        return report, None
+    return report, iter_triangles(lat, r, style, levels, segments, max_groups, _tess=tess)
