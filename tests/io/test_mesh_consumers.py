@@ -239,3 +239,63 @@ def test_lib3mf_beam_lattice_with_triangles(tmp_path):
         assert b"requiredextensions" not in z.read("3D/3dmodel.model")
     back = read_back(path)
     assert_consumer_clean(back, mesh.volume, rel=1e-5)
+
+
+# ----- Blender's own importers (headless bpy, in a subprocess: bpy state is global) ----------
+
+BLENDER_SCRIPT = r'''
+import json, sys
+import bpy  # noqa: I001 - bpy first: it makes bmesh importable
+import bmesh
+out = {}
+for path in sys.argv[1:]:
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    ext = path.rsplit(".", 1)[1]
+    {"stl": bpy.ops.wm.stl_import, "ply": bpy.ops.wm.ply_import, "obj": bpy.ops.wm.obj_import,
+     "glb": bpy.ops.import_scene.gltf}[ext](filepath=path)
+    bm = bmesh.new()
+    for o in [o for o in bpy.context.scene.objects if o.type == "MESH"]:
+        part = bmesh.new()
+        part.from_mesh(o.data)
+        part.transform(o.matrix_world)
+        me = bpy.data.meshes.new("part")
+        part.to_mesh(me)
+        bm.from_mesh(me)
+    co = [v.co[:] for v in bm.verts]
+    out[path] = {"faces": len(bm.faces), "bad_edges": sum(len(e.link_faces) != 2 for e in bm.edges),
+                 "lo": [min(c[i] for c in co) for i in range(3)], "hi": [max(c[i] for c in co) for i in range(3)]}
+print("RESULT" + json.dumps(out))
+'''
+
+
+def test_blender_importers_read_manifold_meshes(tmp_path):
+    import subprocess
+    import sys
+
+    try:
+        import importlib.util
+
+        if importlib.util.find_spec("bpy") is None:
+            pytest.skip("bpy is not installed")
+    except ValueError:
+        pytest.skip("bpy is not installed")
+    mesh = tessellate(load_lattice("becots_kagome"), None, "refined", 1)
+    paths = []
+    for fmt in ("stl", "ply", "obj", "glb"):
+        paths.append(str(tmp_path / f"m.{fmt}"))
+        export_mesh(mesh, paths[-1])
+    script = tmp_path / "import.py"
+    script.write_text(BLENDER_SCRIPT)
+    out = subprocess.run([sys.executable, str(script), *paths], capture_output=True, text=True, timeout=600)
+    line = [x for x in out.stdout.splitlines() if x.startswith("RESULT")]
+    assert line, out.stderr[-2000:]
+    import json
+
+    res = json.loads(line[0][len("RESULT"):])
+    lo, hi = mesh.bounds
+    for p in paths:
+        r = res[p]
+        assert r["bad_edges"] == 0 and r["faces"] == len(mesh.faces)  # every edge has two faces
+        scale = 1e-3 if p.endswith(".glb") else 1.0  # Blender shows glTF in metres, Z up like ours
+        assert np.allclose(r["lo"], lo * scale, atol=1e-5 * scale)
+        assert np.allclose(r["hi"], hi * scale, atol=1e-5 * scale)
