@@ -614,5 +614,5 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
         return write_stl(path, iter_triangles(lat, r, style, levels, segments, max_groups), header=stl_header(unit))
     mesh = tessellate(lat, r, style, levels, segments)
     info["unclean"] = mesh.metadata.get("ple_unclean")
-    export_mesh(mesh, path, unit)
-    return len(mesh.faces)
+    stats = export_mesh(mesh, path, unit)
+    return len(mesh.faces) - stats["dropped_faces"]
