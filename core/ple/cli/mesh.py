@@ -77,8 +77,7 @@ def run(args) -> int:
     elif args.check:
         mesh = tessellate(lat, region, args.style, args.levels, args.segments)
         _say_unclean(mesh)
-        export_mesh(mesh, args.out, args.unit)
-        n = len(mesh.faces)
+        n = len(mesh.faces) - export_mesh(mesh, args.out, args.unit)["dropped_faces"]
     else:
         n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments, unit=args.unit, info=info)
         if info.get("unclean") is not None and len(info["unclean"].nodes):
