@@ -511,7 +511,7 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
 
     filepath: StringProperty(name="File", subtype="FILE_PATH")
     filter_glob: StringProperty(default="*.stl;*.3mf;*.ply;*.obj;*.glb", options={"HIDDEN"})
-    style: EnumProperty(name="Style", items=EXPORT_STYLES, default="BALLS_BEAMS")
+    style: EnumProperty(name="Style", items=EXPORT_STYLES, default="REFINED")
     beyond_limit: BEYOND
 
     def invoke(self, context, event):
@@ -534,14 +534,19 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
         budget(lat, region, self.style, f"export of {region}", streamed=streamed, beyond=self.beyond_limit)
         yield 0.0
         # box by box (thesis §6.2.2 hubs per box): progress and Esc between boxes; binary STL
-        # streams the boxes, other formats are welded into one mesh by the core
+        # streams the boxes, snapped to the region's float32 grid as `ple mesh` writes it (previews
+        # are not snapped); other formats are welded into one mesh by the core
         boxes = max(1, region.groups // EXPORT_BOXES)
         chunks = []
         for n, chunk in enumerate(tess.iter_triangles(lat, region, core_style(self.style), max_groups=boxes)):
             chunks.append(chunk)
             yield min(0.8, 0.8 * (n + 1) * boxes / region.groups)
         yield 0.8
-        count = export.write_stl(path, chunks) if streamed else export.write_chunks(path, chunks)
+        if streamed:
+            grid = None if core_style(self.style) == "balls-beams" else tess.output_grid(lat, region)
+            count = export.write_stl(path, chunks, header=export.stl_header(), grid=grid)
+        else:
+            count = export.write_chunks(path, chunks)
         self.report({"INFO"}, f"{count} triangles written to {path}")
         yield 1.0
 

@@ -89,4 +89,4 @@ def test_ple_mesh_fillet_streams_the_same_mesh(tmp_path):
     streamed.merge_vertices()
     direct = tessellate(load_lattice("cubic", {"n": 2}), style="refined", levels=2, fillet=0.2)
     assert streamed.is_watertight
-    assert streamed.volume == pytest.approx(direct.volume, rel=1e-6)
+    assert streamed.volume == pytest.approx(direct.volume, rel=1e-5)  # float32 file, snapped to its grid

@@ -25,17 +25,18 @@ import numpy as np
 
 from ..errors import PleError
 from ..filters.ir import filter_from_dict
-from ..io.export import mesh_bytes, stl_records
+from ..io.export import mesh_bytes, stl_header, stl_records
 from ..io.files import atomic_path
 from ..io.formats import format_named
 from ..meshing.styles import style as style_named
-from ..meshing.tessellate import tessellate, tessellation_box
+from ..meshing.tessellate import output_grid, tessellate, tessellation_box
+from ..meshing.weld import snap_triangles
 from ..model.lattice import Evaluation, Region
 from ..program.sources import load_lattice, resolve_source
 
 FORMAT = "ple-job/1"
 MANIFEST = "manifest.json"
-STL_HEADER = b"PLE partitioned mesh".ljust(80, b" ")
+STL_HEADER = stl_header(what="partitioned mesh")
 
 
 @dataclass(frozen=True)
@@ -176,7 +177,8 @@ def _mesh_part(settings: dict, part: Part) -> tuple[bytes, dict]:
     lat = load_lattice(settings["source"], settings["params"])
     verts, faces = tessellation_box(lat, settings["region"], part.params["box"], settings["style"],
                                     settings["levels"])
-    rec = stl_records(verts, faces)
+    # the whole region's float32 grid, as the streamed STL (``write_mesh``): the parts close up
+    rec = stl_records(snap_triangles(verts[faces], output_grid(lat, settings["region"])))
     return STL_HEADER + np.uint32(len(rec)).tobytes() + rec.tobytes(), {"triangles": int(len(rec))}
 
 

@@ -16,14 +16,14 @@ import trimesh
 
 from ..errors import PleError
 from ..io.export import write_stl
-from ..meshing.tessellate import tessellate
+from ..meshing.tessellate import _Tessellator, build_with_unions, tessellate
 from ..program.sources import load_lattice
 from ._timing import best_of
 
 CHILD = """
 import json, resource, sys, time
-from ple.program import load_lattice
-from ple.tessellate import write_mesh
+from ple.program.sources import load_lattice
+from ple.io.export import write_mesh
 lat = load_lattice(sys.argv[1]).with_counts(*[int(x) for x in sys.argv[2].split(",")])
 t0 = time.perf_counter()
 n = write_mesh(lat, sys.argv[3], style=sys.argv[4])
@@ -90,6 +90,34 @@ def _manifold_union(lat, segments: int = 16) -> tuple[float, float, int]:
     return time.perf_counter() - t0, float(union.volume()), len(mesh.tri_verts)
 
 
+def _unclean_cost(region, fraction: float = 0.1, seed: int = 0) -> dict:
+    """Throughput of the fast path on a clean lattice (with and without the cleanliness check)
+    and with ``fraction`` of its hubs treated as unclean (fast path for the rest, manifold3d
+    unions for those), per style; the union of everything is ``_manifold_union``'s row."""
+    r = region.region()
+    out = {}
+    for style in ("cnt", "chocc"):
+        t0 = time.perf_counter()
+        fast = tessellate(region, style=style, check_clean=False)
+        t1 = time.perf_counter()
+        checked = tessellate(region, style=style)
+        t2 = time.perf_counter()
+        tess = _Tessellator(region, r, style, 4, 16)
+        rep, ev = tess.find_unclean()
+        rng = np.random.default_rng(seed)
+        nodes = np.sort(rng.choice(len(ev.center), int(round(fraction * len(ev.center))), replace=False))
+        v, f = build_with_unions(tess, ev, nodes)
+        t3 = time.perf_counter()
+        mesh = trimesh.Trimesh(v, f, process=False)
+        out[style] = {"clean_unchecked_s": t1 - t0, "clean_checked_s": t2 - t1,
+                      "clean_unclean_hubs_found": int(len(checked.metadata["ple_unclean"].nodes)),
+                      "clean_triangles": len(fast.faces), "clean_triangles_per_s": len(fast.faces) / (t2 - t1),
+                      f"unclean_{int(fraction * 100)}pct_s": t3 - t2, "unclean_hubs": int(len(nodes)),
+                      "unclean_triangles": len(f), "unclean_triangles_per_s": len(f) / (t3 - t2),
+                      "unclean_watertight": bool(mesh.is_watertight), "unclean_volume": float(mesh.volume)}
+    return out
+
+
 def run(args) -> dict:
     for flag, n in (("--big", args.big), ("--region", args.region)):
         if not 2 <= n <= 1000:
@@ -105,6 +133,7 @@ def run(args) -> dict:
         ours[style] = {"seconds": time.perf_counter() - t0, "triangles": len(mesh.faces),
                        "volume": float(mesh.volume), "watertight": bool(mesh.is_watertight)}
     m_time, m_vol, m_tri = _manifold_union(region)
+    unclean = _unclean_cost(region)
     return {"benchmark": "mesh", "lattice": args.lattice, "machine": f"{os.cpu_count()} cores",
             "stl_write": _stl_rate(lat),
             "big_lattice": big,
@@ -113,4 +142,6 @@ def run(args) -> dict:
                                                                    "triangles": m_tri},
                                      "speedup_cnt": m_time / ours["cnt"]["seconds"],
                                      "speedup_chocc": m_time / ours["chocc"]["seconds"],
-                                     "speedup_refined": m_time / ours["refined"]["seconds"]}}
+                                     "speedup_refined": m_time / ours["refined"]["seconds"]},
+            "clean_vs_unclean": {"groups": region.groups, "ple": unclean,
+                                 "baseline_manifold3d_union_s": m_time}}

@@ -1,4 +1,4 @@
-"""``ple mesh LATTICE --style S [--levels N] [--region R] --out F [--beam-lattice] [--check]``."""
+"""``ple mesh LATTICE --style S [--levels N] [--region R] --out F [--unit U] [--beam-lattice] [--check]``."""
 
 from __future__ import annotations
 
@@ -14,10 +14,11 @@ from ..algebra.elements import beam_distance
 from ..app.cluster import run_job
 from ..app.jobs import assemble_stl, mesh_job
 from ..errors import PleError
-from ..io.export import export_mesh, write_beam_lattice_3mf, write_mesh
-from ..io.formats import mesh_format
+from ..io.export import export_mesh, read_back, write_beam_lattice_3mf, write_mesh
+from ..io.formats import DEFAULT_UNIT, UNITS, mesh_format
 from ..measure.check import is_clean
 from ..measure.integrals import lattice_volume
+from ..meshing.selfcheck import count_self_intersections
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
 from ..meshing.tessellate import _check_style, tessellate
 from ..model.budget import (
@@ -43,20 +44,25 @@ def register(sub) -> None:
     p = sub.add_parser("mesh", help="watertight mesh of a region (STL, 3MF, PLY, OBJ, GLB)")
     add_lattice_args(p)
     p.add_argument("--style", choices=STYLE_NAMES, default=DEFAULT_STYLE,
-                   help=f"tessellation style (default: {DEFAULT_STYLE})")
+                   help=f"tessellation style (default: {DEFAULT_STYLE}; balls-beams is a preview, not a closed solid)")
     p.add_argument("--levels", type=int, default=None, help="refinement levels of 'refined' (default 4)")
     p.add_argument("--segments", type=int, default=None, help="generators per circle of 'chocc' (default 16)")
     p.add_argument("--region", help="I0:I1,J0:J1,K0:K1 (half-open); default: the whole lattice")
     p.add_argument("--fillet", type=float, default=None,
                    help="'refined' only: junction fillet size in ball radii (CHoCC paper Eq. 6)")
     p.add_argument("--out", help="output .stl, .3mf, .ply, .obj or .glb (with --parts: the assembled .stl)")
+    p.add_argument("--unit", choices=tuple(UNITS), default=DEFAULT_UNIT,
+                   help=f"unit of the lattice's coordinates (default {DEFAULT_UNIT}): written into 3MF, stated in "
+                        "STL/PLY/OBJ; glTF is converted to metres")
     p.add_argument("--box-groups", type=int, default=1 << 14, metavar="N",
                    help="with --parts: node-groups per part (default 16384)")
     add_cluster_args(p)
     p.add_argument("--beam-lattice", action="store_true",
-                   help="3MF only: write balls and beams with the Beam Lattice extension, no triangles")
+                   help="3MF only: balls and beams with the Beam Lattice extension beside the watertight "
+                        "triangle mesh of --style (extensions not required)")
     p.add_argument("--check", action="store_true",
-                   help="report watertightness, winding, Euler characteristic and volume vs the lattice's")
+                   help="report, on the file as written and read back: watertightness, winding, Euler "
+                        "characteristic, self-intersections and volume vs the lattice's")
     p.set_defaults(func=run)
 
 
@@ -76,26 +82,37 @@ def run(args) -> int:
                        f".{fmt}{' with --check' if args.check else ''}; write .stl (streamed) or a smaller --region")
     max_groups = _within_budget(args, lat, region, fmt, in_memory)
     t0 = time.perf_counter()
+    if args.beam_lattice and fmt != "3mf":
+        raise PleError(f"--beam-lattice writes 3MF; --out {args.out} is .{fmt}")
+    info: dict = {}
     if args.beam_lattice:
-        if fmt != "3mf":
-            raise PleError(f"--beam-lattice writes 3MF; --out {args.out} is .{fmt}")
         ev = lat.evaluate(region)
-        write_beam_lattice_3mf(args.out, ev.center, ev.radius, ev.beam_nodes)
-        print(f"wrote {args.out}: beam lattice, {len(ev.center):,} balls, {len(ev.beam_nodes):,} beams")
-        return 0
-    if args.check:
+        style = args.style if args.style != "balls-beams" else "refined"
+        mesh = tessellate(lat, region, style, args.levels, args.segments)
+        _say_unclean(mesh)
+        write_beam_lattice_3mf(args.out, ev.center, ev.radius, ev.beam_nodes, mesh=mesh, unit=args.unit)
+        print(f"wrote {args.out}: beam lattice, {len(ev.center):,} balls, {len(ev.beam_nodes):,} beams, "
+              f"with {len(mesh.faces):,} triangles ({style}), unit {args.unit}")
+    elif args.check:
         mesh = tessellate(lat, region, args.style, args.levels, args.segments, fillet=args.fillet)
-        export_mesh(mesh, args.out)
-        n = len(mesh.faces)
+        _say_unclean(mesh)
+        n = len(mesh.faces) - export_mesh(mesh, args.out, args.unit)["dropped_faces"]
     else:
-        n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments, max_groups, fillet=args.fillet)
+        n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments, max_groups, unit=args.unit,
+                       info=info, fillet=args.fillet)
+        if info.get("unclean") is not None and len(info["unclean"].nodes):
+            print(info["unclean"].line())
     dt = time.perf_counter() - t0
-    print(f"wrote {args.out}: {n:,} triangles, style {args.style}, region {region}, {dt:.2f} s")
+    if not args.beam_lattice:
+        print(f"wrote {args.out}: {n:,} triangles, style {args.style}, region {region}, unit {args.unit}, "
+              f"{dt:.2f} s{' (balls-beams: a preview, not a closed solid)' if args.style == 'balls-beams' else ''}")
     if is_clean(lat, region) is False:
-        print("warning: the lattice is not clean (elements overlap elements they share no ball with); the mesh "
-              "assumes a clean lattice — ple check lists the pairs", file=sys.stderr)
+        print("warning: the lattice is not clean (elements overlap elements they share no ball with): ple check "
+              "lists the pairs", file=sys.stderr)
     if args.check:
-        print(json.dumps(check_report(lat, region, mesh), indent=1))
+        written = read_back(args.out, args.unit)
+        rep = mesh.metadata.get("ple_unclean")
+        print(json.dumps(check_report(lat, region, written, unclean=rep is not None and len(rep.nodes) > 0), indent=1))
     return 0
 
 
@@ -104,6 +121,8 @@ def run_parts(args) -> int:
     with --out, assembled into one STL."""
     if args.check or args.beam_lattice:
         raise PleError("--parts writes triangle parts: --check and --beam-lattice need a single file")
+    if args.unit != DEFAULT_UNIT:
+        raise PleError(f"--parts writes STL parts in {DEFAULT_UNIT}; --unit {args.unit} needs a single file")
     if args.out and mesh_format(args.out) != "stl":
         raise PleError(f"--out {args.out}: a partitioned mesh assembles into binary .stl")
     if args.box_groups < 1:
@@ -144,14 +163,24 @@ def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
     return int(max(1, min(1 << 14, limit // per_group)))
 
 
-def check_report(lat, region, mesh) -> dict:
-    """Watertight, winding, Euler characteristic, and mesh volume against the lattice volume
-    (``ple.measure.lattice_volume`` for the whole lattice when available, else a Monte Carlo
-    estimate of the union of balls and cone-beams in the region)."""
+def _say_unclean(mesh) -> None:
+    rep = mesh.metadata.get("ple_unclean")
+    if rep is not None and len(rep.nodes):
+        print(rep.line())
+
+
+def check_report(lat, region, mesh, unclean: bool = False) -> dict:
+    """Watertight, winding, Euler characteristic, self-intersections (exact test,
+    ``ple.meshing.selfcheck``) and mesh volume against the lattice volume (``ple.measure.lattice_volume``
+    for the whole lattice when available, else a Monte Carlo estimate of the union of balls and
+    cone-beams in the region, always for an ``unclean`` lattice, whose overlaps the closed form
+    would count twice)."""
     rep = {"triangles": int(len(mesh.faces)), "watertight": bool(mesh.is_watertight),
            "winding_consistent": bool(mesh.is_winding_consistent),
-           "euler_characteristic": int(mesh.euler_number), "mesh_volume": float(mesh.volume)}
-    whole = region == lat.region() and lat.filter is None  # the closed form knows no filter
+           "euler_characteristic": int(mesh.euler_number)}
+    rep.update(count_self_intersections(mesh.vertices, mesh.faces))
+    rep["mesh_volume"] = float(mesh.volume)
+    whole = region == lat.region() and lat.filter is None and not unclean  # the closed form knows no filter
     exact = None
     if whole:
 

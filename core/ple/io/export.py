@@ -1,15 +1,20 @@
-"""Mesh and lattice files: binary STL (own numpy writer, streaming), PLY, OBJ, GLB, 3MF via
-trimesh, 3MF with the Beam Lattice extension (balls and beams, no triangles), meshes of
-lattice regions written straight to a file, and BeCOTS connector sets.
+"""Mesh and lattice files: binary STL (own numpy writer, streaming), binary PLY and OBJ (own
+writers), GLB (trimesh), 3MF (own strict writer, ``ple.io.threemf``), 3MF with the Beam Lattice
+extension (balls and beams beside the triangle mesh), meshes of lattice regions written straight
+to a file, and BeCOTS connector sets.
+
+Every mesh is snapped to a float32 grid and welded before writing (``ple.meshing.weld``), so the
+file reads back watertight; units are explicit (``unit``, default mm) and the axes follow each
+format's convention (``ple.io.formats``: glTF and OBJ are Y-up, glTF in metres).
 
 Every write is atomic (``ple.io.files.atomic_path``): on any error no partial file is left.
 """
 
 from __future__ import annotations
 
+import io
 import json
 import struct
-import zipfile
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -18,16 +23,15 @@ import trimesh
 
 from ..errors import PleError
 from ..meshing.connectors import constant_radius_connectors
-from ..meshing.tessellate import iter_triangles, tessellate, weld_chunks
+from ..meshing.tessellate import checked_stream, iter_triangles, output_grid, tessellate, weld_chunks
+from ..meshing.weld import grid_spacing, snap_triangles, weld
 from ..model.lattice import Lattice
 from .files import atomic_path, atomic_write_text, check_output_dir, write_marker
-from .formats import format_named, mesh_format
+from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, from_file_axes, mesh_format, to_file_axes, unit_name
+from .threemf import NS_BALLS, NS_BEAM, NS_CORE, package_bytes, write_3mf  # noqa: F401 - NS_* re-exported
 
 STL_RECORD = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
 STL_MAX_TRIANGLES = 2**32 - 1
-NS_CORE = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
-NS_BEAM = "http://schemas.microsoft.com/3dmanufacturing/beamlattice/2017/02"
-NS_BALLS = "http://schemas.microsoft.com/3dmanufacturing/beamlattice/balls/2020/07"
 
 
 def stl_records(triangles: np.ndarray, faces: np.ndarray | None = None) -> np.ndarray:
@@ -56,7 +60,7 @@ def stl_records(triangles: np.ndarray, faces: np.ndarray | None = None) -> np.nd
 class StlWriter:
     """Incremental binary STL: header, then chunks of triangles, then the count is patched.
 
-    Use as a context manager around ``ple.files.atomic_path`` output: memory stays bounded
+    Use as a context manager around ``ple.io.files.atomic_path`` output: memory stays bounded
     by the largest chunk, whatever the total."""
 
     def __init__(self, fh, header: bytes = b"PLE binary STL"):
@@ -79,111 +83,166 @@ class StlWriter:
         self.fh.seek(0, 2)
 
 
-def write_stl(path, chunks: Iterable) -> int:
+def stl_header(unit: str = DEFAULT_UNIT, what: str = "binary STL") -> bytes:
+    """The 80-byte header of our STL files: it states the unit and the up axis."""
+    return f"PLE {what}, unit {unit}, Z up".encode()[:80].ljust(80, b" ")
+
+
+def write_stl(path, chunks: Iterable, header: bytes = b"PLE binary STL", grid: float | None = None) -> int:
     """Write chunks to binary STL atomically; a chunk is triangles (k, 3, 3) or a pair
-    (vertices (V, 3), faces (k, 3)). Returns the number of triangles."""
+    (vertices (V, 3), faces (k, 3)). With ``grid`` every vertex is snapped to that float32 grid
+    (``ple.meshing.weld``; the same grid for every chunk) and triangles whose corners then
+    coincide are dropped. Returns the number of triangles."""
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        w = StlWriter(fh)
+        w = StlWriter(fh, header)
         for chunk in chunks:
-            if isinstance(chunk, tuple):
-                w.write(*chunk)
-            else:
-                w.write(chunk)
+            tri = chunk[0][chunk[1]] if isinstance(chunk, tuple) else np.asarray(chunk, float).reshape(-1, 3, 3)
+            if grid is not None:
+                tri = snap_triangles(tri, grid)
+            w.write(tri)
         w.close()
     return w.count
 
 
-def export_mesh(mesh: trimesh.Trimesh, path) -> None:
-    """Write a mesh; the format follows the suffix (.stl by our writer, others by trimesh)."""
-    fmt = mesh_format(path)
+def prepare(vertices, faces, fmt: str, unit: str = DEFAULT_UNIT, grid: float | None = None):
+    """Vertices and faces as they go into a file of format ``fmt``: in the format's axes and unit
+    (``ple.io.formats.to_file_axes``), snapped to the float32 grid and welded
+    (``ple.meshing.weld``) so the file reads back with the topology it was checked with.
+    ``grid``: the snap grid (default: from these vertices' bounds; ignored for a format with its
+    own unit, glTF, whose coordinates are rescaled). Returns (vertices exactly in float32, faces,
+    weld stats)."""
+    v = to_file_axes(vertices, fmt, unit)
+    f = np.asarray(faces, np.int64).reshape(-1, 3)
+    if MESH_FORMATS[fmt].unit is not None:
+        grid = None
+    if grid is None:
+        grid = grid_spacing(v.min(axis=0), v.max(axis=0)) if len(v) else 1.0
+    return weld(v, f, grid)
+
+
+def encode_mesh(vertices, faces, fmt: str, unit: str = DEFAULT_UNIT) -> bytes:
+    """The file contents, in format ``fmt``, of a mesh already ``prepare``d for it."""
     if fmt == "stl":
-        write_stl(path, [np.asarray(mesh.triangles)])
-        return
+        rec = stl_records(vertices, faces)
+        return stl_header(unit) + np.uint32(len(rec)).tobytes() + rec.tobytes()
+    if fmt == "3mf":
+        return package_bytes(vertices, faces, unit_name(unit))
+    if fmt == "ply":
+        return ply_bytes(vertices, faces, unit)
+    if fmt == "obj":
+        return obj_bytes(vertices, faces, unit)
+    out = trimesh.Trimesh(np.asarray(vertices, np.float32), faces, process=False)
+    return trimesh.exchange.gltf.export_glb(out, include_normals=False)
+
+
+def export_mesh(mesh: trimesh.Trimesh, path, unit: str = DEFAULT_UNIT, grid: float | None = None) -> dict:
+    """Write a mesh; the format follows the suffix. Coordinates are in ``unit`` (default mm:
+    written into 3MF, stated in the STL header, PLY and OBJ comments; glTF is converted to
+    metres, its unit). glTF and OBJ are Y-up (converted from our Z-up). Coordinates are
+    snapped to float32 and welded first (``prepare``); returns the weld statistics."""
+    fmt = mesh_format(path)
+    unit_name(unit)
+    v, f, stats = prepare(mesh.vertices, mesh.faces, fmt, unit, grid)
+    data = encode_mesh(v, f, fmt, unit)
     with atomic_path(path) as tmp:
-        tmp.write_bytes(mesh_bytes(mesh, fmt))
+        tmp.write_bytes(data)
+    return stats
 
 
-def write_chunks(path, chunks: Iterable) -> int:
+def write_chunks(path, chunks: Iterable, unit: str = DEFAULT_UNIT) -> int:
     """Write the boxes of ``iter_triangles`` (pairs vertices, faces) as one mesh, welded by
     ``weld_chunks``, in the format of ``path``'s suffix; returns the number of triangles. (Binary
     STL needs no weld: ``write_stl`` streams the boxes.)"""
     verts, faces = weld_chunks(chunks)
-    export_mesh(trimesh.Trimesh(verts, faces, process=False), path)
+    export_mesh(trimesh.Trimesh(verts, faces, process=False), path, unit)
     return len(faces)
 
 
-def mesh_bytes(mesh: trimesh.Trimesh, fmt: str) -> bytes:
-    """The file contents of a mesh in format ``fmt`` (for writers to other places: job parts)."""
-    if format_named(fmt) == "stl":
-        rec = stl_records(np.asarray(mesh.vertices), np.asarray(mesh.faces))
-        return b"PLE mesh".ljust(80, b" ") + np.uint32(len(rec)).tobytes() + rec.tobytes()
-    data = trimesh.exchange.export.export_mesh(mesh, None, file_type=fmt)
-    return data if isinstance(data, bytes) else data.encode()
+def mesh_bytes(mesh: trimesh.Trimesh, fmt: str, unit: str = DEFAULT_UNIT, grid: float | None = None) -> bytes:
+    """The file contents of a mesh in format ``fmt``, as ``export_mesh`` writes them (for writers
+    to other places: job parts)."""
+    format_named(fmt)
+    unit_name(unit)
+    v, f, _ = prepare(mesh.vertices, mesh.faces, fmt, unit, grid)
+    return encode_mesh(v, f, fmt, unit)
 
 
-def beam_lattice_model_xml(center: np.ndarray, radius: np.ndarray, beam_nodes: np.ndarray,
-                           unit: str = "millimeter") -> str:
-    """3D/3dmodel.model text: one object whose mesh holds the ball centres as vertices, a
-    b:beamlattice of cone beams (r1, r2 = the end balls' radii) and b2:balls at every vertex."""
-    center = np.asarray(center, float).reshape(-1, 3)
-    radius = np.asarray(radius, float).reshape(-1)
-    beam_nodes = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
-    if len(center) == 0:
-        raise PleError("beam lattice 3MF: the region has no balls")
-    if not (np.all(np.isfinite(center)) and np.all(radius > 0)):
-        raise PleError("beam lattice 3MF: ball centres must be finite and radii positive")
-    lengths = np.linalg.norm(center[beam_nodes[:, 0]] - center[beam_nodes[:, 1]], axis=1) if len(beam_nodes) else []
-    min_length = max(1e-9, 0.5 * float(np.min(lengths))) if len(beam_nodes) else 1e-4
-    default_r = float(np.median(radius))
-    fmt = lambda a: np.char.mod("%.9g", a)  # noqa: E731
-    cx, cy, cz = fmt(center[:, 0]), fmt(center[:, 1]), fmt(center[:, 2])
-    verts = "".join(f'<vertex x="{x}" y="{y}" z="{z}"/>' for x, y, z in zip(cx, cy, cz))
-    r = fmt(radius)
-    beams = "".join(f'<b:beam v1="{a}" v2="{b}" r1="{r[a]}" r2="{r[b]}"/>' for a, b in beam_nodes)
-    balls = "".join(f'<b2:ball vindex="{i}" r="{ri}"/>' for i, ri in enumerate(r))
-    return (f'<?xml version="1.0" encoding="UTF-8"?>\n'
-            f'<model xmlns="{NS_CORE}" xmlns:b="{NS_BEAM}" xmlns:b2="{NS_BALLS}" unit="{unit}" '
-            f'xml:lang="en-US" requiredextensions="b b2">'
-            f'<resources><object id="1" type="model" name="PLE lattice"><mesh>'
-            f'<vertices>{verts}</vertices>'
-            f'<b:beamlattice minlength="{min_length:.9g}" radius="{default_r:.9g}" clippingmode="none" '
-            f'cap="sphere" b2:ballmode="mixed" b2:ballradius="{default_r:.9g}">'
-            f'<b:beams>{beams}</b:beams><b2:balls>{balls}</b2:balls></b:beamlattice>'
-            f'</mesh></object></resources><build><item objectid="1"/></build></model>\n')
+def read_back(path, unit: str = DEFAULT_UNIT) -> trimesh.Trimesh:
+    """A written mesh file as a consumer reads it: equal coordinates merged into one vertex, in
+    PLE's axes and ``unit`` again (``ple.io.formats.from_file_axes``); vertices no face uses
+    (a beam-lattice 3MF also lists the ball centres) are dropped."""
+    fmt = mesh_format(path)
+    m = trimesh.load(path, force="mesh", process=False)
+    uniq, inv = np.unique(np.asarray(m.vertices, float), axis=0, return_inverse=True)
+    f = inv.reshape(-1)[np.asarray(m.faces)]
+    out = trimesh.Trimesh(from_file_axes(uniq, fmt, unit), f, process=False)
+    out.remove_unreferenced_vertices()
+    return out
 
 
-CONTENT_TYPES = ('<?xml version="1.0" encoding="UTF-8"?>\n'
-                 '<Types xmlns="http://schemas.openxmlformats.org/package/2006/content-types">'
-                 '<Default Extension="rels" ContentType="application/vnd.openxmlformats-package.relationships+xml"/>'
-                 '<Default Extension="model" ContentType="application/vnd.ms-package.3dmanufacturing-3dmodel+xml"/>'
-                 '</Types>\n')
-RELS = ('<?xml version="1.0" encoding="UTF-8"?>\n'
-        '<Relationships xmlns="http://schemas.openxmlformats.org/package/2006/relationships">'
-        '<Relationship Target="/3D/3dmodel.model" Id="rel0" '
-        'Type="http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"/></Relationships>\n')
+def ply_bytes(vertices, faces, unit: str = DEFAULT_UNIT) -> bytes:
+    """Binary little-endian PLY: float32 vertices, uchar-counted int32 faces; unit in a comment."""
+    v = np.ascontiguousarray(vertices, "<f4")
+    rec = np.empty(len(faces), np.dtype([("n", "u1"), ("f", "<i4", (3,))]))
+    rec["n"] = 3
+    rec["f"] = faces
+    header = ("ply\nformat binary_little_endian 1.0\n"
+              f"comment PLE lattice mesh, unit {unit}, Z up\n"
+              f"element vertex {len(v)}\nproperty float x\nproperty float y\nproperty float z\n"
+              f"element face {len(rec)}\nproperty list uchar int vertex_indices\nend_header\n")
+    return header.encode() + v.tobytes() + rec.tobytes()
 
 
-def write_beam_lattice_3mf(path, center, radius, beam_nodes) -> None:
-    """A 3MF package with the Beam Lattice extension (balls and beams, no triangles)."""
+def obj_bytes(vertices, faces, unit: str = DEFAULT_UNIT) -> bytes:
+    """Wavefront OBJ (Y up, 9 significant digits: float32 values exactly); unit in a comment."""
+    buf = io.StringIO()
+    buf.write(f"# PLE lattice mesh, unit {unit}, Y up\n")
+    if len(vertices):
+        np.savetxt(buf, np.asarray(vertices, np.float32).astype(float), fmt="v %.9g %.9g %.9g")
+    if len(faces):
+        np.savetxt(buf, np.asarray(faces, np.int64) + 1, fmt="f %d %d %d")
+    return buf.getvalue().encode()
+
+
+def write_beam_lattice_3mf(path, center, radius, beam_nodes, mesh=None, unit: str = DEFAULT_UNIT) -> None:
+    """A 3MF package with the Beam Lattice extension (balls and cone beams). With ``mesh``
+    (the lattice's watertight triangle mesh) the same object carries its triangles and the
+    extensions are not required, so consumers without beam support print the triangles;
+    without it the file holds beams only and requires the extensions."""
     if mesh_format(path) != "3mf":
         raise PleError(f"{path}: a beam lattice is written as .3mf")
-    model = beam_lattice_model_xml(center, radius, beam_nodes)
-    with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
-        z.writestr("[Content_Types].xml", CONTENT_TYPES)
-        z.writestr("_rels/.rels", RELS)
-        z.writestr("3D/3dmodel.model", model)
+    if mesh is None:
+        v, f = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    else:
+        v, f, _ = prepare(mesh.vertices, mesh.faces, "3mf", unit)
+    write_3mf(path, v, f, unit_name(unit), (center, radius, beam_nodes))
 
 
 def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: int | None = None,
-               segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None) -> int:
+               segments: int | None = None, max_groups: int = 1 << 14, unit: str = DEFAULT_UNIT,
+               info: dict | None = None, fillet: float | None = None) -> int:
     """Tessellate a region straight to ``path`` (format from the suffix); returns the number of
-    triangles. Binary STL streams box by box (memory bounded by ``max_groups`` groups); the
-    other formats build the mesh in memory and go through trimesh."""
-    if mesh_format(path) == "stl":
-        return write_stl(path, iter_triangles(lat, region, style, levels, segments, max_groups, fillet=fillet))
-    mesh = tessellate(lat, region, style, levels, segments, fillet=fillet)
-    export_mesh(mesh, path)
-    return len(mesh.faces)
+    triangles. Binary STL streams box by box (memory bounded by ``max_groups`` groups), every
+    box snapped to the region's float32 grid; the other formats build the mesh in memory and go
+    through ``export_mesh``. Coordinates are in ``unit`` (see there).
+
+    Regions up to ``MAX_CHECK_GROUPS`` groups are checked for unclean hubs first
+    (``ple.meshing.tessellate.checked_stream``); an unclean one is meshed in memory with its
+    unions. ``info["unclean"]`` gets the report (None when not checked)."""
+    unit_name(unit)
+    fmt = mesh_format(path)
+    r = lat.region(region)
+    info = {} if info is None else info
+    if fmt == "stl" and style != "balls-beams":
+        info["unclean"], chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet)
+        if chunks is not None:
+            return write_stl(path, chunks, header=stl_header(unit), grid=output_grid(lat, r))
+    elif fmt == "stl":
+        return write_stl(path, iter_triangles(lat, r, style, levels, segments, max_groups), header=stl_header(unit))
+    mesh = tessellate(lat, r, style, levels, segments, fillet=fillet)
+    info["unclean"] = mesh.metadata.get("ple_unclean")
+    stats = export_mesh(mesh, path, unit)
+    return len(mesh.faces) - stats["dropped_faces"]  # as written (the weld may drop slivers)
 
 
 def export_connectors(lat: Lattice, folder, radius: float, beam_radius: float | None = None,

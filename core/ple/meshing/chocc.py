@@ -398,6 +398,21 @@ class ChoccMesh:
     faces: np.ndarray
     rings: list
     vertex_circle: np.ndarray
+    # where each face lies on the hull: its corridor (-1: a planar CHoCC triangle) and the
+    # corridor coordinates (s along the arcs, t from circle a to b) of its corners; with
+    # ``corridor_point`` they place refinement points on the curved corridor, not on its chord
+    face_corridor: np.ndarray | None = None
+    face_params: np.ndarray | None = None
+    corridors: list | None = None
+
+    def corridor_point(self, cor: np.ndarray, s: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Points (k, 3) of corridors ``cor`` (k,) at coordinates (s, t): on the generator from
+        circle a (t = 0) to circle b (t = 1) at arc parameter s (0..1 from triangle T1 to T2)."""
+        out = np.zeros((len(cor), 3))
+        for ci in np.unique(cor):
+            sel = np.flatnonzero(cor == ci)
+            out[sel] = self.corridors[ci](s[sel], t[sel])
+        return out
 
     def disk_faces(self, circles=None) -> np.ndarray:
         """Fan triangulations (outward) of the disks bounded by the rings of ``circles``."""
@@ -424,6 +439,9 @@ def corridor_mesh(c: Chocc, arc_segments) -> ChoccMesh:
     faces = [np.arange(3 * t).reshape(t, 3)]
     per_circle_samples: dict[tuple[int, int], np.ndarray] = {}
     merge: list[tuple[int, int]] = []
+    face_cor = [np.full(t, -1, np.int64)]
+    face_par = [np.zeros((t, 3, 2))]
+    cor_fns: list = [None] * len(c.corridors)
     point = c.alphas == 0.0
     apexes = corridor_apexes(c.normals, c.alphas, c.corridors[:, :2]) if len(c.corridors) else np.zeros((0, 4))
 
@@ -450,6 +468,7 @@ def corridor_mesh(c: Chocc, arc_segments) -> ChoccMesh:
             per_circle_samples[(ci, a)] = per_circle_samples[(ci, b)] = np.zeros(0, np.int64)
             continue
         m = max(1, int(arc_segments(max(da, db))))
+        cor_fns[ci] = _corridor_fn(c, a, b, e1, e2, ang(a, pa0), da, ang(b, pb0), db, apexes[ci:ci + 1])
         s = np.arange(1, m) / m
         if m > 1 and c.alphas[a] >= c.alphas[b]:
             th = ang(a, pa0) - s * da
@@ -474,6 +493,11 @@ def corridor_mesh(c: Chocc, arc_segments) -> ChoccMesh:
         q = np.arange(m)
         faces.append(np.stack([rb[q], ra[q], ra[q + 1]], axis=1))
         faces.append(np.stack([rb[q], ra[q + 1], rb[q + 1]], axis=1))
+        s0, s1 = q / m, (q + 1) / m
+        one, zero = np.ones(m), np.zeros(m)
+        face_cor += [np.full(m, ci), np.full(m, ci)]
+        face_par.append(np.stack([np.stack([s0, one], 1), np.stack([s0, zero], 1), np.stack([s1, zero], 1)], 1))
+        face_par.append(np.stack([np.stack([s0, one], 1), np.stack([s1, zero], 1), np.stack([s1, one], 1)], 1))
     rings = []
     for i in range(n):
         parts = []
@@ -496,7 +520,30 @@ def corridor_mesh(c: Chocc, arc_segments) -> ChoccMesh:
         rings[i] = r[keep_r] if keep_r.any() else r[:1]
     faces = remap[faces]
     keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
-    return ChoccMesh(vertices, faces[keep].astype(np.int64), rings, vertex_circle)
+    return ChoccMesh(vertices, faces[keep].astype(np.int64), rings, vertex_circle,
+                     np.concatenate(face_cor)[keep], np.concatenate(face_par)[keep], cor_fns)
+
+
+def _corridor_fn(c: Chocc, a: int, b: int, e1, e2, th_a0: float, da: float, th_b0: float, db: float, apex):
+    """The corridor between circles a and b as a function (s, t) -> points (§4): the larger
+    circle is swept uniformly in angle (clockwise on a, counter-clockwise on b from T1 to T2),
+    the other end of each generator follows through the apex."""
+    if c.alphas[a] >= c.alphas[b]:
+        def ends(s):
+            pa = _circle_points(c, a, e1, e2, th_a0 - s * da)
+            return pa, map_generators(pa[None], apex, c.normals[b:b + 1], c.alphas[b:b + 1])[0]
+    else:
+        rev = corridor_apexes(c.normals, c.alphas, np.array([[b, a]]))
+
+        def ends(s):
+            pb = _circle_points(c, b, e1, e2, th_b0 + s * db)
+            return map_generators(pb[None], rev, c.normals[a:a + 1], c.alphas[a:a + 1])[0], pb
+
+    def point(s, t):
+        pa, pb = ends(np.asarray(s, float))
+        return (1 - t)[:, None] * pa + t[:, None] * pb
+
+    return point
 
 
 def _corner(c: Chocc, tri: int, circle: int) -> int:

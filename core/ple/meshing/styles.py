@@ -40,8 +40,8 @@ STYLES = {s.name: s for s in (
           18.0, 24.0),
     Style("chocc", "CHoCC", "convex hulls of cospherical circles per hub, sampled corridors (CHoCC paper)", True,
           55.0, 24.0),
-    Style("balls-beams", "Balls and beams", "preview: an icosphere per ball, a frustum per beam (not a closed solid)",
-          False, 8.0, 80.0),
+    Style("balls-beams", "Balls and beams (preview)",
+          "preview: an icosphere per ball, a frustum per beam (not a closed solid)", False, 8.0, 80.0),
 )}
 STYLE_NAMES = tuple(STYLES)
 DEFAULT_STYLE = "refined"

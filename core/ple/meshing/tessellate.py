@@ -37,11 +37,14 @@ from .chocc import ChoccMesh, cnt_segments, corridor_mesh, sampled_segments
 from .fillet import filleted
 from .preview import balls_beams_mesh
 from .styles import style as style_named
+from .unclean import find_unclean, unite
+from .weld import COLLAPSE_GRIDS, collapse_short_edges, grid_spacing
 
 DEFAULT_LEVELS = 4
 DEFAULT_SEGMENTS = 16
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
 MAX_LEVELS = 6
+MAX_CHECK_GROUPS = 500_000  # streamed regions up to this size are checked for unclean hubs first
 
 
 @dataclass
@@ -60,10 +63,18 @@ class HubTemplate:
 def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray, np.ndarray, list]:
     """§6 refinement on the unit-sphere CNT: ``levels`` 1-to-4 splits (a corridor quad,
     two triangles, becomes 8 around its centre), arc midpoints snapped to their circle, other
-    new vertices centrally projected. Returns vertices in hub units (centre at 0), faces, rings."""
+    new vertices centrally projected. Returns vertices in hub units (centre at 0), faces, rings.
+
+    A new vertex is first placed on the CHoCC hull itself — on a planar triangle, or on the
+    curved corridor at the mean of its corners' corridor coordinates (``ChoccMesh.corridor_point``)
+    — and then projected from the centre. A point of the planar CNT quad near a long arc's chord
+    lies in that circle's cone, and its projection would land on the beam beyond the contact
+    disk, folding into the beam's strip; a point of the hull never does (the centre is inside
+    the hull, so the cones over its faces, corridors and disks do not overlap)."""
     c = hub.chocc
     real = hub.slots
     r_plus = hub.r_plus
+    hull = mesh.vertices.copy()  # positions on the CHoCC hull (unit sphere scale)
     verts = mesh.vertices * r_plus
     circle = mesh.vertex_circle.copy()
     on_circle = circle < real
@@ -72,6 +83,8 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
         u = verts[off] / np.linalg.norm(verts[off], axis=1, keepdims=True)
         verts[off] = u * hub.exit_distance(u)[:, None]
     faces = mesh.faces
+    fcor = mesh.face_corridor if mesh.face_corridor is not None else np.full(len(faces), -1)
+    fpar = mesh.face_params if mesh.face_params is not None else np.zeros((len(faces), 3, 2))
     rings = [r.copy() for r in mesh.rings]
     frames = perpendicular_frames(c.normals)
     for _ in range(levels):
@@ -81,6 +94,20 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
         uniq, inv = np.unique(ekey, return_inverse=True)
         inv = inv.reshape(-1)
         ua, ub = uniq // nv, uniq % nv
+        # hull points of the face-edge midpoints: corridor coordinates on corridors, chords on triangles
+        ecor = np.tile(fcor, 3)
+        epar = 0.5 * (np.concatenate([fpar[:, 0], fpar[:, 1], fpar[:, 2]])
+                      + np.concatenate([fpar[:, 1], fpar[:, 2], fpar[:, 0]]))
+        hmid = 0.5 * (hull[e[:, 0]] + hull[e[:, 1]])
+        onc = np.flatnonzero(ecor >= 0)
+        if len(onc):
+            hmid[onc] = mesh.corridor_point(ecor[onc], epar[onc, 0], epar[onc, 1])
+        # one hull point per edge: a corridor's if any face on it is a corridor (they agree on
+        # the generators shared with triangles)
+        pick = np.full(len(uniq), -1)
+        order = np.argsort(ecor >= 0, kind="stable")  # triangles first, corridors overwrite
+        pick[inv[order]] = order
+        hnew = hmid[pick]
         mids = 0.5 * (verts[ua] + verts[ub])
         new_ids = nv + np.arange(len(uniq))
         is_arc = np.zeros(len(uniq), bool)
@@ -92,18 +119,25 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
             q = np.searchsorted(uniq, np.minimum(x, y) * nv + np.maximum(x, y))
             is_arc[q] = True
             mids[q] = _arc_mids(verts[x], verts[y], c.normals[ci], c.alphas[ci], r_plus, frames, ci)
+            hnew[q] = mids[q] / r_plus
             out = np.empty(2 * len(ring), np.int64)
             out[0::2], out[1::2] = ring, new_ids[q]
             rings[ci] = out
         proj = ~is_arc
         if proj.any():
-            u = mids[proj] / np.linalg.norm(mids[proj], axis=1, keepdims=True)
+            u = hnew[proj] / np.linalg.norm(hnew[proj], axis=1, keepdims=True)
             mids[proj] = u * hub.exit_distance(u)[:, None]
         verts = np.concatenate([verts, mids])
+        hull = np.concatenate([hull, hnew])
         m = new_ids[inv].reshape(3, -1).T  # midpoints of edges 01, 12, 20 per face
         v0, v1, v2 = faces.T
         faces = np.concatenate([np.stack([v0, m[:, 0], m[:, 2]], 1), np.stack([m[:, 0], v1, m[:, 1]], 1),
                                 np.stack([m[:, 2], m[:, 1], v2], 1), m])
+        p0, p1, p2 = fpar[:, 0], fpar[:, 1], fpar[:, 2]
+        p01, p12, p20 = 0.5 * (p0 + p1), 0.5 * (p1 + p2), 0.5 * (p2 + p0)
+        fpar = np.concatenate([np.stack([p0, p01, p20], 1), np.stack([p01, p1, p12], 1),
+                               np.stack([p20, p12, p2], 1), np.stack([p01, p12, p20], 1)])
+        fcor = np.tile(fcor, 4)
     return verts, faces, rings
 
 
@@ -118,9 +152,11 @@ def _arc_mids(pa, pb, n, alpha, r_plus, frames, ci) -> np.ndarray:
 
 
 def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, levels: int,
-                 segments: int, hint=None, fillet: float | None = None) -> HubTemplate:
+                 segments: int, hint=None, min_edge: float = 0.0, fillet: float | None = None) -> HubTemplate:
     """Tessellate one junction: ball (center (3,), radius) with beams to the balls
-    (neighbor_centers (S, 3), neighbor_radii (S,)), in the given style."""
+    (neighbor_centers (S, 3), neighbor_radii (S,)), in the given style. Edges shorter than
+    ``min_edge`` are collapsed (``ple.meshing.weld.collapse_short_edges``) so that the mesh keeps its
+    topology when written in float32."""
     center = np.asarray(center, float)
     vec = np.asarray(neighbor_centers, float).reshape(-1, 3) - center
     lengths = np.linalg.norm(vec, axis=1)
@@ -135,6 +171,8 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
     else:
         base = corridor_mesh(hub.chocc, cnt_segments if style == "cnt" else sampled_segments(segments))
         verts, faces, rings = base.vertices * hub.r_plus, base.faces, base.rings
+    if min_edge > 0:
+        faces, rings, _ = collapse_short_edges(verts, faces, rings, min_edge)
     axial = hub.r_plus * np.cos(hub.alphas)
     caps = []
     all_verts = [verts]
@@ -201,6 +239,41 @@ class _Tessellator:
         self.strips: dict = {}
         self.hints: dict = {}
         self.scale = lat.template_radii * KEY_QUANTUM
+        # float32-safe output: edges shorter than a few float32 grid steps of the region's size
+        # are collapsed in the hub templates (template units: divided by the smallest group scale)
+        self.grid = output_grid(lat, region)
+        corners = np.array([[i, j, k] for i in (region.i0, max(region.i1 - 1, region.i0))
+                            for j in (region.j0, max(region.j1 - 1, region.j0))
+                            for k in (region.k0, max(region.k1 - 1, region.k0))])
+        fmin = float(np.min(lat.group_factors(corners[:, 0], corners[:, 1], corners[:, 2])))
+        self.min_edge = COLLAPSE_GRIDS * self.grid / fmin
+        self.excluded = None  # sorted linear keys of nodes meshed elsewhere (``ple.meshing.unclean``)
+
+    def _key(self, idx: np.ndarray) -> np.ndarray:
+        _, nv, nw = self.lat.counts
+        nn = len(self.lat.nodes)
+        return ((idx[..., 0] * nv + idx[..., 1]) * nw + idx[..., 2]) * nn + idx[..., 3]
+
+    def is_excluded(self, idx: np.ndarray) -> np.ndarray:
+        """Which nodes idx (..., 4) are left to the union of unclean neighbourhoods: for the fast
+        mesh they lie outside the region (their beams end in capped contact disks)."""
+        if self.excluded is None or idx.size == 0:
+            return np.zeros(idx.shape[:-1], bool)
+        return np.isin(self._key(idx), self.excluded)
+
+    def find_unclean(self):
+        """The region's unclean hubs (``ple.meshing.unclean.find_unclean``) with r⁺ and the ACHoCC's
+        clean flag of every hub from its template. Returns (report, evaluation)."""
+        ev = self.lat.evaluate(self.region)
+        idx = np.asarray(ev.node_index, np.int64)
+        if len(idx) == 0:
+            return find_unclean(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 2)), np.zeros(0)), ev
+        tids, _, _, _ = self.instances(idx)
+        by_id = {v[0]: v[1] for v in self.templates.values()}
+        rp_t = np.array([by_id[t].geometry.r_plus for t in range(len(by_id))])
+        clean_t = np.array([bool(by_id[t].geometry.clean) for t in range(len(by_id))])
+        f = self.lat.group_factors(idx[:, 0], idx[:, 1], idx[:, 2])
+        return find_unclean(ev.center, ev.radius, ev.beam_nodes, rp_t[tids] * f, ~clean_t[tids]), ev
 
     # ----- hubs -----------------------------------------------------------------------
     def _neighbors(self, idx: np.ndarray, n: int):
@@ -220,7 +293,7 @@ class _Tessellator:
             exists[exists] = lat.keeps(nb[exists])  # thesis §9: a beam to a filtered-out node does not exist
         lo = np.array([r.i0, r.j0, r.k0])
         hi = np.array([r.i1, r.j1, r.k1])
-        inside = np.all((nb[..., :3] >= lo) & (nb[..., :3] < hi), axis=-1)
+        inside = np.all((nb[..., :3] >= lo) & (nb[..., :3] < hi), axis=-1) & ~self.is_excluded(nb)
         return nb, exists, inside
 
     def instances(self, idx: np.ndarray):
@@ -270,7 +343,7 @@ class _Tessellator:
                     hint_key = (n, have.tobytes())  # the last hub with these beams: likely the same hull
                     tpl = hub_template(lat.template_centers[n], lat.template_radii[n], local[u, have, :3],
                                        local[u, have, 3], self.style, self.levels, self.segments,
-                                       self.hints.get(hint_key), self.fillet)
+                                       self.hints.get(hint_key), self.min_edge, self.fillet)
                     self.hints[hint_key] = tpl.geometry.base_triangles
                     slot_of = np.cumsum(have) - 1
                     self.templates[key] = (len(self.templates), tpl, np.where(have, slot_of, -1))
@@ -285,13 +358,13 @@ class _Tessellator:
         lat = self.lat
         nn = len(lat.nodes)
         own = box.node_index(nn)
-        own = own[self.lat.keeps(own)]
+        own = own[self.lat.keeps(own) & ~self.is_excluded(own)]
         # ghosts: the far ends of beams leaving the box but not the region
         ghosts = []
         for b in lat.beams:
             src = own[own[:, 3] == b.n1]
             dst = np.concatenate([src[:, :3] + [b.di, b.dj, b.dk], np.full((len(src), 1), b.n2)], axis=1)
-            ok = _in(dst, self.region) & ~_in(dst, box)
+            ok = _in(dst, self.region) & ~_in(dst, box) & ~self.is_excluded(dst)
             ok[ok] = self.lat.keeps(dst[ok])
             ghosts.append(dst[ok])
         ghosts = np.unique(np.concatenate(ghosts), axis=0) if ghosts else np.zeros((0, 4), np.int64)
@@ -342,7 +415,7 @@ class _Tessellator:
         for p, b in enumerate(lat.beams):
             src = np.flatnonzero(idx[:n_own, 3] == b.n1)
             dst_idx = np.concatenate([idx[src, :3] + [b.di, b.dj, b.dk], np.full((len(src), 1), b.n2)], axis=1)
-            ok = _in(dst_idx, self.region)
+            ok = _in(dst_idx, self.region) & ~self.is_excluded(dst_idx)
             ok[ok] = self.lat.keeps(dst_idx[ok])
             src, dst_idx = src[ok], dst_idx[ok]
             if len(src) == 0:
@@ -449,12 +522,16 @@ def tessellation_box(lat: Lattice, region, box, style: str = "refined", levels: 
 
 
 def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
-               segments: int | None = None, fillet: float | None = None) -> trimesh.Trimesh:
+               segments: int | None = None, check_clean: bool = True, fillet: float | None = None) -> trimesh.Trimesh:
     """The mesh of a region (default: the whole lattice) as one trimesh.
 
     ``levels``: refinement levels of ``refined`` (default 4); ``segments``: generators per full
     circle of ``chocc`` corridors (default 16). Watertight and consistently oriented for
-    chocc, cnt and refined; ``balls-beams`` is a preview."""
+    chocc, cnt and refined; ``balls-beams`` is a preview.
+
+    Unclean hubs (``ple.meshing.unclean``) are found first (``check_clean``); if there are any, the
+    clean rest is meshed on the fast path and united with their balls and beams by manifold3d;
+    ``mesh.metadata["ple_unclean"]`` holds the report (None when not checked)."""
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
     if lat.group_map is not None:  # groups not similar (Möbius, warps): the general per-hub path
@@ -464,14 +541,33 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
 
         ev = lat.evaluate(r)
         return balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
-    verts, faces = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style)).build(r)
+    tess = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style))
+    report = None
+    if check_clean:
+        report, ev = tess.find_unclean()
+    if report is not None and len(report.nodes):
+        verts, faces = build_with_unions(tess, ev, report.nodes)
+    else:
+        verts, faces = tess.build(r)
     mesh = trimesh.Trimesh(verts, faces, process=False)
     mesh.remove_unreferenced_vertices()
+    mesh.metadata["ple_unclean"] = report
     return mesh
 
 
+def build_with_unions(tess: _Tessellator, ev, nodes) -> tuple[np.ndarray, np.ndarray]:
+    """The region's mesh with the hubs ``nodes`` (rows of the evaluation ``ev``) left out of the
+    fast path and united with their balls and beams by manifold3d (``ple.meshing.unclean.unite``)."""
+    tess.excluded = np.unique(tess._key(np.asarray(ev.node_index, np.int64)[nodes]))
+    verts, faces = tess.build(tess.region)
+    used = np.unique(faces)
+    remap = np.full(len(verts), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return unite(verts[used], remap[faces], ev.center, ev.radius, ev.beam_nodes, nodes)
+
+
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
-                   segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None):
+                   segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None, _tess=None):
     """Stream the region's mesh box by box (bounded memory) as pairs (vertices (V, 3), faces
     (k, 3)); hubs next to a box boundary are repeated in both boxes (their vertices, not faces)."""
     levels, segments = _check_style(style, levels, segments)
@@ -483,7 +579,7 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
         mesh = tessellate(lat, r, style)
         yield np.asarray(mesh.vertices), np.asarray(mesh.faces)
         return
-    tess = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style))
+    tess = _tess if _tess is not None else _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style))
     boxes = list(lat.iter_slabs(max_groups=max_groups, region=r))
     # build the next box in a worker thread while the caller writes this one (numpy releases
     # the GIL in its large array operations): at most two boxes are held at a time
@@ -515,3 +611,27 @@ def weld_chunks(chunks) -> tuple[np.ndarray, np.ndarray]:
     used[faces.reshape(-1)] = True
     renumber = np.cumsum(used) - 1
     return verts[first[order]][used], renumber[faces]
+
+
+def output_grid(lat: Lattice, region=None) -> float:
+    """The float32 snap grid of a region's output (``ple.meshing.weld.grid_spacing`` of its
+    bounds): one grid for every streamed box and every job part of the region, so they close up."""
+    return grid_spacing(*lat.bounds(lat.region(region)))
+
+
+def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
+                   segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None):
+    """The streamed mesh of a region (``iter_triangles``) if it has no unclean hubs: (report,
+    chunks). Regions up to MAX_CHECK_GROUPS groups are checked first (``ple.meshing.unclean``;
+    the check's hub templates are reused by the stream); report is None for larger regions
+    (not checked). chunks is None when the region has unclean hubs: it must be meshed in memory
+    with its unions (``tessellate``)."""
+    levels, segments = _check_style(style, levels, segments)
+    if style == "balls-beams":
+        raise PleError("a checked stream needs a closed style (refined, cnt or chocc)")
+    r = lat.region(region)
+    tess = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style))
+    report = tess.find_unclean()[0] if r.groups <= MAX_CHECK_GROUPS else None
+    if report is not None and len(report.nodes):
+        return report, None
+    return report, iter_triangles(lat, r, style, levels, segments, max_groups, _tess=tess)

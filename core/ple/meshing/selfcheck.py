@@ -1,0 +1,267 @@
+"""Self-intersections of a triangle mesh, with exact orientation predicates.
+
+A closed mesh that intersects itself counts the overlapping parts twice (slicers, volumes).
+``self_intersections`` finds every pair of faces that meet other than in their shared
+vertices or edge:
+
+- broad phase: a uniform grid over the faces' bounding boxes (cell size from the median box),
+  candidate pairs from shared cells, kept where the boxes overlap;
+- narrow phase, vectorized: orientation predicates ``orient3d`` in float64 with a static
+  error bound (Shewchuk's filter); the few undecided signs are recomputed exactly with
+  integers (the floats' exact values), so every decision is exact.
+
+Pairs without a common vertex intersect (or touch) iff an edge of one meets the other
+(non-coplanar), or, coplanar, iff their 2D projections overlap. Pairs with one common vertex
+intersect iff the edge opposite that vertex in one meets the other. Pairs with a common edge
+intersect iff they are coplanar and on the same side of it (a fold).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..algebra.vectors import cross
+
+ERRBOUND = (7.0 + 56.0 * 2.0**-53) * 2.0**-53  # Shewchuk's o3derrboundA
+MAX_CELL_PAIRS = 1 << 22
+
+
+def orient3d(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Exact sign (-1, 0, 1) of det[a − d, b − d, c − d] for arrays of points (N, 3): positive
+    when d lies below the plane of a, b, c seen counter-clockwise (right-hand rule)."""
+    ad, bd, cd = a - d, b - d, c - d
+    m1 = bd[:, 1] * cd[:, 2] - bd[:, 2] * cd[:, 1]
+    m2 = bd[:, 2] * cd[:, 0] - bd[:, 0] * cd[:, 2]
+    m3 = bd[:, 0] * cd[:, 1] - bd[:, 1] * cd[:, 0]
+    det = ad[:, 0] * m1 + ad[:, 1] * m2 + ad[:, 2] * m3
+    perm = (np.abs(ad[:, 0]) * (np.abs(bd[:, 1] * cd[:, 2]) + np.abs(bd[:, 2] * cd[:, 1]))
+            + np.abs(ad[:, 1]) * (np.abs(bd[:, 2] * cd[:, 0]) + np.abs(bd[:, 0] * cd[:, 2]))
+            + np.abs(ad[:, 2]) * (np.abs(bd[:, 0] * cd[:, 1]) + np.abs(bd[:, 1] * cd[:, 0])))
+    s = np.sign(det).astype(np.int8)
+    unsure = np.flatnonzero(np.abs(det) <= ERRBOUND * perm)
+    if len(unsure):
+        s[unsure] = _exact_orient(a[unsure], b[unsure], c[unsure], d[unsure])
+    return s
+
+
+def _exact_integers(x: np.ndarray) -> np.ndarray:
+    """Rows of floats (k, m) as Python integers scaled by one power of two per row (exact)."""
+    mant, ex = np.frexp(x)
+    mi = (mant * 2.0**53).astype(np.int64).astype(object)
+    ex = ex.astype(np.int64) - 53
+    ex[mant == 0] = np.iinfo(np.int64).max
+    shift = ex - ex.min(axis=1, keepdims=True)
+    shift[mant == 0] = 0
+    return mi * np.vectorize(lambda k: 1 << int(k), otypes=[object])(shift)
+
+
+def _exact_orient(a, b, c, d) -> np.ndarray:
+    """orient3d signs computed with integers (the floats' exact values, one scale per row)."""
+    x = _exact_integers(np.concatenate([a, b, c, d], axis=1))
+    a, b, c, d = x[:, 0:3], x[:, 3:6], x[:, 6:9], x[:, 9:12]
+    ad, bd, cd = a - d, b - d, c - d
+    det = (ad[:, 0] * (bd[:, 1] * cd[:, 2] - bd[:, 2] * cd[:, 1])
+           + ad[:, 1] * (bd[:, 2] * cd[:, 0] - bd[:, 0] * cd[:, 2])
+           + ad[:, 2] * (bd[:, 0] * cd[:, 1] - bd[:, 1] * cd[:, 0]))
+    return np.array([(v > 0) - (v < 0) for v in det], np.int8)
+
+
+def _orient2d(a, b, c) -> np.ndarray:
+    det = (a[:, 0] - c[:, 0]) * (b[:, 1] - c[:, 1]) - (a[:, 1] - c[:, 1]) * (b[:, 0] - c[:, 0])
+    perm = np.abs((a[:, 0] - c[:, 0]) * (b[:, 1] - c[:, 1])) + np.abs((a[:, 1] - c[:, 1]) * (b[:, 0] - c[:, 0]))
+    s = np.sign(det).astype(np.int8)
+    k = np.flatnonzero(np.abs(det) <= 4 * 2.0**-53 * perm)
+    if len(k):
+        x = _exact_integers(np.concatenate([a[k], b[k], c[k]], axis=1))
+        e = (x[:, 0] - x[:, 4]) * (x[:, 3] - x[:, 5]) - (x[:, 1] - x[:, 5]) * (x[:, 2] - x[:, 4])
+        s[k] = np.array([(v > 0) - (v < 0) for v in e], np.int8)
+    return s
+
+
+def candidate_pairs(tri: np.ndarray) -> np.ndarray:
+    """Pairs (P, 2) of face ids (i < j) whose bounding boxes overlap."""
+    n = len(tri)
+    if n < 2:
+        return np.zeros((0, 2), np.int64)
+    lo, hi = tri.min(axis=1), tri.max(axis=1)
+    ext = (hi - lo).max(axis=1)
+    h = max(float(np.median(ext)) * 2.0, 1e-12)
+    origin = lo.min(axis=0)
+    clo = np.floor((lo - origin) / h).astype(np.int64)
+    chi = np.floor((hi - origin) / h).astype(np.int64)
+    span = chi - clo + 1
+    cnt = span.prod(axis=1)
+    ids = np.repeat(np.arange(n), cnt)
+    k = np.arange(len(ids)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    sy, sz = span[ids, 1], span[ids, 2]
+    cx = clo[ids, 0] + k // (sy * sz)
+    cy = clo[ids, 1] + (k // sz) % sy
+    cz = clo[ids, 2] + k % sz
+    dims = chi.max(axis=0) + 1
+    cell = (cx * dims[1] + cy) * dims[2] + cz
+    order = np.argsort(cell, kind="stable")
+    cell, ids = cell[order], ids[order]
+    starts = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]])
+    sizes = np.diff(np.r_[starts, len(cell)])
+    cell_of = np.repeat(np.arange(len(starts)), sizes)
+    follow = sizes[cell_of] - 1 - (np.arange(len(cell)) - starts[cell_of])  # later entries of the same cell
+    out = []
+    cum = np.cumsum(follow)
+    cuts = np.searchsorted(cum, np.arange(MAX_CELL_PAIRS, int(cum[-1]) + MAX_CELL_PAIRS, MAX_CELL_PAIRS))
+    lo_e = 0
+    for hi_e in np.unique(np.r_[np.minimum(cuts + 1, len(cell)), len(cell)]):
+        fo = follow[lo_e:hi_e]
+        first = np.repeat(np.arange(lo_e, hi_e), fo)
+        second = first + 1 + np.arange(len(first)) - np.repeat(np.cumsum(fo) - fo, fo)
+        lo_e = hi_e
+        a, b2 = ids[first], ids[second]
+        p = np.stack([np.minimum(a, b2), np.maximum(a, b2)], axis=1)
+        p = p[p[:, 0] != p[:, 1]]
+        ok = np.all((lo[p[:, 0]] <= hi[p[:, 1]]) & (lo[p[:, 1]] <= hi[p[:, 0]]), axis=1)
+        out.append(p[ok])
+    if not out:
+        return np.zeros((0, 2), np.int64)
+    p = np.concatenate(out)
+    key = np.unique(p[:, 0] * n + p[:, 1])
+    return np.stack([key // n, key % n], axis=1)
+
+
+def _seg_tri(p, q, a, b, c) -> np.ndarray:
+    """Closed segment pq meets closed (non-degenerate) triangle abc."""
+    dp, dq = orient3d(a, b, c, p), orient3d(a, b, c, q)
+    inplane = (dp == 0) & (dq == 0)
+    crosses = (dp * dq <= 0) & ~inplane
+    s1 = orient3d(p, q, a, b)
+    s2 = orient3d(p, q, b, c)
+    s3 = orient3d(p, q, c, a)
+    same = ((s1 >= 0) & (s2 >= 0) & (s3 >= 0)) | ((s1 <= 0) & (s2 <= 0) & (s3 <= 0))
+    hit = crosses & same
+    k = np.flatnonzero(inplane)
+    if len(k):
+        hit[k] = _seg_tri_2d(p[k], q[k], a[k], b[k], c[k])
+    return hit
+
+
+def _seg_tri_2d(p, q, a, b, c) -> np.ndarray:
+    """Closed segment pq meets closed triangle abc, all in one plane."""
+    t = np.stack([a, b, c], axis=1)
+    u, w = _project(t, np.stack([p, q], axis=1), cross(b - a, c - a))
+    hit = np.zeros(len(p), bool)
+    for j in range(3):
+        s, e = u[:, j], u[:, (j + 1) % 3]
+        o1, o2 = _orient2d(s, e, w[:, 0]), _orient2d(s, e, w[:, 1])
+        o3, o4 = _orient2d(w[:, 0], w[:, 1], s), _orient2d(w[:, 0], w[:, 1], e)
+        hit |= (o1 * o2 <= 0) & (o3 * o4 <= 0) & ~((o1 == 0) & (o2 == 0) & (o3 == 0) & (o4 == 0))
+    for i in range(2):
+        o = [_orient2d(u[:, k], u[:, (k + 1) % 3], w[:, i]) for k in range(3)]
+        hit |= ((o[0] >= 0) & (o[1] >= 0) & (o[2] >= 0)) | ((o[0] <= 0) & (o[1] <= 0) & (o[2] <= 0))
+    return hit
+
+
+def _project(t1, t2, normal):
+    """Drop the dominant axis of ``normal``: 2D copies of point sets t1 (N, k, 3), t2 (N, m, 3)."""
+    keep = np.array([[1, 2], [0, 2], [0, 1]])[np.argmax(np.abs(normal), axis=1)]
+    pick = lambda t: np.stack([np.take_along_axis(t, keep[:, None, i:i + 1].repeat(t.shape[1], 1), 2)[..., 0]  # noqa: E731
+                               for i in (0, 1)], axis=2)
+    return pick(t1), pick(t2)
+
+
+def _coplanar_overlap(t1: np.ndarray, t2: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Closed coplanar triangles (N, 3, 3) overlap, tested in the projection along the dominant
+    axis of ``normal``: an edge crossing, or a vertex of one inside the other."""
+    u, w = _project(t1, t2, normal)
+    hit = np.zeros(len(t1), bool)
+    for i in range(3):
+        for j in range(3):
+            p, q = u[:, i], u[:, (i + 1) % 3]
+            s, t = w[:, j], w[:, (j + 1) % 3]
+            o1, o2 = _orient2d(p, q, s), _orient2d(p, q, t)
+            o3, o4 = _orient2d(s, t, p), _orient2d(s, t, q)
+            hit |= (o1 * o2 < 0) & (o3 * o4 < 0)
+    for x, y in ((u, w), (w, u)):
+        for i in range(3):
+            o = [_orient2d(y[:, k], y[:, (k + 1) % 3], x[:, i]) for k in range(3)]
+            hit |= ((o[0] >= 0) & (o[1] >= 0) & (o[2] >= 0)) | ((o[0] <= 0) & (o[1] <= 0) & (o[2] <= 0))
+    return hit
+
+
+def self_intersections(vertices, faces) -> np.ndarray:
+    """Pairs (P, 2) of faces that intersect other than in their shared vertices or edge.
+    Faces with a repeated vertex are ignored (they have no interior)."""
+    v = np.asarray(vertices, float).reshape(-1, 3)
+    f = np.asarray(faces, np.int64).reshape(-1, 3)
+    tri = v[f]
+    pairs = candidate_pairs(tri)
+    if not len(pairs):
+        return pairs
+    fa, fb = f[pairs[:, 0]], f[pairs[:, 1]]
+    shared = (fa[:, :, None] == fb[:, None, :])
+    ns = shared.any(axis=2).sum(axis=1)
+    bad = np.zeros(len(pairs), bool)
+    # no shared vertex
+    sel = np.flatnonzero(ns == 0)
+    if len(sel):
+        bad[sel] = _disjoint_pairs(tri[pairs[sel, 0]], tri[pairs[sel, 1]])
+    # one shared vertex: rotate both so the shared vertex comes first
+    sel = np.flatnonzero(ns == 1)
+    if len(sel):
+        sh = shared[sel]
+        ia = np.argmax(sh.any(axis=2), axis=1)
+        ib = np.argmax(sh.any(axis=1), axis=1)
+        t1 = _rotate(tri[pairs[sel, 0]], ia)
+        t2 = _rotate(tri[pairs[sel, 1]], ib)
+        bad[sel] = (_seg_tri(t1[:, 1], t1[:, 2], t2[:, 0], t2[:, 1], t2[:, 2])
+                    | _seg_tri(t2[:, 1], t2[:, 2], t1[:, 0], t1[:, 1], t1[:, 2]))
+    # one shared edge: a fold if the far vertex lies in the other's plane on the same side
+    sel = np.flatnonzero(ns == 2)
+    if len(sel):
+        sh = shared[sel]
+        ia = np.argmin(sh.any(axis=2), axis=1)  # the unshared vertex of face a
+        ib = np.argmin(sh.any(axis=1), axis=1)
+        t1 = _rotate(tri[pairs[sel, 0]], ia)  # (a, v, w)
+        t2 = _rotate(tri[pairs[sel, 1]], ib)  # (p, ., .)
+        copl = orient3d(t1[:, 0], t1[:, 1], t1[:, 2], t2[:, 0]) == 0
+        c = np.flatnonzero(copl)
+        if len(c):
+            n = cross(t1[c, 1] - t1[c, 0], t1[c, 2] - t1[c, 0])
+            u, w = _project(t1[c], t2[c, :1], n)
+            sa = _orient2d(u[:, 1], u[:, 2], u[:, 0])
+            sp = _orient2d(u[:, 1], u[:, 2], w[:, 0])
+            bad[sel[c]] = sa * sp > 0
+    degenerate = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
+    bad &= ~(degenerate[pairs[:, 0]] | degenerate[pairs[:, 1]])
+    return pairs[bad]
+
+
+def _rotate(t: np.ndarray, first: np.ndarray) -> np.ndarray:
+    idx = (first[:, None] + np.arange(3)) % 3
+    return np.take_along_axis(t, idx[:, :, None].repeat(3, 2), 1)
+
+
+def _disjoint_pairs(t1: np.ndarray, t2: np.ndarray) -> np.ndarray:
+    a, b, c = t1[:, 0], t1[:, 1], t1[:, 2]
+    p, q, r = t2[:, 0], t2[:, 1], t2[:, 2]
+    dp, dq, dr = orient3d(a, b, c, p), orient3d(a, b, c, q), orient3d(a, b, c, r)
+    hit = np.zeros(len(t1), bool)
+    maybe = ~(((dp > 0) & (dq > 0) & (dr > 0)) | ((dp < 0) & (dq < 0) & (dr < 0)))
+    copl = maybe & (dp == 0) & (dq == 0) & (dr == 0)
+    if copl.any():
+        c_ = np.flatnonzero(copl)
+        hit[c_] = _coplanar_overlap(t1[c_], t2[c_], cross(b[c_] - a[c_], c[c_] - a[c_]))
+    m = np.flatnonzero(maybe & ~copl)
+    if len(m):
+        P, Q, R = p[m], q[m], r[m]
+        da, db, dc = orient3d(P, Q, R, a[m]), orient3d(P, Q, R, b[m]), orient3d(P, Q, R, c[m])
+        m2 = ~(((da > 0) & (db > 0) & (dc > 0)) | ((da < 0) & (db < 0) & (dc < 0)))
+        m = m[m2]
+        A, B, C, P, Q, R = a[m], b[m], c[m], p[m], q[m], r[m]
+        h = (_seg_tri(P, Q, A, B, C) | _seg_tri(Q, R, A, B, C) | _seg_tri(R, P, A, B, C)
+             | _seg_tri(A, B, P, Q, R) | _seg_tri(B, C, P, Q, R) | _seg_tri(C, A, P, Q, R))
+        hit[m] = h
+    return hit
+
+
+def count_self_intersections(vertices, faces) -> dict:
+    """Intersecting face pairs and the number of faces involved."""
+    pairs = self_intersections(vertices, faces)
+    return {"self_intersecting_pairs": int(len(pairs)), "self_intersecting_faces": int(len(np.unique(pairs)))}
