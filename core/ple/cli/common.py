@@ -9,8 +9,10 @@ import numpy as np
 
 from ..algebra.similarity import Translation
 from ..errors import PleError
+from ..filters.body import MODES, OPEN_MODES, BodyFilter
 from ..filters.implicit import VARIANTS, Field, FourierField, ImplicitFilter, TPMSField
 from ..filters.stencil import Stencil
+from ..io.bodyfile import load_body
 from ..model.lattice import Lattice
 from ..program.sources import load_lattice
 
@@ -19,10 +21,30 @@ def add_lattice_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("lattice", metavar="LATTICE", help="a program .py, an IR .json, or a preset name")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="set a program input (repeatable)")
+    add_body_args(p)
 
 
 def lattice_from_args(args) -> Lattice:
-    return load_lattice(args.lattice, args.param)
+    return with_body_args(args, load_lattice(args.lattice, args.param))
+
+
+def add_body_args(p: argparse.ArgumentParser) -> None:
+    """``--body MESH --fill MODE [--body-open winding]``: keep what fills a closed mesh (docs/body.md)."""
+    p.add_argument("--body", metavar="MESH", help="fill a body: keep the nodes that fill this closed mesh "
+                   "(STL, OBJ, PLY, 3MF, GLB)")
+    p.add_argument("--fill", choices=MODES, default="inside",
+                   help="with --body: inside (balls wholly inside), centroid (groups whose template centroid "
+                        "is inside) or any (balls touching the body); default inside")
+    p.add_argument("--body-open", choices=OPEN_MODES, default="error",
+                   help="with --body: an open mesh is an error (default) or tested by winding numbers")
+
+
+def with_body_args(args, lat: Lattice) -> Lattice:
+    """``lat`` filtered by ``--body``/``--fill`` when given (after its own filter)."""
+    if getattr(args, "body", None) is None:
+        return lat
+    return lat.with_filter(BodyFilter(load_body(args.body, open=args.body_open, name=f"--body {args.body}"),
+                                      args.fill))
 
 
 def parse_stencil(text: str) -> Stencil:

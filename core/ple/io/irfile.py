@@ -8,6 +8,7 @@ from pathlib import Path
 from ..errors import PleError
 from ..filters.ir import lattice_from_ir, lattice_to_ir
 from ..model.lattice import Lattice
+from .bodyfile import load_body
 from .files import atomic_write_text
 
 
@@ -22,12 +23,20 @@ def load_ir(path) -> Lattice:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise PleError(f"{path}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+    folder = path.parent
+
+    def loader(mesh: str, placement, opened: str, where: str):
+        # a body's mesh path resolves against the JSON file's folder (absolute paths stand); the
+        # file is read as triangles only, never executed
+        return load_body(folder / mesh, placement, opened, f"{where} {mesh!r}")
+
     try:
-        return lattice_from_ir(data)
+        return lattice_from_ir(data, loader)
     except PleError as exc:
         raise PleError(f"{path}: {exc}") from None
 
 
 def save_ir(lat: Lattice, path, resolved: bool = True) -> None:
-    """Write the IR atomically (no partial file on failure)."""
-    atomic_write_text(path, json.dumps(lattice_to_ir(lat, resolved), indent=1) + "\n")
+    """Write the IR atomically (no partial file on failure); body mesh paths relative to it."""
+    base = Path(path).parent
+    atomic_write_text(path, json.dumps(lattice_to_ir(lat, resolved, base), indent=1) + "\n")
