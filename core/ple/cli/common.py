@@ -4,12 +4,14 @@ small languages of ``--stencil`` and ``--implicit``."""
 from __future__ import annotations
 
 import argparse
+import sys
 
 import numpy as np
 
 from ..algebra.similarity import Translation
 from ..errors import PleError
 from ..filters.body import MODES, OPEN_MODES, BodyFilter
+from ..filters.cleanup import cleanup
 from ..filters.implicit import VARIANTS, Field, FourierField, ImplicitFilter, TPMSField
 from ..filters.stencil import Stencil
 from ..io.bodyfile import load_body
@@ -25,7 +27,11 @@ def add_lattice_args(p: argparse.ArgumentParser) -> None:
 
 
 def lattice_from_args(args) -> Lattice:
-    return with_body_args(args, load_lattice(args.lattice, args.param))
+    lat = with_body_args(args, load_lattice(args.lattice, args.param))
+    if getattr(args, "cleanup", False):
+        lat, report = cleanup(lat, getattr(args, "region", None))
+        print(report, file=sys.stderr)
+    return lat
 
 
 def add_body_args(p: argparse.ArgumentParser) -> None:
@@ -37,6 +43,9 @@ def add_body_args(p: argparse.ArgumentParser) -> None:
                         "is inside) or any (balls touching the body); default inside")
     p.add_argument("--body-open", choices=OPEN_MODES, default="error",
                    help="with --body: an open mesh is an error (default) or tested by winding numbers")
+    p.add_argument("--cleanup", action="store_true",
+                   help="remove dangling balls (degree <= 1, repeatedly) and every piece but the largest; "
+                        "the counts go to stderr")
 
 
 def with_body_args(args, lat: Lattice) -> Lattice:
