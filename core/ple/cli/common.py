@@ -10,11 +10,12 @@ import numpy as np
 
 from ..algebra.similarity import Translation
 from ..errors import PleError
-from ..filters.body import MODES, OPEN_MODES, BodyFilter
+from ..filters.body import MODES, OPEN_MODES, BodyFilter, SurfaceDistanceField
 from ..filters.cleanup import cleanup
 from ..filters.implicit import VARIANTS, Field, FourierField, ImplicitFilter, TPMSField
 from ..filters.stencil import Stencil
 from ..io.bodyfile import load_body
+from ..model.grading import LinearGradient, RadiusField
 from ..model.lattice import Lattice
 from ..program.sources import load_lattice
 
@@ -43,17 +44,46 @@ def add_body_args(p: argparse.ArgumentParser) -> None:
                         "is inside) or any (balls touching the body); default inside")
     p.add_argument("--body-open", choices=OPEN_MODES, default="error",
                    help="with --body: an open mesh is an error (default) or tested by winding numbers")
+    p.add_argument("--grade", metavar="SPEC",
+                   help="graded thickness: AX,AY,AZ:BX,BY,BZ:F0:F1 (radii x F0 at A to x F1 at B, linear) or "
+                        "surface:DEPTH:F0:F1 (x F0 on the --body surface to x F1 at DEPTH from it)")
     p.add_argument("--cleanup", action="store_true",
                    help="remove dangling balls (degree <= 1, repeatedly) and every piece but the largest; "
                         "the counts go to stderr")
 
 
 def with_body_args(args, lat: Lattice) -> Lattice:
-    """``lat`` filtered by ``--body``/``--fill`` when given (after its own filter)."""
-    if getattr(args, "body", None) is None:
+    """``lat`` graded by ``--grade`` and filtered by ``--body``/``--fill`` when given (after its
+    own filter; the filter sees the graded radii)."""
+    body = None
+    if getattr(args, "body", None) is not None:
+        body = load_body(args.body, open=args.body_open, name=f"--body {args.body}")
+    if getattr(args, "grade", None):
+        lat = lat.copy()
+        lat.set_radius_field(parse_grade(args.grade, body))
+    if body is None:
         return lat
-    return lat.with_filter(BodyFilter(load_body(args.body, open=args.body_open, name=f"--body {args.body}"),
-                                      args.fill))
+    return lat.with_filter(BodyFilter(body, args.fill))
+
+
+def parse_grade(text: str, body=None) -> RadiusField:
+    """``AX,AY,AZ:BX,BY,BZ:F0:F1`` (a linear gradient) or ``surface:DEPTH:F0:F1`` (with a body)."""
+    parts = text.split(":")
+    if parts[0] == "surface" and body is None:
+        raise PleError(f"--grade {text!r}: a surface gradient needs --body")
+    try:
+        if parts[0] == "surface":
+            if len(parts) != 4:
+                raise ValueError
+            return SurfaceDistanceField(body, float(parts[1]), float(parts[2]), float(parts[3]))
+        if len(parts) != 4:
+            raise ValueError
+        a, b = ([float(x) for x in p.split(",")] for p in parts[:2])
+        if len(a) != 3 or len(b) != 3:
+            raise ValueError
+        return LinearGradient(a, b, float(parts[2]), float(parts[3]))
+    except ValueError:
+        raise PleError(f"--grade {text!r}: expected AX,AY,AZ:BX,BY,BZ:F0:F1 or surface:DEPTH:F0:F1") from None
 
 
 def parse_stencil(text: str) -> Stencil:

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..algebra.similarity import Similarity
 from ..errors import PleError
+from ..model.grading import RadiusField
 from ..model.lattice import Lattice
 from .base import Filter
 
@@ -420,3 +421,23 @@ class BodyFilter(Filter):
 
     def __repr__(self) -> str:
         return f"BodyFilter({self.body!r}, {self.mode!r})"
+
+
+class SurfaceDistanceField(RadiusField):
+    """A radius field graded by the distance d to a body's surface: factor ``f_surface`` on the
+    surface, ``f_deep`` from ``depth`` inwards (and outwards), linear in d between."""
+
+    def __init__(self, body: Body, depth: float, f_surface: float = 2.0, f_deep: float = 1.0) -> None:
+        if not isinstance(body, Body):
+            raise PleError(f"a surface-distance field needs a Body, got {type(body).__name__}")
+        if not depth > 0 or not f_surface > 0 or not f_deep > 0:
+            raise PleError("a surface-distance field needs a positive depth and positive factors")
+        self.body, self.depth, self.f_surface, self.f_deep = body, float(depth), float(f_surface), float(f_deep)
+        self.bound = max(self.f_surface, self.f_deep)
+
+    def values(self, points):
+        t = self.body.distance(points, self.depth) / self.depth
+        return self.f_surface + (self.f_deep - self.f_surface) * t
+
+    def __repr__(self) -> str:
+        return f"SurfaceDistanceField({self.body!r}, {self.depth:g}, {self.f_surface:g}, {self.f_deep:g})"

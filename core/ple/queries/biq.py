@@ -34,6 +34,8 @@ def query(lat: Lattice, centers, radii, method: str = "auto") -> list[BIQResult]
     lat.validate()
     if method not in ("auto", "naive", "rangefinder"):
         raise PleError(f"method {method!r}: expected auto, naive or rangefinder")
+    if lat.becots is not None and lat.radius_field is not None:
+        method = "naive"  # the BeCOTS RangeFinder knows steady radii only
     if lat.becots is not None and method != "naive":
         return _kept(lat, becots_rangefinder.query(lat, c, r))
     if method == "naive":
@@ -48,7 +50,7 @@ def any_hit(lat: Lattice, centers, radii) -> np.ndarray:
     """bool (q,): does each query ball interfere with any kept ball or beam of ``lat``?"""
     c, r = check_queries(centers, radii)
     lat.validate()
-    if lat.becots is not None or lat.filter is not None:
+    if lat.becots is not None or lat.filter is not None or lat.radius_field is not None:
         res = query(lat, c, r)
         return np.array([len(x.nodes) > 0 or len(x.beams) > 0 for x in res], dtype=bool)
     return lattice_any(lat, c, r)

@@ -613,13 +613,16 @@ def _to_frame(lat: Lattice, c: np.ndarray, r: np.ndarray):
 
 def lattice_hits(lat: Lattice, c: np.ndarray, r: np.ndarray):
     """RangeFinder BIQ: (node hits (N, 5), beam hits (M, 5), path) as (qid, i, j, k, x)."""
-    pl = cached_plan(lat)
+    graded = lat.radius_field is not None
+    search = lat.bounding_lattice() if graded else lat  # graded radii: candidates of the bounding balls
+    pl = cached_plan(search)
     qc, qr = _to_frame(lat, c, r)
     node_parts, beam_parts = [], []
     for s in range(0, len(qc), QUERY_BATCH):
-        cand = _candidates(lat, pl, qc[s:s + QUERY_BATCH], qr[s:s + QUERY_BATCH])
+        cand = _candidates(search, pl, qc[s:s + QUERY_BATCH], qr[s:s + QUERY_BATCH])
         cand[:, 0] += s
-        nh, bh = _exact(lat, cand, qc, qr, pl if max(lat.counts) <= MAX_POWER_TABLE else None)
+        fast = not graded and max(lat.counts) <= MAX_POWER_TABLE  # cached powers know no field
+        nh, bh = _exact(lat, cand, qc, qr, pl if fast else None)
         node_parts.append(nh)
         beam_parts.append(bh)
     cat = lambda parts: np.concatenate(parts) if parts else np.zeros((0, 5), np.int64)  # noqa: E731
