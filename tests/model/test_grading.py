@@ -121,3 +121,13 @@ def test_surface_distance_grading_and_the_cli(tmp_path, capsys):
         np.testing.assert_allclose(got["radius"], ev.radius, atol=1e-12)
     assert main(["info", "cubic", "--grade", "surface:1:2:1"]) == 2
     assert "needs --body" in capsys.readouterr().err
+
+
+def test_a_graded_lattice_is_not_written_as_steady_data(tmp_path):
+    from ple.io.irfile import save_ir
+
+    lat = load_lattice("cubic", {"n": 3})
+    lat.set_radius_field(LinearGradient((0, 0, 0), (2, 2, 2), 1, 2))
+    with pytest.raises(PleError, match="graded lattice"):
+        save_ir(lat, tmp_path / "g.json")
+    assert not (tmp_path / "g.json").exists()

@@ -36,7 +36,7 @@ MODES = ("inside", "centroid", "any")
 OPEN_MODES = ("error", "winding")
 MAX_ENTRIES = 1 << 23  # (cell, triangle) registrations of one grid before the cells are made coarser
 PAIR_CHUNK = 1 << 19  # candidate (point, triangle) pairs per vectorized batch
-VOXELS = 64  # cells a side of the grid of inside/outside voxels
+VOXELS = 128  # cells a side of the grid of inside/outside voxels
 MAX_WINDING_WORK = 4 * 10**9  # points × triangles of the open-mesh fallback
 WINDING_CHUNK = 1 << 22  # point-triangle terms per batch of the fallback
 
@@ -224,6 +224,23 @@ class Body:
         p = np.asarray(points, dtype=float).reshape(-1, 3)
         r = np.broadcast_to(np.asarray(radii, dtype=float), (len(p),))
         out = np.zeros(len(p), dtype=bool)
+        if self.closed and len(p):  # a ball whose box meets only voxels that no face's box meets is far
+            grid, label = self._voxels()
+            lo = np.floor((p - r[:, None] - grid.origin) / grid.h).astype(np.int64)
+            hi = np.floor((p + r[:, None] - grid.origin) / grid.h).astype(np.int64)
+            free = np.all(hi - lo <= 1, axis=1)
+            for d in np.ndindex(2, 2, 2):
+                cell = np.where(np.array(d, dtype=bool), hi, lo)
+                inside = np.all((cell >= 0) & (cell < grid.dims), axis=1)  # beyond the grid: no faces
+                rows = np.flatnonzero(free & inside)
+                free[rows] = label[grid.linear(cell[rows])] >= 0
+            test = np.flatnonzero(~free)
+            out[test] = self._near(p[test], r[test])
+            return out
+        return self._near(p, r)
+
+    def _near(self, p: np.ndarray, r: np.ndarray) -> np.ndarray:
+        out = np.zeros(len(p), dtype=bool)
         for rows, tris in self._surface_pairs(p, r):
             rows, tris = self._box_prune(p, r, rows, tris)
             hit = _point_triangle_dist2(p[rows], self.triangles[tris]) < r[rows] ** 2
@@ -281,7 +298,8 @@ class Body:
         """A 3-D grid with cells at least 2·reach wide (cached per power-of-two size)."""
         tri = self.triangles
         span = float(np.ptp(self.vertices, axis=0).max())
-        base = max(float(np.median(np.ptp(tri, axis=1).max(axis=1))), span / 1024, 1e-12)
+        # cells about a triangle wide, but no coarser than span/128 (big faces register in many cells)
+        base = max(min(float(np.median(np.ptp(tri, axis=1).max(axis=1))), span / 128), span / 1024, 1e-12)
         h = base * 2.0 ** max(0, math.ceil(math.log2(max(2 * reach / base, 1.0))))
         if h not in self._cells:
             self._cells[h] = _Grid.fit(tri.min(axis=1), tri.max(axis=1), self.lo, self.hi, h)

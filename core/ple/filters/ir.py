@@ -35,7 +35,10 @@ def lattice_from_ir(data, loader=None) -> Lattice:
 
 def lattice_to_ir(lat: Lattice, resolved: bool = True, base=None) -> dict:
     """The ``ple-lattice/1`` data of a lattice, with its filter; body mesh paths are written
-    relative to the folder ``base`` when given (the JSON file's), else as they were loaded."""
+    relative to the folder ``base`` when given (the JSON file's), else as they were loaded.
+    A graded lattice (a radius field) is refused: the format has no radius fields yet."""
+    if getattr(lat, "radius_field", None) is not None:
+        raise PleError(f"a graded lattice ({lat.radius_field!r}) cannot be written as ple-lattice/1 data yet")
     return lattice_to_dict(lat, resolved, lambda f: filter_to_dict(f, base))
 
 
