@@ -14,7 +14,7 @@ from ..filters.body import MODES, OPEN_MODES, BodyFilter, SurfaceDistanceField
 from ..filters.cleanup import cleanup
 from ..filters.implicit import VARIANTS, Field, FourierField, ImplicitFilter, TPMSField
 from ..filters.stencil import Stencil
-from ..io.bodyfile import load_body
+from ..io.irfile import read_body
 from ..model.grading import LinearGradient, RadiusField
 from ..model.lattice import Lattice
 from ..program.sources import load_lattice
@@ -57,7 +57,7 @@ def with_body_args(args, lat: Lattice) -> Lattice:
     own filter; the filter sees the graded radii)."""
     body = None
     if getattr(args, "body", None) is not None:
-        body = load_body(args.body, open=args.body_open, name=f"--body {args.body}")
+        body = read_body(args.body, open=args.body_open, name=f"--body {args.body}")
     if getattr(args, "grade", None):
         lat = lat.copy()
         lat.set_radius_field(parse_grade(args.grade, body))

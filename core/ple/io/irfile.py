@@ -2,14 +2,21 @@
 
 from __future__ import annotations
 
+import importlib
 import json
 from pathlib import Path
 
 from ..errors import PleError
 from ..filters.ir import lattice_from_ir, lattice_to_ir
 from ..model.lattice import Lattice
-from .bodyfile import load_body
 from .files import atomic_write_text
+
+
+def read_body(path, placement=None, open: str = "error", name: str | None = None):  # noqa: A002
+    """``ple.io.bodyfile.load_body``, imported on first use: reading meshes needs trimesh, which
+    costs about a second and which a command that loads no body should not pay for at start-up
+    (tests/cli/test_main.py)."""
+    return importlib.import_module(f"{__package__}.bodyfile").load_body(path, placement, open, name)
 
 
 def load_ir(path) -> Lattice:
@@ -28,7 +35,7 @@ def load_ir(path) -> Lattice:
     def loader(mesh: str, placement, opened: str, where: str):
         # a body's mesh path resolves against the JSON file's folder (absolute paths stand); the
         # file is read as triangles only, never executed
-        return load_body(folder / mesh, placement, opened, f"{where} {mesh!r}")
+        return read_body(folder / mesh, placement, opened, f"{where} {mesh!r}")
 
     try:
         return lattice_from_ir(data, loader)
