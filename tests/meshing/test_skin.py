@@ -69,3 +69,19 @@ def test_skinned_lattice_is_watertight_with_the_monte_carlo_volume(part, mode):
     mc_shell, _ = monte_carlo(part, 0.3)
     assert shell.volume == pytest.approx(mc_shell, rel=0.01)
     assert out.volume > shell.volume * 1.02
+
+
+def test_skin_command(tmp_path, part, capsys):
+    from ple.cli.main import main
+
+    path = tmp_path / "part.stl"
+    part.export(path)
+    out = tmp_path / "skinned.stl"
+    assert main(["skin", "cubic", "--body", str(path), "--thickness", "0.4", "--out", str(out)]) == 0
+    got = trimesh.load(out, force="mesh", process=False)
+    body = body_from_trimesh(part)
+    want = skin(body, 0.4, tessellate(load_lattice("cubic").with_filter(BodyFilter(body, "any"))))
+    assert want.is_watertight and len(got.faces) == len(want.faces)
+    assert got.volume == pytest.approx(want.volume, rel=1e-4)  # float32 STL
+    assert main(["skin", "cubic", "--thickness", "0.4", "--out", str(out)]) == 2
+    assert "needs --body" in capsys.readouterr().err
