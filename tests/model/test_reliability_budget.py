@@ -78,7 +78,8 @@ WATCHED = [
     (["mesh", "octet", "--levels", "6", "--region", "0:3,0:3,0:3", "--out", "o.stl", "--check"], 2),
     (["mesh", "cubic", "--param", "n=1000", "--style", "cnt", "--out", "cnt.stl"], 2),  # 9.97e8 beams
     (["mesh", "cubic", "--param", "n=79", "--out", "c.glb"], 2),
-    (["mesh", "cubic", "--param", "n=79", "--out", "c.3mf", "--beam-lattice"], 0),
+    (["mesh", "cubic", "--param", "n=79", "--out", "c.3mf", "--beam-lattice"], 2),  # its triangle mesh is refused
+    (["mesh", "cubic", "--param", "n=20", "--out", "c.3mf", "--beam-lattice", "--style", "cnt"], 0),
     (["eval", "many.py", "--out", "e.npz"], 2),  # 5·10^7 nodes × 40 beam-patterns
     (["info", "cubic", "--param", "n=10000"], 0),
     (["biq", "cubic", "--param", "n=10000", "--queries", "small.npy", "--out", "h.json"], 0),

@@ -9,10 +9,14 @@ import sys
 
 from ..algebra.similarity import Translation
 from ..errors import PleError
+from ..filters.body import MODES, OPEN_MODES, BodyFilter, SurfaceDistanceField
+from ..filters.cleanup import cleanup
 from ..filters.implicit import VARIANTS, Field, FourierField, ImplicitFilter, TPMSField
 from ..filters.stencil import Stencil
 from ..io.inputs import load_npy
+from ..io.irfile import read_body
 from ..model.budget import ENV, default_max_memory, parse_size
+from ..model.grading import LinearGradient, RadiusField
 from ..model.lattice import Lattice
 from ..program.runner import DEFAULT_TIMEOUT, run_program
 
@@ -22,6 +26,7 @@ def add_lattice_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="set a program input (repeatable)")
     add_program_limits(p)
+    add_body_args(p)
 
 
 def add_budget_args(p: argparse.ArgumentParser) -> None:
@@ -43,12 +48,67 @@ def max_memory(args=None) -> int:
 
 def lattice_from_args(args) -> Lattice:
     """The lattice of a command's LATTICE, its program contained (``ple.program.runner``)."""
-    return run_program(args.lattice, args.param, args.timeout, max_memory(args))
+    lat = with_body_args(args, run_program(args.lattice, args.param, args.timeout, max_memory(args)))
+    if getattr(args, "cleanup", False):
+        lat, report = cleanup(lat, getattr(args, "region", None))
+        print(report, file=sys.stderr)
+    return lat
 
 
 def contained(args):
     """``source, params -> Lattice`` with the command's limits (for --coarse lattices)."""
     return lambda source, params=None: run_program(source, params, args.timeout, max_memory(args))
+
+
+def add_body_args(p: argparse.ArgumentParser) -> None:
+    """``--body MESH --fill MODE [--body-open winding]``: keep what fills a closed mesh (docs/body.md)."""
+    p.add_argument("--body", metavar="MESH", help="fill a body: keep the nodes that fill this closed mesh "
+                   "(STL, OBJ, PLY, 3MF, GLB)")
+    p.add_argument("--fill", choices=MODES, default="inside",
+                   help="with --body: inside (balls wholly inside), centroid (groups whose template centroid "
+                        "is inside) or any (balls touching the body); default inside")
+    p.add_argument("--body-open", choices=OPEN_MODES, default="error",
+                   help="with --body: an open mesh is an error (default) or tested by winding numbers")
+    p.add_argument("--grade", metavar="SPEC",
+                   help="graded thickness: AX,AY,AZ:BX,BY,BZ:F0:F1 (radii x F0 at A to x F1 at B, linear) or "
+                        "surface:DEPTH:F0:F1 (x F0 on the --body surface to x F1 at DEPTH from it)")
+    p.add_argument("--cleanup", action="store_true",
+                   help="remove dangling balls (degree <= 1, repeatedly) and every piece but the largest; "
+                        "the counts go to stderr")
+
+
+def with_body_args(args, lat: Lattice) -> Lattice:
+    """``lat`` graded by ``--grade`` and filtered by ``--body``/``--fill`` when given (after its
+    own filter; the filter sees the graded radii)."""
+    body = None
+    if getattr(args, "body", None) is not None:
+        body = read_body(args.body, open=args.body_open, name=f"--body {args.body}")
+    if getattr(args, "grade", None):
+        lat = lat.copy()
+        lat.set_radius_field(parse_grade(args.grade, body))
+    if body is None:
+        return lat
+    return lat.with_filter(BodyFilter(body, args.fill))
+
+
+def parse_grade(text: str, body=None) -> RadiusField:
+    """``AX,AY,AZ:BX,BY,BZ:F0:F1`` (a linear gradient) or ``surface:DEPTH:F0:F1`` (with a body)."""
+    parts = text.split(":")
+    if parts[0] == "surface" and body is None:
+        raise PleError(f"--grade {text!r}: a surface gradient needs --body")
+    try:
+        if parts[0] == "surface":
+            if len(parts) != 4:
+                raise ValueError
+            return SurfaceDistanceField(body, float(parts[1]), float(parts[2]), float(parts[3]))
+        if len(parts) != 4:
+            raise ValueError
+        a, b = ([float(x) for x in p.split(",")] for p in parts[:2])
+        if len(a) != 3 or len(b) != 3:
+            raise ValueError
+        return LinearGradient(a, b, float(parts[2]), float(parts[3]))
+    except ValueError:
+        raise PleError(f"--grade {text!r}: expected AX,AY,AZ:BX,BY,BZ:F0:F1 or surface:DEPTH:F0:F1") from None
 
 
 def parse_stencil(text: str) -> Stencil:

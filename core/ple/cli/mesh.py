@@ -141,9 +141,12 @@ def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
     limit = max_memory(args)
     levels, segments = _check_style(args.style, args.levels, args.segments)
     what = f"region {region} ({region_nodes(lat, region):,} nodes)"
-    if args.beam_lattice:
-        require(evaluation_bytes(lat, region) + 150 * (region_nodes(lat, region) + region_beams(lat, region)),
-                f"the beam lattice of {what}", limit, "choose a smaller --region")
+    if args.beam_lattice:  # balls and beams, and the triangle mesh that rides along in the 3MF
+        style = args.style if args.style != "balls-beams" else "refined"
+        tris = mesh_triangles(lat, region, style, levels, segments)
+        require(evaluation_bytes(lat, region) + 150 * (region_nodes(lat, region) + region_beams(lat, region))
+                + tris * MESH_TRIANGLE_BYTES, f"the beam lattice of {what} with {tris:,.3g} triangles ({style})",
+                limit, "choose a smaller --region or fewer --levels")
         return 1 << 14
     tris = mesh_triangles(lat, region, args.style, levels, segments)
     if in_memory:

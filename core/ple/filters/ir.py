@@ -6,6 +6,8 @@ malformed field is named by its path (``filter.and[1].lil.coarse.nodes[0].radius
 from __future__ import annotations
 
 import math
+import os
+from pathlib import Path
 
 import numpy as np
 
@@ -14,6 +16,7 @@ from ..errors import PleError
 from ..model.ir import lattice_from_dict, lattice_to_dict
 from ..model.lattice import Lattice
 from .base import And, Filter, Not, Or
+from .body import MODES, OPEN_MODES, BodyFilter
 from .implicit import TPMS, VARIANTS, FourierField, ImplicitFilter, TPMSField
 from .lil import LiL
 from .stencil import Stencil
@@ -23,31 +26,39 @@ MAX_STENCIL_CELLS = 1 << 20
 MAX_FOURIER_TERMS = 1 << 16
 
 
-def lattice_from_ir(data) -> Lattice:
-    """A Lattice from ``ple-lattice/1`` data, with its filter."""
-    return lattice_from_dict(data, filter_from_dict)
+def lattice_from_ir(data, loader=None) -> Lattice:
+    """A Lattice from ``ple-lattice/1`` data, with its filter. ``loader(path, placement, open,
+    where)`` reads a body's mesh file (``ple.io.irfile`` gives one resolving paths against the
+    JSON file); without it a body filter is refused."""
+    return lattice_from_dict(data, lambda d, w: filter_from_dict(d, w, 0, loader))
 
 
-def lattice_to_ir(lat: Lattice, resolved: bool = True) -> dict:
-    """The ``ple-lattice/1`` data of a lattice, with its filter."""
-    return lattice_to_dict(lat, resolved, filter_to_dict)
+def lattice_to_ir(lat: Lattice, resolved: bool = True, base=None) -> dict:
+    """The ``ple-lattice/1`` data of a lattice, with its filter; body mesh paths are written
+    relative to the folder ``base`` when given (the JSON file's), else as they were loaded.
+    A graded lattice (a radius field) is refused: the format has no radius fields yet."""
+    if getattr(lat, "radius_field", None) is not None:
+        raise PleError(f"a graded lattice ({lat.radius_field!r}) cannot be written as ple-lattice/1 data yet")
+    return lattice_to_dict(lat, resolved, lambda f: filter_to_dict(f, base))
 
 
 # ----- writing -------------------------------------------------------------------------------------
-def filter_to_dict(f) -> dict:
+def filter_to_dict(f, base=None) -> dict:
     """The data of a filter; a filter that is not data (a Python object of a program's own) is
     refused naming its type."""
+    if isinstance(f, BodyFilter):
+        return {"body": _body_to_dict(f, base)}
     if isinstance(f, Stencil):
         a = f.array
         return {"stencil": {"shape": list(a.shape), "cells": a.reshape(-1).astype(int).tolist()}}
     if isinstance(f, LiL):
-        return {"lil": {"coarse": lattice_to_ir(f.coarse), "method": f.method}}
+        return {"lil": {"coarse": lattice_to_ir(f.coarse, base=base), "method": f.method}}
     if isinstance(f, ImplicitFilter):
         return {"implicit": {**_field_to_dict(f.field), "level": f.level, "sheet": f.variant == "sheet"}}
     if isinstance(f, (And, Or)):
-        return {"and" if isinstance(f, And) else "or": [filter_to_dict(p) for p in f.parts]}
+        return {"and" if isinstance(f, And) else "or": [filter_to_dict(p, base) for p in f.parts]}
     if isinstance(f, Not):
-        return {"not": filter_to_dict(f.part)}
+        return {"not": filter_to_dict(f.part, base)}
     raise PleError(f"filter: a {type(f).__name__} cannot be written as data (stencil, lil, implicit, "
                    "and, or, not can)")
 
@@ -66,28 +77,31 @@ def _field_to_dict(field) -> dict:
 
 
 # ----- reading -------------------------------------------------------------------------------------
-def filter_from_dict(data, where: str = "filter", depth: int = 0) -> Filter:
-    """The filter described by ``data``; errors name the offending field."""
+def filter_from_dict(data, where: str = "filter", depth: int = 0, loader=None) -> Filter:
+    """The filter described by ``data``; errors name the offending field. ``loader`` reads body
+    mesh files (see ``lattice_from_ir``)."""
     if depth > MAX_DEPTH:
         raise PleError(f"{where}: filters nested deeper than {MAX_DEPTH}")
     if not isinstance(data, dict) or len(data) != 1:
-        raise PleError(f"{where}: expected an object with exactly one of stencil, lil, implicit, and, or, not")
+        raise PleError(f"{where}: expected an object with exactly one of stencil, lil, implicit, body, and, or, not")
     (kind, body), = data.items()
     here = f"{where}.{kind}"
     if kind in ("and", "or"):
         if not isinstance(body, list) or not body:
             raise PleError(f"{here}: expected a non-empty list of filters")
-        parts = [filter_from_dict(p, f"{here}[{n}]", depth + 1) for n, p in enumerate(body)]
+        parts = [filter_from_dict(p, f"{here}[{n}]", depth + 1, loader) for n, p in enumerate(body)]
         return parts[0] if len(parts) == 1 else (And if kind == "and" else Or)(*parts)
     if kind == "not":
-        return Not(filter_from_dict(body, here, depth + 1))
+        return Not(filter_from_dict(body, here, depth + 1, loader))
     if kind == "stencil":
         return _stencil(body, here)
     if kind == "lil":
-        return _lil(body, here, depth)
+        return _lil(body, here, depth, loader)
     if kind == "implicit":
         return _implicit(body, here)
-    raise PleError(f"{here}: unknown filter (expected stencil, lil, implicit, and, or, not)")
+    if kind == "body":
+        return _body(body, here, loader)
+    raise PleError(f"{here}: unknown filter (expected stencil, lil, implicit, body, and, or, not)")
 
 
 def _keys(body, here: str, required: set, optional: set = frozenset()) -> None:
@@ -120,13 +134,13 @@ def _stencil(body, here: str) -> Stencil:
     return Stencil(np.array(cells, dtype=bool).reshape(shape))
 
 
-def _lil(body, here: str, depth: int) -> LiL:
+def _lil(body, here: str, depth: int, loader=None) -> LiL:
     _keys(body, here, {"coarse"}, {"method"})
     method = body.get("method", "auto")
     if method not in ("auto", "elements", "biq"):
         raise PleError(f"{here}.method: expected auto, elements or biq, got {method!r}")
     try:
-        coarse = lattice_from_dict(body["coarse"], lambda d, w: filter_from_dict(d, w, depth + 1))
+        coarse = lattice_from_dict(body["coarse"], lambda d, w: filter_from_dict(d, w, depth + 1, loader))
     except PleError as exc:
         raise PleError(f"{here}.coarse.{exc}") from None
     return LiL(coarse, method)
@@ -184,3 +198,36 @@ def _fourier(body, here: str, cell, placement) -> FourierField:
     if not isinstance(symmetric, bool):
         raise PleError(f"{here}.symmetric: expected true or false")
     return FourierField(np.array(freqs, dtype=np.int64).reshape(-1, 3), np.array(values), n, cell, placement, symmetric)
+
+
+# ----- bodies (the only file reference of the format) ---------------------------------------------
+def _body_to_dict(f: BodyFilter, base) -> dict:
+    body = f.body
+    if body.source is None:
+        raise PleError("filter.body: a body given as arrays cannot be written as data (load it from a mesh file)")
+    path = body.source
+    if base is not None:
+        path = os.path.relpath(os.path.abspath(path), os.path.abspath(base))
+    out = {"mesh": Path(path).as_posix(), "mode": f.mode}
+    if not body.placement.allclose(Similarity(), 0.0):
+        out["placement"] = body.placement.to_dict()
+    if body.open != "error":
+        out["open"] = body.open
+    return out
+
+
+def _body(body, here: str, loader) -> BodyFilter:
+    _keys(body, here, {"mesh"}, {"mode", "placement", "open"})
+    path, mode, opened = body["mesh"], body.get("mode", "inside"), body.get("open", "error")
+    if not isinstance(path, str) or not path.strip():
+        raise PleError(f"{here}.mesh: expected the path of a mesh file, got {path!r}")
+    if mode not in MODES:
+        raise PleError(f"{here}.mode: expected one of {', '.join(MODES)}, got {mode!r}")
+    if opened not in OPEN_MODES:
+        raise PleError(f"{here}.open: expected one of {', '.join(OPEN_MODES)}, got {opened!r}")
+    placement = similarity_from_dict(body["placement"], f"{here}.placement") if "placement" in body else None
+    if placement is not None and not isinstance(placement, Similarity):
+        raise PleError(f"{here}.placement: expected a similarity")
+    if loader is None:
+        raise PleError(f"{here}.mesh: a body mesh is resolved against its JSON file; load the lattice from a file")
+    return BodyFilter(loader(path, placement, opened, f"{here}.mesh"), mode)

@@ -62,7 +62,8 @@ def max_radius(lat: Lattice) -> float:
     nu, nv, nw = lat.counts
     f = max(lat.U.factor ** i * lat.V.factor ** j * lat.W.factor ** k
             for i in (0, nu - 1) for j in (0, nv - 1) for k in (0, nw - 1))
-    return float(lat.placement.factor * f * lat.template_radii.max())
+    grade = lat.radius_field.bound if lat.radius_field is not None else 1.0  # graded radii: their bound
+    return float(lat.placement.factor * f * lat.template_radii.max() * grade)
 
 
 def lil(fine: Lattice, *coarse: Lattice, extra: Filter | None = None, method: str = "auto") -> Lattice:

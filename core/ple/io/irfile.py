@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import json
 from pathlib import Path
 
@@ -12,16 +13,31 @@ from .files import atomic_write_text
 from .inputs import read_json
 
 
+def read_body(path, placement=None, open: str = "error", name: str | None = None):  # noqa: A002
+    """``ple.io.bodyfile.load_body``, imported on first use: reading meshes needs trimesh, which
+    costs about a second and which a command that loads no body should not pay for at start-up
+    (tests/cli/test_main.py)."""
+    return importlib.import_module(f"{__package__}.bodyfile").load_body(path, placement, open, name)
+
+
 def load_ir(path) -> Lattice:
     """Load and validate a ``ple-lattice/1`` file."""
     path = Path(path)
     data = read_json(path, "lattice file")  # within limits: size, UTF-8, depth (ple.io.inputs)
+    folder = path.parent
+
+    def loader(mesh: str, placement, opened: str, where: str):
+        # a body's mesh path resolves against the JSON file's folder (absolute paths stand); the
+        # file is read as triangles only, never executed
+        return read_body(folder / mesh, placement, opened, f"{where} {mesh!r}")
+
     try:
-        return lattice_from_ir(data)
+        return lattice_from_ir(data, loader)
     except PleError as exc:
         raise PleError(f"{path}: {exc}") from None
 
 
 def save_ir(lat: Lattice, path, resolved: bool = True) -> None:
-    """Write the IR atomically (no partial file on failure)."""
-    atomic_write_text(path, json.dumps(lattice_to_ir(lat, resolved), indent=1) + "\n")
+    """Write the IR atomically (no partial file on failure); body mesh paths relative to it."""
+    base = Path(path).parent
+    atomic_write_text(path, json.dumps(lattice_to_ir(lat, resolved, base), indent=1) + "\n")

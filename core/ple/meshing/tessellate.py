@@ -318,6 +318,8 @@ class _Tessellator:
             s = nb.shape[1]
             bits = (exists.astype(np.int64) << np.arange(s, dtype=np.int64)).sum(axis=1) if s else 0
             col = idx[sel, 0] * nv + idx[sel, 1]
+            if lat.radius_field is not None:  # graded radii: hubs along W are not copies of each other
+                col = np.arange(len(sel), dtype=np.int64)
             _, rep, inv = np.unique(col * (1 << s) + bits, return_index=True, return_inverse=True)
             reps = sel[rep]
             local = np.full((len(reps), s, 4), np.nan)
@@ -335,13 +337,17 @@ class _Tessellator:
                 local[..., 3] = rad.reshape(len(reps), s) / f[:, None]
                 local[~ex] = np.nan
             q = np.where(np.isnan(local), -(2**62), np.round(local / self.scale[n])).astype(np.int64)
+            own = np.full(len(reps), lat.template_radii[n])
+            if lat.radius_field is not None:  # the hub's own graded radius, in its frame
+                own = lat.node_balls(idx[reps])[1] / lat.group_factors(idx[reps, 0], idx[reps, 1], idx[reps, 2])
+            own_q = np.round(own / self.scale[n]).astype(np.int64)
             rep_tid = np.zeros(len(reps), np.int64)
             for u in range(len(reps)):
-                key = (n, q[u].tobytes())
+                key = (n, q[u].tobytes(), int(own_q[u]))
                 if key not in self.templates:
                     have = ~np.isnan(local[u, :, 3])
                     hint_key = (n, have.tobytes())  # the last hub with these beams: likely the same hull
-                    tpl = hub_template(lat.template_centers[n], lat.template_radii[n], local[u, have, :3],
+                    tpl = hub_template(lat.template_centers[n], float(own[u]), local[u, have, :3],
                                        local[u, have, 3], self.style, self.levels, self.segments,
                                        self.hints.get(hint_key), self.min_edge, self.fillet)
                     self.hints[hint_key] = tpl.geometry.base_triangles

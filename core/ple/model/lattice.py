@@ -19,6 +19,7 @@ from ..algebra.similarity import Similarity
 from ..algebra.vectors import Pt
 from ..errors import PleError
 from .becots import BeCOTS, BeCOTSField, Stack, becots_counts
+from .grading import RadiusField
 from .groupmap import GroupMap
 
 MAX_COUNT = 10**7  # per direction; beyond this a count is certainly a typo
@@ -174,6 +175,7 @@ class Lattice:
         self.becots = None  # a BeCOTS description for corner-operated slabs (set_becots, set_field)
         self.filter = None  # an optional ple.filters.Filter deciding which nodes survive (thesis §9)
         self.group_map = None  # a GroupMap placing the groups instead of U, V, W, G (Möbius, warps)
+        self.radius_field = None  # an optional grading.RadiusField multiplying node radii
         self.meta: dict = {}
 
     # ----- building -----------------------------------------------------------------------
@@ -294,6 +296,24 @@ class Lattice:
                            f"got {type(node_filter).__name__}")
         self.filter = node_filter
 
+    def set_radius_field(self, field) -> None:
+        """Grade the thickness: node radii are multiplied by ``field`` at their centres
+        (``ple.model.grading``); None makes the radii steady again."""
+        if field is not None and not isinstance(field, RadiusField):
+            raise PleError(f"radius field must be a RadiusField (LinearGradient, GridField, FunctionField, …), "
+                           f"got {type(field).__name__}")
+        self.radius_field = field
+
+    def bounding_lattice(self) -> Lattice:
+        """The steady lattice whose balls contain this one's graded balls (radii × the field's
+        bound, no field): candidate searches use it, exact tests the true radii."""
+        other = self.copy()
+        if self.radius_field is not None:
+            for node in other.nodes:
+                node.radius *= self.radius_field.bound
+            other.radius_field = None
+        return other
+
     def with_filter(self, node_filter) -> Lattice:
         """A copy whose filter keeps what this lattice's filter and ``node_filter`` both keep
         (this one's first: a program's own filter, then a command's or a panel's)."""
@@ -319,6 +339,7 @@ class Lattice:
         other.u, other.v, other.w, other.placement = self.u, self.v, self.w, self.placement
         other.becots, other.filter, other.meta = self.becots, self.filter, dict(self.meta)
         other.group_map = self.group_map
+        other.radius_field = self.radius_field
         return other
 
     # ----- shape ----------------------------------------------------------------------------
@@ -421,6 +442,8 @@ class Lattice:
         c = self.template_centers[idx[:, 3]]
         centers = np.einsum("nab,nb->na", m[:, :3, :3], c) + m[:, :3, 3]
         radii = self.template_radii[idx[:, 3]] * self.group_factors(idx[:, 0], idx[:, 1], idx[:, 2])
+        if self.radius_field is not None:
+            radii = radii * self.radius_field.factors(centers)
         return centers, radii
 
     def region_balls(self, region=None) -> tuple[np.ndarray, np.ndarray]:
@@ -444,6 +467,8 @@ class Lattice:
         f = (self.placement.factor * self.U.factor ** ii[:, None, None] * self.V.factor ** jj[None, :, None]
              * self.W.factor ** kk[None, None, :])
         radii = f[..., None] * self.template_radii
+        if self.radius_field is not None:
+            radii = radii * self.radius_field.factors(centers.reshape(-1, 3)).reshape(radii.shape)
         return np.ascontiguousarray(centers), radii
 
     def region_beams(self, region=None) -> tuple[np.ndarray, np.ndarray]:
@@ -593,8 +618,8 @@ class Lattice:
 
     def mean_radius(self) -> float:
         """Mean ball radius over the whole lattice, in closed form (geometric series); with a
-        group map, streamed over slabs."""
-        if self.group_map is not None:
+        group map or a radius field, streamed over slabs."""
+        if self.group_map is not None or self.radius_field is not None:
             total = sum(float(self.region_balls(part)[1].sum()) for part in self.iter_slabs())
             return total / self.node_count()
         f = 1.0

@@ -37,6 +37,8 @@ def query(lat: Lattice, centers, radii, method: str = "auto") -> list[BIQResult]
     if lat.group_map is not None:  # no steady rows: every element tested, O(elements) per query
         node_hits, beam_hits = _naive_hits(lat, c, r)
         return split_hits(len(c), node_hits, beam_hits, "naive (group map)")
+    if lat.becots is not None and lat.radius_field is not None:
+        method = "naive"  # the BeCOTS RangeFinder knows steady radii only
     if lat.becots is not None and method != "naive":
         return _kept(lat, becots_rangefinder.query(lat, c, r))
     if method == "naive":
@@ -53,7 +55,7 @@ def any_hit(lat: Lattice, centers, radii) -> np.ndarray:
     lat.validate()
     if lat.group_map is not None and lat.filter is None:  # no steady rows: the naive path
         return naive_any(lat, c, r)
-    if lat.becots is not None or lat.filter is not None:
+    if lat.becots is not None or lat.filter is not None or lat.radius_field is not None:
         res = query(lat, c, r)
         return np.array([len(x.nodes) > 0 or len(x.beams) > 0 for x in res], dtype=bool)
     return lattice_any(lat, c, r)

@@ -618,7 +618,9 @@ PATH_ORDER = ("1", "u", "uv")  # §7.3.1: each path's conditions include the nex
 def lattice_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, path: str | None = None):
     """RangeFinder BIQ: (node hits (N, 5), beam hits (M, 5), path) as (qid, i, j, k, x).
     ``path`` forces a slower path than the detected one ("u" or "uv"; benchmarks, Table 7.2)."""
-    pl = cached_plan(lat)
+    graded = lat.radius_field is not None
+    search = lat.bounding_lattice() if graded else lat  # graded radii: candidates of the bounding balls
+    pl = cached_plan(search)
     if path is not None and path != pl.path:
         if path not in PATH_ORDER or PATH_ORDER.index(path) < PATH_ORDER.index(pl.path):
             raise PleError(f"path {path!r} is not available on this lattice (detected {pl.path!r}; "
@@ -627,9 +629,10 @@ def lattice_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, path: str | None = 
     qc, qr = _to_frame(lat, c, r)
     node_parts, beam_parts = [], []
     for s in range(0, len(qc), QUERY_BATCH):
-        cand = _candidates(lat, pl, qc[s:s + QUERY_BATCH], qr[s:s + QUERY_BATCH])
+        cand = _candidates(search, pl, qc[s:s + QUERY_BATCH], qr[s:s + QUERY_BATCH])
         cand[:, 0] += s
-        nh, bh = _exact(lat, cand, qc, qr, pl if max(lat.counts) <= MAX_POWER_TABLE else None)
+        fast = not graded and max(lat.counts) <= MAX_POWER_TABLE  # cached powers know no field
+        nh, bh = _exact(lat, cand, qc, qr, pl if fast else None)
         node_parts.append(nh)
         beam_parts.append(bh)
     cat = lambda parts: np.concatenate(parts) if parts else np.zeros((0, 5), np.int64)  # noqa: E731

@@ -1,0 +1,114 @@
+"""Cleanup after trimming: dangling beams and floating pieces.
+
+Trimming a lattice to a body leaves balls hanging by one beam (or none) and pieces that no
+longer touch the rest. ``cleanup_evaluation`` removes, round after round, every ball of degree
+≤ 1 with its beam (what is left is the 2-core of the beam graph), then keeps only the largest
+connected component (by balls). ``cleanup`` turns the result into a filter of the lattice (the
+surviving node indices), so every door (eval, mesh, info, queries) sees the cleaned lattice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from ..errors import PleError
+from ..model.lattice import Evaluation, Lattice
+from .base import Filter
+
+MAX_CLEANUP_NODES = 50_000_000  # the graph is built in memory: about 60 bytes per node and beam
+
+
+@dataclass
+class CleanupReport:
+    """What the cleanup removed and kept."""
+
+    rounds: int  # peeling rounds that removed something
+    dangling_nodes: int  # balls of degree <= 1 removed (over all rounds)
+    dangling_beams: int  # beams removed with them
+    components: int  # connected components before keeping the largest
+    dropped_nodes: int  # balls of the dropped components
+    dropped_beams: int
+    nodes: int  # kept
+    beams: int
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    def __str__(self) -> str:
+        return (f"cleanup: removed {self.dangling_nodes:,} dangling balls and {self.dangling_beams:,} beams in "
+                f"{self.rounds} rounds; dropped {self.components - 1 if self.components else 0} of "
+                f"{self.components} components ({self.dropped_nodes:,} balls, {self.dropped_beams:,} beams); "
+                f"kept {self.nodes:,} balls and {self.beams:,} beams")
+
+
+def cleanup_evaluation(ev: Evaluation, largest: bool = True) -> tuple[Evaluation, CleanupReport]:
+    """``ev`` without dangling balls (degree <= 1, removed round by round) and, with ``largest``,
+    without the components other than the largest (ties: the one holding the lowest row)."""
+    n = len(ev.node_index)
+    ends = np.asarray(ev.beam_nodes, dtype=np.int64).reshape(-1, 2)
+    alive = np.ones(n, dtype=bool)
+    beam_alive = np.ones(len(ends), dtype=bool)
+    deg = np.bincount(ends.reshape(-1), minlength=n)
+    rounds = 0
+    while True:
+        drop = alive & (deg <= 1)
+        if not drop.any():
+            break
+        rounds += 1
+        alive &= ~drop
+        dying = beam_alive & (drop[ends[:, 0]] | drop[ends[:, 1]])
+        beam_alive &= ~dying
+        deg -= np.bincount(ends[dying].reshape(-1), minlength=n)
+    dangling_nodes, dangling_beams = n - int(alive.sum()), len(ends) - int(beam_alive.sum())
+    components = dropped_nodes = dropped_beams = 0
+    if alive.any():
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        e = ends[beam_alive]
+        graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+        _, label = connected_components(graph, directed=False)
+        rows = np.flatnonzero(alive)
+        uniq, inv, sizes = np.unique(label[rows], return_inverse=True, return_counts=True)
+        components = len(uniq)
+        if largest and components > 1:
+            keep_label = uniq[np.argmax(sizes)]  # argmax takes the first: the component of the lowest row
+            gone = alive & (label != keep_label)
+            dropped_nodes = int(gone.sum())
+            dying = beam_alive & gone[ends[:, 0]]
+            dropped_beams = int(dying.sum())
+            alive &= ~gone
+    out = ev.select(alive)
+    report = CleanupReport(rounds, dangling_nodes, dangling_beams, components, dropped_nodes, dropped_beams,
+                           len(out.node_index), len(out.beam_nodes))
+    return out, report
+
+
+class NodeSet(Filter):
+    """Keeps exactly the nodes whose (i, j, k, n) are listed (a computed selection, such as a
+    cleanup's survivors); not data: it is not written into ``ple-lattice/1``."""
+
+    def __init__(self, lat: Lattice, node_index) -> None:
+        idx = np.asarray(node_index, dtype=np.int64).reshape(-1, 4)
+        self._shape = (*lat.counts, len(lat.nodes))
+        self.keys = np.unique(self._key(idx))
+
+    def _key(self, idx: np.ndarray) -> np.ndarray:
+        _, nv, nw, nn = self._shape
+        return ((idx[:, 0] * nv + idx[:, 1]) * nw + idx[:, 2]) * nn + idx[:, 3]
+
+    def node_mask(self, lat, node_index, center, radius):
+        k = self._key(np.asarray(node_index, dtype=np.int64).reshape(-1, 4))
+        pos = np.clip(np.searchsorted(self.keys, k), 0, max(len(self.keys) - 1, 0))
+        return self.keys[pos] == k if len(self.keys) else np.zeros(len(k), dtype=bool)
+
+
+def cleanup(lat: Lattice, region=None, largest: bool = True) -> tuple[Lattice, CleanupReport]:
+    """``lat`` restricted to the cleaned evaluation of ``region`` (default: all of it)."""
+    r = lat.region(region)
+    if lat.node_count(r) > MAX_CLEANUP_NODES:
+        raise PleError(f"cleanup of {lat.node_count(r):,} nodes (limit {MAX_CLEANUP_NODES:,}): give a smaller --region")
+    ev, report = cleanup_evaluation(lat.evaluate(r), largest)
+    return lat.with_filter(NodeSet(lat, ev.node_index)), report

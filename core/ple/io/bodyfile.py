@@ -1,0 +1,53 @@
+"""Body mesh files (STL, OBJ, PLY, 3MF, GLB) read into a :class:`ple.filters.body.Body`.
+
+Triangles of a file are merged at shared vertices (an STL stores each triangle's corners apart)
+and, when the surface is closed but some faces point the other way, re-oriented consistently;
+every other defect is named: a missing or unreadable file, an empty mesh, NaN vertices, a hole."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from ..algebra.similarity import Similarity
+from ..errors import PleError
+from ..filters.body import Body
+
+BODY_SUFFIXES = ("stl", "obj", "ply", "3mf", "glb", "gltf", "off")
+MAX_BODY_TRIANGLES = 20_000_000
+
+
+def load_body(path, placement: Similarity | None = None, open: str = "error", name: str | None = None) -> Body:  # noqa: A002
+    """The body in mesh file ``path``, placed by ``placement``."""
+    path = Path(path)
+    name = name or str(path)
+    suffix = path.suffix.lower().lstrip(".")
+    if suffix not in BODY_SUFFIXES:
+        raise PleError(f"{name}: unknown body mesh format {suffix!r} (expected .{', .'.join(BODY_SUFFIXES)})")
+    if not path.is_file():
+        raise PleError(f"{name}: no such body mesh file")
+    try:
+        mesh = trimesh.load(str(path), force="mesh", process=False)
+    except Exception as exc:  # noqa: BLE001 - any reader failure is a bad file, named
+        raise PleError(f"{name}: cannot read the body mesh ({type(exc).__name__}: {exc})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise PleError(f"{name}: the mesh is empty (no triangles)")
+    if len(mesh.faces) > MAX_BODY_TRIANGLES:
+        raise PleError(f"{name}: {len(mesh.faces):,} triangles (limit {MAX_BODY_TRIANGLES:,})")
+    return body_from_trimesh(mesh, placement, str(path), open, name)
+
+
+def body_from_trimesh(mesh, placement: Similarity | None = None, source: str | None = None,
+                      open: str = "error", name: str = "body") -> Body:  # noqa: A002
+    """A Body from a trimesh mesh: vertices merged, a closed surface oriented consistently."""
+    v = np.asarray(mesh.vertices, dtype=float)
+    bad = int(np.count_nonzero(~np.isfinite(v).all(axis=1))) if v.ndim == 2 else 0
+    if bad:
+        raise PleError(f"{name}: {bad} of {len(v)} vertices are NaN or infinite")
+    mesh = trimesh.Trimesh(v, np.asarray(mesh.faces), process=False)
+    mesh.merge_vertices()
+    if mesh.is_watertight and not mesh.is_winding_consistent:
+        trimesh.repair.fix_winding(mesh)
+    return Body(mesh.vertices, mesh.faces, placement, source, open, name)

@@ -1,0 +1,99 @@
+"""Cleanup of trimmed lattices against an independent reference: a queue-based peeling of the
+beam graph (one ball at a time) and networkx components."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import networkx as nx
+import numpy as np
+import pytest
+import trimesh
+from lattices import KINDS, random_lattice
+from ple.algebra.similarity import Translation
+from ple.cli.main import main
+from ple.filters.body import BodyFilter
+from ple.filters.cleanup import cleanup, cleanup_evaluation
+from ple.io.bodyfile import body_from_trimesh
+from ple.io.irfile import save_ir
+from ple.model.lattice import Evaluation
+
+
+def reference(ev: Evaluation):
+    """Kept rows, dangling count and component count by peeling with a queue, then networkx."""
+    n = len(ev.node_index)
+    adj = [[] for _ in range(n)]
+    for b, (x, y) in enumerate(ev.beam_nodes):
+        adj[x].append((y, b))
+        adj[y].append((x, b))
+    deg = [len(a) for a in adj]
+    alive, beam_alive = [True] * n, [True] * len(ev.beam_nodes)
+    todo = deque(v for v in range(n) if deg[v] <= 1)
+    while todo:
+        v = todo.popleft()
+        if not alive[v]:
+            continue
+        alive[v] = False
+        for w, b in adj[v]:
+            if beam_alive[b]:
+                beam_alive[b] = False
+                deg[w] -= 1
+                if alive[w] and deg[w] <= 1:
+                    todo.append(w)
+    g = nx.MultiGraph()
+    g.add_nodes_from(v for v in range(n) if alive[v])
+    g.add_edges_from((int(x), int(y)) for b, (x, y) in enumerate(ev.beam_nodes) if beam_alive[b])
+    comps = sorted(nx.connected_components(g), key=lambda c: (-len(c), min(c)))
+    keep = sorted(comps[0]) if comps else []
+    return np.array(keep, dtype=np.int64), n - sum(alive), len(comps)
+
+
+def trimmed_lattices():
+    rng = np.random.default_rng(7)
+    for n in range(4):
+        lat = random_lattice(rng, [KINDS[(n + a) % 5] for a in range(3)], (8, 7, 6), 0.45, 0.08, nodes=2)
+        mesh = trimesh.creation.torus(1.1, 0.45, major_sections=20, minor_sections=10)
+        mesh.apply_transform(trimesh.transformations.random_rotation_matrix(rng.random(3)))
+        lat.set_placement(Translation(-lat.evaluate().center.mean(axis=0)))
+        yield lat.with_filter(BodyFilter(body_from_trimesh(mesh), ["inside", "any"][n % 2]))
+
+
+@pytest.mark.parametrize("lat", list(trimmed_lattices()))
+def test_cleanup_matches_peeling_and_components(lat):
+    ev = lat.evaluate()
+    keep, dangling, comps = reference(ev)
+    out, report = cleanup_evaluation(ev)
+    assert report.dangling_nodes == dangling > 0  # trimming left dangling balls: the test can fail
+    assert report.components == comps
+    np.testing.assert_array_equal(out.node_index, ev.node_index[keep])
+    # every kept ball has degree >= 2 within the kept beams, and the kept graph is connected
+    deg = np.bincount(out.beam_nodes.reshape(-1), minlength=len(out.node_index))
+    assert len(out.node_index) == 0 or deg.min() >= 2
+    g = nx.MultiGraph(list(map(tuple, out.beam_nodes)))
+    assert len(out.node_index) == 0 or nx.number_connected_components(g) == 1
+    # counts add up
+    assert report.nodes + report.dangling_nodes + report.dropped_nodes == len(ev.node_index)
+    assert report.beams + report.dangling_beams + report.dropped_beams == len(ev.beam_nodes)
+    # as a filter of the lattice: the one evaluation gives the same nodes and beams
+    cleaned, _ = cleanup(lat)
+    again = cleaned.evaluate()
+    np.testing.assert_array_equal(again.node_index, out.node_index)
+    np.testing.assert_array_equal(again.beam_nodes, out.beam_nodes)
+
+
+def test_cleanup_flag(tmp_path, capsys):
+    lat = next(trimmed_lattices())
+    mesh = trimesh.creation.torus(1.1, 0.45, major_sections=20, minor_sections=10)
+    mesh_path = tmp_path / "t.obj"
+    mesh.export(mesh_path)
+    ir = tmp_path / "l.json"
+    save_ir(lat.unfiltered(), ir)
+    out = tmp_path / "e.npz"
+    assert main(["eval", str(ir), "--body", str(mesh_path), "--fill", "any", "--cleanup", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "cleanup: removed" in err and "kept" in err
+    want, report = cleanup_evaluation(lat.unfiltered().with_filter(
+        BodyFilter(body_from_trimesh(mesh), "any")).evaluate())
+    assert f"kept {report.nodes:,} balls" in err
+    with np.load(out) as got:
+        np.testing.assert_array_equal(got["node_index"], want.node_index)

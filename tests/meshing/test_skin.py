@@ -1,0 +1,87 @@
+"""Skins: watertight, and their volume within 1 % of Monte Carlo over the true solid (inside the
+body and either within the thickness of its surface, by brute-force distances, or inside the
+trimmed lattice, by point membership of its exact balls and beams)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from ple.filters.body import BodyFilter
+from ple.io.bodyfile import body_from_trimesh
+from ple.meshing.skin import skin
+from ple.meshing.tessellate import tessellate
+from ple.program.sources import load_lattice
+from ple.queries import biq
+
+pytest.importorskip("manifold3d")
+
+
+def convex_inside_depth(mesh, points):
+    """For a convex polyhedron: (inside, depth) by its face planes alone: a point is inside when it
+    is below every plane, and its distance to the surface is then the smallest plane distance."""
+    n = mesh.face_normals
+    off = np.einsum("ij,ij->i", n, mesh.triangles[:, 0])
+    depth = np.full(len(points), np.inf)
+    for s in range(0, len(points), 4096):
+        depth[s:s + 4096] = (off[None] - points[s:s + 4096] @ n.T).min(axis=1)
+    return depth > 0, depth
+
+
+@pytest.fixture(scope="module")
+def part():
+    mesh = trimesh.creation.icosphere(subdivisions=3)  # convex: its planes give the independent truth
+    mesh.apply_transform(np.diag([2.3, 1.8, 1.5, 1.0]) @ trimesh.transformations.random_rotation_matrix(
+        np.random.default_rng(2).random(3)))
+    mesh.apply_translation([4.5, 4.5, 4.5])
+    assert mesh.is_convex
+    return mesh
+
+
+def monte_carlo(mesh, thickness, lat=None, n=600_000, seed=0):
+    """Volume of the true solid: the body's exact volume times the fraction of uniform points in
+    it that lie within ``thickness`` of its surface or inside the lattice's balls and beams."""
+    rng = np.random.default_rng(seed)
+    lo, hi = mesh.bounds
+    p = rng.uniform(lo, hi, (n, 3))
+    inside, depth = convex_inside_depth(mesh, p)
+    p, depth = p[inside], depth[inside]
+    solid = depth < thickness
+    if lat is not None:
+        rest = np.flatnonzero(~solid)
+        solid[rest] = biq.pmc(lat, p[rest])
+    frac = solid.mean()
+    return frac * mesh.volume, np.sqrt(frac * (1 - frac) / len(p)) * mesh.volume
+
+
+@pytest.mark.parametrize("mode", ["any"])
+def test_skinned_lattice_is_watertight_with_the_monte_carlo_volume(part, mode):
+    body = body_from_trimesh(part)
+    lat = load_lattice("cubic").with_filter(BodyFilter(body, mode))
+    out = skin(body, 0.3, tessellate(lat))
+    assert out.is_watertight and out.is_volume
+    mc, se = monte_carlo(part, 0.3, lat)
+    assert 3 * se < 0.01 * mc  # the estimate is sharp enough for the 1 % claim
+    assert out.volume == pytest.approx(mc, rel=0.01)
+    # the lattice adds volume to the bare shell (the union is not the shell alone)
+    shell = skin(body, 0.3)
+    assert shell.is_watertight
+    mc_shell, _ = monte_carlo(part, 0.3)
+    assert shell.volume == pytest.approx(mc_shell, rel=0.01)
+    assert out.volume > shell.volume * 1.02
+
+
+def test_skin_command(tmp_path, part, capsys):
+    from ple.cli.main import main
+
+    path = tmp_path / "part.stl"
+    part.export(path)
+    out = tmp_path / "skinned.stl"
+    assert main(["skin", "cubic", "--body", str(path), "--thickness", "0.4", "--out", str(out)]) == 0
+    got = trimesh.load(out, force="mesh", process=False)
+    body = body_from_trimesh(part)
+    want = skin(body, 0.4, tessellate(load_lattice("cubic").with_filter(BodyFilter(body, "any"))))
+    assert want.is_watertight and len(got.faces) == len(want.faces)
+    assert got.volume == pytest.approx(want.volume, rel=1e-4)  # float32 STL
+    assert main(["skin", "cubic", "--thickness", "0.4", "--out", str(out)]) == 2
+    assert "needs --body" in capsys.readouterr().err
