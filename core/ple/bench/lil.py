@@ -34,8 +34,8 @@ CASES = [
 BIG_SCRIPT = """
 import json, resource, sys, time
 from ple.filters import lil
-from ple.program import load_lattice
-from ple.stream import stream_filter
+from ple import load_lattice
+from ple.io.chunks import stream_filter
 n, out = int(sys.argv[1]), sys.argv[2]
 fine = load_lattice("thesis_regular", {"n": n})
 coarse = load_lattice("lil_regular_coarse", {"span": n - 1.0})
