@@ -11,7 +11,7 @@ from ..clg.ir import clg_from_dict
 from ..clg.model import CLG
 from ..errors import PleError
 from .presets import preset_dir
-from .runtime import API, Program, _program_builtins, _program_line, parse_params
+from .runtime import API, Program, parse_params, run_source
 
 CLG_API = {"CLG": CLG, "Ball": model.Ball, "Beam": model.Beam, "HollowBeam": model.HollowBeam,
            "ExtendedHub": model.ExtendedHub, "Connector": model.Connector, "Union": model.Union,
@@ -27,37 +27,14 @@ class CLGProgram(Program):
         return self.namespace["clg"]
 
     def run(self, **params) -> CLG:
-        known = {p.name for p in self.parameters()}
-        for name in params:
-            if name not in known:
-                raise PleError(f"{self.name}: unknown parameter {name!r} (inputs: {', '.join(known) or 'none'})")
-        try:
-            out = self.function(**params)
-        except PleError as exc:
-            raise PleError(f"{self.name}: {exc}") from None
-        except Exception as exc:
-            raise PleError(f"{self.name}{_program_line(exc, self.name)}: program raised "
-                           f"{type(exc).__name__}: {exc}") from None
+        out = self.call(**params)
         if not isinstance(out, CLG):
             raise PleError(f"{self.name}: clg() must return a CLG, got {type(out).__name__}")
         return out
 
 
 def compile_clg_program(source: str, name: str = "<program>") -> CLGProgram:
-    try:
-        code = compile(source, name, "exec", dont_inherit=True)
-    except SyntaxError as exc:
-        raise PleError(f"{name}:{exc.lineno}: syntax error: {exc.msg}") from None
-    ns: dict = dict(API) | CLG_API
-    ns["__builtins__"] = _program_builtins()
-    ns["__name__"] = "ple_program"
-    try:
-        exec(code, ns)  # noqa: S102 - programs are trusted code by design (SPEC §9)
-    except Exception as exc:
-        raise PleError(f"{name}{_program_line(exc, name)}: program raised {type(exc).__name__}: {exc}") from None
-    if not callable(ns.get("clg")):
-        raise PleError(f"{name}: a CLG program must define a function clg(...)")
-    return CLGProgram(source, name, ns)
+    return CLGProgram(source, name, run_source(source, name, API | CLG_API, "clg", "a CLG program"))
 
 
 def clg_preset_folder():

@@ -109,12 +109,21 @@ class Program:
 
     def run(self, **params) -> Lattice:
         """Call ``lattice(**params)``; errors inside the program become PleError."""
+        lat = self.call(**params)
+        if not isinstance(lat, Lattice):
+            raise PleError(f"{self.name}: lattice() must return a Lattice, got {type(lat).__name__}")
+        lat.validate()
+        return lat
+
+    def call(self, **params):
+        """The entry function called with checked inputs; errors inside the program become
+        PleError naming the program's file and line (a MemoryError goes on to the limit's report)."""
         known = {p.name: p for p in self.parameters()}
         for name in params:
             if name not in known:
                 raise PleError(f"{self.name}: unknown parameter {name!r} (inputs: {', '.join(known) or 'none'})")
         try:
-            lat = self.function(**params)
+            return self.function(**params)
         except PleError as exc:
             raise PleError(f"{self.name}: {exc}") from None
         except MemoryError:
@@ -122,10 +131,6 @@ class Program:
         except Exception as exc:  # the program is user code: report where it failed
             line = _program_line(exc, self.name)
             raise PleError(f"{self.name}{line}: program raised {type(exc).__name__}: {exc}") from None
-        if not isinstance(lat, Lattice):
-            raise PleError(f"{self.name}: lattice() must return a Lattice, got {type(lat).__name__}")
-        lat.validate()
-        return lat
 
 
 def _program_line(exc: BaseException, filename: str) -> str:
@@ -155,20 +160,26 @@ def _program_builtins() -> dict:
 
 def compile_program(source: str, name: str = "<program>") -> Program:
     """Compile program text; a syntax error or a missing ``lattice`` names the problem."""
+    return Program(source, name, run_source(source, name, API, "lattice", "a program"))
+
+
+def run_source(source: str, name: str, api: dict, entry: str, what: str) -> dict:
+    """The namespace of program text run with ``api`` in scope; a syntax error, an error while
+    running, or no callable ``entry`` names the problem (``what``: "a program", …)."""
     try:
         code = compile(source, name, "exec", dont_inherit=True)  # not this module's future annotations
     except SyntaxError as exc:
         raise PleError(f"{name}:{exc.lineno}: syntax error: {exc.msg}") from None
-    ns: dict = dict(API)
+    ns: dict = dict(api)
     ns["__builtins__"] = _program_builtins()  # vendored core: "import ple" means this package
     ns["__name__"] = "ple_program"
     try:
         exec(code, ns)  # noqa: S102 - programs are trusted code by design (SPEC §9)
     except Exception as exc:
         raise PleError(f"{name}{_program_line(exc, name)}: program raised {type(exc).__name__}: {exc}") from None
-    if not callable(ns.get("lattice")):
-        raise PleError(f"{name}: a program must define a function lattice(...)")
-    return Program(source, name, ns)
+    if not callable(ns.get(entry)):
+        raise PleError(f"{name}: {what} must define a function {entry}(...)")
+    return ns
 
 
 @contextmanager
