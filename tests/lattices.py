@@ -54,3 +54,22 @@ def centre_on(lat: Lattice, target: Lattice) -> None:
     """Place ``lat`` so that its mean node centre meets ``target``'s (both lattices then overlap)."""
     shift = target.evaluate().center.mean(axis=0) - lat.evaluate().center.mean(axis=0)
     lat.set_placement(Translation(shift))
+
+
+def clean_centred_lattice(v_count: int, v) -> Lattice:
+    """A clean lattice of two template nodes: a corner ball with three axis struts and a thinner
+    centre ball joined to the eight corners around it; U a translation, W a scaling, V given."""
+    lat = Lattice()
+    c = lat.add_node([0, 0, 0], 0.1)
+    m = lat.add_node([0.5, 0.5, 0.5], 0.06)
+    for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1)]:
+        lat.add_beam(c, c, *off)
+    for di in (0, 1):
+        for dj in (0, 1):
+            for dk in (0, 1):
+                lat.add_beam(m, c, di, dj, dk)
+    lat.set_u(3, Translation([1, 0, 0]))
+    lat.set_v(v_count, v)
+    lat.set_w(v_count, Scaling(1.1, [0.7, 0.6, -9]))
+    return lat
+

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from lattices import clean_centred_lattice
 from ple.algebra.elements import beam_distance, enclosing_ball
 from ple.algebra.similarity import Rotation, Scaling, Screw, Swirl, Translation
 from ple.errors import PleError
@@ -98,24 +99,8 @@ def _inside(p, elements, tol=0.0):
     return d < -tol, d
 
 
-def _clean_lattice() -> Lattice:
-    lat = Lattice()
-    c = lat.add_node([0, 0, 0], 0.1)
-    m = lat.add_node([0.5, 0.5, 0.5], 0.06)
-    for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1)]:
-        lat.add_beam(c, c, *off)
-    for di in (0, 1):
-        for dj in (0, 1):
-            for dk in (0, 1):
-                lat.add_beam(m, c, di, dj, dk)
-    lat.set_u(3, Translation([1, 0, 0]))
-    lat.set_v(2, Translation([0, 1, 0]))
-    lat.set_w(2, Scaling(1.1, [0.7, 0.6, -9]))
-    return lat
-
-
 def test_volume_and_area_vs_monte_carlo():
-    lat = _clean_lattice()
+    lat = clean_centred_lattice(2, Translation([0, 1, 0]))
     m = lattice_measures(lat)
     assert np.isclose(lattice_volume(lat), m["volume"])
     elements = _elements(lat)

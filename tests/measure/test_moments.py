@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+from lattices import clean_centred_lattice
 from ple.algebra.elements import beam_distance
 from ple.algebra.similarity import Rotation, Scaling, Screw, Swirl, Translation
 from ple.filters.implicit import ImplicitFilter, TPMSField
@@ -232,25 +233,9 @@ def test_volume_and_area_agree_with_lattice_measures():
     assert m["area"] == pytest.approx(old["area"], rel=3e-4)
 
 
-def _clean_lattice() -> Lattice:
-    lat = Lattice()
-    c = lat.add_node([0, 0, 0], 0.1)
-    m = lat.add_node([0.5, 0.5, 0.5], 0.06)
-    for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1)]:
-        lat.add_beam(c, c, *off)
-    for di in (0, 1):
-        for dj in (0, 1):
-            for dk in (0, 1):
-                lat.add_beam(m, c, di, dj, dk)
-    lat.set_u(3, Translation([1, 0, 0]))
-    lat.set_v(3, Rotation(0.25, [0, 0, 1], [-2, -2, 0]))
-    lat.set_w(3, Scaling(1.1, [0.7, 0.6, -9]))
-    return lat
-
-
 @pytest.mark.parametrize("region", [None, "1:3,0:2,1:3"])
 def test_steady_lattice_vs_monte_carlo(region):
-    lat = _clean_lattice()
+    lat = clean_centred_lattice(3, Rotation(0.25, [0, 0, 1], [-2, -2, 0]))
     m = mass_properties(lat, region)
     _assert_monte_carlo(m, _elements(lat.evaluate(region)))
 
