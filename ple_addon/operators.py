@@ -155,11 +155,16 @@ class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
             self.report({"ERROR"}, f"{exc} (the program is kept in text block {text.name!r})")
             return {"CANCELLED"}
         rig.ple.filepath = linked
-        for obj in context.view_layer.objects:
-            obj.select_set(False)
-        context.view_layer.objects.active = rig
-        rig.select_set(True)
+        select_only(context, rig)
         return {"FINISHED"}
+
+
+def select_only(context, obj) -> None:
+    """Make ``obj`` the only selected and the active object (a new rig, a copy)."""
+    for other in context.view_layer.objects:
+        other.select_set(False)
+    context.view_layer.objects.active = obj
+    obj.select_set(True)
 
 
 class PLE_OT_program_run(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
@@ -587,10 +592,7 @@ class PLE_OT_duplicate(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender
 
     def run(self, context, rig):
         copy = rigmod.duplicate(context, rig)
-        for obj in context.view_layer.objects:
-            obj.select_set(False)
-        context.view_layer.objects.active = copy
-        copy.select_set(True)
+        select_only(context, copy)
         return {"FINISHED"}
 
 
