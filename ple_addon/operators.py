@@ -18,9 +18,9 @@ from bpy.props import (
     StringProperty,
 )
 
-from . import prefs
+from . import jobs, prefs
 from . import rig as rigmod
-from .corelink import PleError, core, ir, needs, presets, program, snippets, styles, work
+from .corelink import PleError, core, ir, needs, presets, snippets, styles, work
 
 SNIPPET_TEXT = "PLE snippet"
 EXPORT_BOXES = 20  # an STL export streams the region in about this many boxes (progress steps)
@@ -69,15 +69,8 @@ class RigOperator:
 
     def set_filter(self, rig, **settings) -> set:
         """Set filter settings and redraw; on error the previous settings come back."""
-        old = {k: getattr(rig.ple, k) for k in settings}
-        old = {k: tuple(v) if k == "stencil_shape" else v for k, v in old.items()}
-        for k, v in settings.items():
-            setattr(rig.ple, k, v)
-        err = rigmod.refresh(rig, force=True)
+        err = rigmod.apply_filter(rig, settings)
         if err:
-            for k, v in old.items():
-                setattr(rig.ple, k, v)
-            rigmod.refresh(rig, force=True)
             self.report({"ERROR"}, err)
             return {"CANCELLED"}
         return {"FINISHED"}
@@ -216,8 +209,9 @@ class PLE_OT_program_apply(RigOperator, bpy.types.Operator):  # noqa: N801 - Ble
         else:
             if not rigmod.trusted(rig):
                 raise PleError("the program is not trusted: press Run Program first")
-            with program.time_limit(prefs.get("program_seconds"), text.name):
-                new = snippets.apply_edits(text.as_string(), edits, rigmod.params_of(rig), name=text.name)
+            source, params = text.as_string(), rigmod.params_of(rig)  # the rewrite runs the program: contained
+            new = jobs.call(lambda: snippets.apply_edits(source, edits, params, name=text.name), text.name,
+                            "the program")
         text.from_string(new)
         rig.ple.edits = "[]"
         self.report({"INFO"}, f"{len(edits)} edit(s) written into {text.name}")
@@ -313,25 +307,6 @@ class PLE_OT_beam_remove(RigOperator, bpy.types.Operator):  # noqa: N801 - Blend
         return self.refreshed(rig)
 
 
-class PLE_OT_lil_filter(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
-    """Lattice-in-Lattice filter (thesis §9): draw only the nodes of the region whose balls
-    interfere with a coarse PLE lattice"""
-
-    bl_idname = "ple.lil_filter"
-    bl_label = "LiL Filter"
-
-    coarse: StringProperty(name="Coarse", description="Coarse PLE lattice object (default: another selected one)")
-
-    def run(self, context, rig):
-        if self.coarse:
-            coarse = bpy.data.objects.get(self.coarse)
-        else:
-            coarse = next((o for o in context.selected_objects if rigmod.is_rig(o) and o != rig), None)
-        if not rigmod.is_rig(coarse) or coarse == rig:
-            raise PleError("LiL filter: give (or select) another PLE lattice object as the coarse lattice")
-        return self.set_filter(rig, filter_kind="LIL", coarse=coarse)
-
-
 class PLE_OT_stencil_filter(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
     """Index stencil filter (thesis §9): keep node-group (i, j, k) where the stencil at
     (i, j, k) modulo its shape is 1"""
@@ -396,17 +371,21 @@ BEYOND = BoolProperty(name="Beyond the limit", default=False, options={"SKIP_SAV
 
 class SteppedOperator(RigOperator):
     """Long work as steps: a subclass defines the generator ``steps(context, rig)`` yielding
-    progress fractions; ``execute`` runs them all with progress; ``invoke`` (with a window)
-    runs one step per timer tick so that Esc cancels between steps."""
+    progress fractions (its core work runs contained in a child process, ``jobs.follow``) and
+    sets ``self.result`` to the message it ends with; ``execute`` runs them all; ``invoke``
+    (with a window) runs one step per timer tick, so that Esc cancels at any moment. Progress
+    and the result go to the panel (``rig.ple.message``) and, while running, the status bar."""
 
     _steps = None
     _timer = None
+    _rig = None
+    result = ""
 
     def execute(self, context):
         wm = context.window_manager
         try:
-            rig = self.get_rig(context)
-            gen = self.steps(context, rig)
+            self._rig = self.get_rig(context)
+            gen = self.steps(context, self._rig)
             wm.progress_begin(0, 100)
             try:
                 for frac in gen:
@@ -416,6 +395,7 @@ class SteppedOperator(RigOperator):
         except PleError as exc:
             self.fail(context, str(exc))
             return {"CANCELLED"}
+        self.done(context)
         return {"FINISHED"}
 
     def fail(self, context, message: str) -> None:
@@ -424,14 +404,22 @@ class SteppedOperator(RigOperator):
         found = rigmod.rig_of(bpy.data.objects.get(self.rig) if self.rig else context.active_object)
         if found is not None:
             found.ple.status = message
+            found.ple.message = f"{self.bl_label}: failed"
+
+    def done(self, context) -> None:
+        if self.result:
+            self.report({"INFO"}, self.result)
+            self._rig.ple.message = self.result
 
     def invoke(self, context, event):
         if context.window is None or bpy.app.background:
             return self.execute(context)
         try:
-            self._steps = self.steps(context, self.get_rig(context))
+            self._rig = self.get_rig(context)
+            self._steps = self.steps(context, self._rig)
             next(self._steps)  # the first step checks the work budget
         except StopIteration:
+            self.done(context)
             return {"FINISHED"}
         except PleError as exc:
             if "refused" in str(exc) and not self.beyond_limit:  # ask: beyond the limit?
@@ -443,22 +431,36 @@ class SteppedOperator(RigOperator):
             return {"CANCELLED"}
         wm = context.window_manager
         wm.progress_begin(0, 100)
-        self._timer = wm.event_timer_add(0.01, window=context.window)
+        self._timer = wm.event_timer_add(jobs.TICK, window=context.window)
         wm.modal_handler_add(self)
+        self.show(context, 0.0)
         return {"RUNNING_MODAL"}
+
+    def show(self, context, frac: float) -> None:
+        """Progress in the cursor, the status bar and the panel."""
+        context.window_manager.progress_update(int(100 * frac))
+        text = f"{self.bl_label}: {100 * frac:.0f} % (Esc cancels)"
+        self._rig.ple.message = text
+        if context.workspace is not None:
+            context.workspace.status_text_set(text)
+        for area in context.screen.areas if context.screen is not None else ():
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
 
     def modal(self, context, event):
         if event.type == "ESC":
-            self._steps.close()  # the generator cleans up what it started
+            self._steps.close()  # stops the child: nothing of the job is applied
             self.finish(context)
-            self.report({"WARNING"}, "cancelled")
+            self._rig.ple.message = f"{self.bl_label}: cancelled, nothing changed"
+            self.report({"WARNING"}, self._rig.ple.message)
             return {"CANCELLED"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         try:
-            context.window_manager.progress_update(int(100 * next(self._steps)))
+            self.show(context, next(self._steps))
         except StopIteration:
             self.finish(context)
+            self.done(context)
             return {"FINISHED"}
         except PleError as exc:
             self.finish(context)
@@ -471,6 +473,19 @@ class SteppedOperator(RigOperator):
         if self._timer is not None:
             wm.event_timer_remove(self._timer)
         wm.progress_end()
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
+
+    def mesh_job(self, lat, region, style: str):
+        """Steps tessellating ``region`` box by box in a child process (thesis §6.2.2 hubs per
+        box); returns the boxes (vertices, faces)."""
+        tess = needs("meshing.tessellate")
+        size = max(1, region.groups // EXPORT_BOXES)
+        boxes = len(range(0, region.groups, size))
+        job = jobs.start(lambda: tess.iter_triangles(lat, region, core_style(style), max_groups=size),
+                         self._rig.name, f"the {core_style(style)} tessellation of {region}", self.beyond_limit)
+        chunks, _ = yield from jobs.follow(job, lambda items: 0.8 * min(1.0, len(items) / boxes))
+        return chunks
 
 
 class PLE_OT_tessellate(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
@@ -483,6 +498,7 @@ class PLE_OT_tessellate(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Bl
     beyond_limit: BEYOND
 
     def steps(self, context, rig):
+        self._rig = rig
         lat = rigmod.shown_lattice(rig)  # the panel's filter too: what is drawn is what is meshed
         region = rigmod.region_of(rig, lat)
         if region is None:
@@ -490,21 +506,15 @@ class PLE_OT_tessellate(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Bl
         budget(lat, region, self.style, f"{self.style.lower()} tessellation of {region}",
                beyond=self.beyond_limit)
         yield 0.0
-        tess = needs("meshing.tessellate")
-        # box by box (progress, and Esc between boxes in the modal run), welded by the core
-        boxes = max(1, region.groups // EXPORT_BOXES)
-        chunks = []
-        for n, chunk in enumerate(tess.iter_triangles(lat, region, core_style(self.style), max_groups=boxes)):
-            chunks.append(chunk)
-            yield min(0.8, 0.8 * (n + 1) * boxes / region.groups)
-        verts, faces = tess.weld_chunks(chunks)
+        chunks = yield from self.mesh_job(lat, region, self.style)
+        verts, faces = needs("meshing.tessellate").weld_chunks(chunks)  # welded by the core
         yield 0.8
         me = mesh_from_arrays(f"{rig.name}.{self.style.lower()}", verts, faces)
         obj = bpy.data.objects.new(me.name, me)
         for coll in rig.users_collection:
             coll.objects.link(obj)
         obj.matrix_world = rig.matrix_world
-        self.report({"INFO"}, f"{len(faces)} triangles")
+        self.result = f"{obj.name}: {len(faces)} triangles"
         yield 1.0
 
 
@@ -527,6 +537,7 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
         return super().invoke(context, event)
 
     def steps(self, context, rig):
+        self._rig = rig
         path = Path(bpy.path.abspath(self.filepath))
         if path.suffix.lower() not in (".stl", ".3mf", ".ply", ".obj", ".glb"):
             raise PleError(f"{self.filepath!r}: choose a .stl, .3mf, .ply, .obj or .glb file")
@@ -538,21 +549,56 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
         streamed = path.suffix.lower() == ".stl"
         budget(lat, region, self.style, f"export of {region}", streamed=streamed, beyond=self.beyond_limit)
         yield 0.0
-        # box by box (thesis §6.2.2 hubs per box): progress and Esc between boxes; binary STL
-        # streams the boxes, snapped to the region's float32 grid as `ple mesh` writes it (previews
-        # are not snapped); other formats are welded into one mesh by the core
-        boxes = max(1, region.groups // EXPORT_BOXES)
-        chunks = []
-        for n, chunk in enumerate(tess.iter_triangles(lat, region, core_style(self.style), max_groups=boxes)):
-            chunks.append(chunk)
-            yield min(0.8, 0.8 * (n + 1) * boxes / region.groups)
+        # binary STL is snapped to the region's float32 grid as `ple mesh` writes it (previews are
+        # not snapped); other formats are welded into one mesh by the core
+        chunks = yield from self.mesh_job(lat, region, self.style)
         yield 0.8
         if streamed:
             grid = None if core_style(self.style) == "balls-beams" else tess.output_grid(lat, region)
             count = export.write_stl(path, chunks, header=export.stl_header(), grid=grid)
         else:
             count = export.write_chunks(path, chunks)
-        self.report({"INFO"}, f"{count} triangles written to {path}")
+        self.result = f"{count} triangles written to {path}"
+        yield 1.0
+
+
+class PLE_OT_lil_filter(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Lattice-in-Lattice filter (thesis §9): draw only the nodes of the region whose balls
+    interfere with a coarse PLE lattice (a job: progress, Esc cancels, the rig changes only
+    when it is complete)"""
+
+    bl_idname = "ple.lil_filter"
+    bl_label = "LiL Filter"
+
+    coarse: StringProperty(name="Coarse", description="Coarse PLE lattice object (default: another selected one)")
+    beyond_limit: BEYOND
+
+    def steps(self, context, rig):
+        self._rig = rig
+        coarse = bpy.data.objects.get(self.coarse) if self.coarse else next(
+            (o for o in context.selected_objects if rigmod.is_rig(o) and o != rig), None)
+        if not rigmod.is_rig(coarse) or coarse == rig:
+            raise PleError("LiL filter: give (or select) another PLE lattice object as the coarse lattice")
+        lat = rigmod.lattice_of(rig)
+        shown = lat.with_filter(rigmod.lil_filter(rig, coarse))
+        region = rigmod.region_of(rig, lat)
+        if region is None:
+            raise PleError("the region is empty: set Region from/to inside the repetition counts")
+        if not self.beyond_limit:
+            work.check(work.estimate(lat, region), max_bytes=prefs.max_bytes(), what=f"LiL filter of region {region}")
+        key = rigmod.lil_key(rig, coarse)
+        yield 0.0
+        size = max(1, region.groups // EXPORT_BOXES)  # the filter is asked box by box: progress
+        job = jobs.start(lambda: shown.evaluate_steps(region, max_groups=size), rig.name,
+                         f"the LiL filter of region {region}", self.beyond_limit)
+        _, ev = yield from jobs.follow(job, lambda items: 0.95 * (items[-1] if items else 0.0))
+        # drawn only if nothing it depends on changed meanwhile (else evaluated again, contained)
+        prepared = (lat, ev) if rigmod.lil_key(rig, coarse) == key else None
+        err = rigmod.apply_filter(rig, {"coarse": coarse, "filter_kind": "LIL"}, prepared)
+        if err:
+            raise PleError(err)
+        kept, total = len(ev.center), region.groups * len(lat.nodes)
+        self.result = f"LiL filter by {coarse.name}: {kept} of {total} balls of region {region} kept"
         yield 1.0
 
 

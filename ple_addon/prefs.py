@@ -1,4 +1,4 @@
-"""Add-on preferences: the work budget and the program time limit (Edit › Preferences ›
+"""Add-on preferences: the work budget, the program and job time limits (Edit › Preferences ›
 Add-ons › PLE). Outside Blender's preferences (a source checkout) the defaults apply."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import FloatProperty, IntProperty
 
-DEFAULTS = {"memory_gb": 2.0, "max_triangles": 10_000_000, "program_seconds": 10.0}
+DEFAULTS = {"memory_gb": 2.0, "max_triangles": 10_000_000, "program_seconds": 10.0, "job_seconds": 600.0}
 
 
 class PLE_AddonPreferences(bpy.types.AddonPreferences):  # noqa: N801 - Blender naming
@@ -19,14 +19,18 @@ class PLE_AddonPreferences(bpy.types.AddonPreferences):  # noqa: N801 - Blender 
                                description="Tessellation and export are refused beyond this estimated "
                                            "number of triangles")
     program_seconds: FloatProperty(name="Program time limit (s)", min=0.0, default=DEFAULTS["program_seconds"],
-                                   description="A lattice program running longer is stopped with a "
-                                               "report (0: no limit)")
+                                   description="A lattice program (or a filtered redraw) running longer is "
+                                               "stopped with a report (0: no limit)")
+    job_seconds: FloatProperty(name="Job time limit (s)", min=0.0, default=DEFAULTS["job_seconds"],
+                               description="Tessellation, export and filter jobs running longer are stopped "
+                                           "with a report (0: no limit; Esc stops them at any time)")
 
     def draw(self, context):
         col = self.layout.column()
         col.prop(self, "memory_gb")
         col.prop(self, "max_triangles")
         col.prop(self, "program_seconds")
+        col.prop(self, "job_seconds")
 
 
 def settings():

@@ -88,6 +88,7 @@ class PLE_ObjectSettings(bpy.types.PropertyGroup):  # noqa: N801 - Blender namin
     filepath: StringProperty(name="Program file", subtype="FILE_PATH",
                              description="The file on disk the program text was loaded from (Reload / Save)")
     status: StringProperty(name="Status", description="Last problem met while evaluating the lattice")
+    message: StringProperty(name="Message", description="Progress or result of the last job (tessellate, export, LiL)")
 
 
 def register():

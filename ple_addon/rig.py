@@ -18,8 +18,8 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from . import draw, prefs
-from .corelink import PleError, cage, core, ir, precision, program, snippets, work
+from . import draw, jobs, prefs
+from .corelink import PleError, cage, core, ir, precision, snippets, work
 
 PARAM_PREFIX = "ple:"
 FRAME_NAMES = ("G", "u", "v", "w")
@@ -34,7 +34,7 @@ class RigState:
     """What the add-on last drew for a rig, to tell user moves from its own writes."""
 
     program_key: tuple = ()
-    program: object = None
+    inputs: list | None = None  # the program's inputs (runtime.Param), as its child process gave them
     base: object = None
     lattice: object = None
     expected: dict = field(default_factory=dict)
@@ -149,16 +149,14 @@ def base_lattice(rig, st: RigState):
         except json.JSONDecodeError as exc:
             raise PleError(f"{text.name}: malformed JSON at line {exc.lineno}: {exc.msg}") from None
         base = ir.lattice_from_ir(data)
-        prog = None
+        inputs = None
     else:
         if not trusted(rig):
             raise PleError(f"{text.name}: not run because Blender does not trust scripts "
                            "(enable Auto Run Python Scripts, or press Run Program; frame moves are "
                            "kept until then)")
-        with program.time_limit(prefs.get("program_seconds"), text.name):  # the program's own frames
-            prog = program.compile_program(source, text.name)
-            base = prog.run(**params)
-    st.program_key, st.program, st.base = key, prog, base
+        base, inputs = jobs.run_text(source, text.name, params)  # contained: time and memory limits
+    st.program_key, st.inputs, st.base = key, inputs, base
     return base
 
 
@@ -210,7 +208,12 @@ def filtered(rig, lat, space=None, _seen=()):
         if len(bits) != n or set(bits) - {"0", "1"}:
             raise PleError(f"stencil: expected {n} characters 0/1 for shape {shape}, got {bits!r}")
         return filters.Stencil(np.array([c == "1" for c in bits]).reshape(shape))
-    coarse = rig.ple.coarse
+    return lil_filter(rig, rig.ple.coarse, space, _seen)
+
+
+def lil_filter(rig, coarse, space=None, _seen=()):
+    """The LiL filter of ``rig`` by the rig ``coarse`` (cascading through the coarse rig's own
+    LiL), in the coordinates of ``space`` (default: ``rig``); the rig's settings are not read."""
     if not is_rig(coarse):
         raise PleError("LiL filter: choose a coarse PLE lattice object")
     if uid(coarse) in _seen or coarse == rig:
@@ -218,7 +221,7 @@ def filtered(rig, lat, space=None, _seen=()):
     space = rig if space is None else space
     coarse_lat = in_rig_space(space, coarse, lattice_of(coarse))
     inner = filtered(coarse, coarse_lat, space, (*_seen, uid(rig)))
-    return filters.LiL(coarse_lat.with_filter(inner))
+    return core("filters").LiL(coarse_lat.with_filter(inner))
 
 
 def evaluate_region(rig, lat, st: RigState | None = None):
@@ -241,7 +244,29 @@ def evaluate_region(rig, lat, st: RigState | None = None):
         if st is not None:
             st.topology = (key, ev)
         return ev
-    return lat.with_filter(panel).evaluate(r)  # the program's own filter, then the panel's
+    shown = lat.with_filter(panel)  # the program's own filter, then the panel's
+    return jobs.call(lambda: shown.evaluate(r), rig.name, f"the filtered evaluation of region {r}")
+
+
+def apply_filter(rig, settings: dict, prepared=None) -> str | None:
+    """Set the panel's filter ``settings`` and redraw (``prepared``: what a job computed for them,
+    see ``refresh``); on error the previous settings and drawing come back and the error is
+    returned. Rigs filtered by this one follow."""
+    old = {k: tuple(v) if k == "stencil_shape" else v for k, v in ((k, getattr(rig.ple, k)) for k in settings)}
+    _set_quietly(rig, **settings)
+    err = refresh(rig, force=True, prepared=prepared)
+    if err:
+        _set_quietly(rig, **old)
+        refresh(rig, force=True)
+        return err
+    refresh_dependents(rig)
+    return None
+
+
+def lil_key(rig, coarse) -> tuple:
+    """What a LiL job of ``rig`` by ``coarse`` depends on: if it changed while the job ran, its
+    result is not drawn (the filter is evaluated again)."""
+    return signature(rig), signature(coarse), _flat(rig.matrix_world.inverted() @ coarse.matrix_world)
 
 
 def shown_lattice(rig):
@@ -321,8 +346,10 @@ def signature(rig, _seen=()) -> tuple:
             tuple(p.stencil_shape), p.stencil_bits, p.show_template, p.source_kind)
 
 
-def refresh(rig, force: bool = False) -> str | None:
+def refresh(rig, force: bool = False, prepared=None) -> str | None:
     """Read user moves, re-evaluate and redraw if anything changed; returns an error or None.
+    ``prepared``: (lattice, evaluation) a job computed for the rig as it is now, drawn instead
+    of evaluating again unless the user moved something since.
 
     Errors (bad program, degenerate frame) leave the program text, the edits and the last
     good drawing untouched and are shown as the rig's status."""
@@ -341,8 +368,11 @@ def refresh(rig, force: bool = False) -> str | None:
                 if rig.ple.status:  # e.g. a degenerate frame was put back: nothing is wrong now
                     rig.ple.status = ""
                 return None
-            lat = lattice_of(rig, st, new)  # new edits are kept only if the lattice they give is valid
-            ev = evaluate_region(rig, lat, st)
+            if prepared is not None and not new:
+                lat, ev = prepared
+            else:
+                lat = lattice_of(rig, st, new)  # new edits are kept only if the lattice they give is valid
+                ev = evaluate_region(rig, lat, st)
         except PleError as exc:
             if rig.ple.status != str(exc):
                 notify(rig, str(exc))
@@ -451,9 +481,9 @@ def new_part(rig, name: str, data, role: str, parent=None):
     return obj
 
 
-def set_params(rig, prog) -> None:
-    """Program inputs as custom properties with slider ranges (``Range(lo, hi)``)."""
-    for prm in prog.parameters():
+def set_params(rig, inputs) -> None:
+    """Program inputs (``runtime.Param``) as custom properties with slider ranges (``Range(lo, hi)``)."""
+    for prm in inputs:
         key = PARAM_PREFIX + prm.name
         if key not in rig:
             rig[key] = prm.default
@@ -514,7 +544,7 @@ def create(context, name: str, text, source_kind: str = "PROGRAM", region=(3, 3,
         probe.ple.text, probe.ple.source_kind = text, source_kind
         _trusted.add(uid(probe))
         base = base_lattice(probe, st)
-        prog = st.program
+        inputs = st.inputs
         clamped = tuple(min(r, c) for r, c in zip(region, base.counts))
         work.check(work.estimate(base, f"0:{clamped[0]},0:{clamped[1]},0:{clamped[2]}"),
                     max_bytes=prefs.max_bytes(), what="drawing the region")
@@ -533,8 +563,8 @@ def create(context, name: str, text, source_kind: str = "PROGRAM", region=(3, 3,
     rig.ple.region_max = clamped
     trust(rig)
     claim(rig)
-    if prog is not None:
-        set_params(rig, prog)
+    if inputs is not None:
+        set_params(rig, inputs)
     build_parts(rig, base)
     _state[uid(rig)] = st
     err = refresh(rig, force=True)

@@ -108,6 +108,8 @@ class PLE_PT_program(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender nami
         row.operator("ple.remove", icon="TRASH")
         if p.status:
             layout.label(text=p.status, icon="ERROR")
+        if p.message:
+            layout.label(text=p.message, icon="INFO")
 
 
 class PLE_PT_frames(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender naming

@@ -505,6 +505,28 @@ class Lattice:
         ev.beam_index, ev.beam_nodes = beams_between(self, r, rows, r, rows)
         return ev
 
+    def evaluate_steps(self, region=None, max_groups: int = 1 << 14) -> Iterator[float]:
+        """``evaluate(region)`` with the filter asked box by box (``iter_slabs``): a generator
+        yielding the fraction of node-groups done after each box and returning the Evaluation
+        (the same arrays), so that a caller can show progress and stop between boxes."""
+        r = self.region(region)
+        if self.filter is None:
+            return self.evaluate_unfiltered(r)
+        centers, radii = self.region_balls(r)
+        nn = len(self.nodes)
+        keep = np.zeros(radii.shape, dtype=bool)
+        done = 0
+        for box in self.iter_slabs(max_groups, r):
+            sel = (slice(box.i0 - r.i0, box.i1 - r.i0), slice(box.j0 - r.j0, box.j1 - r.j0),
+                   slice(box.k0 - r.k0, box.k1 - r.k0))
+            keep[sel] = self.keeps(box.node_index(nn), centers[sel].reshape(-1, 3),
+                                   radii[sel].reshape(-1)).reshape(keep[sel].shape)
+            done += box.groups
+            yield done / r.groups
+        ev, rows = self.region_rows(r, keep.reshape(-1), (centers, radii))
+        ev.beam_index, ev.beam_nodes = beams_between(self, r, rows, r, rows)
+        return ev
+
     def evaluate_unfiltered(self, region=None) -> Evaluation:
         """Every node and beam of a region, ignoring the filter (the steady program itself)."""
         r = self.region(region)
@@ -552,13 +574,15 @@ class Lattice:
         keep[rows] = self.filter.node_mask(self, idx[rows], np.asarray(centers)[rows], np.asarray(radii)[rows])
         return keep
 
-    def region_rows(self, region=None) -> tuple[Evaluation, np.ndarray]:
+    def region_rows(self, region=None, keep=None, balls=None) -> tuple[Evaluation, np.ndarray]:
         """Kept nodes of a region (an Evaluation without beams) and the region's row map: int64
-        (ni, nj, nk, nn), each kept node's row or -1 for a removed node (for streaming)."""
+        (ni, nj, nk, nn), each kept node's row or -1 for a removed node (for streaming).
+        ``keep`` (N,) and ``balls`` (``region_balls``) when already computed."""
         r = self.region(region)
-        centers, radii = self.region_balls(r)
+        centers, radii = self.region_balls(r) if balls is None else balls
         index = r.node_index(len(self.nodes))
-        keep = self.keeps(index, centers.reshape(-1, 3), radii.reshape(-1))
+        if keep is None:
+            keep = self.keeps(index, centers.reshape(-1, 3), radii.reshape(-1))
         rows = np.where(keep, np.cumsum(keep) - 1, -1).reshape(radii.shape)
         nodes = Evaluation(index[keep], centers.reshape(-1, 3)[keep], radii.reshape(-1)[keep],
                            np.zeros((0, 4), np.int64), np.zeros((0, 2), np.int64))

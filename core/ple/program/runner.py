@@ -1,17 +1,20 @@
-"""Contained programs: run a lattice program in a child process (docs/reliability.md).
+"""Contained work: lattice programs and long core calls in a child process (docs/reliability.md).
 
-The child (``os.fork``: the core is already imported, so a run costs milliseconds) builds the
-lattice under a memory limit (``RLIMIT_AS``) and sends it back; the parent waits at most
-``timeout`` seconds. ``sys.exit``, ``os._exit``, any ``BaseException``, running out of memory
-and crashes of the child become one PleError naming the program file and, where known, the
-line. IR files and presets in JSON are plain data and load in-process.
+A ``Job`` runs a function in a child (``os.fork``: the core is already imported, so a start
+costs milliseconds) under a memory limit (``RLIMIT_AS``); the parent waits at most ``timeout``
+seconds and may cancel it at any moment (Blender's Esc). What the function yields on the way
+(progress fractions, mesh chunks) comes back as messages; what it returns is the result.
+``sys.exit``, ``os._exit``, any ``BaseException``, running out of memory and crashes of the
+child become one PleError naming the program file and, where known, the line. A hang or a
+memory bomb costs the child, never the caller (the CLI, batch workers, Blender).
 
-What comes back is the Lattice object, pickled by the child and unpickled by the parent with
-an allowlist (classes of this package, numpy arrays and scalars, plain containers), its
-filter included: the IR (``ple-lattice/1``) would lose a program's metadata and its
-canonical similarities are not bit-exact for composed similarities. Nothing outside the
-allowlist can be constructed by the parent; the result is then checked as an IR file is
-(``ple.model.budget.check_finite``).
+``run_program`` builds a lattice from a program file, a preset or (``run_text``) program text;
+IR files and presets in JSON are plain data and load in-process. What comes back is the
+Lattice object, pickled by the child and unpickled by the parent with an allowlist (classes of
+this package, numpy arrays and scalars, plain containers), its filter included: the IR
+(``ple-lattice/1``) would lose a program's metadata and its canonical similarities are not
+bit-exact for composed similarities. Nothing outside the allowlist can be constructed by the
+parent; a lattice is then checked as an IR file is (``ple.model.budget.check_finite``).
 """
 
 from __future__ import annotations
@@ -23,14 +26,19 @@ import os
 import pickle
 import select
 import signal
+import struct
 import sys
 import time
 import traceback
+import types
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
 
 from ..errors import PleError
 from ..model.budget import check_finite, human
 from ..model.lattice import Lattice
-from .runtime import ROOT_PACKAGE
+from .runtime import ROOT_PACKAGE, compile_program
 from .sources import load_lattice, resolve_source
 
 DEFAULT_TIMEOUT = 30.0
@@ -39,6 +47,18 @@ _SAFE_BUILTINS = {"set", "frozenset", "complex", "slice", "range", "tuple", "lis
                   "getattr", "object"}
 _SAFE_NUMPY = ("numpy", "numpy.core.multiarray", "numpy.core.numeric", "numpy._core.multiarray",
                "numpy._core.numeric", "numpy.dtypes", "numpy.random._pickle", "copyreg", "_codecs")
+_FRAME = struct.Struct("<Q")  # each message: its length, then its pickle
+
+
+@dataclass(frozen=True)
+class Hints:
+    """How the user raises a limit, in the words of the door that set it."""
+
+    timeout: str = "raise the limit with --timeout"
+    memory: str = "raise it with --max-memory"
+
+
+CLI_HINTS = Hints()
 
 
 class _ProgramExit(BaseException):
@@ -63,7 +83,7 @@ def _where(exc: BaseException, program: str) -> str:
     return program
 
 
-def _describe(exc: BaseException, program: str, memory: int | None) -> str:
+def _describe(exc: BaseException, program: str, memory: int | None, hints: Hints, what: str) -> str:
     where = _where(exc, program)
     if isinstance(exc, SystemExit):
         return f"{where}: the program called sys.exit({exc.code!r}); a program must return a Lattice"
@@ -71,57 +91,67 @@ def _describe(exc: BaseException, program: str, memory: int | None) -> str:
         return f"{where}: the program called os._exit({exc.args[0]!r}); a program must return a Lattice"
     if isinstance(exc, MemoryError):
         limit = f" (limit {human(memory)})" if memory else ""
-        return f"{where}: the program ran out of memory{limit}; raise it with --max-memory"
+        return f"{where}: {what} ran out of memory{limit}; {hints.memory}"
     if isinstance(exc, RecursionError):
-        return f"{where}: the program recursed too deeply"
-    return f"{where}: program raised {type(exc).__name__}: {exc}"
+        return f"{where}: {what} recursed too deeply"
+    return f"{where}: {what.removeprefix('the ')} raised {type(exc).__name__}: {exc}"
 
 
-def _child(write_fd: int, source: str, params, memory: int | None) -> None:
-    """In the forked child: build, send (status, payload), never return."""
+def _send(fd: int, message) -> None:
+    data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
+    view = memoryview(_FRAME.pack(len(data)) + data)
+    while view:
+        view = view[os.write(fd, view):]
+
+
+def _limit_memory(memory: int | None) -> None:
+    if not memory:
+        return
+    import resource
+
+    limit = _vm_size() + int(memory)
+    hard = resource.getrlimit(resource.RLIMIT_AS)[1]
+    if hard != resource.RLIM_INFINITY:
+        limit = min(limit, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+
+
+def _child(write_fd: int, work: Callable[[], Any], name: str, memory: int | None, hints: Hints,
+           what: str) -> None:
+    """In the forked child: run ``work``, send what it yields and then (status, payload); never return."""
     real_exit = os._exit
-    status, payload = "error", "the program did not finish"
+    status, payload = "error", f"{name}: the work did not finish"
     try:
         signal.signal(signal.SIGINT, signal.SIG_DFL)  # the parent reports Ctrl-C
         faulthandler.disable()  # a crash is reported once, by the parent
-        if memory:
-            import resource
-
-            limit = _vm_size() + memory
-            hard = resource.getrlimit(resource.RLIMIT_AS)[1]
-            if hard != resource.RLIM_INFINITY:
-                limit = min(limit, hard)
-            resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+        _limit_memory(memory)
 
         def program_exit(code=0):
             raise _ProgramExit(code)
 
         os._exit = program_exit
-        lat = load_lattice(source, params)
-        status, payload = "ok", lat
+        out = work()
+        if isinstance(out, types.GeneratorType):
+            while True:
+                try:
+                    item = next(out)
+                except StopIteration as stop:
+                    out = stop.value
+                    break
+                _send(write_fd, ("item", item))
+        status, payload = "ok", out
     except PleError as exc:
         payload = str(exc)
     except BaseException as exc:  # noqa: BLE001 - a program may raise anything; report it
-        payload = _describe(exc, _program_name(source), memory)
+        payload = _describe(exc, name, memory, hints, what)
     os._exit = real_exit
     try:
-        data = pickle.dumps((status, payload), protocol=pickle.HIGHEST_PROTOCOL)
-    except Exception as exc:  # noqa: BLE001 - e.g. a filter holding a lambda
-        data = pickle.dumps(("error", f"{source}: the program's lattice cannot be returned to PLE "
-                                      f"({type(exc).__name__}: {exc})"))
-    try:
-        view = memoryview(data)
-        while view:
-            view = view[os.write(write_fd, view):]
+        try:
+            _send(write_fd, (status, payload))
+        except Exception as exc:  # noqa: BLE001 - e.g. a filter holding a lambda
+            _send(write_fd, ("error", f"{name}: the result cannot be returned to PLE ({type(exc).__name__}: {exc})"))
     finally:
         real_exit(0)
-
-
-def _program_name(source: str) -> str:
-    try:
-        return str(resolve_source(source))
-    except PleError:
-        return source
 
 
 def _vm_size() -> int:
@@ -135,63 +165,172 @@ def _vm_size() -> int:
     return 0
 
 
+def check_timeout(timeout: float | None) -> float | None:
+    """``timeout`` in seconds, None for no limit (None or inf); PleError if not positive (NaN too)."""
+    if timeout is None:
+        return None
+    if not (timeout > 0):
+        raise PleError(f"--timeout {timeout}: expected a positive number of seconds (inf: no limit)")
+    return None if math.isinf(timeout) else float(timeout)
+
+
+class Job:
+    """``work()`` running contained in a child process: at most ``timeout`` seconds (None: no
+    limit) and ``memory`` bytes beyond what this process already maps. ``name`` names it in
+    errors ("<file>: the program ran longer than …"); ``what`` says what ran ("the program",
+    "the tessellation"). Where there is no ``os.fork`` the work runs in-process at ``start``."""
+
+    def __init__(self, work: Callable[[], Any], name: str, timeout: float | None = DEFAULT_TIMEOUT,
+                 memory: int | None = None, what: str = "the program", hints: Hints = CLI_HINTS):
+        self.name, self.what, self.hints = name, what, hints
+        self.timeout = check_timeout(timeout)
+        self.memory = memory
+        self.items: list = []  # what the work yielded, not yet taken
+        self.done = False
+        self._result = None
+        self._error: str | None = None
+        self._buffer = bytearray()
+        self._pid = None
+        self._fd = None
+        self._deadline = None
+        self._start(work)
+
+    def _start(self, work) -> None:
+        if not hasattr(os, "fork"):  # pragma: no cover - Windows: nothing to contain with
+            out = work()
+            if isinstance(out, types.GeneratorType):
+                self.items.extend(out)
+                out = None
+            self._result, self.done = out, True
+            return
+        read_fd, write_fd = os.pipe()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        pid = os.fork()
+        if pid == 0:  # pragma: no cover - the child (its coverage is not collected)
+            os.close(read_fd)
+            _child(write_fd, work, self.name, self.memory, self.hints, self.what)
+        os.close(write_fd)
+        self._pid, self._fd = pid, read_fd
+        self._deadline = None if self.timeout is None else time.monotonic() + self.timeout
+
+    def poll(self, wait: float = 0.0) -> bool:
+        """Read what the child sent (waiting at most ``wait`` seconds for something); True once
+        the work has finished. PleError when it failed, ran out of time or was killed."""
+        end = time.monotonic() + wait
+        while not self.done:
+            left = max(0.0, end - time.monotonic())
+            if self._deadline is not None:
+                left = min(left, max(0.0, self._deadline - time.monotonic()))
+            ready, _, _ = select.select([self._fd], [], [], left)
+            if not ready:
+                if self._deadline is not None and time.monotonic() >= self._deadline:
+                    self.cancel()
+                    raise PleError(f"{self.name}: {self.what} ran longer than {self.timeout:g} s; "
+                                   f"{self.hints.timeout}")
+                return False
+            data = os.read(self._fd, 1 << 20)
+            if not data:
+                self._ended()
+                break
+            self._buffer += data
+            self._messages()
+        if self._error is not None:
+            raise PleError(self._error)
+        return True
+
+    def _messages(self) -> None:
+        while len(self._buffer) >= _FRAME.size:
+            (size,) = _FRAME.unpack_from(self._buffer)
+            if len(self._buffer) < _FRAME.size + size:
+                return
+            data = bytes(self._buffer[_FRAME.size:_FRAME.size + size])
+            del self._buffer[:_FRAME.size + size]
+            try:
+                kind, payload = _SafeUnpickler(io.BytesIO(data)).load()
+            except Exception as exc:  # noqa: BLE001 - anything wrong with the child's answer
+                kind, payload = "error", f"{self.name}: the result cannot be read back ({exc})"
+            if kind == "item":
+                self.items.append(payload)
+            elif kind == "ok":
+                self._result, self.done = payload, True
+            else:
+                self._error, self.done = str(payload), True
+
+    def _ended(self) -> None:
+        """The child closed its end: collect it and say why if it sent no result."""
+        os.close(self._fd)
+        self._fd = None
+        _, status = os.waitpid(self._pid, 0)
+        self._pid = None
+        if self.done:
+            return
+        self.done = True
+        if os.WIFSIGNALED(status):
+            sig = signal.Signals(os.WTERMSIG(status)).name
+            why = " (out of memory?)" if sig == "SIGKILL" else ""
+            self._error = f"{self.name}: {self.what} crashed with {sig}{why}"
+        else:
+            self._error = f"{self.name}: {self.what} ended the process (exit status {os.WEXITSTATUS(status)})"
+
+    def take(self) -> list:
+        """What the work yielded since the last call."""
+        out, self.items = self.items, []
+        return out
+
+    def result(self):
+        """Wait for the work to finish; its return value (PleError if it failed)."""
+        while not self.poll(3600.0):
+            pass
+        return self._result
+
+    def cancel(self) -> None:
+        """Stop the child now (Esc, a time limit); nothing it computed is kept."""
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+        if self._pid is not None:
+            _kill(self._pid)
+            self._pid = None
+        self.done = True
+
+    def __del__(self):
+        self.cancel()
+
+
+def _checked(lat, name: str) -> Lattice:
+    if not isinstance(lat, Lattice):
+        raise PleError(f"{name}: lattice() must return a Lattice")
+    lat.validate()
+    check_finite(lat, name)
+    return lat
+
+
 def run_program(source: str, params=None, timeout: float | None = DEFAULT_TIMEOUT,
-                memory: int | None = None) -> Lattice:
+                memory: int | None = None, hints: Hints = CLI_HINTS) -> Lattice:
     """Build the lattice of ``source`` (program, IR file or preset) contained in a child process:
     at most ``timeout`` seconds and ``memory`` bytes beyond what this process already maps."""
     path = resolve_source(source)
     if path.suffix == ".json" or not hasattr(os, "fork"):  # data only: nothing to contain (or no fork)
         return load_lattice(source, params)
-    if timeout is not None and not (timeout > 0):  # NaN too
-        raise PleError(f"--timeout {timeout}: expected a positive number of seconds (inf: no limit)")
-    if timeout is not None and math.isinf(timeout):
-        timeout = None
+    check_timeout(timeout)
     name = str(path)
-    read_fd, write_fd = os.pipe()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    pid = os.fork()
-    if pid == 0:  # pragma: no cover - the child (its coverage is not collected)
-        os.close(read_fd)
-        _child(write_fd, source, params, memory)
-    os.close(write_fd)
-    chunks, finished = [], False
-    deadline = None if timeout is None else time.monotonic() + timeout
-    try:
-        while True:
-            wait = None if deadline is None else max(0.0, deadline - time.monotonic())
-            ready, _, _ = select.select([read_fd], [], [], wait)
-            if not ready:
-                break
-            data = os.read(read_fd, 1 << 20)
-            if not data:
-                finished = True
-                break
-            chunks.append(data)
-    finally:
-        os.close(read_fd)
-        if not finished:
-            _kill(pid)
-    if not finished:
-        raise PleError(f"{name}: the program ran longer than {timeout:g} s; raise the limit with --timeout")
-    _, status = os.waitpid(pid, 0)
-    if not chunks:
-        if os.WIFSIGNALED(status):
-            sig = signal.Signals(os.WTERMSIG(status)).name
-            why = " (out of memory?)" if sig == "SIGKILL" else ""
-            raise PleError(f"{name}: the program crashed with {sig}{why}")
-        raise PleError(f"{name}: the program ended the process (exit status {os.WEXITSTATUS(status)})")
-    try:
-        kind, payload = _SafeUnpickler(io.BytesIO(b"".join(chunks))).load()
-    except Exception as exc:  # noqa: BLE001 - anything wrong with the child's answer
-        raise PleError(f"{name}: the program's result cannot be read back ({exc})") from None
-    if kind != "ok":
-        raise PleError(str(payload))
-    if not isinstance(payload, Lattice):
-        raise PleError(f"{name}: lattice() must return a Lattice")
-    payload.validate()
-    check_finite(payload, name)
-    return payload
+    lat = Job(lambda: load_lattice(source, params), name, timeout, memory, hints=hints).result()
+    return _checked(lat, name)
+
+
+def run_text(text: str, name: str, params: dict | None = None, timeout: float | None = DEFAULT_TIMEOUT,
+             memory: int | None = None, hints: Hints = CLI_HINTS) -> tuple[Lattice, list]:
+    """Program ``text`` (``name``: its file or text block, in errors) run contained with
+    ``params``: (its lattice, its inputs as ``runtime.Param``). The module's own top level runs
+    in the child too, so a loop there is stopped as well."""
+
+    def build():
+        prog = compile_program(text, name)
+        return prog.run(**(params or {})), prog.parameters()
+
+    lat, inputs = Job(build, name, timeout, memory, hints=hints).result()
+    return _checked(lat, name), inputs
 
 
 def _kill(pid: int) -> None:
