@@ -322,7 +322,7 @@ def case_region_budget():
     status = rig.ple.status
     assert "refused" in status and "64 M" in status and "balls" in status and "GB" in status, status
     lat = ple_ext.rig.lattice_of(rig)
-    est = core.model.work.estimate(lat, "0:400,0:400,0:400")
+    est = core.model.budget.estimate(lat, "0:400,0:400,0:400")
     assert est.balls == 400**3 and est.beams == 3 * 400 * 400 * 399  # exact, independently counted
     assert tuple(rig.ple.region_max) == (3, 3, 3)  # the refused region is not kept
     assert np.array_equal(region_arrays(rig)[0], co0)  # the last drawing stays
@@ -791,7 +791,7 @@ def setup(zip_path: str) -> None:
 
     bpy, core = _bpy, _core
     for name in ("algebra.precision", "algebra.similarity", "filters", "meshing.preview", "meshing.styles",
-                 "meshing.tessellate", "model.cage", "model.ir", "model.work", "program.presets",
+                 "meshing.tessellate", "model.budget", "model.cage", "model.ir", "program.presets",
                  "program.runtime", "program.snippets", "program.sources"):
         importlib.import_module(f"ple.{name}")
     bpy.ops.wm.read_factory_settings(use_empty=True)

@@ -9,7 +9,7 @@ import trimesh
 from ple.errors import PleError
 from ple.meshing.styles import STYLES, mesh_estimate
 from ple.meshing.tessellate import iter_triangles, tessellate, weld_chunks
-from ple.model.work import estimate
+from ple.model.budget import estimate
 from ple.program.sources import load_lattice
 
 

@@ -1,11 +1,11 @@
-"""ple.model.work: the work estimate of a region (exact balls and beams, checked against
-evaluation) and the limits a front end checks it against."""
+"""ple.model.budget as the add-on uses it: the work estimate of a region (exact balls and beams,
+checked against evaluation) and the limits a front end checks it against."""
 
 from __future__ import annotations
 
 import pytest
 from ple.errors import PleError
-from ple.model.work import Estimate, check, estimate
+from ple.model.budget import Estimate, check, estimate
 from ple.program.sources import load_lattice
 
 REGIONS = ["0:3,0:3,0:3", "1:4,0:2,2:5", "0:1,0:1,0:1", "0:7,0:1,0:1"]
@@ -30,7 +30,7 @@ def test_huge_region_is_estimated_without_memory():
         getattr(lat, f"set_{axis}")(10**4, d.similarity)
     est = estimate(lat, "0:400,0:400,0:400")
     assert est.balls == 64_000_000 and est.beams == 3 * 400 * 400 * 399
-    with pytest.raises(PleError, match=r"refused: 64 M node-groups: 64 M balls, 192 M beams, about [0-9.]+ GB"):
+    with pytest.raises(PleError, match=r"refused: 64 M node-groups: 64 M balls, 192 M beams, about [0-9.]+ GiB"):
         check(est, max_bytes=2 * 2**30, what="drawing")
     assert check(estimate(lat, "0:3,0:3,0:3"), max_bytes=2 * 2**30) is not None
 

@@ -36,12 +36,11 @@ from .achocc import HubGeometry, hub_geometry
 from .chocc import ChoccMesh, cnt_segments, corridor_mesh, sampled_segments
 from .fillet import filleted
 from .preview import balls_beams_mesh
+from .styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS
 from .styles import style as style_named
 from .unclean import find_unclean, unite
 from .weld import COLLAPSE_GRIDS, collapse_short_edges, grid_spacing
 
-DEFAULT_LEVELS = 4
-DEFAULT_SEGMENTS = 16
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
 MAX_LEVELS = 6
 MAX_CHECK_GROUPS = 500_000  # streamed regions up to this size are checked for unclean hubs first

@@ -1,10 +1,14 @@
-"""Work budget: what a command will produce, estimated from the program before allocating
-(docs/reliability.md), and the finiteness of a lattice's extremes.
+"""Work budget: what a command or the add-on will produce, estimated from the program before
+allocating (docs/reliability.md, docs/addon.md), and the finiteness of a lattice's extremes.
 
-Every command that allocates in proportion to its output calls ``require`` with an estimate
-of its peak memory; beyond ``--max-memory`` (default: a quarter of the machine's RAM, or the
-``PLE_MAX_MEMORY`` environment variable) it is refused with the estimate and the flag. The
-flags themselves (``--max-memory``, ``--timeout``) belong to the CLI's shared arguments.
+The one place both doors estimate work: node-groups, balls and beams of a region (exact before
+filters: filters only remove), triangles of a tessellation style (``mesh_triangles``, calibrated
+from above) and memory. Every command that allocates in proportion to its output calls
+``require`` with an estimate of its peak memory; beyond ``--max-memory`` (default: a quarter of
+the machine's RAM, or the ``PLE_MAX_MEMORY`` environment variable) it is refused with the
+estimate and the flag. The add-on takes an ``Estimate`` of drawing or tessellating a region and
+``check``s it against the limits of its preferences. The flags themselves (``--max-memory``,
+``--timeout``) belong to the CLI's shared arguments.
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ from __future__ import annotations
 import math
 import os
 import re
+from dataclasses import dataclass, replace
 from itertools import product
 
 import numpy as np
@@ -53,11 +58,20 @@ def default_max_memory() -> int:
 
 
 def human(n: float) -> str:
+    """Bytes for people: ``1.5 GiB``."""
     for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
         if abs(n) < 1024 or unit == "PiB":
             return f"{n:.3g} {unit}"
         n /= 1024
     return f"{n:.3g} PiB"  # pragma: no cover
+
+
+def big(n: float) -> str:
+    """Counts for people: ``64 M``."""
+    for size, unit in ((1e9, " G"), (1e6, " M"), (1e3, " k")):
+        if n >= size:
+            return f"{n / size:.3g}{unit}"
+    return str(int(n))
 
 
 def require(estimate: float, what: str, limit: int, hint: str = "") -> None:
@@ -110,7 +124,60 @@ def mean_degree(lat: Lattice) -> float:
 
 
 def mesh_triangles(lat: Lattice, r: Region, style: str, levels: int, segments: int) -> float:
+    """Triangles of tessellating region ``r`` in ``style`` (``levels`` of refinement, ``segments``
+    per corridor circle): ``hub_triangles`` per ball, read by the CLI, batch jobs and the add-on."""
     return region_nodes(lat, r) * hub_triangles(mean_degree(lat), style, levels, segments)
+
+
+# ----- the work of a region, as the add-on checks it ---------------------------------------------
+# bytes per drawn element: the core's evaluation (measured peak about 200 B a ball and 100 B a beam)
+# plus Blender's mesh and balls-and-beams drawing (issue 15 measured 9.9 GB for 8 M balls and 24 M
+# beams: about 310 B an element in all)
+DRAW_BALL_BYTES = 400
+DRAW_BEAM_BYTES = 300
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Work of drawing (or tessellating) a region, before evaluating anything."""
+
+    groups: int
+    balls: int
+    beams: int
+    triangles: int
+    bytes: int
+
+    def describe(self) -> str:
+        tri = f", {big(self.triangles)} triangles" if self.triangles else ""
+        return (f"{big(self.groups)} node-groups: {big(self.balls)} balls, {big(self.beams)} beams{tri}, "
+                f"about {human(self.bytes)}")
+
+    def with_triangles(self, triangles: float) -> Estimate:
+        """This estimate with ``triangles`` (of a tessellation) counted, their memory included
+        (``MESH_TRIANGLE_BYTES`` each)."""
+        triangles = int(triangles)
+        extra = MESH_TRIANGLE_BYTES * (triangles - self.triangles)
+        return replace(self, triangles=triangles, bytes=int(self.bytes + extra))
+
+
+def estimate(lat: Lattice, region=None) -> Estimate:
+    """Node-groups, balls and beams (exact, before filters: ``region_nodes``, ``region_beams``)
+    and the memory of drawing a region in Blender (no triangles)."""
+    r = lat.region(region)
+    balls, beams = region_nodes(lat, r), region_beams(lat, r)
+    return Estimate(r.groups, balls, beams, 0, int(DRAW_BALL_BYTES * balls + DRAW_BEAM_BYTES * beams))
+
+
+def check(est: Estimate, max_bytes: float | None = None, max_triangles: float | None = None,
+          what: str = "this", hint: str = "raise it in the add-on preferences, or choose a smaller region") -> Estimate:
+    """``est`` if it is within the limits, else a PleError giving the estimate, the limit and
+    ``hint`` (how to raise it)."""
+    if max_bytes is not None and est.bytes > max_bytes:
+        raise PleError(f"{what} refused: {est.describe()} — beyond the memory limit of {human(max_bytes)} ({hint})")
+    if max_triangles is not None and est.triangles > max_triangles:
+        raise PleError(f"{what} refused: {est.describe()} — beyond the limit of {big(int(max_triangles))} "
+                       f"triangles ({hint})")
+    return est
 
 
 # ----- finiteness --------------------------------------------------------------------------------
