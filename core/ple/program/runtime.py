@@ -13,7 +13,6 @@ import inspect
 import json
 import math
 import sys
-import time
 import traceback
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -199,32 +198,6 @@ def trace_program(filename: str, local):
         yield
     finally:
         sys.settrace(old)
-
-
-class ProgramTimeoutError(PleError):
-    """A program ran beyond its time limit."""
-
-
-@contextmanager
-def time_limit(seconds: float | None, filename: str):
-    """Raise ProgramTimeoutError inside code compiled as ``filename`` once ``seconds`` have passed.
-
-    Only the program's own frames are traced (``trace_program``), so core calls run at full
-    speed; a single long core call (one huge numpy operation) is not interrupted, the next
-    program line is. ``seconds`` None or <= 0: no limit."""
-    if not seconds or seconds <= 0:
-        yield
-        return
-    deadline = time.monotonic() + float(seconds)
-
-    def local(frame, event, arg):
-        if time.monotonic() > deadline:
-            raise ProgramTimeoutError(f"stopped after the time limit of {seconds:g} s (a loop that never ends? "
-                                      "a program that needs longer: raise the limit)")
-        return local
-
-    with trace_program(filename, local):
-        yield
 
 
 def parse_param_value(param: Param, text: str):
