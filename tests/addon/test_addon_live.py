@@ -778,6 +778,7 @@ def case_menu_keymap_prefs():
         assert km is not None and {k.idname for k in km.keymap_items} >= {k for k, _, _ in init.KEYMAP}
     prefs = bpy.context.preferences.addons["bl_ext.user_default.ple"].preferences
     assert prefs.memory_gb == 2.0 and prefs.max_triangles == 10_000_000 and prefs.program_seconds == 10.0
+    assert prefs.job_seconds == 600.0
 
 
 def setup(zip_path: str) -> None:
