@@ -320,7 +320,7 @@ def case_region_budget():
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     rig.ple.region_max = (400, 400, 400)
     status = rig.ple.status
-    assert "refused" in status and "64 M" in status and "balls" in status and "GB" in status, status
+    assert "refused" in status and "64 M" in status and "balls" in status and "GiB" in status, status
     lat = ple_ext.rig.lattice_of(rig)
     est = core.model.budget.estimate(lat, "0:400,0:400,0:400")
     assert est.balls == 400**3 and est.beams == 3 * 400 * 400 * 399  # exact, independently counted
