@@ -86,3 +86,12 @@ def test_run_text_gives_the_lattice_and_its_inputs():
     assert (inputs[0].range.lo, inputs[0].range.hi) == (2, 9) and inputs[1].range is None
     with pytest.raises(PleError, match="t.py: the program ran longer than 0.3 s"):
         run_text("while True:\n    pass\n", "t.py", None, timeout=0.3)
+
+
+def test_without_fork_the_work_runs_in_process(monkeypatch):
+    monkeypatch.delattr(os, "fork")  # as on Windows
+    lat = load_lattice("hier_lil2")
+    r = lat.region("0:4,0:3,0:3")
+    job = Job(lambda: lat.evaluate_steps(r, max_groups=4), "hier_lil2", 60, None, "the filter")
+    assert job.done and job.take() == drain(lat.evaluate_steps(r, max_groups=4))[0]
+    assert np.array_equal(job.result().beam_nodes, lat.evaluate(r).beam_nodes)

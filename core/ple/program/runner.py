@@ -130,15 +130,7 @@ def _child(write_fd: int, work: Callable[[], Any], name: str, memory: int | None
             raise _ProgramExit(code)
 
         os._exit = program_exit
-        out = work()
-        if isinstance(out, types.GeneratorType):
-            while True:
-                try:
-                    item = next(out)
-                except StopIteration as stop:
-                    out = stop.value
-                    break
-                _send(write_fd, ("item", item))
+        out = _drain(work(), lambda item: _send(write_fd, ("item", item)))
         status, payload = "ok", out
     except PleError as exc:
         payload = str(exc)
@@ -152,6 +144,17 @@ def _child(write_fd: int, work: Callable[[], Any], name: str, memory: int | None
             _send(write_fd, ("error", f"{name}: the result cannot be returned to PLE ({type(exc).__name__}: {exc})"))
     finally:
         real_exit(0)
+
+
+def _drain(out, send) -> Any:
+    """``out`` itself, or if it is a generator, its return value after ``send``ing what it yields."""
+    if not isinstance(out, types.GeneratorType):
+        return out
+    while True:
+        try:
+            send(next(out))
+        except StopIteration as stop:
+            return stop.value
 
 
 def _vm_size() -> int:
@@ -197,11 +200,7 @@ class Job:
 
     def _start(self, work) -> None:
         if not hasattr(os, "fork"):  # pragma: no cover - Windows: nothing to contain with
-            out = work()
-            if isinstance(out, types.GeneratorType):
-                self.items.extend(out)
-                out = None
-            self._result, self.done = out, True
+            self._result, self.done = _drain(work(), self.items.append), True
             return
         read_fd, write_fd = os.pipe()
         sys.stdout.flush()
