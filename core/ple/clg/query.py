@@ -208,6 +208,7 @@ class Compiled:
 
 
 _CACHE: dict[tuple, tuple[CLG, Compiled]] = {}
+CACHE_SIZE = 64
 
 
 def compiled(clg: CLG, region=None) -> Compiled:
@@ -219,6 +220,8 @@ def compiled(clg: CLG, region=None) -> Compiled:
         return hit[1]
     comp = Compiled(clg, region)
     _CACHE[key] = (clg, comp)
+    while len(_CACHE) > CACHE_SIZE:  # the add-on makes a new CLG per edit: keep the latest only
+        _CACHE.pop(next(iter(_CACHE)))
     return comp
 
 
