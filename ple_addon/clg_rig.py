@@ -18,7 +18,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, In
 from . import draw, prefs
 from . import operators as ops
 from . import rig as rigmod
-from .corelink import PleError, core, needs, program
+from .corelink import PleError, core, ir, needs, program
 
 clg_sources = core("program.clg_sources")
 clg_ir = core("clg.ir")
@@ -102,6 +102,18 @@ def clg_of(rig, lat=None):
     lat = rigmod.lattice_of(rig) if lat is None else lat
     chunk = rig.ple_clg.chunk.strip()
     return clg.with_pattern(lat).showing(chunk or None)
+
+
+def applied_text(rig) -> str:
+    """The CLG text with the GUI edits of its pattern written in (Apply to Program): a ``ple-clg/1``
+    file gets the edited pattern as its ``pattern`` object; a clg() program is refused (its
+    lattice is built inside clg(): copy the snippet into it instead)."""
+    if rig.ple.source_kind != "IR":
+        raise PleError("Apply to Program rewrites ple-clg/1 files only; for a clg() program use Copy Snippet "
+                       "and paste the lines where clg() builds its pattern")
+    data = json.loads(rig.ple.text.as_string())
+    data["pattern"] = ir.lattice_to_ir(rigmod.lattice_of(rig), resolved=False)
+    return json.dumps(data, indent=1) + "\n"
 
 
 def is_clg_rig(obj) -> bool:

@@ -210,7 +210,11 @@ class PLE_OT_program_apply(RigOperator, bpy.types.Operator):  # noqa: N801 - Ble
             self.report({"INFO"}, "no GUI edits to apply")
             return {"CANCELLED"}
         text = rig.ple.text
-        if rig.ple.source_kind == "IR":
+        if rig.ple_clg.active:  # a CLG rig: its edited pattern into the CLG text (clg_rig.py)
+            from . import clg_rig
+
+            new = clg_rig.applied_text(rig)
+        elif rig.ple.source_kind == "IR":
             lat = rigmod.lattice_of(rig)
             new = json.dumps(ir.lattice_to_ir(lat, resolved=False), indent=1) + "\n"
         else:

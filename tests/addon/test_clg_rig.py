@@ -20,7 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import test_addon as base  # noqa: E402
 
 CASES = ["add_sources", "mesh_preview_volume", "corner_edit_follows", "frame_edit_steady", "voxel_and_slice_preview",
-         "operators_write_files", "errors"]
+         "operators_write_files", "apply_to_clg_file", "errors"]
 
 PROGRAM = '''"""A CLG program: hollow beams of a cubic pattern."""
 
@@ -273,6 +273,34 @@ def case_operators_write_files():
     whole = str(Path("whole.stl").resolve())
     assert bpy.ops.ple.clg_export(filepath=whole, segments=16, whole=True) == {"FINISHED"}
     assert trimesh.load(whole).volume > 1.5 * mesh.volume
+
+
+def case_apply_to_clg_file():
+    """Apply to Program writes the dragged corners into the ple-clg/1 text's pattern; the CLG read
+    back from the text is the edited one (same preview); a clg() program is refused, text kept."""
+    bpy = base.bpy
+    rig = new_clg("plate", region=(2, 2, 1))
+    p = base.ple_ext.rig.parts(rig)
+    p[("corner", "C")].location = (4.6, 4.2, 1.5)
+    base.update()
+    before = preview_data(rig)[0].copy()
+    assert bpy.ops.ple.program_apply() == {"FINISHED"}
+    assert base.ple_ext.rig.edits_of(rig) == []
+    data = json.loads(rig.ple.text.as_string())
+    moved = [list(base.matrix(p[("corner", c)])[:3, 3]) for c in "ABCD"]
+    assert np.allclose(data["pattern"]["becots"]["corners"], moved, atol=1e-6)
+    clg = cm("clg.ir").clg_from_dict(data)  # the environment's core reads the rewritten file
+    assert set(clg.chunks) == set(core_clg("plate").chunks)
+    assert np.allclose(np.sort(preview_data(rig)[0], axis=0), np.sort(before, axis=0), atol=1e-5)
+    path = Path("tubes.py")
+    path.write_text(PROGRAM)
+    assert bpy.ops.ple.clg_add(source="FILE", filepath=str(path.resolve())) == {"FINISHED"}
+    prog = bpy.context.active_object
+    u = base.ple_ext.rig.parts(prog)["u"]
+    u.location = (u.location[0] + 0.2, u.location[1], u.location[2])
+    base.update()
+    base.fails(bpy.ops.ple.program_apply, "Copy Snippet")
+    assert prog.ple.text.as_string() == PROGRAM
 
 
 def case_errors():

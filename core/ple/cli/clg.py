@@ -106,7 +106,10 @@ def run_info(args) -> int:
             "unused_chunks": sorted(set(clg.chunks) - set(comp.names)), "primitives": clg.primitive_count(),
             "materials": sorted(clg.materials), "depth": clg.depth, "counts": list(lat.counts),
             "becots": lat.becots is not None, "chunk_copies": lat.groups * len(comp.names),
-            "box": [comp.lo.tolist(), comp.hi.tolist()]}
+            "box": [comp.lo.tolist(), comp.hi.tolist()],
+            "conical_shell": None if comp.shell is None else {
+                "apex": comp.shell.apex.tolist(), "axis": comp.shell.axis.tolist(), "phi": list(comp.shell.phi),
+                "distance": list(comp.shell.dist)}}
     print(json.dumps(info, indent=1))
     return 0
 
