@@ -20,7 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import test_addon as base  # noqa: E402
 
 CASES = ["add_sources", "mesh_preview_volume", "corner_edit_follows", "frame_edit_steady", "voxel_and_slice_preview",
-         "operators_write_files", "apply_to_clg_file", "errors"]
+         "operators_write_files", "apply_to_clg_file", "duplicate_remove", "errors"]
 
 PROGRAM = '''"""A CLG program: hollow beams of a cubic pattern."""
 
@@ -301,6 +301,23 @@ def case_apply_to_clg_file():
     base.update()
     base.fails(bpy.ops.ple.program_apply, "Copy Snippet")
     assert prog.ple.text.as_string() == PROGRAM
+
+
+def case_duplicate_remove():
+    """A copy of a CLG rig is a CLG rig with its own preview; removing a rig takes its preview along."""
+    bpy = base.bpy
+    rig = new_clg("connectors", region=(2, 2, 1))
+    assert bpy.ops.ple.duplicate() == {"FINISHED"}
+    copy = bpy.context.active_object
+    assert copy != rig and copy.ple_clg.active
+    a, b = base.part(rig, "clg"), base.part(copy, "clg")
+    assert a != b and a.data != b.data
+    va, vb = preview_data(rig)[0], preview_data(copy)[0]
+    shift = np.array(copy.matrix_world)[:3, 3] - np.array(rig.matrix_world)[:3, 3]
+    assert np.allclose(va, vb) and np.linalg.norm(shift) > 0  # same solid, in the copy's own frame
+    name = b.name
+    assert bpy.ops.ple.remove() == {"FINISHED"}
+    assert bpy.data.objects.get(name) is None and base.part(rig, "clg").name == a.name
 
 
 def case_errors():
