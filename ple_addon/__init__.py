@@ -11,7 +11,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from . import operators, prefs, props, rig, ui
+from . import clg_rig, operators, prefs, props, rig, ui
 
 
 @persistent
@@ -85,6 +85,7 @@ def register():
     for name, fn in HANDLERS:
         getattr(bpy.app.handlers, name).append(fn)
     bpy.types.VIEW3D_MT_add.append(menu_add)
+    clg_rig.register()
     register_keymap()
     ui.load_previews()
 
@@ -92,6 +93,7 @@ def register():
 def unregister():
     ui.free_previews()
     unregister_keymap()
+    clg_rig.unregister()
     bpy.types.VIEW3D_MT_add.remove(menu_add)
     for name, fn in HANDLERS:
         lst = getattr(bpy.app.handlers, name)

@@ -203,7 +203,11 @@ class PLE_OT_program_apply(RigOperator, bpy.types.Operator):  # noqa: N801 - Ble
             self.report({"INFO"}, "no GUI edits to apply")
             return {"CANCELLED"}
         text = rig.ple.text
-        if rig.ple.source_kind == "IR":
+        if rig.ple_clg.active:  # a CLG rig: its edited pattern into the CLG text (clg_rig.py)
+            from . import clg_rig
+
+            new = clg_rig.applied_text(rig)
+        elif rig.ple.source_kind == "IR":
             lat = rigmod.lattice_of(rig)
             new = json.dumps(ir.lattice_to_ir(lat, resolved=False), indent=1) + "\n"
         else:
@@ -341,14 +345,19 @@ def core_style(style: str) -> str:
     return style.lower().replace("_", "-")
 
 
-def mesh_from_arrays(name: str, verts, faces):
-    me = bpy.data.meshes.new(name)
+def mesh_from_arrays(name: str, verts, faces, me=None):
+    """A mesh of vertices (n, 3) and faces (f, k) of k corners each (a new one, or ``me`` refilled)."""
+    if me is None:
+        me = bpy.data.meshes.new(name)
+    else:
+        me.clear_geometry()
+    k = faces.shape[1] if len(faces) else 3
     me.vertices.add(len(verts))
-    me.loops.add(3 * len(faces))
+    me.loops.add(k * len(faces))
     me.polygons.add(len(faces))
     me.attributes["position"].data.foreach_set("vector", verts.astype(np.float32).ravel())
     me.attributes[".corner_vert"].data.foreach_set("value", faces.astype(np.int32).ravel())
-    me.polygons.foreach_set("loop_start", np.arange(0, 3 * len(faces), 3, dtype=np.int32))
+    me.polygons.foreach_set("loop_start", np.arange(0, k * len(faces), k, dtype=np.int32))
     me.update(calc_edges=True)
     return me
 

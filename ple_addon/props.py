@@ -40,7 +40,8 @@ ROLES = [(r, r.title(), d) for r, d in (
     ("NONE", "not part of a PLE rig"), ("RIG", "the lattice object (root of a rig)"),
     ("FRAME", "a frame handle: placement G or the similarity U, V or W"),
     ("NODE", "a template node of the node-group N[0,0,0]"), ("CORNER", "a BeCOTS corner A, B, C or D"),
-    ("CAGE", "isocurves of the steady 3-map"), ("REGION", "full drawing of the selected index box"))]
+    ("CAGE", "isocurves of the steady 3-map"), ("REGION", "full drawing of the selected index box"),
+    ("CLG", "preview of a CLG rig's solid over the selected index box"))]
 
 
 class PLE_ObjectSettings(bpy.types.PropertyGroup):  # noqa: N801 - Blender naming

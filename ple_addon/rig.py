@@ -45,6 +45,7 @@ class RigState:
 
 
 _state: dict[str, RigState] = {}
+AFTER_DRAW: list = []  # functions (rig, lattice) run after every successful drawing of a rig
 
 
 def clear_state() -> None:
@@ -88,7 +89,8 @@ def rig_of(obj):
 
 
 def parts(rig) -> dict:
-    """Parts of a rig by key: "G", "u", "v", "w", "cage", "region", ("node", n), ("corner", c)."""
+    """Parts of a rig by key: "G", "u", "v", "w", "cage", "region", "clg" (a CLG rig's preview),
+    ("node", n), ("corner", c)."""
     out = {}
     for obj in rig.children_recursive:
         role = obj.ple.role
@@ -98,7 +100,7 @@ def parts(rig) -> dict:
             out[("node", obj.ple.node_index)] = obj
         elif role == "CORNER":
             out[("corner", obj.ple.frame)] = obj
-        elif role in ("CAGE", "REGION"):
+        elif role in ("CAGE", "REGION", "CLG"):
             out[role.lower()] = obj
     return out
 
@@ -143,7 +145,15 @@ def base_lattice(rig, st: RigState):
     key = (rig.ple.source_kind, source, tuple(sorted((k, repr(v)) for k, v in params.items())))
     if key == st.program_key:
         return st.base
-    if rig.ple.source_kind == "IR":
+    if rig.ple.source_kind == "PROGRAM" and not trusted(rig):
+        raise PleError(f"{text.name}: not run because Blender does not trust scripts "
+                       "(enable Auto Run Python Scripts, or press Run Program; frame moves are "
+                       "kept until then)")
+    if rig.ple_clg.active:  # a CLG rig (clg_rig.py): the lattice is the CLG's pattern
+        from . import clg_rig
+
+        inputs, base = clg_rig.load(rig.ple.source_kind, source, params, text.name)
+    elif rig.ple.source_kind == "IR":
         try:
             data = json.loads(source)
         except json.JSONDecodeError as exc:
@@ -151,10 +161,6 @@ def base_lattice(rig, st: RigState):
         base = ir.lattice_from_ir(data)
         inputs = None
     else:
-        if not trusted(rig):
-            raise PleError(f"{text.name}: not run because Blender does not trust scripts "
-                           "(enable Auto Run Python Scripts, or press Run Program; frame moves are "
-                           "kept until then)")
         base, inputs = jobs.run_text(source, text.name, params)  # contained: time and memory limits
     st.program_key, st.inputs, st.base = key, inputs, base
     return base
@@ -383,6 +389,8 @@ def refresh(rig, force: bool = False, prepared=None) -> str | None:
         if not {"G", "u", "v", "w", "cage", "region"} <= set(parts(rig)):
             build_parts(rig, lat)  # a copy (Shift+D) or a rig whose parts were deleted
         draw_rig(rig, lat, ev, st)
+        for hook in AFTER_DRAW:  # e.g. the CLG preview (clg_rig.py)
+            hook(rig, lat)
         st.signature = signature(rig)
         st.cumulative = tuple(rig.ple.cumulative)
         st.region = (tuple(rig.ple.region_min), tuple(rig.ple.region_max))
@@ -534,14 +542,16 @@ def build_parts(rig, lat) -> None:
         draw.set_material(region_obj, draw.REGION_MATERIAL)
 
 
-def create(context, name: str, text, source_kind: str = "PROGRAM", region=(3, 3, 3), location=None):
+def create(context, name: str, text, source_kind: str = "PROGRAM", region=(3, 3, 3), location=None,
+           clg: bool = False):
     """Build a rig for ``text`` (a Text datablock) at ``location`` (default: the 3D cursor);
     raises PleError before creating anything if the program or IR is bad or the region is
-    beyond the work budget."""
+    beyond the work budget. With ``clg``, ``text`` holds a CLG and the rig edits its pattern."""
     st = RigState()
     probe = bpy.data.objects.new("~ple probe", None)  # evaluate before building anything
     try:
         probe.ple.text, probe.ple.source_kind = text, source_kind
+        probe.ple_clg.active = clg
         _trusted.add(uid(probe))
         base = base_lattice(probe, st)
         inputs = st.inputs
@@ -560,6 +570,7 @@ def create(context, name: str, text, source_kind: str = "PROGRAM", region=(3, 3,
     rig.empty_display_size = handle_size(base)
     rig.ple.role = "RIG"
     rig.ple.text, rig.ple.source_kind = text, source_kind
+    rig.ple_clg.active = clg
     rig.ple.region_max = clamped
     trust(rig)
     claim(rig)
@@ -600,7 +611,7 @@ def remove_orphans() -> int:
     return len(orphans)
 
 
-PART_ROLES = ("FRAME", "NODE", "CORNER", "CAGE", "REGION")
+PART_ROLES = ("FRAME", "NODE", "CORNER", "CAGE", "REGION", "CLG")
 
 
 def claim(rig) -> None:

@@ -1,5 +1,6 @@
 """Render the add-on's rig for the docs: ``python -m tools.render_blender`` writes
-``docs/img/addon_rig.png`` (Workbench, headless through EGL, in a subprocess).
+``docs/img/addon_rig.png`` (Workbench, headless through EGL, in a subprocess); with ``--clg
+--preset plate`` a CLG rig and its preview mesh (``docs/img/addon_clg_rig.png``).
 
 The picture shows the default rig of the thesis Fig. 6.3 lattice exactly as the extension
 makes it (no overrides): the cage (isocurves of the steady 3-map, bevelled, material
@@ -21,7 +22,7 @@ from ple_addon import register, rig
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def render(out: Path, preset: str, region: tuple, size: tuple) -> None:
+def render(out: Path, preset: str, region: tuple, size: tuple, clg: bool = False) -> None:
     """Runs inside the child process (bpy state is global)."""
     os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp())
     import bpy
@@ -30,7 +31,8 @@ def render(out: Path, preset: str, region: tuple, size: tuple) -> None:
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     register()
-    bpy.ops.ple.lattice_add(source="PRESET", preset=preset, region=region)
+    add = bpy.ops.ple.clg_add if clg else bpy.ops.ple.lattice_add  # a CLG rig: preview mesh over the region
+    add(source="PRESET", preset=preset, region=region)
     r = bpy.context.active_object
     p = rig.parts(r)
     bpy.context.view_layer.update()
@@ -61,16 +63,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--preset", default="fig6_3")
     ap.add_argument("--region", default="3,3,3", help="node-groups drawn in full per direction (the default rig's)")
     ap.add_argument("--size", default="960x600")
+    ap.add_argument("--clg", action="store_true", help="PRESET is a CLG preset: render a CLG rig")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     out = Path(args.out).resolve()
     if args.child:
         render(out, args.preset, tuple(int(x) for x in args.region.split(",")),
-               tuple(int(x) for x in args.size.split("x")))
+               tuple(int(x) for x in args.size.split("x")), args.clg)
         return 0
     out.parent.mkdir(parents=True, exist_ok=True)
     cmd = [sys.executable, "-m", "tools.render_blender", "--child", "--out", str(out), "--preset", args.preset,
-           "--region", args.region, "--size", args.size]
+           "--region", args.region, "--size", args.size] + (["--clg"] if args.clg else [])
     res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
     if res.returncode != 0 or not out.is_file():
         sys.stderr.write(res.stdout[-2000:] + res.stderr[-2000:])

@@ -519,7 +519,7 @@ def case_export():
 def case_ui():
     panels = [c for c in bpy.types.Panel.__subclasses__() if getattr(c, "bl_category", "") == "PLE"]
     labels = {c.bl_label for c in panels}
-    assert labels == {"Program", "Frames", "Region", "Template", "Filters", "Tessellate & Export"}
+    assert labels == {"Program", "Frames", "Region", "Template", "Filters", "Tessellate & Export", "CLG"}
     assert all(c.bl_space_type == "VIEW_3D" and c.bl_region_type == "UI" for c in panels)
     desc = bpy.types.PLE_OT_stencil_filter.__doc__ + bpy.types.PLE_OT_beam_add.__doc__
     assert "stencil" in desc and "beam-pattern" in desc
@@ -589,6 +589,14 @@ def case_becots_corners():
 
 
 def main(zip_path: str, case: str) -> None:
+    install(zip_path)
+    globals()[f"case_{case}"]()
+    print(f"{case} OK")
+
+
+def install(zip_path: str) -> None:
+    """Install and enable the zip in a fresh headless bpy (this module's globals then hold bpy,
+    the extension and the environment's core; other add-on test files reuse it)."""
     global bpy, ple_ext, core
     os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp()
     import bpy as _bpy
@@ -603,8 +611,6 @@ def main(zip_path: str, case: str) -> None:
     import importlib
 
     ple_ext = importlib.import_module("bl_ext.user_default.ple")
-    globals()[f"case_{case}"]()
-    print(f"{case} OK")
 
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
 """CLG (thesis §5.5–5.7): PMC of 10⁵ points on a 100×100 BeCOTS CLG against the brute-force CSG tree
-(every chunk copy) in the same run; voxelization; a progressive 640×480 render; the memory peak of
+(every chunk copy) in the same run, and with the box bound alone against the conical shell;
+voxelization; a progressive 640×480 render; the memory peak of
 slicing a 10⁸-beam plain lattice (a few layers, streamed)."""
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import numpy as np
 
 from ..clg.grid import iter_slices, voxelize, voxelize_clg
 from ..clg.ir import clg_from_dict
-from ..clg.query import brute_force_value, compiled
+from ..clg.query import Compiled, brute_force_value, compiled
 from ..clg.rays import render
 from ..program.clg_sources import resolve_clg
 from ..program.sources import load_lattice
@@ -65,6 +66,19 @@ def run(args) -> dict:
                   "points": args.points, "inside": int(inside.sum()), "prepare_s": prep, "clg_pmc_s": fast,
                   "brute_force_s_extrapolated": slow, "brute_force_timed_points": m,
                   "speedup": slow / fast, "agree_on_timed_points": bool(np.array_equal(brute, inside[:m]))}
+    box_only = Compiled(clg, shell=False)  # the bound before the conical shell: the box alone
+    box_only.pmc(pts[:1000])
+    t0 = time.perf_counter()
+    inside_box = box_only.pmc(pts)
+    boxed = time.perf_counter() - t0
+    zero = np.zeros(len(pts))
+    out["bound"] = {"clg": out["pmc"]["clg"], "points": args.points, "box_only_pmc_s": boxed,
+                    "conical_shell_pmc_s": fast, "speedup": boxed / fast,
+                    "points_past_box": int(len(box_only.near(pts, zero))),
+                    "points_past_shell": int(len(comp.near(pts, zero))),
+                    "shell": None if comp.shell is None else {"phi": list(comp.shell.phi),
+                                                              "dist": list(comp.shell.dist)},
+                    "agree": bool(np.array_equal(inside_box, inside))}
     shelled = compiled(clg_from_dict(json.loads(resolve_clg("shelled").read_text())))
     n = args.voxels
     t0 = time.perf_counter()

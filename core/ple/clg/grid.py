@@ -100,8 +100,7 @@ def voxelize_clg(comp, lo, hi, shape, progress: Callable | None = None) -> np.nd
     n = np.array([nx, ny, nz])
     axes = [axis_centres(lo[a], hi[a], n[a]) for a in range(3)]
     step = (hi - lo) / n
-    lat = comp.lat
-    groups = np.stack(np.meshgrid(*(np.arange(c) for c in lat.counts), indexing="ij"), -1).reshape(-1, 3)
+    groups = comp.groups()
     unions = []
     for ci in range(len(comp.names)):
         grid = np.zeros((nx, ny, nz), bool)
@@ -128,3 +127,31 @@ def voxelize_clg(comp, lo, hi, shape, progress: Callable | None = None) -> np.nd
         if progress is not None:
             progress(1)
     return comp.combine_bool(unions)
+
+
+def voxel_surface(vox, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """The boundary of the filled voxels of ``vox`` (NX, NY, NZ) over the box [lo, hi]: vertices
+    (m, 3) at voxel corners and quads (f, 4), counter-clockwise seen from outside (one quad per face
+    between a filled and an empty voxel, so the enclosed volume is the filled voxels' volume)."""
+    v = np.pad(np.asarray(vox, bool), 1)
+    n = np.array(v.shape) - 2
+    step = (np.asarray(hi, float) - np.asarray(lo, float)) / n
+    quads = []
+    for a in range(3):
+        b, c = (a + 1) % 3, (a + 2) % 3  # e_b × e_c = e_a: (0,0) (1,0) (1,1) (0,1) turns about +a
+        below, above = [slice(1, -1)] * 3, [slice(1, -1)] * 3
+        below[a], above[a] = slice(0, n[a] + 1), slice(1, n[a] + 2)
+        lower, upper = v[tuple(below)], v[tuple(above)]
+        for mask, order in ((lower & ~upper, (0, 1, 2, 3)), (~lower & upper, (3, 2, 1, 0))):
+            base = np.argwhere(mask)
+            ring = [base, base.copy(), base.copy(), base.copy()]
+            ring[1][:, b] += 1
+            ring[2][:, b] += 1
+            ring[2][:, c] += 1
+            ring[3][:, c] += 1
+            quads.append(np.stack([ring[k] for k in order], axis=1))
+    quads = np.concatenate(quads).reshape(-1, 4, 3)
+    flat = np.ravel_multi_index(quads.reshape(-1, 3).T, tuple(n + 1))
+    used, inverse = np.unique(flat, return_inverse=True)
+    corners = np.column_stack(np.unravel_index(used, tuple(n + 1)))
+    return np.asarray(lo, float) + corners * step, inverse.reshape(-1, 4)

@@ -241,6 +241,18 @@ class CLG:
     def primitive_count(self) -> int:
         return sum(len(leaves(e)) for e in self.chunks.values())
 
+    def with_pattern(self, pattern: Lattice) -> CLG:
+        """The same chunks, solid and materials on another pattern (e.g. one whose frames were edited)."""
+        return CLG(pattern, self.chunks, self.solid, self.materials, self.description)
+
+    def showing(self, chunk: str | None) -> CLG:
+        """The CLG whose solid is one chunk union (None: this CLG)."""
+        if chunk is None:
+            return self
+        if chunk not in self.chunks:
+            raise PleError(f"unknown chunk {chunk!r} (chunks: {', '.join(sorted(self.chunks))})")
+        return CLG(self.pattern, self.chunks, ChunkRef(chunk), self.materials, self.description)
+
     def used_chunks(self) -> list[str]:
         return sorted({c.name for c in chunk_refs(self.solid)})
 

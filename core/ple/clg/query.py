@@ -26,6 +26,7 @@ from ..errors import PleError
 from ..model.lattice import Lattice, Node
 from ..queries import biq
 from ..queries.rangefinder import lattice_hits
+from .bound import conical_shell
 from .model import CLG, ChunkRef, Op, Prim, leaves, positive_leaves
 from .rays import next_crossing, ray_ball_interval, ray_beam_interval
 
@@ -35,8 +36,9 @@ BATCH = 1 << 15  # query points per RangeFinder batch (memory stays bounded)
 class Compiled:
     """A CLG ready for queries: leaf tables per chunk, the auxiliary lattice, the box bound."""
 
-    def __init__(self, clg: CLG):
+    def __init__(self, clg: CLG, region=None, shell: bool = True):
         self.clg = clg
+        self.region = region
         lat = clg.pattern
         self.lat = lat
         self.names = clg.used_chunks()
@@ -72,11 +74,15 @@ class Compiled:
         keep = [m for m, c in enumerate(owner) if self.names[c] in positive]
         box = aux.copy()
         box.nodes = [nodes[m] for m in keep]
-        self.lo, self.hi = box.bounds()
+        self.lo, self.hi = box.bounds(region)
         self.scale = float(np.max(self.hi - self.lo))
         self.step_radius = float(np.median([x.radius for x in nodes])) * lat.placement.factor
         # per chunk: its distinct positive leaves (their union bounds the chunk)
         self.positive = [list(dict.fromkeys(positive_leaves(clg.chunks[n]))) for n in self.names]
+        # the conical shell (§5.5) of the positive leaves of the positive chunks, when the pattern has one
+        prims = [(ca, ra, cb, rb) for c, n in enumerate(self.names) if n in positive
+                 for (ca, cb), (ra, rb) in (self.balls0[p] for p in self.positive[c])]
+        self.shell = conical_shell(lat, prims, region) if shell else None
 
     # ----- values ------------------------------------------------------------------------------------
     def value(self, points, radii=None) -> np.ndarray:
@@ -105,8 +111,7 @@ class Compiled:
         far = np.where(r > 0, r, np.inf)  # what a leaf beyond the query ball is known to be
         out = far.copy()
         event = np.full(len(p), np.inf)
-        near = np.all((p >= self.lo - r[:, None]) & (p <= self.hi + r[:, None]), axis=1)  # box bound first
-        idx = np.nonzero(near)[0]
+        idx = self.near(p, r)
         if len(idx):
             q, g, c = self.candidates(p[idx], r[idx])
             unions = np.repeat(far[idx][:, None], len(self.names), axis=1)
@@ -126,6 +131,13 @@ class Compiled:
         out = np.where(r > 0, np.clip(out, -r, r), out)
         return out if d is None else (out, event)
 
+    def near(self, p: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """Indices of the query balls (p, r) that the box bound, then the conical shell, let through."""
+        idx = np.nonzero(np.all((p >= self.lo - r[:, None]) & (p <= self.hi + r[:, None]), axis=1))[0]
+        if self.shell is not None and len(idx):
+            idx = idx[self.shell.touches(p[idx], r[idx])]
+        return idx
+
     def candidates(self, p: np.ndarray, r: np.ndarray):
         """Unique (query, group (m, 3), chunk) triples whose primitive bounds touch ball (p, r)."""
         if self.aux.becots is None:  # steady: the RangeFinder's flat hit rows (qid, i, j, k, n)
@@ -139,6 +151,11 @@ class Compiled:
             q = np.repeat(np.arange(len(res)), counts)
         if len(q) == 0:
             return np.zeros(0, np.int64), np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+        if self.region is not None:  # only the copies of the region's groups
+            g = self.region
+            keep = ((hits[:, 0] >= g.i0) & (hits[:, 0] < g.i1) & (hits[:, 1] >= g.j0) & (hits[:, 1] < g.j1)
+                    & (hits[:, 2] >= g.k0) & (hits[:, 2] < g.k1))
+            q, hits = q[keep], hits[keep]
         c = self.owner[hits[:, 3]]
         dims = (len(p), *self.lat.counts, len(self.names))
         key = np.unique(np.ravel_multi_index((q, hits[:, 0], hits[:, 1], hits[:, 2], c), dims))
@@ -151,6 +168,12 @@ class Compiled:
         parts = [self.leaf_value(prim, p, copy, r, dirs, tiny) for prim in self.leaves[ci]]
         vals = _eval(self.trees[ci], [x[0] for x in parts])
         return vals, (None if dirs is None else np.minimum.reduce([x[1] for x in parts]))
+
+    def groups(self) -> np.ndarray:
+        """(m, 3) indices of the groups whose chunk copies make the solid (the region's, if any)."""
+        g = self.region if self.region is not None else self.lat.region(None)
+        return np.stack(np.meshgrid(np.arange(g.i0, g.i1), np.arange(g.j0, g.j1), np.arange(g.k0, g.k1),
+                                    indexing="ij"), -1).reshape(-1, 3)
 
     def copies(self, g: np.ndarray):
         """Linear parts (m, 3, 3), translations (m, 3) and factors (m,) of M_g ∘ G⁻¹ (module doc)."""
@@ -184,16 +207,21 @@ class Compiled:
         return out, ev
 
 
-_CACHE: dict[int, tuple[CLG, Compiled]] = {}
+_CACHE: dict[tuple, tuple[CLG, Compiled]] = {}
+CACHE_SIZE = 64
 
 
-def compiled(clg: CLG) -> Compiled:
-    """The Compiled form of ``clg``, built once per CLG object."""
-    hit = _CACHE.get(id(clg))
+def compiled(clg: CLG, region=None) -> Compiled:
+    """The Compiled form of ``clg`` (only the chunk copies of the groups of ``region``, a
+    ``Region``, if given), built once per CLG object and region."""
+    key = (id(clg), None if region is None else str(region))
+    hit = _CACHE.get(key)
     if hit is not None and hit[0] is clg:
         return hit[1]
-    comp = Compiled(clg)
-    _CACHE[id(clg)] = (clg, comp)
+    comp = Compiled(clg, region)
+    _CACHE[key] = (clg, comp)
+    while len(_CACHE) > CACHE_SIZE:  # the add-on makes a new CLG per edit: keep the latest only
+        _CACHE.pop(next(iter(_CACHE)))
     return comp
 
 

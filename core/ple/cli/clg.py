@@ -9,13 +9,13 @@ import time
 import numpy as np
 
 from ..app.progress import Progress
-from ..clg.grid import iter_slices, layer_grid, parse_bounds, voxelize_clg
+from ..clg.grid import layer_grid, parse_bounds, voxelize_clg
 from ..clg.query import compiled
 from ..clg.rays import render, trace
 from ..errors import PleError
 from ..io.export import export_mesh
 from ..io.files import atomic_path
-from ..io.slices import write_slices
+from ..io.slices import write_pmc_slices
 from ..meshing.clg import mesh_clg
 from ..program.clg_sources import load_clg
 
@@ -106,7 +106,10 @@ def run_info(args) -> int:
             "unused_chunks": sorted(set(clg.chunks) - set(comp.names)), "primitives": clg.primitive_count(),
             "materials": sorted(clg.materials), "depth": clg.depth, "counts": list(lat.counts),
             "becots": lat.becots is not None, "chunk_copies": lat.groups * len(comp.names),
-            "box": [comp.lo.tolist(), comp.hi.tolist()]}
+            "box": [comp.lo.tolist(), comp.hi.tolist()],
+            "conical_shell": None if comp.shell is None else {
+                "apex": comp.shell.apex.tolist(), "axis": comp.shell.axis.tolist(), "phi": list(comp.shell.phi),
+                "distance": list(comp.shell.dist)}}
     print(json.dumps(info, indent=1))
     return 0
 
@@ -143,9 +146,7 @@ def run_voxelize(args) -> int:
 def slice_with(pmc, lo, hi, args) -> int:
     zs, xs, ys = layer_grid(lo, hi, args.layer, args.pixel)
     bar = Progress(len(zs), "slice")
-    meta = {"layer": args.layer, "pixel": args.pixel, "origin": [float(lo[0]), float(lo[1]), float(lo[2])],
-            "bounds": [lo.tolist(), hi.tolist()], "rows": "row 0 is the largest y"}
-    man = write_slices(args.out, iter_slices(pmc, lo, hi, args.layer, args.pixel), meta, bar.update)
+    man = write_pmc_slices(args.out, pmc, lo, hi, args.layer, args.pixel, bar.update)
     bar.close()
     print(f"wrote {args.out}: {man['layers']} layers of {man['image_size'][0]}x{man['image_size'][1]} pixels")
     return 0

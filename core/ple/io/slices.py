@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..clg.grid import iter_slices
 from ..errors import PleError
 from .files import atomic_path, atomic_write_text
 
@@ -40,3 +41,12 @@ def write_slices(out_dir, layers: Iterable, meta: dict, progress=None) -> dict:
                     image_size=[int(shape[1]), int(shape[0])] if shape else [0, 0])
     atomic_write_text(out / "manifest.json", json.dumps(manifest, indent=1) + "\n")
     return manifest
+
+
+def write_pmc_slices(out_dir, pmc, lo, hi, layer: float, pixel: float, progress=None) -> dict:
+    """Printer slices of a membership function ``pmc`` (points (n, 3) -> bool (n,)) over the box
+    [lo, hi] (layer centres and pixel centres as ``clg.grid.iter_slices``); returns the manifest."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    meta = {"layer": layer, "pixel": pixel, "origin": [float(lo[0]), float(lo[1]), float(lo[2])],
+            "bounds": [lo.tolist(), hi.tolist()], "rows": "row 0 is the largest y"}
+    return write_slices(out_dir, iter_slices(pmc, lo, hi, layer, pixel), meta, progress)

@@ -68,9 +68,7 @@ def _expr(m, tree, parts):
 
 def _solid_manifold(m, comp, segments: int):
     unit = _unit_sphere(m, segments)
-    lat = comp.lat
-    nu, nv, nw = lat.counts
-    g = np.stack(np.meshgrid(np.arange(nu), np.arange(nv), np.arange(nw), indexing="ij"), -1).reshape(-1, 3)
+    g = comp.groups()
     lin, move, _ = comp.copies(g)
     unions = []
     for ci in range(len(comp.names)):
@@ -85,12 +83,13 @@ def _solid_manifold(m, comp, segments: int):
     return _expr(m, comp.solid, unions)
 
 
-def mesh_clg(clg: CLG, segments: int = 32):
-    """A watertight trimesh of the CLG solid."""
+def mesh_clg(clg: CLG, segments: int = 32, region=None):
+    """A watertight trimesh of the CLG solid (of the chunk copies at the groups of ``region``, a
+    ``Region``, if given: the add-on's preview of its drawn region)."""
     if segments < 8 or segments > 512:
         raise PleError(f"--segments {segments}: expected 8..512")
     m = _manifold()
-    solid = _solid_manifold(m, compiled(clg), segments)
+    solid = _solid_manifold(m, compiled(clg, region), segments)
     out = solid.to_mesh()
     verts = np.asarray(out.vert_properties, float)[:, :3]
     faces = np.asarray(out.tri_verts, np.int64)
