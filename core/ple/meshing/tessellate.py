@@ -164,7 +164,7 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
         raise PleError("a beam joins two balls with the same centre")
     dirs = vec / lengths[:, None]
     hub = hub_geometry(radius, dirs, np.asarray(neighbor_radii, float).reshape(-1), lengths, hint)
-    hub = filleted(hub, fillet)  # optional junction fillet (001_ §6 Eq. 6): projection onto the blend
+    hub = filleted(hub, fillet, hint)  # optional junction fillet (001_ §6 Eq. 6): projection onto the blend
     if style == "refined":
         base = corridor_mesh(hub.chocc, cnt_segments)
         verts, faces, rings = _refine(base, hub, levels)
