@@ -10,6 +10,7 @@ e.g. ``from ple.queries import biq`` or ``from ple.meshing.tessellate import tes
 from .algebra.mobius import Cline, Mobius
 from .algebra.similarity import Identity, Rotation, Scaling, Screw, Similarity, Swirl, Translation
 from .algebra.vectors import Pt, Vec
+from .clg.field import FieldSolid
 from .clg.model import CLG
 from .errors import PleError
 from .filters import FilteredLattice, FourierField, ImplicitFilter, LiL, Stencil, TPMSField, lil
@@ -27,7 +28,8 @@ from .program.sources import load_lattice
 __version__ = "0.1.0"
 
 __all__ = [
-    "CLG", "BeCOTSField", "BeamPattern", "Cline", "Direction", "Evaluation", "FilteredLattice", "FourierField",
+    "CLG", "BeCOTSField", "BeamPattern", "Cline", "Direction", "Evaluation", "FieldSolid", "FilteredLattice",
+    "FourierField",
     "Identity", "ImplicitFilter", "Lattice", "LiL", "Mobius", "Node", "PleError", "Pt", "Range", "RectifiedWarp",
     "Region", "Rotation", "Scaling", "Screw", "ShapeOntoCone", "Similarity", "Stencil", "SteadyMap2", "Swirl",
     "TMIMap", "TPMSField", "Translation", "Vec", "becots_lattice", "compile_program", "lil", "load_clg", "load_ir",
