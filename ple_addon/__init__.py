@@ -11,7 +11,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from . import operators, prefs, props, rig, ui
+from . import mobius_frames, operators, prefs, props, rig, ui
 
 
 @persistent
@@ -87,9 +87,11 @@ def register():
     bpy.types.VIEW3D_MT_add.append(menu_add)
     register_keymap()
     ui.load_previews()
+    mobius_frames.register()
 
 
 def unregister():
+    mobius_frames.unregister()
     ui.free_previews()
     unregister_keymap()
     bpy.types.VIEW3D_MT_add.remove(menu_add)
