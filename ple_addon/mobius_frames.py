@@ -29,6 +29,7 @@ from .corelink import PleError, core, presets
 mobius = core("model.mobius")
 sources = core("program.sources")
 
+PRESETS = ("mobius_slab", "tmi_slab")  # the shipped Möbius presets (Add › PLE Lattice routes them here)
 MAX_NODES = 200_000  # a region larger than this is not drawn live
 MOVE_DIGITS = 7  # matrices compared at this many decimals (float32 frames)
 _drawn: dict[str, tuple] = {}  # rig name -> (preset, params, base lattice, signature last drawn)
@@ -203,7 +204,7 @@ class PLE_PT_mobius(bpy.types.Panel):  # noqa: N801 - Blender naming
 
 def menu_add(self, context):
     self.layout.separator()
-    for name in ("mobius_slab", "tmi_slab"):
+    for name in PRESETS:
         self.layout.operator(PLE_OT_mobius_add.bl_idname, text=f"{name} (Möbius frames)").preset = name
 
 

@@ -18,7 +18,7 @@ from bpy.props import (
     StringProperty,
 )
 
-from . import prefs
+from . import mobius_frames, prefs
 from . import rig as rigmod
 from .corelink import PleError, core, ir, needs, presets, program, snippets, styles, work
 
@@ -144,6 +144,8 @@ class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
         return text, ("IR" if path.suffix == ".json" else "PROGRAM"), path.stem, linked
 
     def execute(self, context):
+        if self.source == "PRESET" and self.preset in mobius_frames.PRESETS:  # its frames are Möbius frames
+            return bpy.ops.ple.mobius_add(preset=self.preset)
         try:
             text, kind, default_name, linked = self.source_text()
         except PleError as exc:

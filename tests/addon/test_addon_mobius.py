@@ -94,7 +94,8 @@ def case_mobius_tmi_and_errors():
     from ple.model.mobius import with_control_frames
     from ple.program.sources import load_lattice
 
-    assert bpy.ops.ple.mobius_add(preset="tmi_slab") == {"FINISHED"}
+    # Add › PLE Lattice › tmi_slab makes a Möbius rig too
+    assert bpy.ops.ple.lattice_add(source="PRESET", preset="tmi_slab") == {"FINISHED"}
     rig = bpy.context.active_object
     p = mf.parts(rig)
     lat = load_lattice("tmi_slab")
