@@ -75,6 +75,22 @@ def test_fillet_mesh_is_closed_and_holds_the_blends_volume_gain(size):
     assert abs(gain_mesh - gain_mc) < 0.04 * gain_mc + 3 * sigma
 
 
+def test_filleted_bcc_mesh_holds_the_blended_solids_volume():
+    """Hubs of up to 11 beams 54.7° apart: the filleted mesh's volume against Monte Carlo of the
+    blended solid (measured 1.1 % low at levels 4: the mesh converges with the levels, see
+    docs/seeds.md)."""
+    lat = load_lattice("bcc", {"n": 2})
+    mesh = tessellate(lat, style="refined", levels=4, fillet=0.2)
+    assert mesh.is_watertight and mesh.is_winding_consistent
+    lo, hi = lat.bounds()
+    lo, hi = lo - 0.1, hi + 0.1
+    pts = np.random.default_rng(4).uniform(lo, hi, (1_000_000, 3))
+    box = np.prod(hi - lo)
+    q = _blend_inside(lat, pts, 0.2).mean()
+    vol, sigma = q * box, np.sqrt(q * (1 - q) / len(pts)) * box
+    assert abs(mesh.volume - vol) < 0.02 * vol + 3 * sigma
+
+
 def test_hubs_reach_where_the_blend_meets_the_beams():
     dirs = np.array([[1.0, 0, 0], [0, 1, 0], [0, 0, 1], [-0.6, -0.6, 0.53]])
     dirs /= np.linalg.norm(dirs, axis=1)[:, None]
