@@ -30,6 +30,7 @@ mobius = core("model.mobius")
 sources = core("program.sources")
 
 PRESETS = ("mobius_slab", "tmi_slab")  # the shipped Möbius presets (Add › PLE Lattice routes them here)
+SNIPPET_TEXT = "PLE snippet"  # the text block the steady rigs' snippets go to as well
 MAX_NODES = 200_000  # a region larger than this is not drawn live
 MOVE_DIGITS = 7  # matrices compared at this many decimals (float32 frames)
 _drawn: dict[str, tuple] = {}  # rig name -> (preset, params, base lattice, signature last drawn)
@@ -183,6 +184,30 @@ class PLE_OT_mobius_add(bpy.types.Operator):  # noqa: N801 - Blender naming
         return {"FINISHED"}
 
 
+class PLE_OT_mobius_snippet(bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Copy the frames as a program line, lat = with_control_frames(lat, {...}), to the text block
+    "PLE snippet" and the clipboard (thesis §6.2.2: GUI edits become program text)"""
+
+    bl_idname = "ple.mobius_snippet"
+    bl_label = "Copy Frames as Code"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return rig_of(context.active_object) is not None
+
+    def execute(self, context):
+        try:
+            code = mobius.control_frames_code(frames_of(rig_of(context.active_object)))
+        except PleError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        text = bpy.data.texts.get(SNIPPET_TEXT) or bpy.data.texts.new(SNIPPET_TEXT)
+        text.from_string(code + "\n")
+        context.window_manager.clipboard = code
+        return {"FINISHED"}
+
+
 class PLE_PT_mobius(bpy.types.Panel):  # noqa: N801 - Blender naming
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
@@ -198,6 +223,7 @@ class PLE_PT_mobius(bpy.types.Panel):  # noqa: N801 - Blender naming
         col = self.layout.column()
         col.label(text=f"Preset: {rig['ple_mobius']}")
         col.label(text="Drag the frames X, Y, Z (arrows) and their C handles (spheres)")
+        col.operator(PLE_OT_mobius_snippet.bl_idname, icon="COPYDOWN")
         if rig.get("ple_status"):
             col.label(text=rig["ple_status"], icon="ERROR")
 
@@ -216,7 +242,7 @@ def on_depsgraph_update(scene, depsgraph):
             refresh(obj)
 
 
-CLASSES = (PLE_OT_mobius_add, PLE_PT_mobius)
+CLASSES = (PLE_OT_mobius_add, PLE_OT_mobius_snippet, PLE_PT_mobius)
 
 
 def register():

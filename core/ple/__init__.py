@@ -18,7 +18,7 @@ from .io.irfile import load_ir, save_ir
 from .model.becots import BeCOTSField
 from .model.becots_builders import becots_lattice, set_field, stack_lattice
 from .model.lattice import BeamPattern, Direction, Evaluation, Lattice, Node, Region
-from .model.mobius import TMIMap, mobius_frames_lattice, mobius_lattice
+from .model.mobius import TMIMap, mobius_frames_lattice, mobius_lattice, with_control_frames
 from .model.planar import ShapeOntoCone, SteadyMap2, snap_corner
 from .model.warp import RectifiedWarp, rectified_warp
 from .program.clg_sources import load_clg
@@ -34,5 +34,6 @@ __all__ = [
     "Region", "Rotation", "Scaling", "Screw", "ShapeOntoCone", "Similarity", "Stencil", "SteadyMap2", "Swirl",
     "TMIMap", "TPMSField", "Translation", "Vec", "becots_lattice", "compile_program", "lil", "load_clg", "load_ir",
     "load_lattice", "mobius_frames_lattice", "mobius_lattice", "rectified_warp", "save_ir", "set_field",
+    "with_control_frames",
     "snap_corner", "stack_lattice",
 ]

@@ -87,6 +87,13 @@ def case_mobius_drag():
     base.update()
     moved["X"] = frame_points(p["X"], p[("handle", "X")])
     assert_drawn(rig, with_control_frames(lat, moved))
+    # the drags as program text: run it on the preset's lattice, get the drawing back
+    assert bpy.ops.ple.mobius_snippet() == {"FINISHED"}
+    code = bpy.data.texts["PLE snippet"].as_string()
+    assert code.startswith("lat = with_control_frames(lat, {")
+    ns = {"lat": load_lattice("mobius_slab"), "with_control_frames": with_control_frames}
+    exec(code, ns)
+    assert_drawn(rig, ns["lat"])
 
 
 def case_mobius_tmi_and_errors():

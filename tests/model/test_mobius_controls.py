@@ -57,3 +57,20 @@ def test_handles_round_trip_and_a_similarity_frame_has_its_handle_on_y():
         with_control_frames(load_lattice("mobius_slab"), {"Y": (1, 1j, 1)})
     with pytest.raises(PleError, match="not a Möbius"):
         control_frames(load_lattice("cubic"))
+
+
+def test_code_of_moved_frames_runs_in_a_program():
+    from ple.model.mobius import control_frames_code
+    from ple.program.runtime import compile_program
+
+    lat = load_lattice("mobius_slab", {"nu": 3, "nv": 2})
+    moved = {"Y": (1.1 + 0.1j, 2.0 + 0.4j, 0.8 + 1.2j), "X": (0.1j, 1.05, 1.1j)}
+    code = control_frames_code(moved)
+    from ple.program.presets import preset_path
+
+    src = preset_path("mobius_slab").read_text()  # the preset, its last line applying the frames
+    src = src.replace("    return mobius_frames_lattice(", "    lat = mobius_frames_lattice(")
+    src += f"    {code}\n    return lat\n"
+    got = compile_program(src).run(nu=3, nv=2)
+    idx = lat.region().node_index(len(lat.nodes))
+    assert np.allclose(got.node_balls(idx)[0], with_control_frames(lat, moved).node_balls(idx)[0], atol=1e-9)

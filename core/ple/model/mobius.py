@@ -227,3 +227,13 @@ def frame_from_handles(matrix, handle) -> tuple[complex, complex, complex]:
     if not np.all(np.isfinite(pts)):
         raise PleError("Möbius frame: the frame or its handle is not finite")
     return tuple(complex(x, y) for x, y in pts[:2].T)
+
+
+def control_frames_code(frames: dict, digits: int = 6) -> str:
+    """A program line that applies moved control frames (the add-on's snippet of frame drags):
+    ``lat = with_control_frames(lat, {"Y": ((x, y), (x, y), (x, y)), …})``."""
+    def pt(z: complex) -> str:
+        return f"({round(z.real, digits)!r}, {round(z.imag, digits)!r})"
+
+    body = ", ".join(f'"{k}": ({", ".join(pt(_complex(p)) for p in frames[k])})' for k in sorted(frames))
+    return f"lat = with_control_frames(lat, {{{body}}})"
