@@ -11,7 +11,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from . import clg_rig, operators, prefs, props, rig, ui
+from . import clg_rig, mobius_frames, operators, prefs, props, rig, ui
 
 
 @persistent
@@ -88,9 +88,11 @@ def register():
     clg_rig.register()
     register_keymap()
     ui.load_previews()
+    mobius_frames.register()
 
 
 def unregister():
+    mobius_frames.unregister()
     ui.free_previews()
     unregister_keymap()
     clg_rig.unregister()

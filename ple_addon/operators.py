@@ -18,7 +18,7 @@ from bpy.props import (
     StringProperty,
 )
 
-from . import jobs, prefs
+from . import jobs, mobius_frames, prefs
 from . import rig as rigmod
 from .corelink import PleError, core, ir, needs, presets, snippets, styles, work
 
@@ -137,6 +137,8 @@ class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
         return text, ("IR" if path.suffix == ".json" else "PROGRAM"), path.stem, linked
 
     def execute(self, context):
+        if self.source == "PRESET" and self.preset in mobius_frames.PRESETS:  # its frames are Möbius frames
+            return bpy.ops.ple.mobius_add(preset=self.preset)
         try:
             text, kind, default_name, linked = self.source_text()
         except PleError as exc:

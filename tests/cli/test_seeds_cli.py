@@ -43,10 +43,29 @@ def test_eval_info_mesh_biq_on_a_tmi_slab(tmp_path, capsys):
 
 
 def test_bench_seeds_runs_small(capsys):
-    assert main(["bench", "seeds", "--queries", "3", "--naive-queries", "1", "--skip-lil"]) == 0
+    assert main(["bench", "seeds", "--queries", "3", "--naive-queries", "1", "--skip-lil",
+                 "--skip-fig21-search"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert {r["lattice"] for r in out["table_7_2"]} == {"thesis_regular", "thesis_cylindrical", "thesis_warped"}
     for row in out["table_7_2"]:
         assert all(v.get("same_hits_as_best_path", True) for v in row["ours"].values())
     assert set(out["table_7_2"][0]["ours"]) == {"1", "u", "uv", "naive"}
     assert len(out["fig_21"]) == 2
+
+
+def test_fig_21_fractions_rest_on_a_chopped_ball_measured_by_monte_carlo():
+    from ple.bench.seeds import _antiprism, _chopped_ball_volume, _fractions
+    from ple.meshing.achocc import hub_geometry
+
+    d = _antiprism()
+    assert np.allclose(np.linalg.norm(d, axis=1), 1)
+    gaps = np.arccos(np.clip(d @ d.T, -1, 1))[np.triu_indices(8, 1)]
+    assert np.isclose(np.sort(gaps)[:16], np.sort(gaps)[0]).all()  # 16 equal edges
+    hub = hub_geometry(1.0, d, np.full(8, 4.0), np.full(8, 20.0), r_plus_min=4.5)
+    p = np.random.default_rng(0).uniform(-hub.r_plus, hub.r_plus, (400_000, 3))
+    keep = (np.linalg.norm(p, axis=1) <= hub.r_plus) & np.all(p @ d.T <= hub.r_plus * np.cos(hub.alphas), axis=1)
+    mc = keep.mean() * (2 * hub.r_plus) ** 3
+    assert abs(_chopped_ball_volume(hub) - mc) < 4 * (2 * hub.r_plus) ** 3 * np.sqrt(keep.mean() / len(p))
+    r_plus, f = _fractions(d, 4.0, 20.0, 4.5, "ball")
+    assert r_plus == hub.r_plus and f[0] > f[1] > f[2]  # CHoCC > CNT > refined, as in the figure
+    assert abs(f[2] - 0.300) < 0.02  # the paper's top row, 1-level (see docs/performance.md)

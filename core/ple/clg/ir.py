@@ -10,6 +10,7 @@ import math
 
 from ..errors import PleError
 from ..model.ir import lattice_from_dict, lattice_to_dict
+from .field import FieldSolid, field_from_dict, field_to_dict
 from .model import (
     CLG,
     MAX_DEPTH,
@@ -64,7 +65,13 @@ def clg_from_dict(data, where: str = "", depth: int = 1) -> CLG:
         frame = m.get("frame", "world")
         if frame not in ("world", "beam"):
             raise PleError(f"{w}.frame: expected 'world' or 'beam', got {frame!r}")
-        rep = clg_from_dict(m["replace"], f"{w}.replace", depth + 1) if m.get("replace") is not None else None
+        rep = m.get("replace")
+        if isinstance(rep, dict) and "fourier" in rep:  # a fitted field, inline (ple.clg.field)
+            if len(rep) != 1:
+                raise PleError(f"{w}.replace: a field is {{\"fourier\": {{...}}}} alone")
+            rep = field_from_dict(rep["fourier"], f"{w}.replace.fourier")
+        elif rep is not None:
+            rep = clg_from_dict(rep, f"{w}.replace", depth + 1)
         materials[str(mid)] = Material(rep, frame)
     chunks_in = data["chunks"]
     if not isinstance(chunks_in, dict) or not chunks_in:
@@ -181,9 +188,11 @@ def clg_to_dict(clg: CLG) -> dict:
     """The ``ple-clg/1`` data of a CLG, compound primitives expanded (data-only materials only)."""
     mats = {}
     for mid, m in clg.materials.items():
-        if m.replace is not None and not isinstance(m.replace, CLG):
+        if m.replace is not None and not isinstance(m.replace, (CLG, FieldSolid)):
             raise PleError(f"materials.{mid}: a material given by a function cannot be written as data")
-        mats[mid] = {"frame": m.frame, "replace": None if m.replace is None else clg_to_dict(m.replace)}
+        rep = m.replace
+        mats[mid] = {"frame": m.frame, "replace": None if rep is None else
+                     field_to_dict(rep) if isinstance(rep, FieldSolid) else clg_to_dict(rep)}
     out = {"format": FORMAT, "pattern": lattice_to_dict(clg.pattern, resolved=False),
            "chunks": {k: expr_to_dict(v) for k, v in clg.chunks.items()}, "solid": expr_to_dict(clg.solid),
            "materials": mats}

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from ..algebra.similarity import commute
 from ..errors import PleError
 from ..model.lattice import Lattice
+from .field import FieldSolid
 
 MAX_DEPTH = 8  # recursive CLG nesting limit (§10.1: infinite recursions must not be defined)
 OPS = ("union", "intersection", "difference")
@@ -85,9 +86,10 @@ class Compound:
 
 @dataclass
 class Material:
-    """An abstract material (§10.1): ``replace`` is a CLG, a function of the template primitive
-    returning a CLG or None, or None (a plain material, e.g. a colour); ``frame`` says where L
-    lives: "world", or "beam" (origin → first centre, (1, 0, 0) → second centre)."""
+    """An abstract material (§10.1): ``replace`` is a CLG, a ``FieldSolid`` (a fitted field's
+    {Φ ≤ level}, ``ple.clg.field``), a function of the template primitive returning either or
+    None, or None (a plain material, e.g. a colour); ``frame`` says where L lives: "world", or
+    "beam" (origin → first centre, (1, 0, 0) → second centre; a ball: its centre and radius)."""
 
     replace: object = None
     frame: str = "world"
@@ -207,8 +209,9 @@ class CLG:
                 raise PleError(f"materials.{mid}: expected a Material, got {type(mat).__name__}")
             if isinstance(mat.replace, CLG) and mat.replace.depth >= MAX_DEPTH:
                 raise PleError(f"materials.{mid}.replace: nesting deeper than {MAX_DEPTH} levels")
-            if mat.replace is not None and not isinstance(mat.replace, CLG) and not callable(mat.replace):
-                raise PleError(f"materials.{mid}.replace: expected a CLG or a function of the primitive")
+            if mat.replace is not None and not isinstance(mat.replace, (CLG, FieldSolid)) \
+                    and not callable(mat.replace):
+                raise PleError(f"materials.{mid}.replace: expected a CLG, a FieldSolid or a function of the primitive")
             mats[str(mid)] = mat
         self.materials = mats
         self.chunks = {str(k): expand(v, self.pattern, f"chunks.{k}", set(mats)) for k, v in self.chunks.items()}
@@ -225,8 +228,9 @@ class CLG:
         rep = mat.replace
         if callable(rep) and not isinstance(rep, CLG):
             rep = rep(prim)  # R(X) (§10.1), once per template primitive
-            if rep is not None and not isinstance(rep, CLG):
-                raise PleError(f"{where}: material {prim.material!r} returned {type(rep).__name__}, not a CLG")
+            if rep is not None and not isinstance(rep, (CLG, FieldSolid)):
+                raise PleError(f"{where}: material {prim.material!r} returned {type(rep).__name__}, "
+                               f"not a CLG or a FieldSolid")
             if rep is not None and rep.depth >= MAX_DEPTH:
                 raise PleError(f"materials.{prim.material}.replace: nesting deeper than {MAX_DEPTH} levels")
         self.replacements[prim] = None if rep is None else (rep, mat.frame)

@@ -48,8 +48,8 @@ class Compiled:
         self.solid = _chunk_tree(clg.solid, self.chunk_id)
         self.children = {}
         for prim, rep in clg.replacements.items():
-            if rep is not None:
-                self.children[prim] = (compiled(rep[0]), rep[1])
+            if rep is not None:  # a CLG is compiled; a FieldSolid answers value() itself
+                self.children[prim] = (compiled(rep[0]) if isinstance(rep[0], CLG) else rep[0], rep[1])
         # bounding balls of every leaf of every chunk at group 0, in the frame G⁻¹ (see module doc)
         ginv = lat.placement.inverse()
         self.ginv = ginv.matrix

@@ -4,6 +4,8 @@ The mesh (STL, OBJ, PLY, GLB, … in cell units inside [-0.5, 0.5]³, or moved a
 with ``--normalize``) is classified inside/outside on N³ grids; the order N is the smallest of
 ``--orders`` whose zero level set is within ``--bound`` (Hausdorff, cell units) of the mesh.
 The coefficients file works as a filter: ``--implicit fourier:file=F.npz`` (Φ < 0 inside).
+With ``--out F.json`` the field is written as inline ``ple-clg/1`` data instead,
+``{"fourier": {...}}``: the ``replace`` of a CLG material (``ple.clg.field``).
 """
 
 from __future__ import annotations
@@ -13,15 +15,17 @@ import json
 import numpy as np
 import trimesh
 
+from ..clg.field import FieldSolid, field_to_dict
 from ..errors import PleError
 from ..filters.fit import fit_mesh
-from ..io.files import save_npz
+from ..io.files import atomic_write_text, save_npz
 
 
 def register(sub) -> None:
     p = sub.add_parser("fit", help="fit a T_d-symmetric Fourier field to a closed mesh (coefficients .npz)")
     p.add_argument("mesh", help="a closed triangle mesh (.stl, .obj, .ply, .glb, .off)")
-    p.add_argument("--out", required=True, help="output coefficients .npz")
+    p.add_argument("--out", required=True,
+                   help="output coefficients .npz, or .json: a ple-clg/1 material's inline field")
     p.add_argument("--bound", type=float, default=0.02, help="Hausdorff bound in cell units (default 0.02)")
     p.add_argument("--orders", default="8,16,32,64", help="candidate orders N, tried in order (default 8,16,32,64)")
     p.add_argument("--max-terms", type=int, default=None, help="keep about this many largest coefficients")
@@ -43,8 +47,8 @@ def load_mesh(path: str):
 
 
 def run(args) -> int:
-    if not args.out.endswith(".npz"):
-        raise PleError(f"--out {args.out}: expected a .npz file")
+    if not args.out.endswith((".npz", ".json")):
+        raise PleError(f"--out {args.out}: expected a .npz or .json file")
     try:
         orders = [int(x) for x in args.orders.split(",") if x.strip()]
     except ValueError:
@@ -59,10 +63,13 @@ def run(args) -> int:
         transform = {"scale": scale, "offset": offset.tolist()}
     res = fit_mesh(v, f, bound=args.bound, orders=orders, symmetric=not args.no_symmetric,
                    max_terms=args.max_terms)
-    arrays = res.field.arrays()
-    arrays.update(order=np.array(res.order), hausdorff=np.array(res.hausdorff), bound=np.array(res.bound),
-                  scale=np.array(transform["scale"]), offset=np.array(transform["offset"]))
-    save_npz(args.out, arrays)
+    if args.out.endswith(".json"):
+        atomic_write_text(args.out, json.dumps(field_to_dict(FieldSolid(res.field))))
+    else:
+        arrays = res.field.arrays()
+        arrays.update(order=np.array(res.order), hausdorff=np.array(res.hausdorff), bound=np.array(res.bound),
+                      scale=np.array(transform["scale"]), offset=np.array(transform["offset"]))
+        save_npz(args.out, arrays)
     report = dict(res.report(), out=args.out, **transform)
     print(json.dumps(report, indent=1))
     if not res.met:

@@ -191,9 +191,11 @@ def _visible_face(c: Chocc) -> tuple[float, np.ndarray, np.ndarray]:
     return best, centroid, normal
 
 
-def hub_geometry(radius: float, dirs, other_radii, lengths, hint=None) -> HubGeometry:
+def hub_geometry(radius: float, dirs, other_radii, lengths, hint=None, r_plus_min: float = 0.0) -> HubGeometry:
     """The junction of one ball: r⁺, contact circles, CHoCC with the off-centre fix (§5–6).
-    ``hint``: the ``base_triangles`` of a similar hub (see ``ple.chocc.chocc``)."""
+    ``hint``: the ``base_triangles`` of a similar hub (see ``ple.chocc.chocc``). ``r_plus_min``
+    asks for a larger S⁺ (a fillet's reach, ``ple.meshing.fillet``), capped where the contact
+    disks would leave the first part of their beams."""
     dirs = np.asarray(dirs, float).reshape(-1, 3)
     other_radii = np.asarray(other_radii, float).reshape(-1)
     lengths = np.asarray(lengths, float).reshape(-1)
@@ -206,6 +208,8 @@ def hub_geometry(radius: float, dirs, other_radii, lengths, hint=None) -> HubGeo
         limit = _max_inflation(radius, other_radii, lengths)
         if r_plus > limit:  # unclean: neighbouring junctions would overlap; stay inside the beams
             r_plus, clean = max(limit, radius), False
+        else:
+            r_plus = max(r_plus, min(r_plus_min, limit))
     alphas, _, _ = contact_circles(radius, r_plus, dirs, other_radii, lengths, strict=clean)
     if len(dirs) > 1:
         theta = np.arccos(np.clip(dirs @ dirs.T, -1, 1))

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+from ..clg.field import FieldSolid
 from ..clg.model import CLG, Prim
 from ..clg.query import compiled, frame_of
 from ..errors import PleError
@@ -49,6 +50,9 @@ def _leaf(m, comp, prim: Prim, unit, segments: int):
     if child is None:
         return x
     sub, frame = child
+    if isinstance(sub, FieldSolid):  # an implicit surface, not a hull of balls
+        raise PleError("a CLG whose material is a fitted field cannot be meshed by manifold3d; "
+                       "use `ple clg voxels` (or slices, renders) instead")
     o, rot, f = frame_of(frame, ca[None], np.array([ra]), None if cb is None else cb[None])
     inner = _solid_manifold(m, sub, segments).transform(_similarity_3x4(rot[0] * f[0], o[0]))
     return x ^ inner

@@ -11,6 +11,12 @@ Fig. 19 right), by sphere tracing from the lattice's own exit (the blend is 1-Li
 below every d_i, so the fillet surface lies outside the lattice and no step overshoots it).
 Vertices on the contact rings stay where the beams' strips meet them: the mesh stays closed.
 
+The blend reaches beyond the lattice's own junction: along each beam it stands out until the
+other beams are a few 1/b away. So a filleted hub gets its own, larger S⁺ (``reach``): the
+smallest r⁺ at which the blend lies within ``REACH_TOL`` ball radii of the beams on every
+contact circle. Beyond it the beams' strips are the blend to that tolerance, and the mesh holds
+the blend's whole volume gain (capped where the disks would leave the first part of a beam).
+
 The fillet is sized relative to the ball: ``size`` s puts the blend s·r outward at a
 symmetric crease between two beams (there d = x - ln 2 / b), so b = ln 2 / (s r).
 """
@@ -22,11 +28,15 @@ import math
 import numpy as np
 
 from ..algebra.elements import beam_distance
+from ..algebra.vectors import perpendicular_frames
 from ..errors import PleError
-from .achocc import HubGeometry
+from .achocc import HubGeometry, contact_circles, hub_geometry
 
 MAX_STEPS = 400
 TOL = 1e-10  # of the ball radius
+REACH_TOL = 1e-3  # of the ball radius: the blend's height over the beams at the contact circles
+REACH_STEP = 1.03  # r⁺ grows by this factor until the blend has settled onto the beams
+RING_SAMPLES = 32
 
 
 def blobbiness(size: float, radius: float) -> float:
@@ -76,6 +86,32 @@ class FilletedHub:
         return t
 
 
-def filleted(hub: HubGeometry, size: float | None):
-    """The hub with a fillet of ``size`` ball radii (None or 0: the hub itself)."""
-    return hub if not size else FilletedHub(hub, size)
+def reach(hub: HubGeometry, size: float) -> float:
+    """The r⁺ (hub units) beyond which the blend of Eq. 6 stands at most REACH_TOL ball radii
+    over the beams: sampled on each beam's contact circle, grown from the hub's own r⁺."""
+    fh = FilletedHub(hub, size)
+    s = len(hub.dirs)
+    if s < 2:
+        return hub.r_plus
+    e1, e2 = perpendicular_frames(hub.dirs)
+    ang = np.arange(RING_SAMPLES) * 2 * np.pi / RING_SAMPLES
+    ring = np.cos(ang)[:, None, None] * e1[None] + np.sin(ang)[:, None, None] * e2[None]  # (m, S, 3)
+    r_plus = hub.r_plus
+    for _ in range(MAX_STEPS):
+        _, x, y = contact_circles(hub.radius, r_plus, hub.dirs, hub.other_radii, hub.lengths, strict=False)
+        pts = (x[:, None] * hub.dirs)[None] + y[None, :, None] * ring
+        if np.abs(fh.blend(pts.reshape(-1, 3))).max() <= REACH_TOL * hub.radius:
+            break
+        r_plus *= REACH_STEP
+        if np.any(x >= 0.5 * hub.lengths):  # the disks would pass the beams' middles
+            break
+    return r_plus
+
+
+def filleted(hub: HubGeometry, size: float | None, hint=None):
+    """The hub with a fillet of ``size`` ball radii (None or 0: the hub itself), rebuilt on the
+    S⁺ that holds the blend (``reach``)."""
+    if not size:
+        return hub
+    grown = hub_geometry(hub.radius, hub.dirs, hub.other_radii, hub.lengths, hint, reach(hub, size))
+    return FilletedHub(grown, size)

@@ -151,11 +151,13 @@ def _arc_mids(pa, pb, n, alpha, r_plus, frames, ci) -> np.ndarray:
 
 
 def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, levels: int,
-                 segments: int, hint=None, min_edge: float = 0.0, fillet: float | None = None) -> HubTemplate:
+                 segments: int, hint=None, min_edge: float = 0.0, fillet: float | None = None,
+                 target=None) -> HubTemplate:
     """Tessellate one junction: ball (center (3,), radius) with beams to the balls
     (neighbor_centers (S, 3), neighbor_radii (S,)), in the given style. Edges shorter than
     ``min_edge`` are collapsed (``ple.meshing.weld.collapse_short_edges``) so that the mesh keeps its
-    topology when written in float32."""
+    topology when written in float32. ``target``: an optional wrapper of the HubGeometry whose
+    ``exit_distance`` the refined vertices are projected to (default: the lattice, or the fillet)."""
     center = np.asarray(center, float)
     vec = np.asarray(neighbor_centers, float).reshape(-1, 3) - center
     lengths = np.linalg.norm(vec, axis=1)
@@ -163,7 +165,8 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
         raise PleError("a beam joins two balls with the same centre")
     dirs = vec / lengths[:, None]
     hub = hub_geometry(radius, dirs, np.asarray(neighbor_radii, float).reshape(-1), lengths, hint)
-    hub = filleted(hub, fillet)  # optional junction fillet (001_ §6 Eq. 6): projection onto the blend
+    hub = filleted(hub, fillet, hint)  # optional junction fillet (001_ §6 Eq. 6): projection onto the blend
+    hub = target(hub) if target is not None else hub
     if style == "refined":
         base = corridor_mesh(hub.chocc, cnt_segments)
         verts, faces, rings = _refine(base, hub, levels)

@@ -12,6 +12,7 @@ COTS map. ``TMIMap.from_six`` follows §11.4.1, ``TMIMap.from_five`` §11.4.2.
 
 from __future__ import annotations
 
+import cmath
 import math
 from dataclasses import replace
 
@@ -161,3 +162,78 @@ class TMIMap:
 
 def _xy(z: complex) -> tuple[float, float]:
     return (z.real, z.imag)
+
+
+# ----- control frames: how a Möbius lattice is edited by frames (the add-on's handles) -------------
+CONTROL_NAMES = ("X", "Y", "Z", "W")  # X places the template; U takes X to Y, V takes X to Z, W takes X to W
+
+
+def control_frames(lat: Lattice) -> dict:
+    """The Möbius frames {A, B, C} (complex triples) that control a Möbius lattice (§11.3):
+    X = frame G, Y = U∘G, Z = V∘G, W = W∘G, each the images of 0, 1, i; only the directions
+    whose transformation is not the identity (or X alone)."""
+    gm = lat.group_map
+    if not isinstance(gm, MobiusGroups):
+        raise PleError("control frames: the lattice is not a Möbius lattice (mobius_lattice, "
+                       "mobius_frames_lattice or a TMI map)")
+    ident = Mobius.identity()
+    out = {"X": gm.frame.frame()}
+    for name, g in (("Y", gm.u), ("Z", gm.v), ("W", gm.w)):
+        if not g.allclose(ident):
+            out[name] = (g @ gm.frame).frame()
+    for name, f in out.items():
+        if not all(np.isfinite(complex(p)) for p in f):
+            raise PleError(f"control frame {name} sends a point to infinity: it cannot be shown as a frame")
+    return out
+
+
+def with_control_frames(lat: Lattice, frames: dict) -> Lattice:
+    """The Möbius lattice with its controls moved: frames {name: (A, B, C)} replace those of
+    ``control_frames`` (missing names keep theirs); U = between_frames(X, Y), V from Z, W from W."""
+    have = control_frames(lat)
+    bad = sorted(set(frames) - set(have))
+    if bad:
+        raise PleError(f"control frame {bad[0]!r}: this lattice has only {', '.join(have)}")
+    f = {**have, **{k: tuple(_complex(p) for p in v) for k, v in frames.items()}}
+    gx = Mobius.from_frame(*f["X"])
+    u, v, w = (Mobius.between_frames(f["X"], f[n]) if n in f else None for n in ("Y", "Z", "W"))
+    out = lat.copy()
+    out.set_group_map(MobiusGroups(u or Mobius.identity(), v, w, gx), lat.counts)
+    return out
+
+
+def frame_handles(frame) -> tuple[np.ndarray, np.ndarray]:
+    """A Möbius frame {A, B, C} shown as a similarity frame and a handle: the 4x4 matrix with
+    origin A, x axis along AB scaled |AB| (z up, the plane z = 0) and C in that frame's
+    coordinates (3,). A similarity frame has C at (0, 1, 0); moving C bends the frame."""
+    a, b, c = (_complex(p) for p in frame)
+    ab = b - a
+    if abs(ab) == 0:
+        raise PleError("Möbius frame: A and B coincide")
+    s, t = abs(ab), cmath.phase(ab)
+    m = np.eye(4)
+    m[:2, :2] = s * np.array([[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]])
+    m[2, 2] = s
+    m[:2, 3] = (a.real, a.imag)
+    local = (c - a) / ab  # the inverse similarity applied to C
+    return m, np.array([local.real, local.imag, 0.0])
+
+
+def frame_from_handles(matrix, handle) -> tuple[complex, complex, complex]:
+    """The Möbius frame {A, B, C} of a frame matrix (4x4) and its C handle (frame coordinates):
+    A = the origin, B = the tip of the x axis, C = the handle, projected on the plane z = 0."""
+    m = np.asarray(matrix, float).reshape(4, 4)
+    pts = m[:3, :3] @ np.array([[0, 0, 0], [1, 0, 0], list(np.asarray(handle, float).reshape(3))]).T + m[:3, 3:]
+    if not np.all(np.isfinite(pts)):
+        raise PleError("Möbius frame: the frame or its handle is not finite")
+    return tuple(complex(x, y) for x, y in pts[:2].T)
+
+
+def control_frames_code(frames: dict, digits: int = 6) -> str:
+    """A program line that applies moved control frames (the add-on's snippet of frame drags):
+    ``lat = with_control_frames(lat, {"Y": ((x, y), (x, y), (x, y)), …})``."""
+    def pt(z: complex) -> str:
+        return f"({round(z.real, digits)!r}, {round(z.imag, digits)!r})"
+
+    body = ", ".join(f'"{k}": ({", ".join(pt(_complex(p)) for p in frames[k])})' for k in sorted(frames))
+    return f"lat = with_control_frames(lat, {{{body}}})"

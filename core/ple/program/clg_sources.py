@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from ..clg import model
+from ..clg.field import FieldSolid
 from ..clg.ir import clg_from_dict
 from ..clg.model import CLG
 from ..errors import PleError
@@ -16,7 +17,7 @@ from .runtime import API, Program, parse_params, run_source
 CLG_API = {"CLG": CLG, "Ball": model.Ball, "Beam": model.Beam, "HollowBeam": model.HollowBeam,
            "ExtendedHub": model.ExtendedHub, "Connector": model.Connector, "Union": model.Union,
            "Intersection": model.Intersection, "Difference": model.Difference, "Chunk": model.Chunk,
-           "Material": model.Material}
+           "Material": model.Material, "FieldSolid": FieldSolid}
 
 
 class CLGProgram(Program):

@@ -31,7 +31,7 @@ from ..io.inputs import read_input_file
 from ..model.becots import BeCOTSField
 from ..model.becots_builders import becots_lattice, set_field, stack_lattice
 from ..model.lattice import Lattice
-from ..model.mobius import TMIMap, mobius_frames_lattice, mobius_lattice
+from ..model.mobius import TMIMap, mobius_frames_lattice, mobius_lattice, with_control_frames
 from ..model.planar import ShapeOntoCone, SteadyMap2, snap_corner
 from ..model.warp import RectifiedWarp, rectified_warp
 
@@ -69,7 +69,7 @@ API = {
     "becots_lattice": becots_lattice, "stack_lattice": stack_lattice, "set_field": set_field,
     # Möbius patterns and TMI maps (§11)
     "Mobius": Mobius, "Cline": Cline, "TMIMap": TMIMap, "mobius_lattice": mobius_lattice,
-    "mobius_frames_lattice": mobius_frames_lattice,
+    "mobius_frames_lattice": mobius_frames_lattice, "with_control_frames": with_control_frames,
     # rectified steady warps (§3.1–3.4)
     "RectifiedWarp": RectifiedWarp, "rectified_warp": rectified_warp,
     # five-point planar maps, shapes rolled onto cones, seamless snapping (§2.6.5, §4.3.2, §4.4.3)
