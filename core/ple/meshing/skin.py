@@ -20,8 +20,7 @@ import numpy as np
 import trimesh
 
 from ..errors import PleError
-from ..filters.base import And
-from ..filters.body import Body, BodyFilter
+from ..filters.body import Body, body_filters
 
 MAX_SDF_SAMPLES = 8_000_000  # grid samples of the signed distance
 
@@ -123,16 +122,9 @@ def skin(body: Body, thickness: float, lattice_mesh=None, edge: float | None = N
 
 
 def clip_bodies(lat) -> list[Body]:
-    """The bodies a lattice's mesh is cut at: those of its ``any`` body filters, reached through
-    and-compounds (a body under or/not does not bound what is kept, so it cuts nothing)."""
-    out, todo = [], [lat.filter]
-    while todo:
-        f = todo.pop(0)
-        if isinstance(f, And):
-            todo.extend(f.parts)
-        elif isinstance(f, BodyFilter) and f.mode == "any":
-            out.append(f.body)
-    return out
+    """The bodies a lattice's mesh is cut at: those of its ``any`` body filters (reached through
+    and-compounds: ``ple.filters.body.body_filters``)."""
+    return [f.body for f in body_filters(lat) if f.mode == "any"]
 
 
 def clip_to_bodies(mesh: trimesh.Trimesh, bodies) -> trimesh.Trimesh:
