@@ -91,7 +91,8 @@ def run(args) -> int:
         if args.beam_lattice or args.check:
             raise PleError("--skin makes one solid of shell and lattice: not with --beam-lattice or --check")
         style = args.style if args.style != "balls-beams" else "refined"
-        mesh = skin(body_of(lat, "--skin"), args.skin, tessellate(lat, region, style, args.levels, args.segments))
+        lattice = tessellate(lat, region, style, args.levels, args.segments, cut=False)  # skin cuts and unites
+        mesh = skin(body_of(lat, "--skin"), args.skin, lattice)
         n = len(mesh.faces) - export_mesh(mesh, args.out, args.unit)["dropped_faces"]
     elif args.beam_lattice:
         ev = lat.evaluate(region)

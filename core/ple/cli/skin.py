@@ -35,7 +35,7 @@ def run(args) -> int:
     if lat.node_count() > MAX_SKIN_NODES:
         raise PleError(f"{lat.node_count():,} nodes (limit {MAX_SKIN_NODES:,} for a skinned mesh)")
     body = body_of(lat, "ple skin")
-    solid = skin(body, args.skin, tessellate(lat, style=args.style), args.edge)
+    solid = skin(body, args.skin, tessellate(lat, style=args.style, cut=False), args.edge)
     export_mesh(solid, args.out)
     print(f"wrote {args.out}: {len(solid.faces):,} triangles, volume {solid.volume:.6g}, "
           f"watertight {solid.is_watertight}")

@@ -117,7 +117,10 @@ def skin(body: Body, thickness: float, lattice_mesh=None, edge: float | None = N
     outer = _manifold(body.vertices, body.faces)
     solid = outer - inward_offset(body, thickness, edge)
     if lattice_mesh is not None and len(lattice_mesh.faces):
-        solid = solid + (_manifold(lattice_mesh.vertices, lattice_mesh.faces) ^ outer)
+        lattice = _manifold(lattice_mesh.vertices, lattice_mesh.faces)
+        if not any(b is body for b in lattice_mesh.metadata.get("ple_cut_by", ())):
+            lattice = lattice ^ outer  # not cut yet (cutting twice would meet coincident faces)
+        solid = solid + lattice
     return _trimesh(solid)
 
 
@@ -140,4 +143,5 @@ def clip_to_bodies(mesh: trimesh.Trimesh, bodies) -> trimesh.Trimesh:
         solid = solid ^ _manifold(body.vertices, body.faces)
     out = _trimesh(solid)
     out.metadata.update(mesh.metadata)
+    out.metadata["ple_cut_by"] = [*mesh.metadata.get("ple_cut_by", ()), *bodies]
     return out

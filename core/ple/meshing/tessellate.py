@@ -532,7 +532,8 @@ def tessellation_box(lat: Lattice, region, box, style: str = "refined", levels: 
 
 
 def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
-               segments: int | None = None, check_clean: bool = True, fillet: float | None = None) -> trimesh.Trimesh:
+               segments: int | None = None, check_clean: bool = True, fillet: float | None = None,
+               cut: bool = True) -> trimesh.Trimesh:
     """The mesh of a region (default: the whole lattice) as one trimesh.
 
     ``levels``: refinement levels of ``refined`` (default 4); ``segments``: generators per full
@@ -542,7 +543,8 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     Unclean hubs (``ple.meshing.unclean``) are found first (``check_clean``); if there are any, the
     clean rest is meshed on the fast path and united with their balls and beams by manifold3d;
     ``mesh.metadata["ple_unclean"]`` holds the report (None when not checked). A lattice filling a
-    body by ``any`` is cut at the body's surface (``ple.meshing.skin.clip_to_bodies``)."""
+    body by ``any`` is cut at the body's surface (``ple.meshing.skin.clip_to_bodies``) unless
+    ``cut`` is False (for a skin, which cuts and unites in one run of Booleans)."""
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
     bodies = clip_bodies(lat)
@@ -564,7 +566,7 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     mesh = trimesh.Trimesh(verts, faces, process=False)
     mesh.remove_unreferenced_vertices()
     mesh.metadata["ple_unclean"] = report
-    return clip_to_bodies(mesh, bodies)  # a lattice filling a body by `any` ends at its surface
+    return clip_to_bodies(mesh, bodies if cut else [])  # a lattice filling a body by `any` ends at its surface
 
 
 def build_with_unions(tess: _Tessellator, ev, nodes) -> tuple[np.ndarray, np.ndarray]:
