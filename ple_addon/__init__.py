@@ -11,7 +11,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from . import clg_rig, mobius_frames, operators, prefs, props, rig, ui
+from . import body_panel, clg_rig, mobius_frames, operators, prefs, props, rig, ui
 
 
 @persistent
@@ -84,6 +84,7 @@ def register():
         bpy.utils.register_class(cls)
     for name, fn in HANDLERS:
         getattr(bpy.app.handlers, name).append(fn)
+    body_panel.register()
     bpy.types.VIEW3D_MT_add.append(menu_add)
     clg_rig.register()
     register_keymap()
@@ -97,6 +98,7 @@ def unregister():
     unregister_keymap()
     clg_rig.unregister()
     bpy.types.VIEW3D_MT_add.remove(menu_add)
+    body_panel.unregister()
     for name, fn in HANDLERS:
         lst = getattr(bpy.app.handlers, name)
         if fn in lst:

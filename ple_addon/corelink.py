@@ -32,7 +32,10 @@ def needs(name: str) -> ModuleType:
                            "does not have (install it into Blender's Python to use this)") from None
 
 
+body = core("filters.body")  # bodies and the body filter (the Body panel)
 cage = core("model.cage")
+cleanup = core("filters.cleanup")
+grading = core("model.grading")  # radius fields: graded thickness
 ir = core("filters.ir")  # ple-lattice/1 data with filters
 precision = core("algebra.precision")  # numbers read off float32 frames
 presets = core("program.presets")

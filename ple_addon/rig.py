@@ -18,7 +18,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from . import draw, jobs, prefs
+from . import body_panel, draw, jobs, prefs
 from .corelink import PleError, cage, core, ir, precision, snippets, work
 
 PARAM_PREFIX = "ple:"
@@ -239,7 +239,7 @@ def evaluate_region(rig, lat, st: RigState | None = None):
         return None
     work.check(work.estimate(lat, r), max_bytes=prefs.max_bytes(), what=f"drawing region {r}")
     panel = filtered(rig, lat)
-    if lat.filter is None and panel is None:
+    if lat.filter is None and panel is None and not body_panel.active(rig):
         key = (str(r), len(lat.nodes), tuple((b.n1, b.n2, b.di, b.dj, b.dk) for b in lat.beams))
         if st is not None and st.topology and st.topology[0] == key:
             last = st.topology[1]
@@ -250,7 +250,7 @@ def evaluate_region(rig, lat, st: RigState | None = None):
         if st is not None:
             st.topology = (key, ev)
         return ev
-    shown = lat.with_filter(panel)  # the program's own filter, then the panel's
+    shown = shown_lattice(rig, lat, panel)  # the program's own filter, then the panels'
     return jobs.call(lambda: shown.evaluate(r), rig.name, f"the filtered evaluation of region {r}")
 
 
@@ -275,11 +275,13 @@ def lil_key(rig, coarse) -> tuple:
     return signature(rig), signature(coarse), _flat(rig.matrix_world.inverted() @ coarse.matrix_world)
 
 
-def shown_lattice(rig):
-    """The rig's lattice as its panel shows it: the program's filter and the panel's filter
-    and-ed, so that drawing, tessellation and export evaluate the same kept set."""
-    lat = lattice_of(rig)
-    return lat.with_filter(filtered(rig, lat))
+def shown_lattice(rig, lat=None, panel=None):
+    """The rig's lattice as its panels show it: the program's filter and the Filters panel's
+    and-ed, then the Body panel's grading, body and cleanup, so that drawing, tessellation and
+    export evaluate the same kept set."""
+    lat = lattice_of(rig) if lat is None else lat
+    shown = lat.with_filter(filtered(rig, lat) if panel is None else panel)
+    return body_panel.fill(rig, shown, region_of(rig, lat))
 
 
 # ----- reading user moves ---------------------------------------------------------------------
@@ -349,7 +351,7 @@ def signature(rig, _seen=()) -> tuple:
                   signature(p.coarse, (*_seen, uid(rig))))
     return (text, tuple(sorted((k, repr(v)) for k, v in params_of(rig).items())), p.edits, tuple(p.region_min),
             tuple(p.region_max), tuple(p.cumulative), p.cage_interior, p.filter_kind, coarse,
-            tuple(p.stencil_shape), p.stencil_bits, p.show_template, p.source_kind)
+            tuple(p.stencil_shape), p.stencil_bits, p.show_template, p.source_kind, body_panel.signature(rig))
 
 
 def refresh(rig, force: bool = False, prepared=None) -> str | None:

@@ -13,15 +13,17 @@ from lattices import KINDS, random_lattice
 from ple.algebra.similarity import Translation
 from ple.cli.main import main
 from ple.filters.body import BodyFilter
-from ple.filters.cleanup import cleanup, cleanup_evaluation
+from ple.filters.cleanup import cleanup, cleanup_evaluation, skin_anchored
 from ple.io.bodyfile import body_from_trimesh
 from ple.io.irfile import save_ir
 from ple.model.lattice import Evaluation
 
 
-def reference(ev: Evaluation):
-    """Kept rows, dangling count and component count by peeling with a queue, then networkx."""
+def reference(ev: Evaluation, anchored=None):
+    """Kept rows, dangling count and component count by peeling with a queue, then networkx;
+    ``anchored`` balls (held by a skin) are never peeled and join through one extra vertex."""
     n = len(ev.node_index)
+    anchored = [False] * n if anchored is None else list(anchored)
     adj = [[] for _ in range(n)]
     for b, (x, y) in enumerate(ev.beam_nodes):
         adj[x].append((y, b))
@@ -31,7 +33,7 @@ def reference(ev: Evaluation):
     todo = deque(v for v in range(n) if deg[v] <= 1)
     while todo:
         v = todo.popleft()
-        if not alive[v]:
+        if not alive[v] or anchored[v]:
             continue
         alive[v] = False
         for w, b in adj[v]:
@@ -43,7 +45,9 @@ def reference(ev: Evaluation):
     g = nx.MultiGraph()
     g.add_nodes_from(v for v in range(n) if alive[v])
     g.add_edges_from((int(x), int(y)) for b, (x, y) in enumerate(ev.beam_nodes) if beam_alive[b])
-    comps = sorted(nx.connected_components(g), key=lambda c: (-len(c), min(c)))
+    g.add_edges_from((v, "skin") for v in range(n) if alive[v] and anchored[v])
+    comps = [c - {"skin"} for c in nx.connected_components(g)]
+    comps = sorted(comps, key=lambda c: (-len(c), min(c)))
     keep = sorted(comps[0]) if comps else []
     return np.array(keep, dtype=np.int64), n - sum(alive), len(comps)
 
@@ -97,3 +101,45 @@ def test_cleanup_flag(tmp_path, capsys):
     assert f"kept {report.nodes:,} balls" in err
     with np.load(out) as got:
         np.testing.assert_array_equal(got["node_index"], want.node_index)
+
+
+def anchored_by_brute_force(mesh, center, radius, thickness):
+    """Balls reaching into the skin: trimesh's containment and closest points over every face."""
+    inside = mesh.contains(center)
+    _, dist, _ = trimesh.proximity.closest_point(mesh, center)
+    return np.where(inside, dist < radius + thickness, dist < radius)
+
+
+@pytest.mark.parametrize("n", range(4))
+def test_cleanup_keeps_beams_ending_on_the_skin(n):
+    lat = list(trimmed_lattices())[n]
+    body = lat.filter.body
+    mesh = trimesh.Trimesh(body.vertices, body.faces)
+    ev = lat.evaluate()
+    held = anchored_by_brute_force(mesh, ev.center, ev.radius, 0.12)
+    np.testing.assert_array_equal(skin_anchored(body, 0.12, ev.center, ev.radius), held)
+    keep, dangling, comps = reference(ev, held)
+    out, report = cleanup_evaluation(ev, anchored=held)
+    np.testing.assert_array_equal(out.node_index, ev.node_index[keep])
+    assert report.dangling_nodes == dangling and report.components == comps
+    assert 0 < report.anchored and report.nodes > cleanup_evaluation(ev)[1].nodes  # the skin held balls
+    cleaned, rep = cleanup(lat, skin=0.12)  # the lattice's own body, as the filter of the one evaluation
+    np.testing.assert_array_equal(cleaned.evaluate().node_index, out.node_index)
+    assert rep == report
+
+
+def test_cleanup_skin_flag(tmp_path, capsys):
+    lat = next(trimmed_lattices())
+    mesh = trimesh.Trimesh(lat.filter.body.vertices, lat.filter.body.faces)
+    mesh_path = tmp_path / "t.stl"
+    mesh.export(mesh_path)
+    ir = tmp_path / "l.json"
+    save_ir(lat.unfiltered(), ir)
+    out = tmp_path / "e.npz"
+    assert main(["eval", str(ir), "--body", str(mesh_path), "--cleanup", "--skin", "0.12", "--out", str(out)]) == 0
+    assert "held by the skin" in capsys.readouterr().err
+    want, _ = cleanup(lat, skin=0.12)
+    with np.load(out) as got:
+        np.testing.assert_array_equal(got["node_index"], want.evaluate().node_index)
+    assert main(["eval", str(ir), "--cleanup", "--skin", "0.12", "--out", str(out)]) == 2
+    assert "--skin needs --body" in capsys.readouterr().err

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import trimesh
@@ -123,11 +125,87 @@ def test_surface_distance_grading_and_the_cli(tmp_path, capsys):
     assert "needs --body" in capsys.readouterr().err
 
 
-def test_a_graded_lattice_is_not_written_as_steady_data(tmp_path):
+def _round_trip(lat, path):
+    from ple.io.irfile import load_ir, save_ir
+
+    save_ir(lat, path)
+    back = load_ir(path)
+    np.testing.assert_allclose(back.evaluate().radius, lat.evaluate().radius, rtol=0, atol=1e-12)
+    save_ir(back, path.with_name("again.json"))  # the data is a fixed point of save/load
+    assert json.loads(path.read_text()) == json.loads(path.with_name("again.json").read_text())
+    return json.loads(path.read_text())["grade"]
+
+
+def test_graded_lattices_round_trip_as_data(tmp_path):
+    lat = load_lattice("cubic", {"n": 4})
+    lat.set_radius_field(LinearGradient((0, 0, 0), (3, 3, 3), 1, 2))
+    assert _round_trip(lat, tmp_path / "lin.json") == {"kind": "linear", "a": [0, 0, 0], "b": [3, 3, 3],
+                                                       "f0": 1.0, "f1": 2.0}
+    g = np.random.default_rng(3).uniform(0.5, 2.0, (3, 4, 2))
+    lat.set_radius_field(GridField(g, (-1, 0, 0), (4, 3, 3.5)))
+    data = _round_trip(lat, tmp_path / "grid.json")
+    assert data["kind"] == "grid" and np.array_equal(np.array(data["values"]), g)
+    box = trimesh.creation.box(extents=(3.2, 3.1, 3.3))
+    box.apply_translation((1.5, 1.5, 1.5))
+    box.export(tmp_path / "box.stl")
+    from ple.io.bodyfile import load_body
+
+    body = load_body(tmp_path / "box.stl")
+    lat = load_lattice("cubic", {"n": 4}).with_filter(BodyFilter(body, "any"))
+    lat.set_radius_field(SurfaceDistanceField(body, 1.2, 2.0, 1.0))
+    assert _round_trip(lat, tmp_path / "surf.json") == {"kind": "surface", "depth": 1.2, "f_surface": 2.0,
+                                                        "f_deep": 1.0}
+
+
+def test_function_fields_and_foreign_bodies_are_not_data(tmp_path):
     from ple.io.irfile import save_ir
 
     lat = load_lattice("cubic", {"n": 3})
-    lat.set_radius_field(LinearGradient((0, 0, 0), (2, 2, 2), 1, 2))
-    with pytest.raises(PleError, match="graded lattice"):
+    lat.set_radius_field(FunctionField(lambda p: 1 + 0 * p[:, 0], 1.0))
+    with pytest.raises(PleError, match="grade: a FunctionField cannot be written as data"):
         save_ir(lat, tmp_path / "g.json")
     assert not (tmp_path / "g.json").exists()
+    body = body_from_trimesh(trimesh.creation.box(extents=(2, 2, 2)))
+    lat.set_radius_field(SurfaceDistanceField(body, 1.0))
+    with pytest.raises(PleError, match="lattice's own body"):
+        save_ir(lat, tmp_path / "g.json")
+
+
+BASE = {"format": "ple-lattice/1", "nodes": [{"center": [0, 0, 0], "radius": 0.1}],
+        "U": {"count": 3, "similarity": {"kind": "translation", "vector": [1, 0, 0]}}}
+
+
+@pytest.mark.parametrize("grade, message", [
+    ({"kind": "ramp"}, "grade.kind: expected one of linear, grid, surface, got 'ramp'"),
+    ([1, 2], "grade: expected an object with kind"),
+    ({"kind": "linear", "a": [0, 0, 0]}, "grade.b: missing"),
+    ({"kind": "linear", "a": [0, "x", 0], "b": [1, 1, 1]}, "grade.a[1]: expected a finite number"),
+    ({"kind": "linear", "a": [0, 0, 0], "b": [1, 1, 1], "f0": -1}, "grade.f0: must be positive"),
+    ({"kind": "linear", "a": [0, 0, 0], "b": [1, 1, 1], "slope": 2}, "grade.slope: unknown field"),
+    ({"kind": "linear", "a": [1, 1, 1], "b": [1, 1, 1]}, "grade: a gradient needs two distinct points"),
+    ({"kind": "grid", "lo": [0, 0, 0], "hi": [1, 1, 1], "values": [[[1, 1], [1, 1]], [[1, 1], [1]]]},
+     "grade.values[1][1]: expected 2 numbers"),
+    ({"kind": "grid", "lo": [0, 0, 0], "hi": [1, 1, 1], "values": [[[1, 1], [1, 1]], [[1, 0], [1, 1]]]},
+     "grade.values[1][0][1]: must be positive"),
+    ({"kind": "grid", "lo": [0, 0, 0], "hi": [0, 1, 1], "values": [[[1, 1], [1, 1]], [[1, 1], [1, 1]]]},
+     "grade: grid field box: hi must exceed lo"),
+    ({"kind": "surface", "depth": 1.0}, "grade: a surface grade needs a body filter"),
+    ({"kind": "surface", "depth": 0}, "grade.depth: must be positive"),
+])
+def test_grade_errors_name_the_field(grade, message):
+    from ple.filters.ir import lattice_from_ir
+
+    with pytest.raises(PleError) as err:
+        lattice_from_ir({**BASE, "grade": grade})
+    assert str(err.value).startswith(message), str(err.value)
+
+
+def test_ple_ir_writes_the_grade(tmp_path):
+    out = tmp_path / "g.json"
+    assert main(["ir", "cubic", "--param", "n=4", "--grade", "0,0,0:3,3,3:1:2", "--out", str(out)]) == 0
+    assert json.loads(out.read_text())["grade"]["kind"] == "linear"
+    a, b = tmp_path / "a.npz", tmp_path / "b.npz"
+    assert main(["eval", str(out), "--out", str(a)]) == 0
+    assert main(["eval", "cubic", "--param", "n=4", "--grade", "0,0,0:3,3,3:1:2", "--out", str(b)]) == 0
+    with np.load(a) as x, np.load(b) as y:
+        np.testing.assert_allclose(x["radius"], y["radius"], rtol=0, atol=1e-12)

@@ -49,8 +49,10 @@ def max_memory(args=None) -> int:
 def lattice_from_args(args) -> Lattice:
     """The lattice of a command's LATTICE, its program contained (``ple.program.runner``)."""
     lat = with_body_args(args, run_program(args.lattice, args.param, args.timeout, max_memory(args)))
+    if getattr(args, "skin", None) is not None and getattr(args, "body", None) is None:
+        raise PleError("--skin needs --body MESH")
     if getattr(args, "cleanup", False):
-        lat, report = cleanup(lat, getattr(args, "region", None))
+        lat, report = cleanup(lat, getattr(args, "region", None), skin=getattr(args, "skin", None))
         print(report, file=sys.stderr)
     return lat
 
@@ -75,6 +77,9 @@ def add_body_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cleanup", action="store_true",
                    help="remove dangling balls (degree <= 1, repeatedly) and every piece but the largest; "
                         "the counts go to stderr")
+    p.add_argument("--skin", type=float, metavar="T",
+                   help="with --body: a shell of thickness T inside the body; --cleanup keeps the beams ending "
+                        "on it, and ple mesh unites it with the lattice into one solid (as ple skin)")
 
 
 def with_body_args(args, lat: Lattice) -> Lattice:

@@ -14,11 +14,13 @@ from ..algebra.elements import beam_distance
 from ..app.cluster import run_job
 from ..app.jobs import assemble_stl, mesh_job
 from ..errors import PleError
+from ..filters.body import body_of
 from ..io.export import export_mesh, read_back, write_beam_lattice_3mf, write_mesh
 from ..io.formats import DEFAULT_UNIT, UNITS, mesh_format
 from ..measure.check import is_clean
 from ..measure.integrals import lattice_volume
 from ..meshing.selfcheck import count_self_intersections
+from ..meshing.skin import skin
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
 from ..meshing.tessellate import _check_style, tessellate
 from ..model.budget import (
@@ -76,7 +78,7 @@ def run(args) -> int:
     region = lat.region(args.region)
     if region.groups > MAX_MESH_GROUPS:
         raise PleError(f"region {region} has {region.groups:,} node-groups; choose a smaller --region")
-    in_memory = args.check or args.beam_lattice or fmt != "stl"
+    in_memory = args.check or args.beam_lattice or fmt != "stl" or args.skin is not None
     if in_memory and region.groups > MAX_MEMORY_GROUPS:
         raise PleError(f"region {region} has {region.groups:,} node-groups: too many to hold in memory for "
                        f".{fmt}{' with --check' if args.check else ''}; write .stl (streamed) or a smaller --region")
@@ -85,7 +87,14 @@ def run(args) -> int:
     if args.beam_lattice and fmt != "3mf":
         raise PleError(f"--beam-lattice writes 3MF; --out {args.out} is .{fmt}")
     info: dict = {}
-    if args.beam_lattice:
+    if args.skin is not None:  # the body's shell united with the lattice: one solid, in memory
+        if args.beam_lattice or args.check:
+            raise PleError("--skin makes one solid of shell and lattice: not with --beam-lattice or --check")
+        style = args.style if args.style != "balls-beams" else "refined"
+        lattice = tessellate(lat, region, style, args.levels, args.segments, cut=False)  # skin cuts and unites
+        mesh = skin(body_of(lat, "--skin"), args.skin, lattice)
+        n = len(mesh.faces) - export_mesh(mesh, args.out, args.unit)["dropped_faces"]
+    elif args.beam_lattice:
         ev = lat.evaluate(region)
         style = args.style if args.style != "balls-beams" else "refined"
         mesh = tessellate(lat, region, style, args.levels, args.segments)
@@ -119,8 +128,8 @@ def run(args) -> int:
 def run_parts(args) -> int:
     """The mesh as binary-STL parts, one per box of node-groups, computed by Dask workers;
     with --out, assembled into one STL."""
-    if args.check or args.beam_lattice:
-        raise PleError("--parts writes triangle parts: --check and --beam-lattice need a single file")
+    if args.check or args.beam_lattice or args.skin is not None:
+        raise PleError("--parts writes triangle parts: --check, --beam-lattice and --skin need a single file")
     if args.unit != DEFAULT_UNIT:
         raise PleError(f"--parts writes STL parts in {DEFAULT_UNIT}; --unit {args.unit} needs a single file")
     if args.out and mesh_format(args.out) != "stl":

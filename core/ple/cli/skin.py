@@ -1,10 +1,10 @@
-"""``ple skin LATTICE --body MESH --thickness T --out F.stl``: a body's shell of thickness T united
+"""``ple skin LATTICE --body MESH --thickness T [--cleanup] --out F.stl``: a body's shell of thickness T united
 with the lattice that fills it (by ``--fill``, default any) into one watertight solid."""
 
 from __future__ import annotations
 
 from ..errors import PleError
-from ..filters.body import BodyFilter
+from ..filters.body import body_of
 from ..io.export import export_mesh
 from ..meshing.skin import skin
 from ..meshing.styles import STYLES
@@ -17,7 +17,7 @@ MAX_SKIN_NODES = 2_000_000  # the lattice is meshed in memory before the Boolean
 def register(sub) -> None:
     p = sub.add_parser("skin", help="a body's shell of thickness T united with the lattice filling it")
     add_lattice_args(p)
-    p.add_argument("--thickness", type=float, required=True, metavar="T", help="shell thickness")
+    p.add_argument("--thickness", type=float, metavar="T", help="shell thickness (or --skin T)")
     p.add_argument("--edge", type=float, help="edge length of the offset surface (default T/2)")
     p.add_argument("--style", default="refined", choices=[s for s in STYLES if s != "balls-beams"],
                    help="tessellation style of the lattice (default refined)")
@@ -28,22 +28,16 @@ def register(sub) -> None:
 def run(args) -> int:
     if args.body is None:
         raise PleError("ple skin needs --body MESH")
+    args.skin = args.thickness if args.thickness is not None else args.skin
+    if args.skin is None:
+        raise PleError("ple skin needs --thickness T")
     lat = lattice_from_args(args)
     if lat.node_count() > MAX_SKIN_NODES:
         raise PleError(f"{lat.node_count():,} nodes (limit {MAX_SKIN_NODES:,} for a skinned mesh)")
-    body = _body_of(lat)
-    solid = skin(body, args.thickness, tessellate(lat, style=args.style), args.edge)
+    body = body_of(lat, "ple skin")
+    solid = skin(body, args.skin, tessellate(lat, style=args.style, cut=False), args.edge)
     export_mesh(solid, args.out)
     print(f"wrote {args.out}: {len(solid.faces):,} triangles, volume {solid.volume:.6g}, "
           f"watertight {solid.is_watertight}")
     return 0
 
-
-def _body_of(lat):
-    """The body of the --body filter (the last BodyFilter of the lattice's filter)."""
-    f = lat.filter
-    while not isinstance(f, BodyFilter):
-        f = getattr(f, "parts", [None])[-1]
-        if f is None:
-            raise PleError("ple skin: the lattice has no body filter")
-    return f.body

@@ -30,7 +30,7 @@ from ..algebra.similarity import Similarity
 from ..errors import PleError
 from ..model.grading import RadiusField
 from ..model.lattice import Lattice
-from .base import Filter
+from .base import And, Filter
 
 MODES = ("inside", "centroid", "any")
 OPEN_MODES = ("error", "winding")
@@ -459,3 +459,25 @@ class SurfaceDistanceField(RadiusField):
 
     def __repr__(self) -> str:
         return f"SurfaceDistanceField({self.body!r}, {self.depth:g}, {self.f_surface:g}, {self.f_deep:g})"
+
+
+
+def body_filters(lat: Lattice) -> list[BodyFilter]:
+    """The body filters of a lattice, reached through and-compounds in order (a body under or/not
+    does not bound what is kept)."""
+    out, todo = [], [lat.filter]
+    while todo:
+        f = todo.pop(0)
+        if isinstance(f, And):
+            todo[:0] = f.parts
+        elif isinstance(f, BodyFilter):
+            out.append(f)
+    return out
+
+
+def body_of(lat: Lattice, what: str = "this") -> Body:
+    """The body a lattice fills: that of its last body filter (``body_filters``)."""
+    found = body_filters(lat)
+    if not found:
+        raise PleError(f"{what} needs a body: the lattice has no body filter (give --body MESH)")
+    return found[-1].body

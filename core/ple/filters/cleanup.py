@@ -5,6 +5,11 @@ longer touch the rest. ``cleanup_evaluation`` removes, round after round, every 
 ≤ 1 with its beam (what is left is the 2-core of the beam graph), then keeps only the largest
 connected component (by balls). ``cleanup`` turns the result into a filter of the lattice (the
 surviving node indices), so every door (eval, mesh, info, queries) sees the cleaned lattice.
+
+With a skin of thickness t (``skin=t``), beams that end on the skin are kept: a ball that
+reaches into the shell {x in the body : sd(x) < t} is anchored (never peeled: the skin holds
+it), and every piece touching the skin is one piece with it (the skin joins them) when the
+largest is chosen.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ import numpy as np
 from ..errors import PleError
 from ..model.lattice import Evaluation, Lattice
 from .base import Filter
+from .body import Body, body_of
 
 MAX_CLEANUP_NODES = 50_000_000  # the graph is built in memory: about 60 bytes per node and beam
 
@@ -32,6 +38,7 @@ class CleanupReport:
     dropped_beams: int
     nodes: int  # kept
     beams: int
+    anchored: int = 0  # kept balls held by the skin (with a skin only)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -40,20 +47,44 @@ class CleanupReport:
         return (f"cleanup: removed {self.dangling_nodes:,} dangling balls and {self.dangling_beams:,} beams in "
                 f"{self.rounds} rounds; dropped {self.components - 1 if self.components else 0} of "
                 f"{self.components} components ({self.dropped_nodes:,} balls, {self.dropped_beams:,} beams); "
-                f"kept {self.nodes:,} balls and {self.beams:,} beams")
+                f"kept {self.nodes:,} balls and {self.beams:,} beams"
+                + (f" ({self.anchored:,} balls held by the skin)" if self.anchored else ""))
 
 
-def cleanup_evaluation(ev: Evaluation, largest: bool = True) -> tuple[Evaluation, CleanupReport]:
+def skin_anchored(body: Body, thickness: float, center, radius) -> np.ndarray:
+    """bool (N,): which balls reach into the skin of ``body`` (the shell of points inside it
+    closer than ``thickness`` to its surface). A ball whose centre lies at depth d inside meets
+    the shell when d < r + t (the distance from the centre to the shell is d - t); a ball whose
+    centre is outside meets it when it touches the body (d < r)."""
+    if not thickness > 0:
+        raise PleError(f"cleanup: skin thickness must be positive, got {thickness!r}")
+    c = np.asarray(center, dtype=float).reshape(-1, 3)
+    r = np.asarray(radius, dtype=float).reshape(-1)
+    inside = body.contains(c)
+    out = np.zeros(len(c), dtype=bool)
+    out[inside] = body.near(c[inside], r[inside] + thickness)
+    out[~inside] = body.near(c[~inside], r[~inside])
+    return out
+
+
+def cleanup_evaluation(ev: Evaluation, largest: bool = True,
+                       anchored: np.ndarray | None = None) -> tuple[Evaluation, CleanupReport]:
     """``ev`` without dangling balls (degree <= 1, removed round by round) and, with ``largest``,
-    without the components other than the largest (ties: the one holding the lowest row)."""
+    without the components other than the largest (ties: the one holding the lowest row).
+
+    ``anchored`` (bool per node, e.g. ``skin_anchored``) marks balls held by a skin: they are
+    never peeled, and all pieces holding one count as one piece (joined through the skin)."""
     n = len(ev.node_index)
     ends = np.asarray(ev.beam_nodes, dtype=np.int64).reshape(-1, 2)
+    held = np.zeros(n, dtype=bool) if anchored is None else np.asarray(anchored, dtype=bool).reshape(-1)
+    if len(held) != n:
+        raise PleError(f"cleanup: {len(held)} anchor flags for {n} nodes")
     alive = np.ones(n, dtype=bool)
     beam_alive = np.ones(len(ends), dtype=bool)
     deg = np.bincount(ends.reshape(-1), minlength=n)
     rounds = 0
     while True:
-        drop = alive & (deg <= 1)
+        drop = alive & (deg <= 1) & ~held
         if not drop.any():
             break
         rounds += 1
@@ -68,8 +99,11 @@ def cleanup_evaluation(ev: Evaluation, largest: bool = True) -> tuple[Evaluation
         from scipy.sparse.csgraph import connected_components
 
         e = ends[beam_alive]
-        graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+        skin = np.flatnonzero(held & alive)  # joined through one extra vertex: the skin (row n)
+        e = np.concatenate([e, np.stack([skin, np.full(len(skin), n)], axis=1)])
+        graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n + 1, n + 1))
         _, label = connected_components(graph, directed=False)
+        label = label[:n]
         rows = np.flatnonzero(alive)
         uniq, inv, sizes = np.unique(label[rows], return_inverse=True, return_counts=True)
         components = len(uniq)
@@ -82,7 +116,7 @@ def cleanup_evaluation(ev: Evaluation, largest: bool = True) -> tuple[Evaluation
             alive &= ~gone
     out = ev.select(alive)
     report = CleanupReport(rounds, dangling_nodes, dangling_beams, components, dropped_nodes, dropped_beams,
-                           len(out.node_index), len(out.beam_nodes))
+                           len(out.node_index), len(out.beam_nodes), int((held & alive).sum()))
     return out, report
 
 
@@ -105,10 +139,16 @@ class NodeSet(Filter):
         return self.keys[pos] == k if len(self.keys) else np.zeros(len(k), dtype=bool)
 
 
-def cleanup(lat: Lattice, region=None, largest: bool = True) -> tuple[Lattice, CleanupReport]:
-    """``lat`` restricted to the cleaned evaluation of ``region`` (default: all of it)."""
+def cleanup(lat: Lattice, region=None, largest: bool = True,
+            skin: float | None = None) -> tuple[Lattice, CleanupReport]:
+    """``lat`` restricted to the cleaned evaluation of ``region`` (default: all of it). With
+    ``skin`` (a thickness), beams ending on the skin of the lattice's body are kept."""
     r = lat.region(region)
     if lat.node_count(r) > MAX_CLEANUP_NODES:
         raise PleError(f"cleanup of {lat.node_count(r):,} nodes (limit {MAX_CLEANUP_NODES:,}): give a smaller --region")
-    ev, report = cleanup_evaluation(lat.evaluate(r), largest)
+    ev = lat.evaluate(r)
+    anchored = None
+    if skin is not None:
+        anchored = skin_anchored(body_of(lat, "cleanup with a skin"), skin, ev.center, ev.radius)
+    ev, report = cleanup_evaluation(ev, largest, anchored)
     return lat.with_filter(NodeSet(lat, ev.node_index)), report

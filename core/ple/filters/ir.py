@@ -13,10 +13,11 @@ import numpy as np
 
 from ..algebra.similarity import Similarity, similarity_from_dict
 from ..errors import PleError
+from ..model.grading import grade_to_dict
 from ..model.ir import lattice_from_dict, lattice_to_dict
 from ..model.lattice import Lattice
 from .base import And, Filter, Not, Or
-from .body import MODES, OPEN_MODES, BodyFilter
+from .body import MODES, OPEN_MODES, BodyFilter, SurfaceDistanceField, body_filters, body_of
 from .implicit import TPMS, VARIANTS, FourierField, ImplicitFilter, TPMSField
 from .lil import LiL
 from .stencil import Stencil
@@ -30,16 +31,34 @@ def lattice_from_ir(data, loader=None) -> Lattice:
     """A Lattice from ``ple-lattice/1`` data, with its filter. ``loader(path, placement, open,
     where)`` reads a body's mesh file (``ple.io.irfile`` gives one resolving paths against the
     JSON file); without it a body filter is refused."""
-    return lattice_from_dict(data, lambda d, w: filter_from_dict(d, w, 0, loader))
+    return lattice_from_dict(data, lambda d, w: filter_from_dict(d, w, 0, loader), _surface_grade)
 
 
 def lattice_to_ir(lat: Lattice, resolved: bool = True, base=None) -> dict:
-    """The ``ple-lattice/1`` data of a lattice, with its filter; body mesh paths are written
-    relative to the folder ``base`` when given (the JSON file's), else as they were loaded.
-    A graded lattice (a radius field) is refused: the format has no radius fields yet."""
-    if getattr(lat, "radius_field", None) is not None:
-        raise PleError(f"a graded lattice ({lat.radius_field!r}) cannot be written as ple-lattice/1 data yet")
-    return lattice_to_dict(lat, resolved, lambda f: filter_to_dict(f, base))
+    """The ``ple-lattice/1`` data of a lattice, with its filter and its grade; body mesh paths
+    are written relative to the folder ``base`` when given (the JSON file's), else as they were
+    loaded."""
+    return lattice_to_dict(lat, resolved, lambda f: filter_to_dict(f, base), lambda g: _grade_to_dict(lat, g))
+
+
+# ----- grades by the distance to the body's surface -------------------------------------------------
+def _surface_grade(lat: Lattice, depth: float, f_surface: float, f_deep: float, where: str):
+    """A surface grade of the data: by the distance to the lattice's own body (its body filter)."""
+    try:
+        body = body_of(lat, where)
+    except PleError:
+        raise PleError(f"{where}: a surface grade needs a body filter (filter.body) in the same file") from None
+    return SurfaceDistanceField(body, depth, f_surface, f_deep)
+
+
+def _grade_to_dict(lat: Lattice, field) -> dict:
+    if isinstance(field, SurfaceDistanceField):
+        found = [f.body for f in body_filters(lat)]
+        if not found or field.body is not found[-1]:
+            raise PleError("grade: a surface grade is written only by the distance to the lattice's own body "
+                           "(its body filter)")
+        return {"kind": "surface", "depth": field.depth, "f_surface": field.f_surface, "f_deep": field.f_deep}
+    return grade_to_dict(field)
 
 
 # ----- writing -------------------------------------------------------------------------------------
@@ -140,7 +159,8 @@ def _lil(body, here: str, depth: int, loader=None) -> LiL:
     if method not in ("auto", "elements", "biq"):
         raise PleError(f"{here}.method: expected auto, elements or biq, got {method!r}")
     try:
-        coarse = lattice_from_dict(body["coarse"], lambda d, w: filter_from_dict(d, w, depth + 1, loader))
+        coarse = lattice_from_dict(body["coarse"], lambda d, w: filter_from_dict(d, w, depth + 1, loader),
+                                   _surface_grade)
     except PleError as exc:
         raise PleError(f"{here}.coarse.{exc}") from None
     return LiL(coarse, method)

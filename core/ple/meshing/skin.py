@@ -5,6 +5,11 @@ signed distance (positive inside) sampled on a grid and interpolated trilinearly
 surface is extracted by manifold3d's level set (marching tetrahedra on a body-centred grid) and
 every Boolean is manifold3d's, so the result is one watertight solid. The lattice's own mesh
 is clipped to the body (beams trimmed by ``any`` are cut at the surface) before the union.
+
+Clipping is also how every mesh of a lattice filled by ``any`` ends at the body's surface
+(``clip_bodies``, ``clip_to_bodies``; ``ple.meshing.tessellate`` applies them): the balls that
+touch the body from outside and the beams that cross its surface are cut there, by one
+manifold3d intersection of the closed lattice mesh with each body.
 """
 
 from __future__ import annotations
@@ -15,7 +20,7 @@ import numpy as np
 import trimesh
 
 from ..errors import PleError
-from ..filters.body import Body
+from ..filters.body import Body, body_filters
 
 MAX_SDF_SAMPLES = 8_000_000  # grid samples of the signed distance
 
@@ -112,5 +117,31 @@ def skin(body: Body, thickness: float, lattice_mesh=None, edge: float | None = N
     outer = _manifold(body.vertices, body.faces)
     solid = outer - inward_offset(body, thickness, edge)
     if lattice_mesh is not None and len(lattice_mesh.faces):
-        solid = solid + (_manifold(lattice_mesh.vertices, lattice_mesh.faces) ^ outer)
+        lattice = _manifold(lattice_mesh.vertices, lattice_mesh.faces)
+        if not any(b is body for b in lattice_mesh.metadata.get("ple_cut_by", ())):
+            lattice = lattice ^ outer  # not cut yet (cutting twice would meet coincident faces)
+        solid = solid + lattice
     return _trimesh(solid)
+
+
+def clip_bodies(lat) -> list[Body]:
+    """The bodies a lattice's mesh is cut at: those of its ``any`` body filters (reached through
+    and-compounds: ``ple.filters.body.body_filters``)."""
+    return [f.body for f in body_filters(lat) if f.mode == "any"]
+
+
+def clip_to_bodies(mesh: trimesh.Trimesh, bodies) -> trimesh.Trimesh:
+    """``mesh`` (closed) intersected with every body (closed): what sticks out is cut at their
+    surfaces. One watertight solid; an empty mesh stays empty."""
+    if not bodies or not len(mesh.faces):
+        return mesh
+    for body in bodies:
+        if not body.closed:
+            raise PleError(f"{body.name}: an open body (winding-number fallback) cannot cut a mesh: close it")
+    solid = _manifold(mesh.vertices, mesh.faces)
+    for body in bodies:
+        solid = solid ^ _manifold(body.vertices, body.faces)
+    out = _trimesh(solid)
+    out.metadata.update(mesh.metadata)
+    out.metadata["ple_cut_by"] = [*mesh.metadata.get("ple_cut_by", ()), *bodies]
+    return out

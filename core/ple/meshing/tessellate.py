@@ -36,6 +36,7 @@ from .achocc import HubGeometry, hub_geometry
 from .chocc import ChoccMesh, cnt_segments, corridor_mesh, sampled_segments
 from .fillet import filleted
 from .preview import balls_beams_mesh
+from .skin import clip_bodies, clip_to_bodies
 from .styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS
 from .styles import style as style_named
 from .unclean import find_unclean, unite
@@ -525,12 +526,16 @@ def tessellation_box(lat: Lattice, region, box, style: str = "refined", levels: 
     levels, segments = _check_style(style, levels, segments)
     if style == "balls-beams":
         raise PleError("boxes of a mesh need a closed style (refined, cnt or chocc)")
+    if clip_bodies(lat):
+        raise PleError("a lattice filling a body by 'any' is cut at the body's surface in one piece: "
+                       "mesh it without parts")
     r = lat.region(region)
     return _Tessellator(lat, r, style, levels, segments).build(lat.region(box))
 
 
 def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
-               segments: int | None = None, check_clean: bool = True, fillet: float | None = None) -> trimesh.Trimesh:
+               segments: int | None = None, check_clean: bool = True, fillet: float | None = None,
+               cut: bool = True) -> trimesh.Trimesh:
     """The mesh of a region (default: the whole lattice) as one trimesh.
 
     ``levels``: refinement levels of ``refined`` (default 4); ``segments``: generators per full
@@ -539,9 +544,12 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
 
     Unclean hubs (``ple.meshing.unclean``) are found first (``check_clean``); if there are any, the
     clean rest is meshed on the fast path and united with their balls and beams by manifold3d;
-    ``mesh.metadata["ple_unclean"]`` holds the report (None when not checked)."""
+    ``mesh.metadata["ple_unclean"]`` holds the report (None when not checked). A lattice filling a
+    body by ``any`` is cut at the body's surface (``ple.meshing.skin.clip_to_bodies``) unless
+    ``cut`` is False (for a skin, which cuts and unites in one run of Booleans)."""
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
+    bodies = clip_bodies(lat)
     if lat.group_map is not None:  # groups not similar (Möbius, warps): the general per-hub path
         lat = lat.explicit(r)
         r = lat.region()
@@ -560,7 +568,7 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     mesh = trimesh.Trimesh(verts, faces, process=False)
     mesh.remove_unreferenced_vertices()
     mesh.metadata["ple_unclean"] = report
-    return mesh
+    return clip_to_bodies(mesh, bodies if cut else [])  # a lattice filling a body by `any` ends at its surface
 
 
 def build_with_unions(tess: _Tessellator, ev, nodes) -> tuple[np.ndarray, np.ndarray]:
@@ -580,13 +588,13 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
     (k, 3)); hubs next to a box boundary are repeated in both boxes (their vertices, not faces)."""
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
+    if style == "balls-beams" or clip_bodies(lat):  # a preview; or one mesh cut at a body's surface
+        mesh = tessellate(lat, r, style, levels, segments, fillet=fillet)
+        yield np.asarray(mesh.vertices), np.asarray(mesh.faces)
+        return
     if lat.group_map is not None:  # groups not similar (Möbius, warps): the general per-hub path
         lat = lat.explicit(r)
         r = lat.region()
-    if style == "balls-beams":
-        mesh = tessellate(lat, r, style)
-        yield np.asarray(mesh.vertices), np.asarray(mesh.faces)
-        return
     tess = _tess if _tess is not None else _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style))
     boxes = list(lat.iter_slabs(max_groups=max_groups, region=r))
     # build the next box in a worker thread while the caller writes this one (numpy releases
@@ -638,6 +646,8 @@ def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: in
     if style == "balls-beams":
         raise PleError("a checked stream needs a closed style (refined, cnt or chocc)")
     r = lat.region(region)
+    if clip_bodies(lat):  # cut at a body's surface: one Boolean of the whole mesh, in memory
+        return None, None
     tess = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style))
     report = tess.find_unclean()[0] if r.groups <= MAX_CHECK_GROUPS else None
     if report is not None and len(report.nodes):

@@ -9,16 +9,24 @@ lattice with radii × bound (a superset) and test the candidates with the true r
 Fields: ``LinearGradient`` (between two points), ``GridField`` (a 3-D array over a box, trilinear),
 ``FunctionField`` (a Python function of the positions, in programs); the distance to a body's
 surface is ``ple.filters.body.SurfaceDistanceField``.
+
+In ``ple-lattice/1`` a field is the data ``"grade"`` (docs/formats.md): ``grade_to_dict`` and
+``grade_from_dict`` (strict: every malformed entry is named by its path, e.g.
+``grade.values[2][0][1]``). A function field is code, not data: it is refused.
 """
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 
 import numpy as np
 
 from ..algebra.vectors import Pt
 from ..errors import PleError
+
+GRADE_KINDS = ("linear", "grid", "surface")
+MAX_GRID_VALUES = 1 << 21  # samples of a grid field written as data
 
 
 class RadiusField(ABC):
@@ -113,3 +121,93 @@ class FunctionField(RadiusField):
 
     def __repr__(self) -> str:
         return f"FunctionField({getattr(self.fn, '__name__', 'fn')}, bound={self.bound:g})"
+
+
+# ----- ple-lattice/1 data ------------------------------------------------------------------------------
+def grade_to_dict(field: RadiusField) -> dict:
+    """The ``"grade"`` data of a linear or grid field (others are refused naming their type)."""
+    if isinstance(field, LinearGradient):
+        return {"kind": "linear", "a": field.a.tolist(), "b": field.b.tolist(), "f0": field.f0, "f1": field.f1}
+    if isinstance(field, GridField):
+        return {"kind": "grid", "lo": field.lo.tolist(), "hi": field.hi.tolist(), "values": field.v.tolist()}
+    raise PleError(f"grade: a {type(field).__name__} cannot be written as data (linear, grid and surface "
+                   "fields can; a function field is code: keep the program)")
+
+
+def _keys(d, where: str, required: tuple, optional: tuple = ()) -> None:
+    if not isinstance(d, dict):
+        raise PleError(f"{where}: expected an object with {', '.join(required)}")
+    for key in required:
+        if key not in d:
+            raise PleError(f"{where}.{key}: missing")
+    for key in d:
+        if key not in required and key not in optional:
+            raise PleError(f"{where}.{key}: unknown field (expected some of {', '.join(required + optional)})")
+
+
+def _number(x, where: str, positive: bool = False) -> float:
+    if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+        raise PleError(f"{where}: expected a finite number, got {x!r}")
+    if positive and x <= 0:
+        raise PleError(f"{where}: must be positive, got {x!r}")
+    return float(x)
+
+
+def _point(x, where: str) -> list[float]:
+    if not isinstance(x, list) or len(x) != 3:
+        raise PleError(f"{where}: expected a list of 3 numbers, got {x!r}")
+    return [_number(c, f"{where}[{n}]") for n, c in enumerate(x)]
+
+
+def _grid_values(v, where: str) -> np.ndarray:
+    """A nested (nx, ny, nz) list of positive numbers, every row of one length, checked entry by entry."""
+    shape = []
+    probe = v
+    for _ in range(3):
+        if not isinstance(probe, list) or not probe:
+            raise PleError(f"{where}: expected a non-empty 3-D list (x, then y, then z), got {probe!r}"[:200])
+        shape.append(len(probe))
+        probe = probe[0]
+    if math.prod(shape) > MAX_GRID_VALUES:
+        raise PleError(f"{where}: {math.prod(shape):,} samples (limit {MAX_GRID_VALUES:,})")
+    out = np.empty(shape)
+    for i, plane in enumerate(v):
+        if not isinstance(plane, list) or len(plane) != shape[1]:
+            raise PleError(f"{where}[{i}]: expected {shape[1]} rows like {where}[0]")
+        for j, row in enumerate(plane):
+            if not isinstance(row, list) or len(row) != shape[2]:
+                raise PleError(f"{where}[{i}][{j}]: expected {shape[2]} numbers like {where}[0][0]")
+            for k, x in enumerate(row):
+                out[i, j, k] = _number(x, f"{where}[{i}][{j}][{k}]", positive=True)
+    return out
+
+
+def grade_from_dict(d, where: str = "grade", surface=None) -> RadiusField:
+    """The radius field of ``"grade"`` data. ``surface(depth, f_surface, f_deep, where)`` makes a
+    surface-distance field (it needs the lattice's body: ``ple.filters.ir`` gives one); without
+    it a surface grade is refused."""
+    kind = d.get("kind") if isinstance(d, dict) else None
+    if kind not in GRADE_KINDS:
+        if not isinstance(d, dict):
+            raise PleError(f"{where}: expected an object with kind ({', '.join(GRADE_KINDS)})")
+        raise PleError(f"{where}.kind: expected one of {', '.join(GRADE_KINDS)}, got {kind!r}")
+    try:
+        if kind == "linear":
+            _keys(d, where, ("kind", "a", "b"), ("f0", "f1"))
+            return LinearGradient(_point(d["a"], f"{where}.a"), _point(d["b"], f"{where}.b"),
+                                  _number(d.get("f0", 1.0), f"{where}.f0", True),
+                                  _number(d.get("f1", 2.0), f"{where}.f1", True))
+        if kind == "grid":
+            _keys(d, where, ("kind", "lo", "hi", "values"))
+            return GridField(_grid_values(d["values"], f"{where}.values"), _point(d["lo"], f"{where}.lo"),
+                             _point(d["hi"], f"{where}.hi"))
+        _keys(d, where, ("kind", "depth"), ("f_surface", "f_deep"))
+        depth = _number(d["depth"], f"{where}.depth", True)
+        fs = _number(d.get("f_surface", 2.0), f"{where}.f_surface", True)
+        fd = _number(d.get("f_deep", 1.0), f"{where}.f_deep", True)
+    except PleError as exc:
+        msg = str(exc)
+        raise PleError(msg if msg.startswith(where) else f"{where}: {msg}") from None
+    if surface is None:
+        raise PleError(f"{where}: a surface grade needs the lattice's body (load the file with ple.io.irfile.load_ir)")
+    return surface(depth, fs, fd, where)

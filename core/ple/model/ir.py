@@ -15,6 +15,7 @@ from ..algebra.vectors import _as3
 from ..errors import PleError
 from .becots import BeCOTSField, Stack
 from .budget import check_finite
+from .grading import grade_from_dict, grade_to_dict
 from .lattice import Lattice
 from .schema import check_ir
 
@@ -57,10 +58,12 @@ def _similarity(d, where: str) -> Similarity:
     return similarity_from_dict(sim, f"{where}.similarity")
 
 
-def lattice_from_dict(data, filter_from_dict=None) -> Lattice:
+def lattice_from_dict(data, filter_from_dict=None, surface_grade=None) -> Lattice:
     """Build a Lattice from parsed ``ple-lattice/1`` data (validated). The optional ``"filter"``
     field is parsed by ``filter_from_dict(data, where)`` (``ple.filters.ir`` gives one: filters
-    live above the model); without it a filtered file is refused, never silently unfiltered."""
+    live above the model); without it a filtered file is refused, never silently unfiltered.
+    The optional ``"grade"`` (a radius field) is ``grade_from_dict``'s; a surface grade is made by
+    ``surface_grade(lat, depth, f_surface, f_deep, where)`` from the lattice's body."""
     if not isinstance(data, dict):
         raise PleError("lattice file: expected a JSON object at the top level")
     if data.get("format") != FORMAT:
@@ -137,6 +140,9 @@ def lattice_from_dict(data, filter_from_dict=None) -> Lattice:
         if filter_from_dict is None:
             raise PleError("filter: this reader cannot apply filters (load the file with ple.io.irfile.load_ir)")
         lat.set_filter(filter_from_dict(data["filter"], "filter"))
+    if "grade" in data:
+        surface = None if surface_grade is None else (lambda *a: surface_grade(lat, *a))
+        lat.set_radius_field(grade_from_dict(data["grade"], "grade", surface))
     return lat
 
 
@@ -144,11 +150,12 @@ def _matrix_list(s: Similarity) -> list[list[float]]:
     return [[float(x) for x in row] for row in s.matrix]
 
 
-def lattice_to_dict(lat: Lattice, resolved: bool = True, filter_to_dict=None) -> dict:
+def lattice_to_dict(lat: Lattice, resolved: bool = True, filter_to_dict=None, field_to_dict=None) -> dict:
     """The IR of a lattice. ``resolved``: every U/V/W as its incremental 4x4 matrix (what
     ``ple ir`` writes); otherwise canonical similarities with their cumulative flags. A filter is
     written by ``filter_to_dict(filter)`` (``ple.filters.ir``); without it a filtered lattice is
-    refused rather than written unfiltered."""
+    refused rather than written unfiltered. A radius field is written by ``field_to_dict``
+    (default ``grade_to_dict``: linear and grid fields)."""
     if lat.group_map is not None:  # Möbius patterns, TMI maps: no similarities to write
         raise PleError(f"a lattice placed by a {lat.group_map.kind} map has no ple-lattice/1 form "
                        "(keep its program instead)")
@@ -179,6 +186,8 @@ def lattice_to_dict(lat: Lattice, resolved: bool = True, filter_to_dict=None) ->
         if filter_to_dict is None:
             raise PleError("filter: this writer cannot write filters (use ple.io.irfile.save_ir)")
         out["filter"] = filter_to_dict(lat.filter)
+    if lat.radius_field is not None:
+        out["grade"] = (field_to_dict or grade_to_dict)(lat.radius_field)
     return out
 
 

@@ -3,7 +3,8 @@
 ``check_ir`` walks parsed data against ``SCHEMA`` before anything is built: an unknown key is
 rejected with its JSON path and the nearest valid name, every value has its type, numbers are
 finite and within range, lists within their sizes. ``ple.model.ir`` then builds the lattice
-from data that is known to be well-formed. The top-level ``"filter"`` is left to
+from data that is known to be well-formed. The top-level ``"grade"`` is left to
+``ple.model.grading.grade_from_dict`` and the ``"filter"`` to
 ``ple.filters.ir`` (filters live above the model). Reading files within limits (size, UTF-8,
 nesting depth) is ``ple.io.inputs``.
 """
@@ -33,7 +34,8 @@ SCHEMA: dict[str, dict[str, tuple[str, bool]]] = {
     "lattice": {"format": ("format", True), "nodes": ("[node]", True), "beams": ("[beam]", False),
                 "U": ("@direction", False), "V": ("@direction", False), "W": ("@direction", False),
                 "placement": ("@transform", False), "becots": ("@becots", False), "description": ("text", False),
-                "meta": ("json", False), "filter": ("filter", False)},
+                "meta": ("json", False), "filter": ("filter", False),
+                "grade": ("grade", False)},
     "node": {"id": ("ref", False), "center": ("vec3", True), "radius": ("positive", True)},
     "beam": {"from": ("ref", True), "to": ("ref", True), "offset": ("offset", False)},
     "direction": {"count": ("count", False), "cumulative": ("bool", False), "matrix": ("matrix", False),
@@ -155,6 +157,8 @@ def _check_value(kind: str, x, where: str) -> None:
         pass  # free-form (meta); depth and size are bounded by ple.io.inputs.read_json
     elif kind == "filter":
         pass  # validated, with its own paths and names, by ple.filters.ir.filter_from_dict
+    elif kind == "grade":
+        pass  # validated, with its own paths and names, by ple.model.grading.grade_from_dict
     else:  # pragma: no cover - a schema typo
         raise AssertionError(kind)
 
