@@ -24,6 +24,7 @@ from .progress import Progress
 
 CONNECT_TIMEOUT = 5  # seconds to reach a scheduler before giving up with a message
 RETRIES = 2  # reruns of a part whose worker died (Dask also reruns lost tasks by itself)
+SAVE_EVERY = 1.0  # seconds between two writes of a running job's manifest
 
 
 @contextlib.contextmanager
@@ -110,13 +111,21 @@ def run_job(job: Job, url: str, scheduler: str | None = "local", workers: int | 
 
 
 def _run_parts(client, job: Job, todo, url, manifest, save, bar) -> None:
-    """Every part of ``todo`` through ``run_tasks``; the manifest is saved after each one."""
+    """Every part of ``todo`` through ``run_tasks``; the manifest is saved at most every
+    SAVE_EVERY seconds and at the end (a part finished but not yet recorded when the client dies
+    is only computed again), so thousands of small parts do not rewrite it thousands of times."""
     args = [(job.kind, job.settings, part, url) for part in todo]
-    for part, result in run_tasks(client, compute_part, args, todo):
-        if isinstance(result, Exception):
-            error = str(result) if isinstance(result, PleError) else f"{type(result).__name__}: {result}"
-            manifest["failures"][part.name] = {"params": part.params, "error": error}
-        else:
-            manifest["parts"][part.name] = result
+    last = -SAVE_EVERY  # the first finished part is recorded at once
+    try:
+        for part, result in run_tasks(client, compute_part, args, todo):
+            if isinstance(result, Exception):
+                error = str(result) if isinstance(result, PleError) else f"{type(result).__name__}: {result}"
+                manifest["failures"][part.name] = {"params": part.params, "error": error}
+            else:
+                manifest["parts"][part.name] = result
+            if time.monotonic() - last >= SAVE_EVERY:
+                save()
+                last = time.monotonic()
+            bar.update(1, part.name)
+    finally:
         save()
-        bar.update(1, part.name)

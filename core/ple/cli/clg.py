@@ -15,7 +15,7 @@ from ..clg.rays import render, trace
 from ..errors import PleError
 from ..io.export import export_mesh
 from ..io.files import atomic_path
-from ..io.slices import write_slices
+from ..io.slices import slice_meta, write_slices
 from ..meshing.clg import mesh_clg
 from ..program.clg_sources import load_clg
 
@@ -66,11 +66,11 @@ def register(sub) -> None:
     q.set_defaults(func=run_mesh)
 
 
-def add_slice_args(q) -> None:
+def add_slice_args(q, out_required: bool = True) -> None:
     q.add_argument("--layer", type=float, required=True, help="layer height")
     q.add_argument("--pixel", type=float, required=True, help="pixel size")
     q.add_argument("--bounds", metavar="x0,y0,z0,x1,y1,z1", help="default: the solid's box")
-    q.add_argument("--out", required=True, help="output folder")
+    q.add_argument("--out", required=out_required, help="output folder")
 
 
 def _load(args):
@@ -143,8 +143,7 @@ def run_voxelize(args) -> int:
 def slice_with(pmc, lo, hi, args) -> int:
     zs, xs, ys = layer_grid(lo, hi, args.layer, args.pixel)
     bar = Progress(len(zs), "slice")
-    meta = {"layer": args.layer, "pixel": args.pixel, "origin": [float(lo[0]), float(lo[1]), float(lo[2])],
-            "bounds": [lo.tolist(), hi.tolist()], "rows": "row 0 is the largest y"}
+    meta = slice_meta(lo, hi, args.layer, args.pixel)
     man = write_slices(args.out, iter_slices(pmc, lo, hi, args.layer, args.pixel), meta, bar.update)
     bar.close()
     print(f"wrote {args.out}: {man['layers']} layers of {man['image_size'][0]}x{man['image_size'][1]} pixels")

@@ -15,6 +15,13 @@ from .files import atomic_path, atomic_write_text
 SLICES_FORMAT = "ple-slices/1"
 
 
+def slice_meta(lo, hi, layer: float, pixel: float) -> dict:
+    """The manifest fields of a slice stack that do not depend on its layers' contents."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    return {"layer": layer, "pixel": pixel, "origin": [float(lo[0]), float(lo[1]), float(lo[2])],
+            "bounds": [lo.tolist(), hi.tolist()], "rows": "row 0 is the largest y"}
+
+
 def write_slices(out_dir, layers: Iterable, meta: dict, progress=None) -> dict:
     """Write ``layer_00000.png`` … from (index, z, mask) items and ``manifest.json``; returns it."""
     try:
