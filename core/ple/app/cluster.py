@@ -42,6 +42,7 @@ def dask_client(scheduler: str | None = "local", workers: int | None = None) -> 
         n = max(1, int(workers or os.cpu_count() or 1))
         with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                           silence_logs=40) as cluster, Client(cluster) as client:
+            client.run(_warm)
             yield client
         return
     if "://" not in scheduler:
@@ -51,7 +52,13 @@ def dask_client(scheduler: str | None = "local", workers: int | None = None) -> 
     except (OSError, TimeoutError, ValueError) as exc:
         raise PleError(f"--scheduler {scheduler}: cannot reach the scheduler ({exc})") from None
     with client:
+        client.run(_warm)
         yield client
+
+
+def _warm() -> None:
+    """Run on each worker when the client connects: unpickling this function imports this module
+    and with it the job code (``ple.app.jobs``), so no part pays the library's import."""
 
 
 def run_tasks(client, fn, args_list: list[tuple], items: list):
