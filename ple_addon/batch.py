@@ -128,6 +128,12 @@ def _worker_start(tmp: Path):
 
 # ----- worker: bpy in the worker process ------------------------------------------------------------
 _BLENDER: dict = {}  # zip hash -> (bpy, rig module, core export module): installed once per process
+# Blender runs on the thread that imported bpy (the package ``ple_addon`` imports it just before
+# this module): the main thread when this module was an embedded worker's main module (its
+# ``__mp_main__``, run first) or a worker's ``--preload``; a Dask worker that first met it while
+# unpickling a task, on another thread, cannot run it
+BPY_ON_MAIN_THREAD = (threading.current_thread() is threading.main_thread()
+                      or getattr(getattr(sys.modules.get("__mp_main__"), "__spec__", None), "name", None) == __name__)
 
 
 def _blender(addon: tuple[str, bytes]):
@@ -169,8 +175,13 @@ def blender_variant(addon, job: dict, params: dict, path: str) -> dict:
     Blender's API works only on the process's main thread (elsewhere its operators crash), and a
     Dask task runs on a worker thread: the task hands its work to the worker's main thread (its
     event loop) and waits, so one variant at a time runs with ``bpy`` in each worker process."""
+    from ple.errors import PleError
+
     if threading.current_thread() is threading.main_thread():
         return _variant_here(addon, job, params, path)
+    if not BPY_ON_MAIN_THREAD:
+        raise PleError("this Dask worker imported bpy outside its main thread, where Blender cannot run: start "
+                       "it with `dask worker ADDRESS --nthreads 1 --preload ple_addon.batch`")
     from distributed import get_worker
     from distributed.utils import sync
 

@@ -13,9 +13,10 @@ from pathlib import Path
 
 
 @contextlib.contextmanager
-def dask_cluster(tmp: Path, workers: int = 2, env: dict | None = None):
+def dask_cluster(tmp: Path, workers: int = 2, env: dict | None = None, worker_args: tuple = ()):
     """Yield (scheduler address, [scheduler, worker …] processes). Workers run without a nanny
-    (killing one kills it) and one thread each; ``env`` is added to their environment."""
+    (killing one kills it) and one thread each; ``env`` is added to their environment and
+    ``worker_args`` to their command line. Their stderr goes to ``tmp/worker<N>.log``."""
     info = tmp / "scheduler.json"
     env = dict(os.environ, DASK_DISTRIBUTED__WORKER__DAEMON="False", **(env or {}))
     procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
@@ -28,8 +29,8 @@ def dask_cluster(tmp: Path, workers: int = 2, env: dict | None = None):
         address = json.loads(info.read_text())["address"]
         for n in range(workers):
             procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads",
-                                           "1", "--no-nanny", "--no-dashboard", "--name", f"w{n}"],
-                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env))
+                                           "1", "--no-nanny", "--no-dashboard", "--name", f"w{n}", *worker_args],
+                                          stdout=subprocess.DEVNULL, stderr=open(tmp / f"worker{n}.log", "w"), env=env))
         from dask.distributed import Client
 
         with Client(address, timeout=30) as c:

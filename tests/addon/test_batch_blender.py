@@ -56,8 +56,9 @@ def test_embedded_cluster_exports_the_core_meshes_reports_failures_and_resumes(t
 
 
 def test_real_scheduler_and_worker_process(tmp_path):
-    env = {"BLENDER_USER_RESOURCES": str(tmp_path / "worker-user"), "PYTHONPATH": os.pathsep.join(sys.path)}
-    with dask_cluster(tmp_path, workers=1, env=env) as (address, procs):
+    path = [str(ROOT / "core"), str(ROOT), os.environ.get("PYTHONPATH", "")]
+    env = {"BLENDER_USER_RESOURCES": str(tmp_path / "worker-user"), "PYTHONPATH": os.pathsep.join(path)}
+    with dask_cluster(tmp_path, workers=1, env=env, worker_args=("--preload", "ple_addon.batch")) as (address, procs):
         res = run_batch(tmp_path / "out", tmp_path, "--scheduler", address, sweep="radius=0.1,0.2")
         assert res.returncode == 0, res.stderr[-3000:]
         outputs = check_outputs(tmp_path / "out", 2)

@@ -23,13 +23,14 @@ def add_arguments(p) -> None:
     p.add_argument("--n", type=int, default=10, help="its input n for the mesh job (default 10)")
     p.add_argument("--box-groups", type=int, default=25, help="node-groups per mesh part (default 25)")
     p.add_argument("--slice-n", type=int, default=6, help="its input n for the slice job (default 6)")
-    p.add_argument("--layer", type=float, default=0.05, help="slice job layer height (default 0.05)")
+    p.add_argument("--layer", type=float, default=0.1, help="slice job layer height (default 0.1)")
     p.add_argument("--pixel", type=float, default=0.02, help="slice job pixel size (default 0.02)")
-    p.add_argument("--layers-per-part", type=int, default=4, help="layers per slice part (default 4)")
+    p.add_argument("--layers-per-part", type=int, default=2, help="layers per slice part (default 2)")
     p.add_argument("--repeat", type=int, default=2, help="best of this many runs per worker count (default 2)")
     p.add_argument("--beams", type=float, default=1e9,
                    help="fine beams of the end-to-end LiL count job (default 1e9; 0 skips it)")
     p.add_argument("--count-slab", type=int, default=1 << 20, help="node-groups per count part (default 2^20)")
+    p.add_argument("--only", choices=("throughput", "billion"), help="run only this half (default: both)")
 
 
 def _peak_rss_mb(client) -> float:
@@ -130,16 +131,20 @@ def _billion(tmp: str, beams: float, slab: int) -> dict:
 def run(args) -> dict:
     out = {"benchmark": "scale", "machine": "2 shared cores"}
     with tempfile.TemporaryDirectory(prefix="ple-bench-scale-") as tmp:
-        mesh = mesh_job(args.lattice, [f"n={args.n}"], "cnt", box_groups=args.box_groups)
-        out["mesh"] = {"job": f"ple mesh {args.lattice} --param n={args.n} --style cnt --parts URL "
-                              f"--box-groups {args.box_groups}", **_throughput(mesh, tmp, "mesh", args.repeat,
-                                                                               "triangles")}
-        sl = slice_job(args.lattice, [f"n={args.slice_n}"], args.layer, args.pixel,
-                       layers_per_part=args.layers_per_part)
-        out["slice"] = {"job": f"ple slice {args.lattice} --param n={args.slice_n} --layer {args.layer} --pixel "
-                               f"{args.pixel} --parts URL --layers-per-part {args.layers_per_part}",
-                        **_throughput(sl, tmp, "slice", args.repeat, "layers")}
-        out["scheduler_overhead"] = _overhead(tmp)
-        if args.beams > 0:
+        if args.only != "billion":
+            out.update(_throughputs(args, tmp))
+        if args.beams > 0 and args.only != "throughput":
             out["billion"] = _billion(tmp, args.beams, args.count_slab)
     return out
+
+
+def _throughputs(args, tmp: str) -> dict:
+    """The mesh and slice jobs with 1 and 2 workers, and the scheduler's per-part overhead."""
+    mesh = mesh_job(args.lattice, [f"n={args.n}"], "cnt", box_groups=args.box_groups)
+    sl = slice_job(args.lattice, [f"n={args.slice_n}"], args.layer, args.pixel, layers_per_part=args.layers_per_part)
+    return {"mesh": {"job": f"ple mesh {args.lattice} --param n={args.n} --style cnt --parts URL --box-groups "
+                            f"{args.box_groups}", **_throughput(mesh, tmp, "mesh", args.repeat, "triangles")},
+            "slice": {"job": f"ple slice {args.lattice} --param n={args.slice_n} --layer {args.layer} --pixel "
+                             f"{args.pixel} --parts URL --layers-per-part {args.layers_per_part}",
+                      **_throughput(sl, tmp, "slice", args.repeat, "layers")},
+            "scheduler_overhead": _overhead(tmp)}
