@@ -5,54 +5,40 @@ path; a worker killed mid-job changes nothing; a re-run recomputes nothing that 
 from __future__ import annotations
 
 import json
-import os
 import signal
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from daskcluster import dask_cluster
 from ple.app.batch import plan
 from ple.app.cluster import run_job
-from ple.app.jobs import assemble_stl, filter_job, load_filter_parts, mesh_job, sweep_job
+from ple.app.jobs import (
+    assemble_slices,
+    assemble_stl,
+    count_job,
+    count_totals,
+    filter_job,
+    load_filter_parts,
+    mesh_job,
+    slice_job,
+    sweep_job,
+)
 from ple.cli.main import main
 from ple.errors import PleError
 from ple.filters.ir import filter_to_dict
+from ple.filters.lil import lil
 from ple.filters.stencil import Stencil
 from ple.meshing.tessellate import tessellate
 from ple.program.sources import load_lattice
 
-DASK = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
-
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory):
-    """``dask scheduler`` and two ``dask worker`` processes (no nanny: killing one kills it)."""
-    tmp = tmp_path_factory.mktemp("dask")
-    info = tmp / "scheduler.json"
-    env = dict(os.environ, DASK_DISTRIBUTED__WORKER__DAEMON="False")
-    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
-                               "--port", "0", "--no-dashboard", "--scheduler-file", str(info)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)]
-    deadline = time.monotonic() + 60
-    while not info.is_file() and time.monotonic() < deadline:
-        time.sleep(0.2)
-    address = json.loads(info.read_text())["address"]
-    for n in range(2):
-        procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads",
-                                       "1", "--no-nanny", "--no-dashboard", "--name", f"w{n}"],
-                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env))
-    from dask.distributed import Client
-
-    with Client(address, timeout=30) as c:
-        c.wait_for_workers(2, timeout=60)
-    yield address, procs
-    for p in procs:
-        p.kill()
-        p.wait(timeout=30)
+    with dask_cluster(tmp_path_factory.mktemp("dask")) as running:
+        yield running
 
 
 def _hashes(folder: Path) -> dict:
@@ -136,3 +122,66 @@ def test_cli_doors_and_bad_input(tmp_path, capsys):
         run_job(mesh_job("cubic", [], "cnt"), str(tmp_path / "file"), "sync")
     with pytest.raises(PleError, match="another job"):
         run_job(mesh_job("cubic", ["n=3"], "cnt"), str(tmp_path / "p"), "sync")
+
+
+def _files(folder: Path) -> dict:
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+def test_slice_parts_assemble_to_the_one_process_slices(tmp_path, cluster):
+    address, _ = cluster
+    flags = ["octet", "--param", "n=2", "--layer", "0.1", "--pixel", "0.04"]
+    assert main(["slice", *flags, "--out", str(tmp_path / "one")]) == 0  # the one-process path
+    one = _files(tmp_path / "one")
+    assert len(one) > 10
+    lat = load_lattice("octet", ["n=2"])
+    job = slice_job("octet", ["n=2"], 0.1, 0.04, lat.bounds(), layers_per_part=6)
+    assert len(job.parts) > 2
+    run_job(job, str(tmp_path / "sync"), "sync", progress=False)
+    remote = run_job(job, str(tmp_path / "remote"), address, progress=False)
+    assert remote["written"] == len(job.parts) and _hashes(tmp_path / "sync") == _hashes(tmp_path / "remote")
+    assemble_slices(str(tmp_path / "remote"), tmp_path / "two")
+    assert _files(tmp_path / "two") == one  # every PNG and the manifest, byte for byte
+    again = run_job(job, str(tmp_path / "remote"), address, progress=False)  # resume: nothing recomputed
+    assert again["written"] == 0 and again["skipped"] == len(job.parts)
+    (tmp_path / "remote" / job.parts[-1].name).unlink()
+    again = run_job(job, str(tmp_path / "remote"), address, progress=False)
+    assert again["written"] == 1 and _hashes(tmp_path / "remote") == _hashes(tmp_path / "sync")
+    # the CLI door: --parts on the embedded cluster, assembled into --out
+    assert main(["slice", *flags, "--parts", str(tmp_path / "cli"), "--workers", "2", "--layers-per-part", "5",
+                 "--out", str(tmp_path / "three")]) == 0
+    assert _files(tmp_path / "three") == one
+    assert main(["assemble", str(tmp_path / "cli"), "--out", str(tmp_path / "four")]) == 0
+    assert _files(tmp_path / "four") == one
+
+
+@pytest.mark.parametrize("preset, params, region", [("octet", ["n=4"], "1:4,0:4,1:4"), ("fig6_3", [], "0:7,2:9,3:12"),
+                                                    ("thesis_regular", ["n=9"], None)])
+def test_counts_equal_the_evaluation(tmp_path, preset, params, region):
+    """Kept nodes and beams counted slab by slab (halo masks) against the full evaluation's arrays."""
+    lat = load_lattice(preset, params)
+    lats = [lat.with_filter(Stencil.named("faces", 3)),
+            lil(lat, load_lattice("lil_regular_coarse", {"span": 8.0}))]
+    for n, filtered in enumerate(lats):
+        job = count_job(preset, params, region, 7, filter_to_dict(filtered.filter))
+        assert len(job.parts) > 3
+        run_job(job, str(tmp_path / f"c{n}"), "sync", progress=False)
+        ev = filtered.evaluate(region)
+        assert count_totals(str(tmp_path / f"c{n}")) == {"nodes": len(ev.node_index), "beams": len(ev.beam_index),
+                                                         "parts": len(job.parts)}
+
+
+def test_lil_count_cli_on_a_real_cluster(tmp_path, cluster, capsys):
+    address, _ = cluster
+    lil_args = ["lil", "thesis_regular", "--param", "n=12", "--coarse", "lil_regular_coarse:span=11"]
+    assert main([*lil_args, "--out", str(tmp_path / "all.npz")]) == 0
+    with np.load(tmp_path / "all.npz") as z:
+        nodes, beams = len(z["node_index"]), len(z["beam_index"])
+    capsys.readouterr()
+    assert main([*lil_args, "--count", "--parts", str(tmp_path / "p"), "--scheduler", address,
+                 "--slab-groups", "100"]) == 0
+    out = capsys.readouterr().out
+    assert f"kept: {nodes:,} nodes of {2 * 12**3:,}" in out and f"{beams:,} beams of" in out
+    assert main(["assemble", str(tmp_path / "p")]) == 0
+    assert f"kept: {nodes:,} nodes, {beams:,} beams" in capsys.readouterr().out
+    assert main([*lil_args, "--count"]) == 2 and "give --parts" in capsys.readouterr().err

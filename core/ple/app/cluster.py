@@ -24,6 +24,7 @@ from .progress import Progress
 
 CONNECT_TIMEOUT = 5  # seconds to reach a scheduler before giving up with a message
 RETRIES = 2  # reruns of a part whose worker died (Dask also reruns lost tasks by itself)
+SAVE_EVERY = 1.0  # seconds between two writes of a running job's manifest
 
 
 @contextlib.contextmanager
@@ -37,10 +38,11 @@ def dask_client(scheduler: str | None = "local", workers: int | None = None) -> 
         return
     from dask.distributed import Client, LocalCluster  # optional: only distributed runs need Dask
 
-    if scheduler == "local":
+    if scheduler == "local":  # its logs stay quiet: a failed part is reported by name, not as a worker's traceback
         n = max(1, int(workers or os.cpu_count() or 1))
         with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                          silence_logs=40) as cluster, Client(cluster) as client:
+                          silence_logs=50) as cluster, Client(cluster) as client:
+            client.run(_warm)
             yield client
         return
     if "://" not in scheduler:
@@ -50,7 +52,13 @@ def dask_client(scheduler: str | None = "local", workers: int | None = None) -> 
     except (OSError, TimeoutError, ValueError) as exc:
         raise PleError(f"--scheduler {scheduler}: cannot reach the scheduler ({exc})") from None
     with client:
+        client.run(_warm)
         yield client
+
+
+def _warm() -> None:
+    """Run on each worker when the client connects: unpickling this function imports this module
+    and with it the job code (``ple.app.jobs``), so no part pays the library's import."""
 
 
 def run_tasks(client, fn, args_list: list[tuple], items: list):
@@ -110,13 +118,21 @@ def run_job(job: Job, url: str, scheduler: str | None = "local", workers: int | 
 
 
 def _run_parts(client, job: Job, todo, url, manifest, save, bar) -> None:
-    """Every part of ``todo`` through ``run_tasks``; the manifest is saved after each one."""
+    """Every part of ``todo`` through ``run_tasks``; the manifest is saved at most every
+    SAVE_EVERY seconds and at the end (a part finished but not yet recorded when the client dies
+    is only computed again), so thousands of small parts do not rewrite it thousands of times."""
     args = [(job.kind, job.settings, part, url) for part in todo]
-    for part, result in run_tasks(client, compute_part, args, todo):
-        if isinstance(result, Exception):
-            error = str(result) if isinstance(result, PleError) else f"{type(result).__name__}: {result}"
-            manifest["failures"][part.name] = {"params": part.params, "error": error}
-        else:
-            manifest["parts"][part.name] = result
+    last = -SAVE_EVERY  # the first finished part is recorded at once
+    try:
+        for part, result in run_tasks(client, compute_part, args, todo):
+            if isinstance(result, Exception):
+                error = str(result) if isinstance(result, PleError) else f"{type(result).__name__}: {result}"
+                manifest["failures"][part.name] = {"params": part.params, "error": error}
+            else:
+                manifest["parts"][part.name] = result
+            if time.monotonic() - last >= SAVE_EVERY:
+                save()
+                last = time.monotonic()
+            bar.update(1, part.name)
+    finally:
         save()
-        bar.update(1, part.name)

@@ -5,9 +5,14 @@ share), with a manifest recording each part's parameters, size, hash and time.
 Kinds: a sweep (one part per program variant, ``ple batch``), a big mesh (one part per box of
 node-groups, binary STL; the boxes' boundary hubs are handled as by the streamed tessellation, so
 the parts close up), a filtered lattice (one part per slab of node-groups, ``.npz``; ``ple lil``,
-``ple filter``). Parts are computed by ``ple.app.cluster.run_parts`` (Dask, an embedded local
-cluster by default, or a real one). Re-running a job skips every part already written and
-valid (its hash matches the manifest): a crash or a Ctrl-C loses no finished work.
+``ple filter``), kept counts of a filtered lattice (one small JSON part per slab: the 10⁹-beam
+job), printer slices (one part per range of layers, packed bits; ``ple slice``). Parts are
+computed by ``ple.app.cluster.run_job`` (Dask, an embedded local cluster by default, or a real
+one). Re-running a job skips every part already written and valid (its hash matches the
+manifest): a crash or a Ctrl-C loses no finished work.
+
+A worker builds a job's lattice once and keeps it for the job's next parts (``job_lattice``):
+a part costs its own work, not the program's run, the filter's set-up or the query plans.
 """
 
 from __future__ import annotations
@@ -18,25 +23,33 @@ import json
 import posixpath
 import time
 import uuid
+import zipfile
+from collections import OrderedDict
+from collections.abc import Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import fsspec
 import numpy as np
 
+from ..clg.grid import iter_slices, layer_grid
 from ..errors import PleError
 from ..filters.ir import filter_from_dict
 from ..io.export import mesh_bytes, stl_header, stl_records
 from ..io.files import atomic_path
 from ..io.formats import format_named
+from ..io.slices import slice_meta, write_slices
 from ..meshing.styles import style as style_named
 from ..meshing.tessellate import output_grid, tessellate, tessellation_box
 from ..meshing.weld import snap_triangles
-from ..model.lattice import Evaluation, Region
+from ..model.lattice import Evaluation, Lattice, Region
 from ..program.sources import load_lattice, resolve_source
+from ..queries.biq import pmc
 
 FORMAT = "ple-job/1"
 MANIFEST = "manifest.json"
 STL_HEADER = stl_header(what="partitioned mesh")
+CACHE_SIZE = 4  # lattices a worker keeps between the parts of its jobs
 
 
 @dataclass(frozen=True)
@@ -129,14 +142,15 @@ def sweep_job(source: str, variants: list, style: str, fmt: str, levels=None, re
 
 def mesh_job(source: str, params: dict, style: str = "refined", levels=None, region=None,
              box_groups: int = 1 << 14) -> Job:
-    """One binary-STL part per box of node-groups of ``region`` (``Lattice.iter_slabs`` order)."""
+    """One binary-STL part per box of node-groups of ``region`` (``Lattice.iter_slabs`` order).
+    The region's float32 snap grid is computed here, once, and travels with the job."""
     style_named(style)
     if style == "balls-beams":
         raise PleError("a partitioned mesh needs a closed style (refined, cnt or chocc)")
     lat = load_lattice(source, params)
     r = lat.region(region)
     settings = {"source": str(resolve_source(source)), "params": _params(params), "style": style, "levels": levels,
-                "region": str(r)}
+                "region": str(r), "grid": output_grid(lat, r)}
     parts = [Part(f"part_{n:06d}.stl", {"box": str(box)}) for n, box in enumerate(lat.iter_slabs(box_groups, r))]
     return Job("mesh", settings, parts)
 
@@ -152,16 +166,85 @@ def filter_job(lat_source: str, params: dict, region=None, slab_groups: int = 1 
     return Job("filter", settings, parts)
 
 
+def count_job(lat_source: str, params, region=None, slab_groups: int = 1 << 19, filter_spec=None) -> Job:
+    """One small JSON part per slab: the slab's kept nodes and the kept beams whose from-group
+    lies in it (``kept_counts``). Nothing but numbers is written, so a 10⁹-beam lattice costs its
+    filter's work and a few bytes per slab."""
+    lat = load_lattice(lat_source, params)
+    r = lat.region(region)
+    settings = {"source": str(resolve_source(lat_source)), "params": _params(params), "region": str(r),
+                "filter": filter_spec}
+    parts = [Part(f"part_{n:06d}.json", {"box": str(box)}) for n, box in enumerate(lat.iter_slabs(slab_groups, r))]
+    return Job("count", settings, parts)
+
+
+def slice_job(source: str, params, layer: float, pixel: float, bounds=None, layers_per_part: int = 32,
+              filter_spec=None) -> Job:
+    """Printer slices (``ple slice``) as one part per range of ``layers_per_part`` layers; the
+    box (default: the lattice's bounds) is computed here, once, and travels with the job."""
+    if int(layers_per_part) < 1:
+        raise PleError(f"--layers-per-part must be at least 1, got {layers_per_part}")
+    lat = _with_filter(load_lattice(source, params), filter_spec)
+    lo, hi = lat.bounds() if bounds is None else bounds
+    zs, _, _ = layer_grid(np.asarray(lo, float), np.asarray(hi, float), layer, pixel)
+    settings = {"source": str(resolve_source(source)), "params": _params(params), "filter": filter_spec,
+                "lo": np.asarray(lo, float).tolist(), "hi": np.asarray(hi, float).tolist(), "layer": float(layer),
+                "pixel": float(pixel)}
+    step = int(layers_per_part)
+    parts = [Part(f"part_{n:06d}.npz", {"layers": [k, min(k + step, len(zs))]})
+             for n, k in enumerate(range(0, len(zs), step))]
+    return Job("slice", settings, parts)
+
+
+# ----- the worker's lattice ----------------------------------------------------------------------------
+_BUILT: OrderedDict = OrderedDict()
+
+
+def _with_filter(lat: Lattice, spec) -> Lattice:
+    """``lat`` with the command's filter (given as data), which already holds the program's own."""
+    return lat if spec is None else lat.unfiltered().with_filter(filter_from_dict(spec))
+
+
+def job_lattice(settings: dict) -> Lattice:
+    """The lattice of a job's settings, built once per worker process and kept for the job's next
+    parts (with the filter's index and the query plans it grows); keyed by the program's text, the
+    inputs and the filter, so an edited program is built again."""
+    text = hashlib.sha256(Path(settings["source"]).read_bytes()).hexdigest()
+    key = (text, json.dumps(settings.get("params"), sort_keys=True), json.dumps(settings.get("filter"), sort_keys=True))
+    if key in _BUILT:
+        _BUILT.move_to_end(key)
+        return _BUILT[key]
+    lat = _with_filter(load_lattice(settings["source"], settings["params"]), settings.get("filter"))
+    _BUILT[key] = lat
+    while len(_BUILT) > CACHE_SIZE:
+        _BUILT.popitem(last=False)
+    return lat
+
+
+def npz_bytes(compress: bool = False, **arrays) -> bytes:
+    """An ``.npz`` of ``arrays`` whose bytes depend on the arrays only (``np.savez`` stamps the
+    time into the zip), so the same part has the same hash on every path and every day."""
+    buf = io.BytesIO()
+    method = zipfile.ZIP_DEFLATED if compress else zipfile.ZIP_STORED
+    with zipfile.ZipFile(buf, "w", method) as zf:
+        for name, a in arrays.items():
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = method
+            with zf.open(info, "w", force_zip64=True) as fh:
+                np.lib.format.write_array(fh, np.asanyarray(a), allow_pickle=False)
+    return buf.getvalue()
+
+
 # ----- computing one part (runs on a worker) ----------------------------------------------------------
 def compute_part(kind: str, settings: dict, part: Part, url: str) -> dict:
     """Compute ``part`` and write it under ``url``; returns its manifest entry. Runs in a worker:
     everything it needs is in its arguments (no state shared with the client)."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     fs, root = fsspec.core.url_to_fs(url)
     data, extra = _PARTS[kind](settings, part)
     write_atomic(fs, posixpath.join(root, part.name), data)
     return {"params": part.params, "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest(),
-            "seconds": round(time.perf_counter() - t0, 3), **extra}
+            "seconds": round(time.perf_counter() - t0, 4), "cpu_seconds": round(time.process_time() - c0, 4), **extra}
 
 
 def _sweep_part(settings: dict, part: Part) -> tuple[bytes, dict]:
@@ -174,25 +257,70 @@ def _sweep_part(settings: dict, part: Part) -> tuple[bytes, dict]:
 
 
 def _mesh_part(settings: dict, part: Part) -> tuple[bytes, dict]:
-    lat = load_lattice(settings["source"], settings["params"])
+    lat = job_lattice(settings)
     verts, faces = tessellation_box(lat, settings["region"], part.params["box"], settings["style"],
-                                    settings["levels"])
+                                    settings["levels"], grid=settings["grid"])
     # the whole region's float32 grid, as the streamed STL (``write_mesh``): the parts close up
-    rec = stl_records(snap_triangles(verts[faces], output_grid(lat, settings["region"])))
+    rec = stl_records(snap_triangles(verts[faces], settings["grid"]))
     return STL_HEADER + np.uint32(len(rec)).tobytes() + rec.tobytes(), {"triangles": int(len(rec))}
 
 
 def _filter_part(settings: dict, part: Part) -> tuple[bytes, dict]:
-    lat = load_lattice(settings["source"], settings["params"])
-    if settings.get("filter") is not None:  # the command's filter (with the program's own one)
-        lat = lat.unfiltered().with_filter(filter_from_dict(settings["filter"]))
+    lat = job_lattice(settings)
     box = lat.region(part.params["box"])
     nodes, rows = lat.region_rows(box)
     beam_index, ends = owned_beams(lat, box, rows, lat.region(settings["region"]))
-    buf = io.BytesIO()
-    np.savez(buf, node_index=nodes.node_index, center=nodes.center, radius=nodes.radius, beam_index=beam_index,
-             beam_ends=ends)
-    return buf.getvalue(), {"nodes": int(len(nodes.node_index)), "beams": int(len(beam_index))}
+    data = npz_bytes(node_index=nodes.node_index, center=nodes.center, radius=nodes.radius, beam_index=beam_index,
+                     beam_ends=ends)
+    return data, {"nodes": int(len(nodes.node_index)), "beams": int(len(beam_index))}
+
+
+def _count_part(settings: dict, part: Part) -> tuple[bytes, dict]:
+    lat = job_lattice(settings)
+    nodes, beams = kept_counts(lat, lat.region(part.params["box"]), lat.region(settings["region"]))
+    return json.dumps({"box": part.params["box"], "nodes": nodes, "beams": beams}).encode(), {"nodes": nodes,
+                                                                                              "beams": beams}
+
+
+def _slice_part(settings: dict, part: Part) -> tuple[bytes, dict]:
+    lat = job_lattice(settings)
+    k0, k1 = part.params["layers"]
+    index, zs, masks, filled, width = [], [], [], 0, 0
+    for k, z, mask in iter_slices(lambda p: pmc(lat, p), np.array(settings["lo"]), np.array(settings["hi"]),
+                                  settings["layer"], settings["pixel"], range(k0, k1)):
+        index.append(k)
+        zs.append(z)
+        masks.append(np.packbits(mask, axis=1))  # 1 bit per pixel, rows padded to bytes
+        filled += int(np.count_nonzero(mask))
+        width = int(mask.shape[1])
+    data = npz_bytes(True, index=np.array(index, np.int64), z=np.array(zs, float), packed=np.array(masks, np.uint8),
+                     width=np.int64(width))
+    return data, {"layers": len(index), "filled_pixels": filled}
+
+
+def kept_counts(lat: Lattice, box: Region, region: Region) -> tuple[int, int]:
+    """Kept nodes of ``box`` and kept beams whose from-group lies in ``box`` (both ends kept and in
+    ``region``). One keep mask over the box grown by the beam offsets (clipped to ``region``) serves
+    every beam-pattern: a pattern's beams are the mask and-ed with itself shifted by its offset."""
+    offs = np.array([[b.di, b.dj, b.dk] for b in lat.beams], np.int64).reshape(-1, 3)
+    b_lo, b_hi = np.array([box.i0, box.j0, box.k0]), np.array([box.i1, box.j1, box.k1])
+    r_lo, r_hi = np.array([region.i0, region.j0, region.k0]), np.array([region.i1, region.j1, region.k1])
+    lo = np.maximum(b_lo + np.minimum(offs.min(axis=0, initial=0), 0), r_lo)
+    hi = np.minimum(b_hi + np.maximum(offs.max(axis=0, initial=0), 0), r_hi)
+    halo = Region(int(lo[0]), int(hi[0]), int(lo[1]), int(hi[1]), int(lo[2]), int(hi[2]))
+    centers, radii = lat.region_balls(halo)
+    keep = lat.keeps(halo.node_index(len(lat.nodes)), centers.reshape(-1, 3), radii.reshape(-1)).reshape(radii.shape)
+    del centers, radii
+    own = tuple(slice(int(b_lo[a] - lo[a]), int(b_hi[a] - lo[a])) for a in range(3))
+    beams = 0
+    for b, d in zip(lat.beams, offs):
+        s_lo, s_hi = np.maximum(b_lo, r_lo - d), np.minimum(b_hi, r_hi - d)  # from-groups whose far end is in region
+        if np.any(s_hi <= s_lo):
+            continue
+        src = tuple(slice(int(s_lo[a] - lo[a]), int(s_hi[a] - lo[a])) for a in range(3))
+        dst = tuple(slice(int(s_lo[a] + d[a] - lo[a]), int(s_hi[a] + d[a] - lo[a])) for a in range(3))
+        beams += int(np.count_nonzero(keep[(*src, b.n1)] & keep[(*dst, b.n2)]))
+    return int(np.count_nonzero(keep[own])), beams
 
 
 def owned_beams(lat, box: Region, rows: np.ndarray, region: Region):
@@ -216,7 +344,8 @@ def owned_beams(lat, box: Region, rows: np.ndarray, region: Region):
     return idx[order], ends[order]
 
 
-_PARTS = {"sweep": _sweep_part, "mesh": _mesh_part, "filter": _filter_part}
+_PARTS = {"sweep": _sweep_part, "mesh": _mesh_part, "filter": _filter_part, "count": _count_part,
+          "slice": _slice_part}
 
 
 # ----- assembling ---------------------------------------------------------------------------------------
@@ -224,12 +353,7 @@ def assemble_stl(url: str, out, chunk: int = 1 << 22) -> int:
     """One binary STL of a partitioned mesh: the parts' triangle records concatenated, streamed
     (never all parts in memory). Returns the triangle count."""
     fs, root = location(url)
-    manifest = read_manifest(fs, root)
-    if manifest.get("kind") != "mesh":
-        raise PleError(f"{url}: not a partitioned mesh (kind {manifest.get('kind')!r})")
-    missing = [p for p in manifest["order"] if p not in valid_parts(fs, root, manifest)]
-    if missing:
-        raise PleError(f"{url}: {len(missing)} part(s) missing or damaged (e.g. {missing[0]}); re-run the job")
+    manifest = _complete(url, fs, root, "mesh")
     total = sum(manifest["parts"][p]["triangles"] for p in manifest["order"])
     if total >= 2**32:
         raise PleError(f"{total:,} triangles do not fit one binary STL")
@@ -261,3 +385,42 @@ def load_filter_parts(url: str):
     order = np.lexsort((cat["beam_index"][:, 3], cat["beam_index"][:, 2], cat["beam_index"][:, 1],
                         cat["beam_index"][:, 0]))
     return Evaluation(nodes, cat["center"], cat["radius"], cat["beam_index"][order], ends[order])
+
+
+def count_totals(url: str) -> dict:
+    """Kept nodes and beams of a partitioned count job, summed over its parts' manifest entries."""
+    fs, root = location(url)
+    manifest = _complete(url, fs, root, "count")
+    entries = [manifest["parts"][p] for p in manifest["order"]]
+    return {"nodes": sum(e["nodes"] for e in entries), "beams": sum(e["beams"] for e in entries),
+            "parts": len(entries)}
+
+
+def _complete(url: str, fs, root: str, kind: str) -> dict:
+    """The manifest of a finished job of ``kind`` (every part present and valid)."""
+    manifest = read_manifest(fs, root)
+    if manifest.get("kind") != kind:
+        raise PleError(f"{url}: not a partitioned {kind} job (kind {manifest.get('kind')!r})")
+    missing = [p for p in manifest["order"] if p not in valid_parts(fs, root, manifest)]
+    if missing:
+        raise PleError(f"{url}: {len(missing)} part(s) missing or damaged (e.g. {missing[0]}); re-run the job")
+    return manifest
+
+
+def iter_slice_parts(url: str) -> Iterator[tuple[int, float, np.ndarray]]:
+    """(index, z, mask) of every layer of a partitioned slice job, one part in memory at a time."""
+    fs, root = location(url)
+    manifest = _complete(url, fs, root, "slice")
+    for name in manifest["order"]:
+        with fs.open(posixpath.join(root, name), "rb") as fh, np.load(io.BytesIO(fh.read())) as z:
+            width = int(z["width"])
+            for k, zk, packed in zip(z["index"].tolist(), z["z"].tolist(), z["packed"]):
+                yield k, zk, np.unpackbits(packed, axis=1, count=width).astype(bool)
+
+
+def assemble_slices(url: str, out_dir, progress=None) -> dict:
+    """The slice folder of a partitioned slice job (``layer_00000.png`` … and ``manifest.json``),
+    the same files as ``ple slice`` writes in one process; returns its manifest."""
+    fs, root = location(url)
+    s = _complete(url, fs, root, "slice")["settings"]
+    return write_slices(out_dir, iter_slice_parts(url), slice_meta(s["lo"], s["hi"], s["layer"], s["pixel"]), progress)

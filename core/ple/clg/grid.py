@@ -77,12 +77,15 @@ def layer_grid(lo, hi, layer: float, pixel: float):
     return zs, xs, ys
 
 
-def iter_slices(pmc: Callable, lo, hi, layer: float, pixel: float) -> Iterator[tuple[int, float, np.ndarray]]:
-    """(index, z, mask (ny, nx) bool, row 0 at the largest y: image order) per layer, one at a time."""
+def iter_slices(pmc: Callable, lo, hi, layer: float, pixel: float, layers: range | None = None
+                ) -> Iterator[tuple[int, float, np.ndarray]]:
+    """(index, z, mask (ny, nx) bool, row 0 at the largest y: image order) per layer, one at a time;
+    only the layer indices of ``layers`` when given (a part of a partitioned slice job)."""
     zs, xs, ys = layer_grid(lo, hi, layer, pixel)
     gx, gy = np.meshgrid(xs, ys[::-1])
     flat = np.column_stack([gx.reshape(-1), gy.reshape(-1), np.zeros(gx.size)])
-    for k, z in enumerate(zs):
+    for k in range(len(zs)) if layers is None else layers:
+        z = zs[k]
         flat[:, 2] = z
         yield k, float(z), _membership(pmc, flat).reshape(gx.shape)
 

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from ..app.jobs import assemble_stl, load_filter_parts, location, read_manifest
+from ..app.jobs import assemble_slices, assemble_stl, count_totals, load_filter_parts, location, read_manifest
 from ..errors import PleError
 from ..io.files import save_npz
 
@@ -11,14 +11,24 @@ from ..io.files import save_npz
 def register(sub) -> None:
     p = sub.add_parser("assemble", help="one file of the parts of a job written with --parts")
     p.add_argument("parts", metavar="URL", help="the folder or fsspec URL given to --parts")
-    p.add_argument("--out", required=True, help=".stl for a partitioned mesh, .npz for a partitioned filter")
+    p.add_argument("--out", help=".stl for a partitioned mesh, .npz for a partitioned filter, a folder for "
+                   "partitioned slices (a count job needs none: its totals are printed)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     fs, root = location(args.parts)
     kind = read_manifest(fs, root).get("kind")
-    if kind == "mesh":
+    if kind == "count":
+        totals = count_totals(args.parts)
+        print(f"kept: {totals['nodes']:,} nodes, {totals['beams']:,} beams ({totals['parts']} parts)")
+        return 0
+    if not args.out:
+        raise PleError(f"{args.parts}: a {kind} job assembles into a file: give --out")
+    if kind == "slice":
+        man = assemble_slices(args.parts, args.out)
+        print(f"wrote {args.out}: {man['layers']} layers of {man['image_size'][0]}x{man['image_size'][1]} pixels")
+    elif kind == "mesh":
         if not args.out.endswith(".stl"):
             raise PleError(f"--out {args.out}: a partitioned mesh assembles into binary .stl")
         print(f"wrote {args.out}: {assemble_stl(args.parts, args.out):,} triangles")

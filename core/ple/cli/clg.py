@@ -66,11 +66,11 @@ def register(sub) -> None:
     q.set_defaults(func=run_mesh)
 
 
-def add_slice_args(q) -> None:
+def add_slice_args(q, out_required: bool = True) -> None:
     q.add_argument("--layer", type=float, required=True, help="layer height")
     q.add_argument("--pixel", type=float, required=True, help="pixel size")
     q.add_argument("--bounds", metavar="x0,y0,z0,x1,y1,z1", help="default: the solid's box")
-    q.add_argument("--out", required=True, help="output folder")
+    q.add_argument("--out", required=out_required, help="output folder")
 
 
 def _load(args):

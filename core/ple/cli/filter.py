@@ -8,7 +8,7 @@ both of its nodes survive (thesis §9). ``--out`` ending in ``.npz`` evaluates i
 from __future__ import annotations
 
 from ..app.cluster import run_job
-from ..app.jobs import filter_job
+from ..app.jobs import count_job, count_totals, filter_job
 from ..app.progress import Progress
 from ..errors import PleError
 from ..filters.base import Filter, all_of
@@ -54,6 +54,9 @@ def add_output_args(p) -> None:
     p.add_argument("--method", choices=("auto", "elements", "biq"), default="auto",
                    help="LiL test against the coarsest level (default auto)")
     add_cluster_args(p)
+    p.add_argument("--count", action="store_true",
+                   help="with --parts: only count the kept nodes and beams, slab by slab (no arrays written; "
+                        "the way through a 10⁹-beam lattice)")
 
 
 def load_coarse(text: str, load=load_lattice):
@@ -80,10 +83,18 @@ def build(args, lat: Lattice, parts: list[Filter]) -> Lattice:
 
 
 def write(args, lat: Lattice) -> int:
-    if args.parts:  # one .npz part per slab, on Dask workers; the filter travels as data
+    if args.count and not args.parts:
+        raise PleError("--count runs as a partitioned job: give --parts URL")
+    if args.parts:  # one part per slab, on Dask workers; the filter travels as data
         spec = None if lat.filter is None else filter_to_dict(lat.filter)  # the program's and the flags'
-        job = filter_job(args.lattice, args.param, args.region, args.slab_groups, spec)
-        return report_job(run_job(job, args.parts, args.scheduler, args.workers))
+        make = count_job if args.count else filter_job
+        status = report_job(run_job(make(args.lattice, args.param, args.region, args.slab_groups, spec), args.parts,
+                                    args.scheduler, args.workers))
+        if status == 0 and args.count:
+            totals = count_totals(args.parts)
+            print(f"kept: {totals['nodes']:,} nodes of {region_nodes(lat, lat.region(args.region)):,}, "
+                  f"{totals['beams']:,} beams of {region_beams(lat, lat.region(args.region)):,}")
+        return status
     region = lat.region(args.region)
     total = f"of {region.groups * len(lat.nodes):,} nodes"
     if args.out is None or args.out.endswith(".npz"):

@@ -16,6 +16,13 @@ from .files import atomic_path, atomic_write_text
 SLICES_FORMAT = "ple-slices/1"
 
 
+def slice_meta(lo, hi, layer: float, pixel: float) -> dict:
+    """The manifest fields of a slice stack that do not depend on its layers' contents."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    return {"layer": layer, "pixel": pixel, "origin": [float(lo[0]), float(lo[1]), float(lo[2])],
+            "bounds": [lo.tolist(), hi.tolist()], "rows": "row 0 is the largest y"}
+
+
 def write_slices(out_dir, layers: Iterable, meta: dict, progress=None) -> dict:
     """Write ``layer_00000.png`` … from (index, z, mask) items and ``manifest.json``; returns it."""
     try:
@@ -46,7 +53,5 @@ def write_slices(out_dir, layers: Iterable, meta: dict, progress=None) -> dict:
 def write_pmc_slices(out_dir, pmc, lo, hi, layer: float, pixel: float, progress=None) -> dict:
     """Printer slices of a membership function ``pmc`` (points (n, 3) -> bool (n,)) over the box
     [lo, hi] (layer centres and pixel centres as ``clg.grid.iter_slices``); returns the manifest."""
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    meta = {"layer": layer, "pixel": pixel, "origin": [float(lo[0]), float(lo[1]), float(lo[2])],
-            "bounds": [lo.tolist(), hi.tolist()], "rows": "row 0 is the largest y"}
+    meta = slice_meta(lo, hi, layer, pixel)
     return write_slices(out_dir, iter_slices(pmc, lo, hi, layer, pixel), meta, progress)

@@ -230,7 +230,7 @@ class _Tessellator:
     """Builds region meshes box by box, caching hub templates and beam strips."""
 
     def __init__(self, lat: Lattice, region: Region, style: str, levels: int, segments: int,
-                 fillet: float | None = None):
+                 fillet: float | None = None, grid: float | None = None):
         lat.validate()
         self.fillet = fillet
         self.lat, self.region, self.style, self.levels, self.segments = lat, region, style, levels, segments
@@ -244,7 +244,7 @@ class _Tessellator:
         self.scale = lat.template_radii * KEY_QUANTUM
         # float32-safe output: edges shorter than a few float32 grid steps of the region's size
         # are collapsed in the hub templates (template units: divided by the smallest group scale)
-        self.grid = output_grid(lat, region)
+        self.grid = output_grid(lat, region) if grid is None else grid
         corners = np.array([[i, j, k] for i in (region.i0, max(region.i1 - 1, region.i0))
                             for j in (region.j0, max(region.j1 - 1, region.j0))
                             for k in (region.k0, max(region.k1 - 1, region.k0))])
@@ -519,10 +519,12 @@ def _check_style(style: str, levels: int | None, segments: int | None) -> tuple[
 
 
 def tessellation_box(lat: Lattice, region, box, style: str = "refined", levels: int | None = None,
-                     segments: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+                     segments: int | None = None, grid: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (V, 3) and faces (F, 3) of the hubs of one ``box`` of ``region`` (and of the
     beams from them, capped where a beam leaves the region): a part of a partitioned mesh. Boxes
-    of one region close up exactly as the streamed tessellation's do (``iter_triangles``)."""
+    of one region close up exactly as the streamed tessellation's do (``iter_triangles``).
+    ``grid``: the region's ``output_grid`` when the caller knows it (it streams the region's
+    bounds otherwise: a whole-region pass per box)."""
     levels, segments = _check_style(style, levels, segments)
     if style == "balls-beams":
         raise PleError("boxes of a mesh need a closed style (refined, cnt or chocc)")
@@ -530,7 +532,7 @@ def tessellation_box(lat: Lattice, region, box, style: str = "refined", levels: 
         raise PleError("a lattice filling a body by 'any' is cut at the body's surface in one piece: "
                        "mesh it without parts")
     r = lat.region(region)
-    return _Tessellator(lat, r, style, levels, segments).build(lat.region(box))
+    return _Tessellator(lat, r, style, levels, segments, grid=grid).build(lat.region(box))
 
 
 def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
