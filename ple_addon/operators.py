@@ -390,9 +390,15 @@ class SteppedOperator(RigOperator):
     _steps = None
     _timer = None
     _rig = None
+    _confirmed = False  # the user answered "Run anyway" (invoke_confirm then calls execute)
     result = ""
 
     def execute(self, context):
+        if self._confirmed and context.window is not None and not bpy.app.background:
+            # confirmed "Run anyway" (invoke_confirm calls execute): run as the modal job, so that
+            # Esc still cancels it; invoke passes the budget step since beyond_limit is set
+            op = getattr(getattr(bpy.ops, self.bl_idname.split(".")[0]), self.bl_idname.split(".")[1])
+            return op("INVOKE_DEFAULT", **self.as_keywords())
         wm = context.window_manager
         try:
             self._rig = self.get_rig(context)
@@ -434,7 +440,7 @@ class SteppedOperator(RigOperator):
             return {"FINISHED"}
         except PleError as exc:
             if "refused" in str(exc) and not self.beyond_limit:  # ask: beyond the limit?
-                self.beyond_limit = True
+                self.beyond_limit = self._confirmed = True
                 return context.window_manager.invoke_confirm(self, event, title="Beyond the work limit",
                                                              message=str(exc), confirm_text="Run anyway",
                                                              icon="WARNING")
