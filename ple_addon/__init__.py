@@ -16,9 +16,18 @@ from . import body_panel, clg_rig, mobius_frames, operators, prefs, props, rig, 
 
 @persistent
 def on_depsgraph_update(scene, depsgraph):
+    """The add-on's one depsgraph handler: the updates are read before anything is deleted."""
+    bodies = body_panel.rigs_in_updates(depsgraph)  # rigs whose body or gradient empty changed
     rig.check_removed(scene)  # parts of a rig whose lattice object was deleted go with it
+    done = set()
     for r in rig.rigs_in_updates(depsgraph):
         rig.refresh(r)
+        done.add(r.name)
+    for name in bodies:
+        r = bpy.data.objects.get(name)
+        if r is not None and name not in done:
+            rig.refresh(r)
+    mobius_frames.on_depsgraph_update(scene)  # Möbius rigs whose control frames moved
 
 
 @persistent

@@ -15,7 +15,6 @@ import importlib.util
 
 import bpy
 import numpy as np
-from bpy.app.handlers import persistent
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, PointerProperty, StringProperty
 
 from .corelink import PleError, Similarity, body, cleanup, grading, needs
@@ -188,20 +187,18 @@ def users_of(obj) -> list:
             and obj in (r.ple_body.body, r.ple_body.grade_a, r.ple_body.grade_b)]
 
 
-@persistent
-def on_depsgraph_update(scene, depsgraph):
-    """A body or gradient empty moved or its mesh was edited: redraw the rigs that use it."""
-    from . import rig as rigmod
-
+def rigs_in_updates(depsgraph) -> list[str]:
+    """Names of the rigs whose body or gradient empty moved or whose body mesh was edited. Read by
+    the add-on's one depsgraph handler before anything is rebuilt or deleted (an update may name
+    objects that the rig handler then removes, e.g. the parts of a Shift+D copy)."""
     seen = {}
     for u in depsgraph.updates:
         obj = u.id.original if isinstance(u.id, bpy.types.Object) else None
         if obj is None or obj.ple.role != "NONE" or obj.type not in ("MESH", "EMPTY"):
             continue
         for r in users_of(obj):
-            seen[r.as_pointer()] = r
-    for r in seen.values():
-        rigmod.refresh(r)
+            seen[r.name] = True
+    return list(seen)
 
 
 # ----- panel and operators --------------------------------------------------------------------------
@@ -350,12 +347,9 @@ def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
     bpy.types.Object.ple_body = PointerProperty(type=PLE_BodySettings)
-    bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
 
 
 def unregister():
-    if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
     del bpy.types.Object.ple_body
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

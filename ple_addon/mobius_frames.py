@@ -20,7 +20,6 @@ import json
 
 import bpy
 import numpy as np
-from bpy.app.handlers import persistent
 from mathutils import Matrix
 
 from . import draw
@@ -234,9 +233,8 @@ def menu_add(self, context):
         self.layout.operator(PLE_OT_mobius_add.bl_idname, text=f"{name} (Möbius frames)").preset = name
 
 
-@persistent
-def on_depsgraph_update(scene, depsgraph):
-    """Redraw the Möbius rigs whose frames or handles moved."""
+def on_depsgraph_update(scene):
+    """Redraw the Möbius rigs whose frames or handles moved (called by the add-on's depsgraph handler)."""
     for obj in scene.objects:
         if is_mobius_rig(obj):
             refresh(obj)
@@ -248,14 +246,11 @@ CLASSES = (PLE_OT_mobius_add, PLE_OT_mobius_snippet, PLE_PT_mobius)
 def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
-    bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
     bpy.types.PLE_MT_add.append(menu_add)
 
 
 def unregister():
     bpy.types.PLE_MT_add.remove(menu_add)
-    if on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)
     _drawn.clear()

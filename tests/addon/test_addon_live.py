@@ -762,7 +762,9 @@ def case_menu_keymap_prefs():
         def separator(self):
             pass
 
-    ui.PLE_MT_add.draw(type("M", (), {"layout": Layout()})(), bpy.context)
+    menu = type("M", (), {"layout": Layout()})()
+    for draw in getattr(ui.PLE_MT_add.draw, "_draw_funcs", [ui.PLE_MT_add.draw]):  # the menu and its appended parts
+        draw(menu, bpy.context)
     presets = [p for _, kw, p in ops if getattr(p, "source", "") == "PRESET"]
     assert {p.preset for p in presets} == set(core.program.presets.preset_names())
     thumbs = ui._previews["presets"]  # the thumbnails shipped in the zip, loaded for the menu
