@@ -13,9 +13,12 @@ they meet). Pairs are found without all-pairs work:
   §6.1.4; V, U as in ``similar_axes``) a pair whose lower element lies past the first ``reach``
   indices is a similar copy of a pair anchored at index ``reach``. Only the elements of the anchor
   groups (the base slab k ≤ reach for a general steady lattice; one corner block of groups when U,
-  V and W are all similar, as for regular lattices) are queried, with the RangeFinder,
-  against the lattice extended by its own counts on both sides along those directions (so that
-  every partner of a moved pair is found), and each pair class is counted over the index interval
+  V and W are all similar, as for regular lattices) are queried, with the RangeFinder. Each
+  unordered pair class is taken from the element lower in the first similar direction where the
+  two differ, so its partner lies at or above the anchor there; in the later similar directions
+  it may lie below index 0, so the lattice is extended by its counts on the lower side of those
+  only (never along the first: a full turn of a rotation row is not repeated, and the
+  RangeFinder's ranges stay one turn wide). Each pair class is counted over the index interval
   where both of its elements exist;
 - ``explicit`` path (filtered lattices, regions, BeCOTS slabs): the evaluated (kept) elements, their
   bounding balls hashed in a uniform grid, candidate pairs from neighbouring cells only.
@@ -119,20 +122,9 @@ def _explicit(ev: Evaluation, margin: float) -> dict:
     ca, ra, cb, rb = ev.center[ends[:, 0]], ev.radius[ends[:, 0]], ev.center[ends[:, 1]], ev.radius[ends[:, 1]]
     box_lo = np.minimum(ca - ra[:, None], cb - rb[:, None])
     box_hi = np.maximum(ca + ra[:, None], cb + rb[:, None])
-    edge_keys = np.sort(np.concatenate([ev.beam_nodes[:, 0] * nn + ev.beam_nodes[:, 1],
-                                        ev.beam_nodes[:, 1] * nn + ev.beam_nodes[:, 0]]))
     result = _Collector(margin)
-    for i, j in grid_pairs(box_lo, box_hi, margin):
+    for i, j in non_incident_pairs(ends, kinds, box_lo, box_hi, ev.beam_nodes, margin):
         ia, ib = ends[i], ends[j]
-        shared = (ia[:, :1] == ib).any(axis=1) | (ia[:, 1:] == ib).any(axis=1)
-        both_balls = (kinds[i] == 0) & (kinds[j] == 0)
-        if both_balls.any() and len(edge_keys):
-            key = ia[:, 0] * nn + ib[:, 0]
-            pos = np.minimum(np.searchsorted(edge_keys, key), len(edge_keys) - 1)
-            shared |= both_balls & (edge_keys[pos] == key)
-        i, j, ia, ib = i[~shared], j[~shared], ia[~shared], ib[~shared]
-        if not len(i):
-            continue
         ea = (ev.center[ia[:, 1]], ev.radius[ia[:, 1]])
         eb = (ev.center[ib[:, 1]], ev.radius[ib[:, 1]])
         gap, over, depth = pair_gaps(kinds[i], ev.center[ia[:, 0]], ev.radius[ia[:, 0]], ea,
@@ -142,6 +134,29 @@ def _explicit(ev: Evaluation, margin: float) -> dict:
     out["path"] = "explicit"
     out["elements"] = int(nn + nb)
     return out
+
+
+def non_incident_pairs(ends: np.ndarray, kinds: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray,
+                       beam_nodes: np.ndarray, margin: float = 0.0):
+    """Pairs (i, j), i < j, of explicit elements whose boxes (grown by margin / 2, ``grid_pairs``)
+    meet and which are not incident: they share no ball, and are not two balls joined by a beam.
+    ``ends`` (E, 2): node rows of each element (a ball: (n, n)); ``kinds`` (E,): 0 ball, 1 beam;
+    ``beam_nodes`` (M, 2) the beams' node rows. Yielded in blocks of index arrays. The one
+    candidate search of unclean elements: ``unclean_pairs`` tests the pairs exactly, the
+    tessellation (``meshing.unclean``) with its conservative junction spheres."""
+    bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
+    nn = int(ends.max()) + 1 if len(ends) else 0
+    edge_keys = np.sort(np.concatenate([bn[:, 0] * nn + bn[:, 1], bn[:, 1] * nn + bn[:, 0]]))
+    for i, j in grid_pairs(box_lo, box_hi, margin):
+        ia, ib = ends[i], ends[j]
+        shared = (ia[:, :1] == ib).any(axis=1) | (ia[:, 1:] == ib).any(axis=1)
+        both_balls = (kinds[i] == 0) & (kinds[j] == 0)
+        if both_balls.any() and len(edge_keys):
+            key = ia[:, 0] * nn + ib[:, 0]
+            pos = np.minimum(np.searchsorted(edge_keys, key), len(edge_keys) - 1)
+            shared |= both_balls & (edge_keys[pos] == key)
+        if (~shared).any():
+            yield i[~shared], j[~shared]
 
 
 def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float):
@@ -234,9 +249,9 @@ def _label(row) -> dict:
 
 # ----- steady lattices: anchors and similar copies --------------------------------------------------------------
 def _extended(lat: Lattice, ext: np.ndarray) -> Lattice:
-    """The lattice extended by ``ext[d]`` groups on both sides of every similar direction d (its
-    group (i, j, k) is the extension's (i + ext_u, j + ext_v, k + ext_w))."""
-    out = lat.with_counts(*(int(c + 2 * e) for c, e in zip(lat.counts, ext)))
+    """The lattice extended by ``ext[d]`` groups below index 0 of every direction d (its group
+    (i, j, k) is the extension's (i + ext_u, j + ext_v, k + ext_w))."""
+    out = lat.with_counts(*(int(c + e) for c, e in zip(lat.counts, ext)))
     shift = lat.placement
     for step, e in zip((lat.W, lat.V, lat.U), ext[::-1]):
         if e:
@@ -278,7 +293,8 @@ def _steady(lat: Lattice, margin: float, force: bool = False):
     elements = lat.node_count() + lat.beam_count()
     if not force and n_anchor > MAX_ANCHOR_FRACTION * lat.groups and elements <= MAX_EXPLICIT:
         return None
-    ext = np.where(rep >= 0, counts, 0)
+    later = (rep >= 0) & (np.cumsum(rep >= 0) > 1)  # similar directions after the first
+    ext = np.where(later, counts, 0)
     big = _extended(lat, ext)
     # the smallest factor a moved pair can have, relative to its anchor: gaps are searched that much wider
     shrink = 1.0
@@ -360,6 +376,12 @@ def _steady_pairs(lat, result, rep, counts, search, xk, xi, xs, xe, yk, yi):
     big = 3 * int(counts.max()) + 1
     d_key = (delta[:, 0] * big + delta[:, 1]) * big + delta[:, 2]
     first = (xk < yk) | ((xk == yk) & ((xi[:, 3] < yi[:, 3]) | ((xi[:, 3] == yi[:, 3]) & (d_key > 0))))
+    # a class whose elements differ along a similar direction: the orientation from the element
+    # lower in the first such direction (the only one the queries are sure to meet)
+    sim_delta = np.where((rep >= 0)[None], delta, 0)
+    lead = np.argmax(sim_delta != 0, axis=1)
+    lead_delta = sim_delta[np.arange(len(delta)), lead]
+    first = np.where(lead_delta != 0, lead_delta > 0, first)
     keep = ok & first
     result.add(xk[keep], yk[keep], gap[keep], over[keep], depth[keep], ia[keep], ib[keep], count[keep],
                gap[keep] * scale[keep])
