@@ -11,7 +11,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from . import operators, prefs, props, rig, ui
+from . import check_panel, operators, prefs, props, rig, ui
 
 
 @persistent
@@ -82,6 +82,7 @@ def register():
     props.register()
     for cls in prefs.CLASSES + operators.CLASSES + ui.CLASSES:
         bpy.utils.register_class(cls)
+    check_panel.register()
     for name, fn in HANDLERS:
         getattr(bpy.app.handlers, name).append(fn)
     bpy.types.VIEW3D_MT_add.append(menu_add)
@@ -97,6 +98,7 @@ def unregister():
         lst = getattr(bpy.app.handlers, name)
         if fn in lst:
             lst.remove(fn)
+    check_panel.unregister()
     for cls in reversed(prefs.CLASSES + operators.CLASSES + ui.CLASSES):
         bpy.utils.unregister_class(cls)
     props.unregister()
