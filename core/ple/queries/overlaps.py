@@ -41,7 +41,8 @@ WORST = 10  # worst offenders listed
 MAX_ANCHOR_FRACTION = 0.02  # "auto" takes the steady path when the anchors are at most this share of all groups
 MAX_EXPLICIT = 2_000_000  # ... or when more elements than this would be evaluated
 PAIR_CHUNK = 1 << 18  # candidate pairs per vectorized block
-QUERY_CHUNK = 1 << 12  # anchor elements per RangeFinder batch
+QUERY_CHUNK = 1 << 10  # anchor blocks per RangeFinder batch
+ANCHOR_BLOCK = 4  # anchor groups per block side: one RangeFinder query per block
 KINDS = ("ball_ball", "ball_beam", "beam_beam")
 
 
@@ -159,13 +160,14 @@ def non_incident_pairs(ends: np.ndarray, kinds: np.ndarray, box_lo: np.ndarray, 
             yield i[~shared], j[~shared]
 
 
-def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float):
-    """Index pairs (i < j) of axis-aligned boxes closer than ``margin`` (each grown by margin / 2).
-    Each box is entered in every cell of a uniform grid (cell: the median box diagonal) it
-    overlaps; a pair is reported by the one cell holding the larger of the two lower corners (no
-    duplicates). Yielded in blocks of about PAIR_CHUNK cell entries."""
+def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float, split: int | None = None):
+    """Index pairs (i < j) of axis-aligned boxes closer than ``margin`` (each grown by margin / 2);
+    with ``split``, only pairs i < split <= j (boxes of a first set against a second). Each box
+    (of the first set) is entered in every cell of a uniform grid (cell: the median box diagonal)
+    it overlaps; a pair is reported by the one cell holding the larger of the two lower corners
+    (no duplicates). Yielded in blocks of about PAIR_CHUNK cell entries."""
     n = len(box_lo)
-    if n < 2:
+    if n < 2 or (split is not None and not 0 < split < n):
         return
     blo, bhi = box_lo - margin / 2, box_hi + margin / 2
     h = max(float(np.median(np.max(bhi - blo, axis=1))), 1e-12)
@@ -175,18 +177,20 @@ def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float):
     dims = hi.max(axis=0) + 1
     span = hi - lo + 1
     per = np.prod(span, axis=1)
-    key_all, owner_all = _cell_entries(lo, span, dims, np.arange(n))
+    first = 0 if split is None else split  # rows looked up in the table of rows [0, split or n)
+    key_all, owner_all = _cell_entries(lo, span, dims, np.arange(n if split is None else split))
     sort = np.argsort(key_all, kind="stable")
     table = (key_all[sort], owner_all[sort])
-    bounds = np.searchsorted(np.cumsum(per), np.arange(0, int(per.sum()), max(1, PAIR_CHUNK // 32)), "right")
-    edges = np.unique(np.concatenate([[0], bounds, [n]]))
+    bounds = first + np.searchsorted(np.cumsum(per[first:]), np.arange(0, int(per[first:].sum()),
+                                                                        max(1, PAIR_CHUNK // 32)), "right")
+    edges = np.unique(np.concatenate([[first], bounds, [n]]))
     for start, stop in zip(edges[:-1], edges[1:]):
         key, owner = _cell_entries(lo, span, dims, np.arange(start, stop))
         a, b = np.searchsorted(table[0], key, "left"), np.searchsorted(table[0], key, "right")
         cnt = b - a
-        i = np.repeat(owner, cnt)
+        j = np.repeat(owner, cnt)
         cell = np.repeat(key, cnt)
-        j = table[1][np.repeat(a, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
+        i = table[1][np.repeat(a, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
         keep = i < j
         i, j, cell = i[keep], j[keep], cell[keep]
         corner = np.maximum(lo[i], lo[j])  # the one cell that reports the pair
@@ -314,17 +318,38 @@ def _steady(lat: Lattice, margin: float, force: bool = False):
     qc, qr = enclosing_ball(ca, ra, cb, rb)
     result = _Collector(margin)
     queries = 0
-    for s in range(0, len(kind), QUERY_CHUNK):
-        part = slice(s, s + QUERY_CHUNK)
-        node_hits, beam_hits, _ = lattice_hits(big, qc[part], qr[part] + search)
-        queries += len(qc[part])
-        if not len(node_hits) and not len(beam_hits):
-            continue
-        qa = np.concatenate([node_hits[:, 0], beam_hits[:, 0]]) + s
-        yk = np.concatenate([np.zeros(len(node_hits), np.int64), np.ones(len(beam_hits), np.int64)])
-        yi = np.concatenate([node_hits[:, 1:], beam_hits[:, 1:]])
-        yi = yi - np.concatenate([ext, [0]])  # back to the lattice's own indices (possibly outside it)
-        _steady_pairs(lat, result, rep, counts, search, kind[qa], idx[qa], nodes[0][qa], nodes[1][qa], yk, yi)
+    # anchor elements in blocks of ANCHOR_BLOCK³ groups: one RangeFinder query per block (the ball
+    # around its elements' balls, grown by the gap search) finds every partner of its elements
+    _, block = np.unique(idx[:, :3] // ANCHOR_BLOCK, axis=0, return_inverse=True)
+    block = block.reshape(-1)
+    n_blocks = int(block.max()) + 1 if len(block) else 0
+    lo_box = np.full((n_blocks, 3), np.inf)
+    hi_box = np.full((n_blocks, 3), -np.inf)
+    np.minimum.at(lo_box, block, qc - qr[:, None])
+    np.maximum.at(hi_box, block, qc + qr[:, None])
+    bc = (lo_box + hi_box) / 2
+    br = np.linalg.norm(hi_box - lo_box, axis=1) / 2 + search
+    found = []
+    for s in range(0, n_blocks, QUERY_CHUNK):
+        node_hits, beam_hits, _ = lattice_hits(big, bc[s:s + QUERY_CHUNK], br[s:s + QUERY_CHUNK])
+        found += [np.concatenate([np.zeros((len(node_hits), 1), np.int64), node_hits[:, 1:]], axis=1),
+                  np.concatenate([np.ones((len(beam_hits), 1), np.int64), beam_hits[:, 1:]], axis=1)]
+        queries += min(QUERY_CHUNK, n_blocks - s)
+    hits = np.unique(np.concatenate(found), axis=0) if found else np.zeros((0, 5), np.int64)
+    yk = hits[:, 0]
+    yi = hits[:, 1:] - np.concatenate([ext, [0]])  # back to the lattice's own indices (possibly outside it)
+    ydata = _elements_at(lat, yk, yi)
+    hc, hr = enclosing_ball(ydata[0], ydata[1], *ydata[2])
+    # candidate (anchor, partner) pairs: balls within the gap search (every partner of an anchor
+    # is among the hits of its block's query)
+    xdata = (ca, ra, (cb, rb), nodes)
+    cen, rad = np.concatenate([qc, hc]), np.concatenate([qr, hr])
+    n_anchor_el = len(qc)
+    for qa, hb in grid_pairs(cen - rad[:, None], cen + rad[:, None], search, split=n_anchor_el):
+        hb = hb - n_anchor_el
+        if len(qa):
+            _steady_pairs(lat, result, rep, counts, search, kind[qa], idx[qa], _rows(xdata, qa), yk[hb], yi[hb],
+                          _rows(ydata, hb))
     out = result.report()
     out["path"] = "steady (" + "".join(n for n, p in zip("UVW", rep) if p >= 0) + " similar)"
     out["queries"] = queries
@@ -332,10 +357,20 @@ def _steady(lat: Lattice, margin: float, force: bool = False):
     return out
 
 
-def _steady_pairs(lat, result, rep, counts, search, xk, xi, xs, xe, yk, yi):
-    """Exact tests and occurrence counts of ordered pairs (anchor X, partner Y)."""
+def _rows(data, r):
+    """Rows ``r`` of element data (start centre, start radius, (end centre, end radius), (start node, end node))."""
+    return data[0][r], data[1][r], (data[2][0][r], data[2][1][r]), (data[3][0][r], data[3][1][r])
+
+
+def _steady_pairs(lat, result, rep, counts, search, xk, xi, xdata, yk, yi, ydata):
+    """Exact tests and occurrence counts of ordered pairs (anchor X, partner Y); element data
+    as ``_elements_at`` gives it. Only one orientation of each unordered pair is tested."""
+    one = _first_orientation(rep, counts, xk, xi, yk, yi)
+    xk, xi, yk, yi = xk[one], xi[one], yk[one], yi[one]
+    xdata, ydata = (_rows(xdata, one), _rows(ydata, one))
     same = (xk == yk) & np.all(xi == yi, axis=1)
-    ya, yr, (yc, yrr), ynodes = _elements_at(lat, yk, yi)
+    xa, xr, xe_, (xs, xe) = xdata
+    ya, yr, (yc, yrr), ynodes = ydata
     # incidence: shared node (group and node id), or two balls joined by a beam
     xn = np.stack([xs, xe], axis=1)  # (P, 2, 4)
     yn = np.stack(ynodes, axis=1)
@@ -351,7 +386,7 @@ def _steady_pairs(lat, result, rep, counts, search, xk, xi, xs, xe, yk, yi):
     if not keep.any():
         return
     xk, xi, yk, yi = xk[keep], xi[keep], yk[keep], yi[keep]
-    xa, xr, xe_ = _elements_at(lat, xk, xi)[:3]
+    xa, xr, xe_ = xa[keep], xr[keep], (xe_[0][keep], xe_[1][keep])
     ya, yr, ye = ya[keep], yr[keep], (yc[keep], yrr[keep])
     gap, over, depth = pair_gaps(xk, xa, xr, xe_, yk, ya, yr, ye, search)
     # occurrences: groups g (X at g, Y at g + δ) with both existing; similar directions move the anchor
@@ -372,19 +407,24 @@ def _steady_pairs(lat, result, rep, counts, search, xk, xi, xs, xe, yk, yi):
     ok = count > 0
     ia = np.concatenate([np.where(ok[:, None], np.concatenate([lo, xi[:, 3:]], axis=1), xi), xk[:, None]], axis=1)
     ib = np.concatenate([ia[:, :3] + delta, yi[:, 3:], yk[:, None]], axis=1)
-    # each unordered pair is met twice, once from each element: only one orientation is kept
+    keep = ok
+    result.add(xk[keep], yk[keep], gap[keep], over[keep], depth[keep], ia[keep], ib[keep], count[keep],
+               gap[keep] * scale[keep])
+
+
+def _first_orientation(rep, counts, xk, xi, yk, yi) -> np.ndarray:
+    """Which ordered pairs (X, Y) are the one orientation kept of their unordered pair: each is met
+    from both elements when neither lies lower along a similar direction (then kinds, node ids
+    and the offset decide); otherwise only from the element lower in the first similar direction
+    where they differ (the only one the queries are sure to meet)."""
+    delta = yi[:, :3] - xi[:, :3]
     big = 3 * int(counts.max()) + 1
     d_key = (delta[:, 0] * big + delta[:, 1]) * big + delta[:, 2]
     first = (xk < yk) | ((xk == yk) & ((xi[:, 3] < yi[:, 3]) | ((xi[:, 3] == yi[:, 3]) & (d_key > 0))))
-    # a class whose elements differ along a similar direction: the orientation from the element
-    # lower in the first such direction (the only one the queries are sure to meet)
     sim_delta = np.where((rep >= 0)[None], delta, 0)
     lead = np.argmax(sim_delta != 0, axis=1)
     lead_delta = sim_delta[np.arange(len(delta)), lead]
-    first = np.where(lead_delta != 0, lead_delta > 0, first)
-    keep = ok & first
-    result.add(xk[keep], yk[keep], gap[keep], over[keep], depth[keep], ia[keep], ib[keep], count[keep],
-               gap[keep] * scale[keep])
+    return np.where(lead_delta != 0, lead_delta > 0, first)
 
 
 # ----- public API -----------------------------------------------------------------------------------------
