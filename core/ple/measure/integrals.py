@@ -42,7 +42,7 @@ MAX_HUBS = 200_000  # more hub classes than this: no area/volume (guard for huge
 MAX_KEPT_NODES = 20_000_000  # nodes of a filtered lattice or region decided one by one for its measures
 GRID_START, GRID_MAX = 3, 48  # overlap quadrature cells per cube face side, first and last
 ADAPT_TOL = 3e-4  # refine until 3 σ of the quadrature error of a lattice's summed measures is below this share
-ROTATION_DOF = 32  # hub geometries given extra rotations (a sample), and about the error estimate's degrees of freedom
+ROTATION_DOF = 32  # hub variants given extra rotations (a sample), and about the error estimate's degrees of freedom
 ROTATIONS_MAX = 8  # rotations per sampled geometry: at most this many (at least 2)
 CHUNK_RAYS = 1 << 20  # (geometry, half-beam, direction) rays per vectorized block
 _GL = (np.array([-math.sqrt(0.6), 0.0, math.sqrt(0.6)]), np.array([5.0, 8.0, 5.0]) / 9.0)  # 3-point Gauss–Legendre
@@ -632,44 +632,38 @@ def hub_moments(ra, offsets, rb, present=None, geometry=None, grid: int = 0, wei
 
 def _adaptive_overlaps(sub, numbers, weights, base):
     """Overlaps on randomly rotated grids, refined until the weighted sums' error estimate is small.
-    Every geometry gets one rotation; a sample of them (all when there are few) gets K − 1 more,
-    and the spread of those estimates the error (relative to each geometry's weighted measure,
-    extrapolated to the geometries measured once; distinct geometries' errors are independent)."""
+    Every variant is measured under its geometry's first rotation; a sample of variants (all when
+    there are few) under K − 1 more. Their spread gives the relative error of one rotated
+    measurement; the sum's error adds the geometries' errors independently, each geometry's
+    variants taken as fully correlated (they share its rotation)."""
     ra, e, length, rb, local, present = sub
-    geos = len(ra)
-    sample = np.linspace(0, geos - 1, min(geos, ROTATION_DOF)).astype(np.int64)
+    geos, nv = len(ra), len(local)
+    sample = np.unique(np.linspace(0, nv - 1, min(nv, ROTATION_DOF)).astype(np.int64))
     k = int(np.clip(math.ceil(ROTATION_DOF / len(sample)) + 1, 2, ROTATIONS_MAX))
     rots = random_rotations(_geometry_keys(*numbers), k)  # (G, K, 3, 3)
-    in_sample = np.zeros(geos, bool)
-    in_sample[sample] = True
-    # rows: every variant once with rotation 0, the sample's variants again with rotations 1 … K − 1
-    extra = np.nonzero(in_sample[local])[0]
-    geo_rows = np.concatenate([np.arange(geos), np.repeat(sample, k - 1)])
-    rot_rows = np.concatenate([rots[:, 0], rots[sample, 1:].reshape(-1, 3, 3)])
-    slot = np.full(geos, -1, np.int64)
-    slot[sample] = np.arange(len(sample))
-    var_rows = np.concatenate([local, (geos + slot[local[extra]][:, None] * (k - 1) + np.arange(k - 1)).reshape(-1)])
-    var_present = np.concatenate([present, np.repeat(present[extra], k - 1, axis=0)])
+    sg = local[sample]
+    # rows: every variant with rotation 0, then the sampled variants with rotations 1 … K − 1
+    geo_rows = np.concatenate([np.arange(geos), np.repeat(sg, k - 1)])
+    rot_rows = np.concatenate([rots[:, 0], rots[sg, 1:].reshape(-1, 3, 3)])
+    var_rows = np.concatenate([local, geos + np.arange(len(sample) * (k - 1))])
+    var_present = np.concatenate([present, np.repeat(present[sample], k - 1, axis=0)])
     n = GRID_START
     while True:
         oa, om = _overlaps(ra[geo_rows], e[geo_rows], length[geo_rows], rb[geo_rows], var_rows, var_present, n,
                            rot_rows)
-        first = len(local)
-        values, rel = [], 0.0
+        rel = 0.0
+        means = []
         for x, wcol, total in ((oa, weights[:, 0], base[0]), (om[:, 3, 3], weights[:, 1], base[1])):
-            all_k = np.concatenate([x[:first, None][extra], x[first:].reshape(-1, k - 1)], axis=1)  # (E, K)
-            per_geo = np.zeros((len(sample), k))  # weighted overlap of each sampled geometry, per rotation
-            np.add.at(per_geo, slot[local[extra]], wcol[extra, None] * all_k)
-            measure = np.zeros(geos)
-            np.add.at(measure, local, wcol * (total - x[:first]))
-            rel_var = np.mean(np.var(per_geo, axis=1, ddof=1) / np.maximum(measure[sample], 1e-300) ** 2)
-            var = rel_var * (np.sum(measure[~in_sample] ** 2) + np.sum(measure[sample] ** 2) / k)
-            rel = max(rel, 3 * math.sqrt(var) / max(float(measure.sum()), 1e-300))
-            values.append(all_k.mean(axis=1))
-        mom = om[:first].copy()
-        mom[extra] = np.concatenate([om[:first][extra][:, None], om[first:].reshape(-1, k - 1, 4, 4)], 1).mean(1)
-        area = oa[:first].copy()
-        area[extra] = values[0]
+            all_k = np.concatenate([x[:nv][sample][:, None], x[nv:].reshape(-1, k - 1)], axis=1)  # (S, K)
+            measure = total - x[:nv]
+            rel_var = float(np.mean(np.var(all_k, axis=1, ddof=1) / np.maximum(measure[sample], 1e-300) ** 2))
+            per_geo = np.zeros(geos)
+            np.add.at(per_geo, local, wcol * measure)
+            rel = max(rel, 3 * math.sqrt(rel_var * float(np.sum(per_geo**2))) / max(float(per_geo.sum()), 1e-300))
+            means.append(all_k.mean(axis=1))
+        area, mom = oa[:nv].copy(), om[:nv].copy()
+        area[sample] = means[0]
+        mom[sample] = np.concatenate([om[:nv][sample][:, None], om[nv:].reshape(-1, k - 1, 4, 4)], 1).mean(1)
         if rel <= ADAPT_TOL or 2 * n > GRID_MAX:
             return area, mom, n, k, rel
         n *= 2
