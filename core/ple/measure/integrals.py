@@ -7,11 +7,14 @@ volume is the sum of hub volumes and its area the sum of hub areas without the c
 Every half-beam is convex and contains the node's centre, so a hub is star-shaped and, with
 R(ω) the exit distance along direction ω, Volume = ∫ R³/3 dω and Area = ∫ R² / (n·ω) dω over
 non-cut surface. ``hub_measures`` (the reference, slow) integrates that on a cubed-sphere grid
-refined at the pieces' edges. ``hub_measures_batch`` (used for lattices) writes R = max_b R_b
-over the one-beam hubs ball ∪ half-beam b, whose measures are exact solids of revolution, so
-only the overlap term ∫ (Σ_b f_b − f_max) dω needs quadrature; it is vectorized over many hubs
-at once and refined per hub until two grids (n and 2n, turned) agree (tests: solids of
-revolution, fine reference grids, Monte Carlo). Assumes neighbouring balls are disjoint.
+refined at the pieces' edges. ``hub_moments`` (the one hub routine for lattices: area and the
+moment matrix, whose volume ``hub_measures_batch`` and ``lattice_measures`` read) writes
+R = max_b R_b over the one-beam hubs ball ∪ half-beam b, whose measures are exact solids of
+revolution, so only the overlap term ∫ (Σ_b f_b − f_max) dω needs quadrature; it is vectorized
+over many hubs at once, on grids turned by pseudo-random rotations per hub geometry (unbiased,
+so errors of distinct geometries cancel in a lattice's sum) and refined until the estimated
+error of the lattice's sums is small (tests: solids of revolution, fine reference grids, Monte
+Carlo). Assumes neighbouring balls are disjoint.
 
 The sum over hubs uses similarity: hubs that differ by a group similarity of factor f have
 f² times the area and f³ times the volume (§3.6). Along every direction whose similarity
