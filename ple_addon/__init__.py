@@ -11,7 +11,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from . import body_panel, clg_rig, mobius_frames, operators, prefs, props, rig, ui
+from . import body_panel, check_panel, clg_rig, mobius_frames, operators, prefs, props, rig, ui
 
 
 @persistent
@@ -91,6 +91,7 @@ def register():
     props.register()
     for cls in prefs.CLASSES + operators.CLASSES + ui.CLASSES:
         bpy.utils.register_class(cls)
+    check_panel.register()
     for name, fn in HANDLERS:
         getattr(bpy.app.handlers, name).append(fn)
     body_panel.register()
@@ -112,6 +113,7 @@ def unregister():
         lst = getattr(bpy.app.handlers, name)
         if fn in lst:
             lst.remove(fn)
+    check_panel.unregister()
     for cls in reversed(prefs.CLASSES + operators.CLASSES + ui.CLASSES):
         bpy.utils.unregister_class(cls)
     props.unregister()

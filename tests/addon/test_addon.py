@@ -520,7 +520,7 @@ def case_ui():
     panels = [c for c in bpy.types.Panel.__subclasses__() if getattr(c, "bl_category", "") == "PLE"]
     labels = {c.bl_label for c in panels}
     assert labels == {"Program", "Frames", "Region", "Template", "Filters", "Body", "Tessellate & Export",
-                      "CLG", "Möbius Frames"}
+                      "CLG", "Möbius Frames", "Check"}
     assert all(c.bl_space_type == "VIEW_3D" and c.bl_region_type == "UI" for c in panels)
     desc = bpy.types.PLE_OT_stencil_filter.__doc__ + bpy.types.PLE_OT_beam_add.__doc__
     assert "stencil" in desc and "beam-pattern" in desc

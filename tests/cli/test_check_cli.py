@@ -114,3 +114,18 @@ def test_gap_rule(capsys):
 def test_bad_input_exits_2(capsys, args):
     assert main(["check", *args]) == 2
     assert "error" in capsys.readouterr().err
+
+
+def test_components_without_scipy_equal_scipy():
+    """The numpy fallback (min-label hooking, for Blender's Python) partitions like scipy."""
+    from ple.measure.check import _min_labels
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    rng = np.random.default_rng(1)
+    for _ in range(100):
+        n, m = int(rng.integers(1, 300)), int(rng.integers(0, 400))
+        e = rng.integers(0, n, (m, 2))
+        label = _min_labels(n, e)
+        count, want = connected_components(coo_matrix((np.ones(m), (e[:, 0], e[:, 1])), shape=(n, n)), directed=False)
+        assert len(set(zip(want.tolist(), label.tolist()))) == count == len(np.unique(label))

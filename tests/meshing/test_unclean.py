@@ -99,3 +99,34 @@ def test_detection_of_parallel_beams():
     c2 = np.array([[0, 0, 0], [3, 0, 0], [1.5, 0.15, 0.0]])  # 0.15 < 0.1 + 0.1
     rep = find_unclean(c2, np.full(3, 0.1), np.array([[0, 1]]), np.full(3, 0.1))
     assert set(rep.nodes.tolist()) == {0, 1, 2}
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_detection_equals_all_pairs_of_capsules(seed):
+    """The tessellation's unclean hubs (candidates from ``queries.overlaps.non_incident_pairs``)
+    equal a test of every pair of elements: hub spheres S⁺ and trimmed beam capsules."""
+    from ple.algebra.elements import segment_distance
+    from ple.meshing.unclean import TRIM
+
+    ev = random_unclean_lattice(seed).evaluate()
+    c, r, bn = ev.center, ev.radius, ev.beam_nodes
+    rp = 1.3 * r
+    rep = find_unclean(c, r, bn, rp)
+    n = len(c)
+    a, b = c[bn[:, 0]], c[bn[:, 1]]
+    u = (b - a) / np.linalg.norm(b - a, axis=1)[:, None]
+    trim = TRIM * np.sqrt(rp**2 - r**2)
+    seg0 = np.concatenate([c, a + u * trim[bn[:, 0], None]])
+    seg1 = np.concatenate([c, b - u * trim[bn[:, 1], None]])
+    rr = np.concatenate([rp, np.maximum(r[bn[:, 0]], r[bn[:, 1]])])
+    ends = [{x} for x in range(n)] + [set(e) for e in bn.tolist()]
+    edges = {frozenset(e) for e in bn.tolist()}
+    bad, pairs = set(), 0
+    for i in range(len(ends)):
+        for j in range(i + 1, len(ends)):
+            if ends[i] & ends[j] or (i < n and j < n and frozenset((i, j)) in edges):
+                continue
+            if segment_distance(seg0[i], seg1[i], seg0[j], seg1[j]) < rr[i] + rr[j]:
+                pairs += 1
+                bad |= ends[i] | ends[j]
+    assert rep.pairs == pairs > 0 and set(rep.nodes.tolist()) == bad

@@ -115,3 +115,32 @@ def test_clean_presets(name):
     assert unclean_pairs(lat, path="explicit")["pairs"] == got["pairs"]
     if lat.node_count() + lat.beam_count() <= 1200:  # small enough for all pairs
         assert _brute(lat.evaluate(), 0.0)[0] == got["pairs"]
+
+
+def _cylinder(nv: int, turns: float) -> Lattice:
+    """A cylindrical lattice (radial U translation, angular V rotation, axial W translation: V and
+    W similar), its V row spanning ``turns`` full turns: past one turn it overlaps itself."""
+    lat = Lattice()
+    angle = 2 * np.pi * turns / nv
+    a = lat.add_node([2.0, 0, 0], 0.12)
+    b = lat.add_node([2.3, 0.4, 0.3], 0.08)
+    for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1)]:
+        lat.add_beam(a, a, *off)
+    lat.add_beam(b, a, 0, 1, 1)
+    lat.add_beam(b, a, 1, 0, -1)
+    lat.set_u(3, Translation([0.6, 0, 0]))
+    lat.set_v(nv, Rotation(angle, [0, 0, 1], [0, 0, 0]))
+    lat.set_w(4, Translation([0, 0, 0.6]))
+    return lat
+
+
+@pytest.mark.parametrize("turns", [11 / 12, 1.3, 1.4])
+def test_curved_lattice_wrapping_around_vs_all_pairs(turns):
+    """A row of rotations closing its circle (the last group next to the first, 11 indices apart)
+    and rows overlapping themselves (1.3, 1.4 turns): the steady path meets the pairs of far indices."""
+    lat = _cylinder(12, turns)
+    want, gap = _brute(lat.evaluate(), 0.3)
+    got = unclean_pairs(lat, margin=0.3, path="steady")
+    assert got["path"] == "steady (VW similar)" and got["pairs"] == want
+    assert turns < 1 or want["ball_beam"] > 0  # past one turn, balls sit on beams of the next turn
+    assert got["min_gap"] == (pytest.approx(gap, rel=1e-9) if gap is not None else None)

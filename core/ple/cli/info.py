@@ -54,9 +54,7 @@ def lattice_info(lat: Lattice, region=None) -> dict:
             (lo, hi), exact = lat.bounds(r), True
         info.update(nodes=lat.node_count(r), beams=lat.beam_count(r),
                     bounds={"min": lo.tolist(), "max": hi.tolist(), "exact": exact})
-        info.update(lattice_measures(lat) if whole else kept_measures(lat, r))
-        _check_finite_measures(info)
-        return _moments_and_clean(lat, r, info)
+        return _measures(lat, r, whole, info)
     info.update(program_nodes=lat.node_count(r), program_beams=lat.beam_count(r))
     if lat.node_count(r) > MAX_KEPT_NODES:
         info["counts_method"] = (f"skipped: {lat.node_count(r):,} nodes to decide one by one (limit "
@@ -72,21 +70,27 @@ def lattice_info(lat: Lattice, region=None) -> dict:
     info.update(nodes=nodes, beams=beams)
     if nodes:
         info["bounds"] = {"min": lo.tolist(), "max": hi.tolist(), "exact": True}
-    info.update(kept_measures(lat, r))
-    _check_finite_measures(info)
-    return _moments_and_clean(lat, r, info)
+    return _measures(lat, r, whole, info)
 
 
-def _moments_and_clean(lat: Lattice, r, info: dict) -> dict:
-    """Centroid and inertia (about the centroid, unit density) of what is kept, when its area and
-    volume were measured; ``clean``: True/False, or None when checking would cost more than a
-    quick look (``ple check`` gives the full report)."""
+def _measures(lat: Lattice, r, whole: bool, info: dict) -> dict:
+    """Area, volume, centroid and inertia (about the centroid, unit density) of what is kept, in one
+    computation (``mass_properties``; lattices whose groups a map places: area and volume per hub);
+    ``clean``: True/False, or None when checking would cost more than a quick look (``ple check``
+    gives the full report)."""
     if lat.group_map is not None:  # no similar hubs to move moments with: ple check and moments skip it
+        info.update(lattice_measures(lat) if whole else kept_measures(lat, r))
+        _check_finite_measures(info)
         info["clean"] = None
         return info
-    if "volume" in info and info["volume"] > 0:
-        props = mass_properties(lat, r)
-        info.update(centroid=np.asarray(props["centroid"]).tolist(), inertia=np.asarray(props["inertia"]).tolist())
+    props = mass_properties(lat, r)
+    info["area_method"] = props["method"]
+    if "volume" in props:
+        info.update(area=props["area"], volume=props["volume"], hubs=props["hubs"], hub_shapes=props["hub_shapes"],
+                    quadrature_error=props["quadrature_error"])
+        _check_finite_measures(info)
+        if props["centroid"] is not None:
+            info.update(centroid=np.asarray(props["centroid"]).tolist(), inertia=np.asarray(props["inertia"]).tolist())
     info["clean"] = is_clean(lat, r)
     return info
 

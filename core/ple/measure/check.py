@@ -11,6 +11,7 @@ import numpy as np
 from ..errors import PleError
 from ..model.lattice import Evaluation, Lattice
 from ..queries.overlaps import similar_axes, unclean_pairs
+from .moments import mass_properties
 
 MAX_CHECK_ELEMENTS = 20_000_000  # nodes + beams evaluated by one check (memory bound)
 QUICK_ELEMENTS = 300_000  # is_clean evaluates at most this many elements (a quick look)
@@ -98,18 +99,116 @@ def check_lattice(lat: Lattice, region=None, min_feature: float | None = None,
             "region": str(r), "nodes": int(len(ev.radius)), "beams": int(len(ev.beam_nodes)), "rules": rules}
 
 
+def check_report(lat: Lattice, region=None, min_feature: float | None = None,
+                 max_slenderness: float | None = None) -> dict:
+    """``check_lattice`` with the mass properties of what is checked (``mass_properties``: area,
+    volume, centroid, inertia about the centroid; None when they were skipped): the report of
+    the add-on's Check panel."""
+    out = check_lattice(lat, region, min_feature, max_slenderness)
+    props = {} if lat.group_map is not None else mass_properties(lat, region)
+    out["mass"] = None if "volume" not in props else {
+        k: (np.asarray(props[k]).tolist() if props[k] is not None else None)
+        for k in ("area", "volume", "centroid", "inertia", "quadrature_error")}
+    return out
+
+
+RULE_NAMES = {"clean": "clean (no overlapping non-incident elements)", "thinnest_beam": "thinnest beam diameter",
+              "smallest_gap": "smallest gap between non-incident elements", "slenderness": "beam slenderness L/d",
+              "dangling_beams": "dangling beams (ball with one beam)", "isolated_balls": "isolated balls",
+              "components": "connected components"}
+
+
+def rule_lines(report: dict, offenders: int = 5) -> list[tuple[str, bool, str, list[str]]]:
+    """The report as text, one entry per rule: (key, ok, "name: value", offender lines) — what
+    ``ple check`` prints and the add-on's panel shows."""
+    out = []
+    for key, rule in report["rules"].items():
+        worst = [] if rule["ok"] else [offender_text(w) for w in rule["worst"][:offenders]]
+        out.append((key, bool(rule["ok"]), f"{RULE_NAMES[key]}: {_value(key, rule)}", worst))
+    return out
+
+
+def _value(key: str, rule: dict) -> str:
+    limit = f" (limit {rule['limit']:g})" if isinstance(rule.get("limit"), float) else ""
+    if key == "clean":
+        kinds = ", ".join(f"{n:,} {k.replace('_', '–')}" for k, n in rule["value"].items() if n)
+        return f"{rule['count']:,} unclean pairs" + (f" ({kinds})" if kinds else "")
+    if key == "smallest_gap":
+        if rule["value"] is None:
+            return f"none closer than {rule['searched_within']:.4g}{limit}"
+        return f"{rule['value']:.4g}{limit}"
+    if key in ("thinnest_beam", "slenderness"):
+        v = "no beams" if rule["value"] is None else f"{rule['value']:.4g}"
+        return v + limit + (f", {rule['count']:,} beams beyond" if rule["count"] else "")
+    return f"{rule['count']:,}"
+
+
+def offender_text(w: dict) -> str:
+    """One offender of a rule: an element, or a pair of elements with its depth and copies."""
+    parts = [f"{kind} {tuple(idx)}" for side in ("a", "b") if side in w for kind, idx in w[side].items()]
+    if parts:
+        extra = f" depth {w['depth']:.3g}" if "depth" in w else ""
+        copies = f", {w['count']:,} similar copies" if w.get("count", 1) > 1 else ""
+        return f"{w.get('kind', '')} {' × '.join(parts)}{extra}{copies}".strip()
+    (kind, idx), = ((k, v) for k, v in w.items() if k in ("ball", "beam"))
+    return f"{kind} {tuple(idx)}" + (f" ({w['balls']} balls)" if "balls" in w else "")
+
+
+def offender_region(lat: Lattice, w: dict, pad: int = 1):
+    """The index region around an offender (its elements' groups, a beam's far group too),
+    grown by ``pad`` groups and clamped to the lattice: where to look at it."""
+    lat.validate()
+    groups = []
+    for kind, idx in ((k, v) for part in (w.get("a", {}), w.get("b", {}), w) for k, v in part.items()
+                      if k in ("ball", "beam")):
+        g = np.array(idx[:3], np.int64)
+        groups.append(g)
+        if kind == "beam":
+            if not 0 <= idx[3] < len(lat.beams):
+                raise PleError(f"offender {w}: no beam-pattern {idx[3]}")
+            groups.append(g + np.array(lat.beams[idx[3]].offset))
+    if not groups:
+        raise PleError(f"offender {w}: no ball or beam indices")
+    lo = np.maximum(np.min(groups, axis=0) - pad, 0)
+    hi = np.minimum(np.max(groups, axis=0) + 1 + pad, lat.counts)
+    return lat.region(",".join(f"{a}:{b}" for a, b in zip(lo, hi)))
+
+
 def components(n: int, edges: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
     """Connected components of n nodes joined by ``edges`` (m, 2): their number, sizes and one
-    node of each."""
+    node of each (scipy's, or numpy's min-label hooking where scipy is missing, e.g. in Blender)."""
     if n == 0:
         return 0, np.zeros(0, np.int64), np.zeros(0, np.int64)
-    from scipy.sparse import coo_matrix  # noqa: PLC0415 - optional package
-    from scipy.sparse.csgraph import connected_components  # noqa: PLC0415
-
     e = np.asarray(edges, np.int64).reshape(-1, 2)
-    graph = coo_matrix((np.ones(len(e), np.int8), (e[:, 0], e[:, 1])), shape=(n, n))
-    count, label = connected_components(graph, directed=False)
+    try:
+        from scipy.sparse import coo_matrix  # noqa: PLC0415 - optional package
+        from scipy.sparse.csgraph import connected_components  # noqa: PLC0415
+    except ImportError:
+        label = _min_labels(n, e)
+    else:
+        graph = coo_matrix((np.ones(len(e), np.int8), (e[:, 0], e[:, 1])), shape=(n, n))
+        label = connected_components(graph, directed=False)[1]
+    _, label = np.unique(label, return_inverse=True)
+    count = int(label.max()) + 1
     sizes = np.bincount(label, minlength=count)
     first = np.full(count, n, np.int64)
     np.minimum.at(first, label, np.arange(n))
-    return int(count), sizes, first
+    return count, sizes, first
+
+
+def _min_labels(n: int, e: np.ndarray) -> np.ndarray:
+    """Per node the smallest node of its component: roots hooked onto the smaller neighbouring
+    root, then pointers jumped to their roots, until no edge joins two roots."""
+    label = np.arange(n)
+    while True:
+        a, b = label[e[:, 0]], label[e[:, 1]]
+        differ = a != b
+        if not differ.any():
+            return label
+        a, b = a[differ], b[differ]
+        np.minimum.at(label, np.maximum(a, b), np.minimum(a, b))
+        while True:  # pointer jumping: every node to its root
+            nxt = label[label]
+            if np.array_equal(nxt, label):
+                break
+            label = nxt

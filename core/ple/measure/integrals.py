@@ -7,11 +7,14 @@ volume is the sum of hub volumes and its area the sum of hub areas without the c
 Every half-beam is convex and contains the node's centre, so a hub is star-shaped and, with
 R(ω) the exit distance along direction ω, Volume = ∫ R³/3 dω and Area = ∫ R² / (n·ω) dω over
 non-cut surface. ``hub_measures`` (the reference, slow) integrates that on a cubed-sphere grid
-refined at the pieces' edges. ``hub_measures_batch`` (used for lattices) writes R = max_b R_b
-over the one-beam hubs ball ∪ half-beam b, whose measures are exact solids of revolution, so
-only the overlap term ∫ (Σ_b f_b − f_max) dω needs quadrature; it is vectorized over many hubs
-at once and refined per hub until two grids (n and 2n, turned) agree (tests: solids of
-revolution, fine reference grids, Monte Carlo). Assumes neighbouring balls are disjoint.
+refined at the pieces' edges. ``hub_moments`` (the one hub routine for lattices: area and the
+moment matrix, whose volume ``hub_measures_batch`` and ``lattice_measures`` read) writes
+R = max_b R_b over the one-beam hubs ball ∪ half-beam b, whose measures are exact solids of
+revolution, so only the overlap term ∫ (Σ_b f_b − f_max) dω needs quadrature; it is vectorized
+over many hubs at once, on grids turned by pseudo-random rotations per hub geometry (unbiased,
+so errors of distinct geometries cancel in a lattice's sum) and refined until the estimated
+error of the lattice's sums is small (tests: solids of revolution, fine reference grids, Monte
+Carlo). Assumes neighbouring balls are disjoint.
 
 The sum over hubs uses similarity: hubs that differ by a group similarity of factor f have
 f² times the area and f³ times the volume (§3.6). Along every direction whose similarity
@@ -32,7 +35,6 @@ import numpy as np
 
 from ..algebra.elements import beam_distance
 from ..algebra.series import geometric_sum
-from ..algebra.similarity import Rotation
 from ..errors import PleError
 from ..model.lattice import Lattice
 from ..queries.overlaps import similar_axes
@@ -41,9 +43,12 @@ HUB_GRID = 24  # direction cells per cube face side (6 faces), edge cells refine
 REFINE = 8
 MAX_HUBS = 200_000  # more hub classes than this: no area/volume (guard for huge base slabs)
 MAX_KEPT_NODES = 20_000_000  # nodes of a filtered lattice or region decided one by one for its measures
-GRID_START, GRID_MAX = 8, 64  # fast path: overlap quadrature cells per cube face side, first and last
-FEATURE_CELLS = 2  # first grid: cells per narrowest angle between two beams of the hub
-ADAPT_TOL = 3e-4  # refine while the overlap integrals on grids n and 2n (turned) differ by more than this × the measure
+GRID_START, GRID_MAX = 3, 48  # overlap quadrature cells per cube face side, first and last
+ADAPT_TOL = 3e-4  # refine until 3 σ of the quadrature error of a lattice's summed measures is below this share
+ROTATION_DOF = 32  # hub variants given extra rotations (a sample), and about the error estimate's degrees of freedom
+ROTATIONS_MAX = 8  # rotations per sampled geometry: at most this many (at least 2)
+CHUNK_RAYS = 1 << 20  # (geometry, half-beam, direction) rays per vectorized block
+_GL = (np.array([-math.sqrt(0.6), 0.0, math.sqrt(0.6)]), np.array([5.0, 8.0, 5.0]) / 9.0)  # 3-point Gauss–Legendre
 
 
 @dataclass
@@ -382,14 +387,21 @@ def _measure_hubs(idx, ra, off, rb, present, f, wa, wv, grid: int = 0) -> tuple[
         return 0.0, 0.0, 0, 0
     key = np.round(np.concatenate([idx[:, 3:], ra[:, None], off.reshape(len(idx), -1), rb], axis=1), 9)
     key[key == 0] = 0.0  # -0.0 and 0.0 alike
-    _, geo_first, geo = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    geo = geo.reshape(-1)
-    _, first, inverse = np.unique(np.concatenate([geo[:, None], present], axis=1), axis=0, return_index=True,
-                                  return_inverse=True)
-    inverse = inverse.reshape(-1)
+    _, geo_first, geo = unique_rows(key)
+    _, first, inverse = unique_rows(np.concatenate([geo[:, None], present], axis=1).astype(np.float64))
     g = geo_first
-    a, v = hub_measures_batch(ra[g], off[g], rb[g], present[first], grid=grid, geometry=geo[first])
+    weights = np.zeros((len(first), 2))
+    np.add.at(weights, inverse, np.stack([f * f * wa, f**3 * wv], axis=1))
+    a, v = hub_measures_batch(ra[g], off[g], rb[g], present[first], grid=grid, geometry=geo[first], weights=weights)
     return float(np.sum(a[inverse] * f * f * wa)), float(np.sum(v[inverse] * f**3 * wv)), len(first), len(g)
+
+
+def unique_rows(a: np.ndarray):
+    """np.unique(a, axis=0) with index and inverse, through one byte string per row (faster)."""
+    a = np.ascontiguousarray(a)
+    rows = a.view(np.dtype((np.void, a.dtype.itemsize * a.shape[1]))).reshape(-1)
+    u, first, inverse = np.unique(rows, return_index=True, return_inverse=True)
+    return u, first, inverse.reshape(-1)
 
 
 def kept_measures(lat: Lattice, region=None, grid: int = 0, max_nodes: int = MAX_KEPT_NODES) -> dict:
@@ -453,124 +465,7 @@ def single_beam_excess(ra, rb, length):
     return d_area, d_volume
 
 
-_DIRECTIONS: dict[tuple[int, bool], tuple[np.ndarray, np.ndarray]] = {}
-_TURN = Rotation(1.0, [1.0, math.sqrt(2.0), math.pi], [0, 0, 0]).matrix[:3, :3]  # a generic rotation
-
-
-def sphere_quadrature(n: int, turned: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """Cubed-sphere directions (6 n², 3) and their solid-angle weights (sum 4π): n × n cells
-    per cube face, one midpoint each, weight du dv / (1 + u² + v²)^1.5; ``turned``: the same
-    grid under a fixed generic rotation (an independent second estimate)."""
-    if (n, turned) not in _DIRECTIONS:
-        h = 2.0 / n
-        g = -1 + (np.arange(n) + 0.5) * h
-        u, v = (x.reshape(-1) for x in np.meshgrid(g, g, indexing="ij"))
-        dirs = np.concatenate([_face_directions(face, u, v) for face in _FACES])
-        w = np.tile(_jacobian(u, v) * h * h, 6)
-        _DIRECTIONS[n, turned] = (dirs @ _TURN.T if turned else dirs, w * (4 * math.pi / w.sum()))
-    return _DIRECTIONS[n, turned]
-
-
-def hub_measures_batch(ra, offsets, rb, present=None, grid: int = 0, geometry=None, chunk: int = 1 << 17):
-    """(areas, volumes) of hubs: ball(0, ra[g]) ∪ half-beams towards offsets[g, b] (G, B, 3)
-    with far radii rb[g, b]; ``present`` masks absent beams (padding). With ``geometry`` (V,)
-    indices into the G geometries, ``present`` is (V, B) and each of the V results is that
-    geometry with that subset of beams (boundary hubs share their geometry's ray casting).
-
-    Exact single-beam excesses (``single_beam_excess``) plus the overlap of half-beams: the
-    hub's radial function is R = max_b R_b (each ball ∪ half-beam is star-shaped from the
-    centre), so V = V_ball + Σ ΔV_b − ∫ (Σ_b R_b³ − R³)/3 dω, and the same for the area with
-    integrand R²/(n·ω) (0 on cut disks). Only that overlap integral, non-zero where two or more
-    half-beams reach past the ball, uses quadrature (``sphere_quadrature(grid)``); grid 0 refines
-    each geometry adaptively: grids n (from the narrowest beam angle, at least GRID_START) and 2n,
-    alternately turned, until they agree to ADAPT_TOL of the measure (2n kept; n up to GRID_MAX)."""
-    ra = np.asarray(ra, float)
-    off = np.asarray(offsets, float).reshape(len(ra), -1, 3)
-    rb = np.asarray(rb, float).reshape(off.shape[:2])
-    vg = np.arange(len(ra)) if geometry is None else np.asarray(geometry, np.int64).reshape(-1)
-    present = np.ones((len(vg), off.shape[1]), bool) if present is None else np.asarray(present, bool)
-    length = np.linalg.norm(off, axis=2)
-    safe = np.where(length > 0, length, 1.0)
-    present = present & (length[vg] > 0)
-    d_area, d_volume = single_beam_excess(ra[:, None], rb, safe)
-    area = 4 * math.pi * ra[vg] ** 2 + np.sum(np.where(present, d_area[vg], 0.0), axis=1)
-    volume = 4 / 3 * math.pi * ra[vg] ** 3 + np.sum(np.where(present, d_volume[vg], 0.0), axis=1)
-    if off.shape[1] < 2:
-        return area, volume
-    e = off / safe[..., None]
-    order = np.argsort(vg, kind="stable")
-    vg, present = vg[order], present[order]
-    rest = (ra, e, safe, rb, vg, present)
-    if grid:
-        ca, cv = _overlap_chunked(np.arange(len(ra)), rest, grid, chunk)
-        area[order] -= ca
-        volume[order] -= cv
-        return area, volume
-    # adaptive: each geometry's overlap integrals on two grids of n × n cells per face, the
-    # second turned; their mean is kept when they agree to ADAPT_TOL of every variant's measure,
-    # else n doubles (up to GRID_MAX)
-    a_s, v_s = area[order], volume[order]
-    # the first grid resolves the narrowest angle between two beams of a geometry (the overlap
-    # lens of two beams is about that wide): cells of at most half that angle
-    cosines = np.einsum("gbk,gck->gbc", e, e) - 2 * np.eye(e.shape[1])[None]
-    closest = np.arccos(np.clip(cosines.max(axis=(1, 2)), -1.0, 1.0))
-    start = np.clip(FEATURE_CELLS * (math.pi / 2) / np.maximum(closest, 1e-9), GRID_START, GRID_MAX)
-    todo, n, waiting = np.zeros(0, np.int64), GRID_START, np.arange(len(ra))
-    prev = None  # the finer grid of the last round (rows of ``todo``), reused as the coarse one
-    while len(todo) or len(waiting):
-        new = waiting[start[waiting] <= n]
-        waiting = waiting[start[waiting] > n]
-        if len(new):
-            a0, v0 = _overlap_chunked(new, rest, n, chunk, turned=_turned(n))
-            prev = _merge(todo, prev, new, (a0, v0), vg)
-            todo = np.union1d(todo, new)
-        if not len(todo):
-            n *= 2
-            continue
-        rows = np.nonzero(np.isin(vg, todo))[0]
-        a1, v1 = prev
-        # the finer grid turned against the coarse one, so that their cells do not line up
-        a2, v2 = _overlap_chunked(todo, rest, 2 * n, chunk, turned=_turned(2 * n))
-        bad = (np.abs(a1 - a2) > ADAPT_TOL * a_s[rows]) | (np.abs(v1 - v2) > ADAPT_TOL * v_s[rows])
-        bad_geo = np.zeros(len(ra), bool)
-        bad_geo[vg[rows[bad]]] = 4 * n <= GRID_MAX
-        ok = ~bad_geo[vg[rows]]
-        a_s[rows[ok]] -= a2[ok]
-        v_s[rows[ok]] -= v2[ok]
-        todo, prev, n = todo[bad_geo[todo]], (a2[~ok], v2[~ok]), 2 * n
-    area[order], volume[order] = a_s, v_s
-    return area, volume
-
-
-def _turned(n: int) -> bool:
-    """Grids of successive refinement levels alternate between plain and turned."""
-    return round(math.log2(n / GRID_START)) % 2 == 1
-
-
-def _merge(todo, prev, new, values, vg):
-    """Per-row values of the geometries todo ∪ new (rows sorted by geometry), from both parts."""
-    if prev is None or not len(todo):
-        return values
-    rows_old, rows_new = np.nonzero(np.isin(vg, todo))[0], np.nonzero(np.isin(vg, new))[0]
-    rows = np.concatenate([rows_old, rows_new])
-    order = np.argsort(rows, kind="stable")
-    return tuple(np.concatenate([p, q])[order] for p, q in zip(prev, values))
-
-
-def _overlap_chunked(geos, rest, grid: int, chunk: int, turned: bool = False):
-    """Overlap integrals of every variant (rows sorted by geometry) of the geometries ``geos``."""
-    ra, e, length, rb, vg, present = rest
-    dirs, weights = sphere_quadrature(grid, turned)
-    per = max(1, chunk // (e.shape[1] * len(dirs)))
-    out_a, out_v = [], []
-    for lo in range(0, len(geos), per):
-        g = geos[lo:lo + per]
-        rows = np.nonzero(np.isin(vg, g))[0]
-        local = np.searchsorted(g, vg[rows])
-        a, v = _overlap_integrals(ra[g], e[g], length[g], rb[g], dirs, weights, local, present[rows])
-        out_a.append(a)
-        out_v.append(v)
-    return np.concatenate(out_a), np.concatenate(out_v)
+_DIRECTIONS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
 
 def beam_exits(ra, e, length, rb, dirs):
@@ -611,25 +506,257 @@ def beam_exits(ra, e, length, rb, dirs):
     return t, f_area
 
 
-def _overlap_integrals(ra, e, length, rb, dirs, weights, vg, present):
-    """∫ (Σ_b f_b − f_max) dω for area (f = R²/(n·ω), 0 on a cut) and volume (f = R³/3), per
-    variant (geometry vg with beams ``present``). Computed in units of the node radius."""
-    m = len(dirs)
-    t, f_area = beam_exits(ra, e, length, rb, dirs)
-    ia = f_area.reshape(-1, m) @ weights  # per-beam integrals (G·B,)
-    iv = (t * t * t).reshape(-1, m) @ weights / 3
-    # the variants: absent beams fall back to the ball (t = 1, f = 1); the bounding beam per direction
-    tmax = np.ones((len(vg), m))
-    famax = np.ones((len(vg), m))
-    for b in range(t.shape[1]):
-        tb_, better = t[vg, b], present[:, b:b + 1]
-        better = better & (tb_ > tmax)
-        tmax = np.where(better, tb_, tmax)
-        famax = np.where(better, f_area[vg, b], famax)
-    nb = present.sum(axis=1)
-    sum_a = np.sum(np.where(present, ia.reshape(len(ra), -1)[vg], 0.0), axis=1)
-    sum_v = np.sum(np.where(present, iv.reshape(len(ra), -1)[vg], 0.0), axis=1)
-    over_a = sum_a - famax @ weights - (nb - 1) * 4 * math.pi
-    over_v = sum_v - (tmax**3) @ weights / 3 - (nb - 1) * 4 * math.pi / 3
+def sphere_quadrature(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cubed-sphere directions (6 n², 3) and their solid-angle weights (sum 4π): n × n cells
+    per cube face, one midpoint each, weight du dv / (1 + u² + v²)^1.5."""
+    if n not in _DIRECTIONS:
+        h = 2.0 / n
+        g = -1 + (np.arange(n) + 0.5) * h
+        u, v = (x.reshape(-1) for x in np.meshgrid(g, g, indexing="ij"))
+        dirs = np.concatenate([_face_directions(face, u, v) for face in _FACES])
+        w = np.tile(_jacobian(u, v) * h * h, 6)
+        _DIRECTIONS[n] = (dirs, w * (4 * math.pi / w.sum()))
+    return _DIRECTIONS[n]
+
+
+# ----- moment matrices of simple solids (exact) ------------------------------------------------------
+def ball_moments(radius) -> np.ndarray:
+    """Moment matrices (…, 4, 4) of balls of ``radius`` centred at the origin (``moments``: P = ∫ h hᵀ dV)."""
+    r = np.asarray(radius, float)
+    out = np.zeros(r.shape + (4, 4))
+    out[..., 3, 3] = 4 / 3 * math.pi * r**3
+    for a in range(3):
+        out[..., a, a] = 4 / 15 * math.pi * r**5
+    return out
+
+
+def axial_moments(e, volume, first, axial2, radial2) -> np.ndarray:
+    """Moment matrix of a solid of revolution about the axis through the origin along unit ``e``
+    (…, 3) from its volume, ∫ x dV, ∫ x² dV (x along e) and ∫ ρ² dV (ρ the distance to the axis)."""
+    e = np.asarray(e, float)
+    ee = e[..., :, None] * e[..., None, :]
+    out = np.zeros(e.shape[:-1] + (4, 4))
+    out[..., :3, :3] = axial2[..., None, None] * ee + (radial2 / 2)[..., None, None] * (np.eye(3) - ee)
+    out[..., :3, 3] = first[..., None] * e
+    out[..., 3, :3] = first[..., None] * e
+    out[..., 3, 3] = volume
+    return out
+
+
+def _piece(lo, hi, y2, y4):
+    """(∫ π y², ∫ π y² x, ∫ π y² x², ∫ π y⁴ / 2) dx over [lo, hi] for a profile given as functions
+    y²(x), y⁴(x) (polynomials of degree ≤ 4 in x: 3-point Gauss–Legendre is exact)."""
+    nodes, weights = _GL
+    half, mid = (hi - lo) / 2, (hi + lo) / 2
+    sums = [0.0, 0.0, 0.0, 0.0]
+    for t, w in zip(nodes, weights):
+        x = mid + half * t
+        a, b = y2(x), y4(x)
+        sums[0] = sums[0] + w * a
+        sums[1] = sums[1] + w * a * x
+        sums[2] = sums[2] + w * a * x * x
+        sums[3] = sums[3] + w * b / 2
+    return [math.pi * half * s for s in sums]
+
+
+def single_beam_moments(ra, rb, length):
+    """(volume, ∫x, ∫x², ∫ρ²) of the one-beam hub ball(0, ra) ∪ half-beam towards (length, 0, 0)
+    (far radius rb, cut by the radical plane) minus those of the ball, exactly: the ball up to the
+    contact circle, the cone frustum, ball B's zone when the cut lies past its contact circle
+    (the same pieces as ``single_beam_excess``)."""
+    ra, rb, length = np.broadcast_arrays(*(np.asarray(x, float) for x in (ra, rb, length)))
+    contained = length + rb <= ra  # special case: ball A contains ball B, nothing is added
+    safe = np.where(contained, 1.0, length)
+    s = np.clip((ra - rb) / safe, -1.0, 1.0)
+    c = np.sqrt(np.maximum(1 - s * s, 1e-300))
+    x0 = ra * s
+    x_cut = (safe * safe + ra * ra - rb * rb) / (2 * safe)
+    x1 = np.minimum(x_cut, safe + rb * s)
+    u0, u1 = rb * s, np.maximum(x_cut - safe, rb * s)  # ball B's zone in B's coordinate
+    ball = _piece(-ra, x0, lambda x: ra * ra - x * x, lambda x: (ra * ra - x * x) ** 2)
+    cone = _piece(x0, x1, lambda x: ((ra - s * x) / c) ** 2, lambda x: ((ra - s * x) / c) ** 4)
+    zone = _piece(safe + u0, safe + u1, lambda x: rb * rb - (x - safe) ** 2, lambda x: (rb * rb - (x - safe) ** 2) ** 2)
+    full = (4 / 3 * math.pi * ra**3, 0.0, 4 / 15 * math.pi * ra**5, 8 / 15 * math.pi * ra**5)
+    return tuple(np.where(contained, 0.0, p + q + z - f) for p, q, z, f in zip(ball, cone, zone, full))
+
+
+# ----- the one hub routine: exact one-beam hubs + the overlap quadrature, randomly rotated -------------
+def hub_moments(ra, offsets, rb, present=None, geometry=None, grid: int = 0, weights=None):
+    """(areas (V,), moment matrices (V, 4, 4), quadrature stats) of hub variants in their
+    node-centred frames: ball(0, ra[g]) ∪ half-beams towards offsets[g, b] (G, B, 3) with far
+    radii rb[g, b], variant v being geometry ``geometry[v]`` (default: one variant per geometry)
+    with the half-beams ``present[v]`` (V, B). The volume is moments[:, 3, 3].
+
+    Exact ball and one-beam parts (``single_beam_excess``, ``single_beam_moments``) minus the
+    overlap of the half-beams ∫ (Σ_b f_b − f_max) dω with f = (R²/(n·ω), R³/3, R⁴/4 ω, R⁵/5 ω ωᵀ)
+    (R the exit distance; a hub is star-shaped from its centre), on a cubed-sphere grid.
+
+    ``grid`` > 0: that grid, unrotated (deterministic, for tests and references). ``grid`` 0:
+    each geometry's grid is turned by K pseudo-random rotations (uniform on SO(3), seeded by the
+    geometry's rounded numbers, so the same hub always gets the same ones): a randomly rotated
+    rule is unbiased, so the errors of distinct geometries cancel in a lattice's sum instead of
+    adding up. The K values are averaged and their spread estimates the error of the sum
+    Σ_v weights[v] · measure[v] (``weights`` (V, 2): area and volume weights, e.g. f² and f³
+    times a series; default 1); the grid doubles from GRID_START until 3 σ of both sums is at
+    most ADAPT_TOL of them (or GRID_MAX)."""
+    ra = np.asarray(ra, float).reshape(-1)
+    off = np.asarray(offsets, float).reshape(len(ra), -1, 3)
+    rb = np.asarray(rb, float).reshape(off.shape[:2])
+    vg = np.arange(len(ra)) if geometry is None else np.asarray(geometry, np.int64).reshape(-1)
+    present = np.ones((len(vg), off.shape[1]), bool) if present is None else np.asarray(present, bool)
+    present = present.reshape(len(vg), off.shape[1])
+    length = np.linalg.norm(off, axis=2)
+    safe = np.where(length > 0, length, 1.0)
+    present = present & (length[vg] > 0)
+    e = off / safe[..., None]
+    d_area, _ = single_beam_excess(ra[:, None], rb, safe)
+    dv, d1, d2, dr = single_beam_moments(ra[:, None], rb, safe)
+    excess = axial_moments(e, dv, d1, d2, dr)  # (G, B, 4, 4)
+    area = 4 * math.pi * ra[vg] ** 2 + np.sum(np.where(present, d_area[vg], 0.0), axis=1)
+    moments = ball_moments(ra[vg]) + np.einsum("vb,vbij->vij", present.astype(float), excess[vg])
+    stats = {"quadrature_grid": None, "quadrature_rotations": 0, "quadrature_rel_error": 0.0}
+    multi = present.sum(axis=1) >= 2
+    if not multi.any():
+        return area, moments, stats
+    geos, local = np.unique(vg[multi], return_inverse=True)
+    sub = (ra[geos], e[geos], safe[geos], rb[geos], local.reshape(-1), present[multi])
+    if grid:
+        oa, om = _overlaps(*sub, int(grid), None)
+        stats.update(quadrature_grid=int(grid), quadrature_rotations=0)
+    else:
+        w = np.ones((len(vg), 2)) if weights is None else np.asarray(weights, float).reshape(len(vg), 2)
+        base = (area[multi], moments[multi, 3, 3])
+        oa, om, n, k, rel = _adaptive_overlaps(sub, (ra[geos], off[geos], rb[geos]), w[multi], base)
+        stats.update(quadrature_grid=n, quadrature_rotations=k, quadrature_rel_error=rel)
+    area[multi] -= oa
+    moments[multi] -= om
+    return area, moments, stats
+
+
+def _adaptive_overlaps(sub, numbers, weights, base):
+    """Overlaps on randomly rotated grids, refined until the weighted sums' error estimate is small.
+    Every variant is measured under its geometry's first rotation; a sample of variants (all when
+    there are few) under K − 1 more. Their spread gives the relative error of one rotated
+    measurement; the sum's error adds the geometries' errors independently, each geometry's
+    variants taken as fully correlated (they share its rotation)."""
+    ra, e, length, rb, local, present = sub
+    geos, nv = len(ra), len(local)
+    sample = np.unique(np.linspace(0, nv - 1, min(nv, ROTATION_DOF)).astype(np.int64))
+    k = int(np.clip(math.ceil(ROTATION_DOF / len(sample)) + 1, 2, ROTATIONS_MAX))
+    rots = random_rotations(_geometry_keys(*numbers), k)  # (G, K, 3, 3)
+    sg = local[sample]
+    # rows: every variant with rotation 0, then the sampled variants with rotations 1 … K − 1
+    geo_rows = np.concatenate([np.arange(geos), np.repeat(sg, k - 1)])
+    rot_rows = np.concatenate([rots[:, 0], rots[sg, 1:].reshape(-1, 3, 3)])
+    var_rows = np.concatenate([local, geos + np.arange(len(sample) * (k - 1))])
+    var_present = np.concatenate([present, np.repeat(present[sample], k - 1, axis=0)])
+    n = GRID_START
+    while True:
+        oa, om = _overlaps(ra[geo_rows], e[geo_rows], length[geo_rows], rb[geo_rows], var_rows, var_present, n,
+                           rot_rows)
+        rel = 0.0
+        means = []
+        for x, wcol, total in ((oa, weights[:, 0], base[0]), (om[:, 3, 3], weights[:, 1], base[1])):
+            all_k = np.concatenate([x[:nv][sample][:, None], x[nv:].reshape(-1, k - 1)], axis=1)  # (S, K)
+            measure = total - x[:nv]
+            rel_var = float(np.mean(np.var(all_k, axis=1, ddof=1) / np.maximum(measure[sample], 1e-300) ** 2))
+            per_geo = np.zeros(geos)
+            np.add.at(per_geo, local, wcol * measure)
+            rel = max(rel, 3 * math.sqrt(rel_var * float(np.sum(per_geo**2))) / max(float(per_geo.sum()), 1e-300))
+            means.append(all_k.mean(axis=1))
+        area, mom = oa[:nv].copy(), om[:nv].copy()
+        area[sample] = means[0]
+        mom[sample] = np.concatenate([om[:nv][sample][:, None], om[nv:].reshape(-1, k - 1, 4, 4)], 1).mean(1)
+        if rel <= ADAPT_TOL or 2 * n > GRID_MAX:
+            return area, mom, n, k, rel
+        n *= 2
+
+
+def _geometry_keys(ra, off, rb) -> np.ndarray:
+    """64-bit hashes (G,) of the geometries' numbers rounded to 1e-9 (splitmix64 over the bytes)."""
+    key = np.round(np.concatenate([ra[:, None], off.reshape(len(ra), -1), rb], axis=1), 9)
+    key[key == 0] = 0.0  # -0.0 and 0.0 alike
+    h = np.full(len(ra), 0x9E3779B97F4A7C15, np.uint64)
+    for col in np.ascontiguousarray(key).view(np.uint64).T:
+        h = _splitmix(h ^ col)
+    return h
+
+
+def _splitmix(x: np.ndarray) -> np.ndarray:
+    with np.errstate(over="ignore"):
+        x = x + np.uint64(0x9E3779B97F4A7C15)
+        x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        return x ^ (x >> np.uint64(31))
+
+
+def random_rotations(keys: np.ndarray, k: int) -> np.ndarray:
+    """(G, k, 3, 3) rotations uniform on SO(3) (Shoemake's quaternions), a fixed function of ``keys``."""
+    u = np.empty((len(keys), k, 3))
+    with np.errstate(over="ignore"):
+        for j in range(k):
+            for c in range(3):
+                bits = _splitmix(keys + np.uint64(3 * j + c + 1))
+                u[:, j, c] = (bits >> np.uint64(11)).astype(float) / float(1 << 53)
+    a, b = np.sqrt(1 - u[..., 0]), np.sqrt(u[..., 0])
+    x, y = a * np.sin(2 * math.pi * u[..., 1]), a * np.cos(2 * math.pi * u[..., 1])
+    z, w = b * np.sin(2 * math.pi * u[..., 2]), b * np.cos(2 * math.pi * u[..., 2])
+    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+                     np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+                     np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], -2)
+
+
+def _overlaps(ra, e, length, rb, vg, present, grid, rot):
+    """Overlap ∫ (Σ_b f_b − f_max) dω per variant (geometry vg, half-beams ``present``) for the area
+    integrand and the moment matrix; ``rot`` (G, 3, 3): each geometry's grid turned by it."""
+    dirs, w = sphere_quadrature(grid)
+    m, nb_max = len(dirs), e.shape[1]
+    w1 = w[:, None] * dirs
+    w2 = (w[:, None, None] * dirs[:, :, None] * dirs[:, None, :]).reshape(m, 9)
+    ball = np.concatenate([np.eye(3).reshape(-1) * 4 * math.pi / 15, np.zeros(3), [4 * math.pi / 3]])
+    unit_ball = np.concatenate([[4 * math.pi], ball])
+    # the grid turned by R is the beams turned by Rᵀ
+    e = e if rot is None else np.einsum("gbk,gkj->gbj", e, rot)
+
+    def integrals(t, fa):  # (…, M) → (…, 14): area, second (9), first (3), volume, in node-radius units
+        t3 = t * t * t
+        return np.concatenate([(fa @ w)[..., None], (t3 * t * t) @ w2 / 5, (t3 * t) @ w1 / 4,
+                               (t3 @ w / 3)[..., None]], axis=-1)
+
+    out = np.zeros((len(vg), 14))
+    order = np.argsort(vg, kind="stable")
+    starts = np.searchsorted(vg[order], np.arange(len(ra) + 1))
+    per = max(1, CHUNK_RAYS // (nb_max * m))
+    for lo in range(0, len(ra), per):
+        hi = min(len(ra), lo + per)
+        rows = order[starts[lo]:starts[hi]]
+        local = vg[rows] - lo
+        t, fa = beam_exits(ra[lo:hi], e[lo:hi], length[lo:hi], rb[lo:hi], dirs)
+        per_beam = integrals(t, fa)  # (G, B, 14)
+        pres = present[rows]
+        tmax = np.ones((len(rows), m), np.float32)
+        famax = np.ones((len(rows), m), np.float32)
+        for b in range(nb_max):
+            tb = t[local, b]
+            better = pres[:, b:b + 1] & (tb > tmax)
+            tmax = np.where(better, tb, tmax)
+            famax = np.where(better, fa[local, b], famax)
+        nb = pres.sum(axis=1)
+        total = np.einsum("vb,vbk->vk", pres.astype(float), per_beam[local])
+        out[rows] = total - integrals(tmax, famax) - (nb - 1)[:, None] * unit_ball
+    if rot is not None:  # back from the turned frame: second moment R S Rᵀ, first R v
+        rv = rot[vg]
+        out[:, 1:10] = np.einsum("vab,vbc,vdc->vad", rv, out[:, 1:10].reshape(-1, 3, 3), rv).reshape(-1, 9)
+        out[:, 10:13] = np.einsum("vab,vb->va", rv, out[:, 10:13])
     r = ra[vg]
-    return over_a * r * r, over_v * r**3
+    mom = np.zeros((len(vg), 4, 4))
+    mom[:, :3, :3] = out[:, 1:10].reshape(-1, 3, 3) * (r**5)[:, None, None]
+    mom[:, :3, 3] = mom[:, 3, :3] = out[:, 10:13] * (r**4)[:, None]
+    mom[:, 3, 3] = out[:, 13] * r**3
+    return out[:, 0] * r**2, mom
+
+
+def hub_measures_batch(ra, offsets, rb, present=None, grid: int = 0, geometry=None, weights=None):
+    """(areas, volumes) of hubs (``hub_moments``: the same numbers as the moments)."""
+    area, mom, _ = hub_moments(ra, offsets, rb, present, geometry, grid, weights)
+    return area, mom[:, 3, 3]

@@ -25,7 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..algebra.elements import segment_distance
 from ..errors import PleError
+from ..queries.overlaps import non_incident_pairs
 
 TRIM = 0.5  # beams are tested from half their contact distance on (the rest is inside S⁺ of their hub)
 SPHERE_SEGMENTS = 32
@@ -46,29 +48,12 @@ class UncleanReport:
                 f"united with manifold3d")
 
 
-def _seg_seg_distance(p0, p1, q0, q1) -> np.ndarray:
-    """Distances between segments p0p1 and q0q1 (arrays (k, 3)), clamped closest points."""
-    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
-    a = np.einsum("ij,ij->i", d1, d1)
-    e = np.einsum("ij,ij->i", d2, d2)
-    f = np.einsum("ij,ij->i", d2, r)
-    c = np.einsum("ij,ij->i", d1, r)
-    b = np.einsum("ij,ij->i", d1, d2)
-    den = a * e - b * b
-    s = np.where(den > 1e-300, np.clip((b * f - c * e) / np.where(den > 1e-300, den, 1), 0, 1), 0.0)
-    t = (b * s + f) / np.where(e > 1e-300, e, 1)
-    t = np.clip(t, 0, 1)
-    s = np.clip((b * t - c) / np.where(a > 1e-300, a, 1), 0, 1)
-    return np.linalg.norm(p0 + d1 * s[:, None] - q0 - d2 * t[:, None], axis=1)
-
-
 def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None) -> UncleanReport:
     """Unclean hubs of a region from its balls (center (N, 3), radius (N,)), beams (M, 2 rows),
     each hub's inflated radius r_plus (N,) (world units) and ``shrunk`` (N,) hubs whose ACHoCC
     was not clean."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
+    from scipy.sparse import coo_matrix  # noqa: PLC0415 - optional package
+    from scipy.sparse.csgraph import connected_components  # noqa: PLC0415
 
     c = np.asarray(center, float).reshape(-1, 3)
     rad = np.asarray(radius, float).reshape(-1)
@@ -83,40 +68,22 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None) -> UncleanRepo
     u = (b - a) / np.where(length > 0, length, 1)[:, None]
     ta = TRIM * np.sqrt(np.maximum(rp[bn[:, 0]] ** 2 - rad[bn[:, 0]] ** 2, 0))
     tb = TRIM * np.sqrt(np.maximum(rp[bn[:, 1]] ** 2 - rad[bn[:, 1]] ** 2, 0))
-    s0 = a + u * ta[:, None]
-    s1 = b - u * tb[:, None]
-    rb = np.maximum(rad[bn[:, 0]], rad[bn[:, 1]])
-    ec = np.concatenate([c, 0.5 * (s0 + s1)])  # bounding spheres of every element
-    er = np.concatenate([rp, 0.5 * np.linalg.norm(s1 - s0, axis=1) + rb])
+    seg0 = np.concatenate([c, a + u * ta[:, None]])
+    seg1 = np.concatenate([c, b - u * tb[:, None]])
+    rr = np.concatenate([rp, np.maximum(rad[bn[:, 0]], rad[bn[:, 1]])])
+    ends = np.concatenate([np.repeat(np.arange(n)[:, None], 2, axis=1), bn])
+    kinds = np.concatenate([np.zeros(n, np.int64), np.ones(m, np.int64)])
+    lo = np.minimum(seg0, seg1) - rr[:, None]
+    hi = np.maximum(seg0, seg1) + rr[:, None]
     pairs = 0
-    if n + m > 1:
-        tree = cKDTree(ec)
-        cand = tree.query_pairs(2 * float(er.max()), output_type="ndarray")
-        cand = cand[np.linalg.norm(ec[cand[:, 0]] - ec[cand[:, 1]], axis=1) < er[cand[:, 0]] + er[cand[:, 1]]]
-        i, j = cand[:, 0], cand[:, 1]
-        ends = np.full((n + m, 2), -1, np.int64)
-        ends[:n, 0] = np.arange(n)
-        ends[n:] = bn
-        # elements that share a ball are incident (their overlap is the junction's business)
-        share = ((ends[i, :, None] == ends[j, None, :]) & (ends[i, :, None] >= 0)).any(axis=(1, 2))
-        # two hubs joined by a beam are neighbours: their meeting is judged by the junctions
-        adj = np.zeros(len(i), bool)
-        hh = (i < n) & (j < n)
-        if hh.any() and m:
-            key = np.minimum(bn[:, 0], bn[:, 1]) * n + np.maximum(bn[:, 0], bn[:, 1])
-            kk = np.minimum(i[hh], j[hh]) * n + np.maximum(i[hh], j[hh])
-            adj[hh] = np.isin(kk, key)
-        keep = ~share & ~adj
-        i, j = i[keep], j[keep]
-        seg0 = np.concatenate([c, s0])
-        seg1 = np.concatenate([c, s1])
-        rr = np.concatenate([rp, rb])
-        d = _seg_seg_distance(seg0[i], seg1[i], seg0[j], seg1[j])
-        hit = d < rr[i] + rr[j]
-        pairs = int(hit.sum())
-        for x in (i[hit], j[hit]):
-            e = ends[x].reshape(-1)
-            bad[e[e >= 0]] = True
+    # the one candidate search of non-incident elements (``queries.overlaps``), tested here with
+    # the junctions' spheres S⁺: elements that share a ball, and hubs joined by a beam, are the
+    # junctions' business
+    for i, j in non_incident_pairs(ends, kinds, lo, hi, bn):
+        hit = segment_distance(seg0[i], seg1[i], seg0[j], seg1[j]) < rr[i] + rr[j]
+        pairs += int(hit.sum())
+        bad[ends[i[hit]].reshape(-1)] = True
+        bad[ends[j[hit]].reshape(-1)] = True
     nodes = np.flatnonzero(bad)
     comps = 0
     if len(nodes):

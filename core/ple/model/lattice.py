@@ -477,23 +477,23 @@ class Lattice:
         r = self.region(region)
         ni, nj, nk = r.shape
         nn = len(self.nodes)
-        parts_idx, parts_nodes = [], []
-        for p, b in enumerate(self.beams):
-            ranges = []
-            for lo, hi, d in ((r.i0, r.i1, b.di), (r.j0, r.j1, b.dj), (r.k0, r.k1, b.dk)):
-                ranges.append(np.arange(max(lo, lo - d), min(hi, hi - d)))
-            if min(len(x) for x in ranges) == 0:
-                continue
-            gi, gj, gk = (g.reshape(-1) for g in np.meshgrid(*ranges, indexing="ij"))
-            row = lambda i, j, k: (((i - r.i0) * nj + (j - r.j0)) * nk + (k - r.k0)) * nn  # noqa: E731
-            parts_idx.append(np.stack([gi, gj, gk, np.full_like(gi, p)], axis=1))
-            parts_nodes.append(np.stack([row(gi, gj, gk) + b.n1, row(gi + b.di, gj + b.dj, gk + b.dk) + b.n2], axis=1))
-        if not parts_idx:
+        if not self.beams or not r.groups:
             return np.zeros((0, 4), np.int64), np.zeros((0, 2), np.int64)
-        idx = np.concatenate(parts_idx).astype(np.int64)
-        nodes = np.concatenate(parts_nodes).astype(np.int64)
-        order = np.lexsort((idx[:, 3], idx[:, 2], idx[:, 1], idx[:, 0]))
-        return idx[order], nodes[order]
+        off = np.array([b.offset for b in self.beams], np.int64)
+        # which (group, pattern) pairs have both ends in the region: nonzero lists them in (i, j, k, p) order
+        valid = np.ones((ni, nj, nk, len(self.beams)), bool)
+        for d, size in enumerate((ni, nj, nk)):
+            x = np.arange(size)[:, None] + off[:, d][None]
+            shape = [1, 1, 1, len(self.beams)]
+            shape[d] = size
+            valid &= ((x >= 0) & (x < size)).reshape(shape)
+        gi, gj, gk, p = (x.astype(np.int64) for x in np.nonzero(valid))
+        row = ((gi * nj + gj) * nk + gk) * nn
+        n1 = np.array([b.n1 for b in self.beams], np.int64)
+        n2 = np.array([b.n2 for b in self.beams], np.int64)
+        step = ((off[:, 0] * nj + off[:, 1]) * nk + off[:, 2]) * nn + n2  # row offset of each pattern's far end
+        idx = np.stack([gi + r.i0, gj + r.j0, gk + r.k0, p], axis=1)
+        return idx, np.stack([row + n1[p], row + step[p]], axis=1)
 
     def evaluate(self, region=None) -> Evaluation:
         """The nodes and beams of a region (default: the whole lattice) that the lattice's filter

@@ -13,9 +13,12 @@ they meet). Pairs are found without all-pairs work:
   §6.1.4; V, U as in ``similar_axes``) a pair whose lower element lies past the first ``reach``
   indices is a similar copy of a pair anchored at index ``reach``. Only the elements of the anchor
   groups (the base slab k ≤ reach for a general steady lattice; one corner block of groups when U,
-  V and W are all similar, as for regular lattices) are queried, with the RangeFinder,
-  against the lattice extended by its own counts on both sides along those directions (so that
-  every partner of a moved pair is found), and each pair class is counted over the index interval
+  V and W are all similar, as for regular lattices) are queried, with the RangeFinder. Each
+  unordered pair class is taken from the element lower in the first similar direction where the
+  two differ, so its partner lies at or above the anchor there; in the later similar directions
+  it may lie below index 0, so the lattice is extended by its counts on the lower side of those
+  only (never along the first: a full turn of a rotation row is not repeated, and the
+  RangeFinder's ranges stay one turn wide). Each pair class is counted over the index interval
   where both of its elements exist;
 - ``explicit`` path (filtered lattices, regions, BeCOTS slabs): the evaluated (kept) elements, their
   bounding balls hashed in a uniform grid, candidate pairs from neighbouring cells only.
@@ -38,7 +41,8 @@ WORST = 10  # worst offenders listed
 MAX_ANCHOR_FRACTION = 0.02  # "auto" takes the steady path when the anchors are at most this share of all groups
 MAX_EXPLICIT = 2_000_000  # ... or when more elements than this would be evaluated
 PAIR_CHUNK = 1 << 18  # candidate pairs per vectorized block
-QUERY_CHUNK = 1 << 12  # anchor elements per RangeFinder batch
+QUERY_CHUNK = 1 << 10  # anchor blocks per RangeFinder batch
+ANCHOR_BLOCK = 4  # anchor groups per block side: one RangeFinder query per block
 KINDS = ("ball_ball", "ball_beam", "beam_beam")
 
 
@@ -119,20 +123,9 @@ def _explicit(ev: Evaluation, margin: float) -> dict:
     ca, ra, cb, rb = ev.center[ends[:, 0]], ev.radius[ends[:, 0]], ev.center[ends[:, 1]], ev.radius[ends[:, 1]]
     box_lo = np.minimum(ca - ra[:, None], cb - rb[:, None])
     box_hi = np.maximum(ca + ra[:, None], cb + rb[:, None])
-    edge_keys = np.sort(np.concatenate([ev.beam_nodes[:, 0] * nn + ev.beam_nodes[:, 1],
-                                        ev.beam_nodes[:, 1] * nn + ev.beam_nodes[:, 0]]))
     result = _Collector(margin)
-    for i, j in grid_pairs(box_lo, box_hi, margin):
+    for i, j in non_incident_pairs(ends, kinds, box_lo, box_hi, ev.beam_nodes, margin):
         ia, ib = ends[i], ends[j]
-        shared = (ia[:, :1] == ib).any(axis=1) | (ia[:, 1:] == ib).any(axis=1)
-        both_balls = (kinds[i] == 0) & (kinds[j] == 0)
-        if both_balls.any() and len(edge_keys):
-            key = ia[:, 0] * nn + ib[:, 0]
-            pos = np.minimum(np.searchsorted(edge_keys, key), len(edge_keys) - 1)
-            shared |= both_balls & (edge_keys[pos] == key)
-        i, j, ia, ib = i[~shared], j[~shared], ia[~shared], ib[~shared]
-        if not len(i):
-            continue
         ea = (ev.center[ia[:, 1]], ev.radius[ia[:, 1]])
         eb = (ev.center[ib[:, 1]], ev.radius[ib[:, 1]])
         gap, over, depth = pair_gaps(kinds[i], ev.center[ia[:, 0]], ev.radius[ia[:, 0]], ea,
@@ -144,13 +137,37 @@ def _explicit(ev: Evaluation, margin: float) -> dict:
     return out
 
 
-def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float):
-    """Index pairs (i < j) of axis-aligned boxes closer than ``margin`` (each grown by margin / 2).
-    Each box is entered in every cell of a uniform grid (cell: the median box diagonal) it
-    overlaps; a pair is reported by the one cell holding the larger of the two lower corners (no
-    duplicates). Yielded in blocks of about PAIR_CHUNK cell entries."""
+def non_incident_pairs(ends: np.ndarray, kinds: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray,
+                       beam_nodes: np.ndarray, margin: float = 0.0):
+    """Pairs (i, j), i < j, of explicit elements whose boxes (grown by margin / 2, ``grid_pairs``)
+    meet and which are not incident: they share no ball, and are not two balls joined by a beam.
+    ``ends`` (E, 2): node rows of each element (a ball: (n, n)); ``kinds`` (E,): 0 ball, 1 beam;
+    ``beam_nodes`` (M, 2) the beams' node rows. Yielded in blocks of index arrays. The one
+    candidate search of unclean elements: ``unclean_pairs`` tests the pairs exactly, the
+    tessellation (``meshing.unclean``) with its conservative junction spheres."""
+    bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
+    nn = int(ends.max()) + 1 if len(ends) else 0
+    edge_keys = np.sort(np.concatenate([bn[:, 0] * nn + bn[:, 1], bn[:, 1] * nn + bn[:, 0]]))
+    for i, j in grid_pairs(box_lo, box_hi, margin):
+        ia, ib = ends[i], ends[j]
+        shared = (ia[:, :1] == ib).any(axis=1) | (ia[:, 1:] == ib).any(axis=1)
+        both_balls = (kinds[i] == 0) & (kinds[j] == 0)
+        if both_balls.any() and len(edge_keys):
+            key = ia[:, 0] * nn + ib[:, 0]
+            pos = np.minimum(np.searchsorted(edge_keys, key), len(edge_keys) - 1)
+            shared |= both_balls & (edge_keys[pos] == key)
+        if (~shared).any():
+            yield i[~shared], j[~shared]
+
+
+def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float, split: int | None = None):
+    """Index pairs (i < j) of axis-aligned boxes closer than ``margin`` (each grown by margin / 2);
+    with ``split``, only pairs i < split <= j (boxes of a first set against a second). Each box
+    (of the first set) is entered in every cell of a uniform grid (cell: the median box diagonal)
+    it overlaps; a pair is reported by the one cell holding the larger of the two lower corners
+    (no duplicates). Yielded in blocks of about PAIR_CHUNK cell entries."""
     n = len(box_lo)
-    if n < 2:
+    if n < 2 or (split is not None and not 0 < split < n):
         return
     blo, bhi = box_lo - margin / 2, box_hi + margin / 2
     h = max(float(np.median(np.max(bhi - blo, axis=1))), 1e-12)
@@ -160,18 +177,20 @@ def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float):
     dims = hi.max(axis=0) + 1
     span = hi - lo + 1
     per = np.prod(span, axis=1)
-    key_all, owner_all = _cell_entries(lo, span, dims, np.arange(n))
+    first = 0 if split is None else split  # rows looked up in the table of rows [0, split or n)
+    key_all, owner_all = _cell_entries(lo, span, dims, np.arange(n if split is None else split))
     sort = np.argsort(key_all, kind="stable")
     table = (key_all[sort], owner_all[sort])
-    bounds = np.searchsorted(np.cumsum(per), np.arange(0, int(per.sum()), max(1, PAIR_CHUNK // 32)), "right")
-    edges = np.unique(np.concatenate([[0], bounds, [n]]))
+    bounds = first + np.searchsorted(np.cumsum(per[first:]), np.arange(0, int(per[first:].sum()),
+                                                                        max(1, PAIR_CHUNK // 32)), "right")
+    edges = np.unique(np.concatenate([[first], bounds, [n]]))
     for start, stop in zip(edges[:-1], edges[1:]):
         key, owner = _cell_entries(lo, span, dims, np.arange(start, stop))
         a, b = np.searchsorted(table[0], key, "left"), np.searchsorted(table[0], key, "right")
         cnt = b - a
-        i = np.repeat(owner, cnt)
+        j = np.repeat(owner, cnt)
         cell = np.repeat(key, cnt)
-        j = table[1][np.repeat(a, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
+        i = table[1][np.repeat(a, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
         keep = i < j
         i, j, cell = i[keep], j[keep], cell[keep]
         corner = np.maximum(lo[i], lo[j])  # the one cell that reports the pair
@@ -234,9 +253,9 @@ def _label(row) -> dict:
 
 # ----- steady lattices: anchors and similar copies --------------------------------------------------------------
 def _extended(lat: Lattice, ext: np.ndarray) -> Lattice:
-    """The lattice extended by ``ext[d]`` groups on both sides of every similar direction d (its
-    group (i, j, k) is the extension's (i + ext_u, j + ext_v, k + ext_w))."""
-    out = lat.with_counts(*(int(c + 2 * e) for c, e in zip(lat.counts, ext)))
+    """The lattice extended by ``ext[d]`` groups below index 0 of every direction d (its group
+    (i, j, k) is the extension's (i + ext_u, j + ext_v, k + ext_w))."""
+    out = lat.with_counts(*(int(c + e) for c, e in zip(lat.counts, ext)))
     shift = lat.placement
     for step, e in zip((lat.W, lat.V, lat.U), ext[::-1]):
         if e:
@@ -278,7 +297,8 @@ def _steady(lat: Lattice, margin: float, force: bool = False):
     elements = lat.node_count() + lat.beam_count()
     if not force and n_anchor > MAX_ANCHOR_FRACTION * lat.groups and elements <= MAX_EXPLICIT:
         return None
-    ext = np.where(rep >= 0, counts, 0)
+    later = (rep >= 0) & (np.cumsum(rep >= 0) > 1)  # similar directions after the first
+    ext = np.where(later, counts, 0)
     big = _extended(lat, ext)
     # the smallest factor a moved pair can have, relative to its anchor: gaps are searched that much wider
     shrink = 1.0
@@ -298,17 +318,38 @@ def _steady(lat: Lattice, margin: float, force: bool = False):
     qc, qr = enclosing_ball(ca, ra, cb, rb)
     result = _Collector(margin)
     queries = 0
-    for s in range(0, len(kind), QUERY_CHUNK):
-        part = slice(s, s + QUERY_CHUNK)
-        node_hits, beam_hits, _ = lattice_hits(big, qc[part], qr[part] + search)
-        queries += len(qc[part])
-        if not len(node_hits) and not len(beam_hits):
-            continue
-        qa = np.concatenate([node_hits[:, 0], beam_hits[:, 0]]) + s
-        yk = np.concatenate([np.zeros(len(node_hits), np.int64), np.ones(len(beam_hits), np.int64)])
-        yi = np.concatenate([node_hits[:, 1:], beam_hits[:, 1:]])
-        yi = yi - np.concatenate([ext, [0]])  # back to the lattice's own indices (possibly outside it)
-        _steady_pairs(lat, result, rep, counts, search, kind[qa], idx[qa], nodes[0][qa], nodes[1][qa], yk, yi)
+    # anchor elements in blocks of ANCHOR_BLOCK³ groups: one RangeFinder query per block (the ball
+    # around its elements' balls, grown by the gap search) finds every partner of its elements
+    _, block = np.unique(idx[:, :3] // ANCHOR_BLOCK, axis=0, return_inverse=True)
+    block = block.reshape(-1)
+    n_blocks = int(block.max()) + 1 if len(block) else 0
+    lo_box = np.full((n_blocks, 3), np.inf)
+    hi_box = np.full((n_blocks, 3), -np.inf)
+    np.minimum.at(lo_box, block, qc - qr[:, None])
+    np.maximum.at(hi_box, block, qc + qr[:, None])
+    bc = (lo_box + hi_box) / 2
+    br = np.linalg.norm(hi_box - lo_box, axis=1) / 2 + search
+    found = []
+    for s in range(0, n_blocks, QUERY_CHUNK):
+        node_hits, beam_hits, _ = lattice_hits(big, bc[s:s + QUERY_CHUNK], br[s:s + QUERY_CHUNK])
+        found += [np.concatenate([np.zeros((len(node_hits), 1), np.int64), node_hits[:, 1:]], axis=1),
+                  np.concatenate([np.ones((len(beam_hits), 1), np.int64), beam_hits[:, 1:]], axis=1)]
+        queries += min(QUERY_CHUNK, n_blocks - s)
+    hits = np.unique(np.concatenate(found), axis=0) if found else np.zeros((0, 5), np.int64)
+    yk = hits[:, 0]
+    yi = hits[:, 1:] - np.concatenate([ext, [0]])  # back to the lattice's own indices (possibly outside it)
+    ydata = _elements_at(lat, yk, yi)
+    hc, hr = enclosing_ball(ydata[0], ydata[1], *ydata[2])
+    # candidate (anchor, partner) pairs: balls within the gap search (every partner of an anchor
+    # is among the hits of its block's query)
+    xdata = (ca, ra, (cb, rb), nodes)
+    cen, rad = np.concatenate([qc, hc]), np.concatenate([qr, hr])
+    n_anchor_el = len(qc)
+    for qa, hb in grid_pairs(cen - rad[:, None], cen + rad[:, None], search, split=n_anchor_el):
+        hb = hb - n_anchor_el
+        if len(qa):
+            _steady_pairs(lat, result, rep, counts, search, kind[qa], idx[qa], _rows(xdata, qa), yk[hb], yi[hb],
+                          _rows(ydata, hb))
     out = result.report()
     out["path"] = "steady (" + "".join(n for n, p in zip("UVW", rep) if p >= 0) + " similar)"
     out["queries"] = queries
@@ -316,10 +357,20 @@ def _steady(lat: Lattice, margin: float, force: bool = False):
     return out
 
 
-def _steady_pairs(lat, result, rep, counts, search, xk, xi, xs, xe, yk, yi):
-    """Exact tests and occurrence counts of ordered pairs (anchor X, partner Y)."""
+def _rows(data, r):
+    """Rows ``r`` of element data (start centre, start radius, (end centre, end radius), (start node, end node))."""
+    return data[0][r], data[1][r], (data[2][0][r], data[2][1][r]), (data[3][0][r], data[3][1][r])
+
+
+def _steady_pairs(lat, result, rep, counts, search, xk, xi, xdata, yk, yi, ydata):
+    """Exact tests and occurrence counts of ordered pairs (anchor X, partner Y); element data
+    as ``_elements_at`` gives it. Only one orientation of each unordered pair is tested."""
+    one = _first_orientation(rep, counts, xk, xi, yk, yi)
+    xk, xi, yk, yi = xk[one], xi[one], yk[one], yi[one]
+    xdata, ydata = (_rows(xdata, one), _rows(ydata, one))
     same = (xk == yk) & np.all(xi == yi, axis=1)
-    ya, yr, (yc, yrr), ynodes = _elements_at(lat, yk, yi)
+    xa, xr, xe_, (xs, xe) = xdata
+    ya, yr, (yc, yrr), ynodes = ydata
     # incidence: shared node (group and node id), or two balls joined by a beam
     xn = np.stack([xs, xe], axis=1)  # (P, 2, 4)
     yn = np.stack(ynodes, axis=1)
@@ -335,7 +386,7 @@ def _steady_pairs(lat, result, rep, counts, search, xk, xi, xs, xe, yk, yi):
     if not keep.any():
         return
     xk, xi, yk, yi = xk[keep], xi[keep], yk[keep], yi[keep]
-    xa, xr, xe_ = _elements_at(lat, xk, xi)[:3]
+    xa, xr, xe_ = xa[keep], xr[keep], (xe_[0][keep], xe_[1][keep])
     ya, yr, ye = ya[keep], yr[keep], (yc[keep], yrr[keep])
     gap, over, depth = pair_gaps(xk, xa, xr, xe_, yk, ya, yr, ye, search)
     # occurrences: groups g (X at g, Y at g + δ) with both existing; similar directions move the anchor
@@ -356,13 +407,24 @@ def _steady_pairs(lat, result, rep, counts, search, xk, xi, xs, xe, yk, yi):
     ok = count > 0
     ia = np.concatenate([np.where(ok[:, None], np.concatenate([lo, xi[:, 3:]], axis=1), xi), xk[:, None]], axis=1)
     ib = np.concatenate([ia[:, :3] + delta, yi[:, 3:], yk[:, None]], axis=1)
-    # each unordered pair is met twice, once from each element: only one orientation is kept
+    keep = ok
+    result.add(xk[keep], yk[keep], gap[keep], over[keep], depth[keep], ia[keep], ib[keep], count[keep],
+               gap[keep] * scale[keep])
+
+
+def _first_orientation(rep, counts, xk, xi, yk, yi) -> np.ndarray:
+    """Which ordered pairs (X, Y) are the one orientation kept of their unordered pair: each is met
+    from both elements when neither lies lower along a similar direction (then kinds, node ids
+    and the offset decide); otherwise only from the element lower in the first similar direction
+    where they differ (the only one the queries are sure to meet)."""
+    delta = yi[:, :3] - xi[:, :3]
     big = 3 * int(counts.max()) + 1
     d_key = (delta[:, 0] * big + delta[:, 1]) * big + delta[:, 2]
     first = (xk < yk) | ((xk == yk) & ((xi[:, 3] < yi[:, 3]) | ((xi[:, 3] == yi[:, 3]) & (d_key > 0))))
-    keep = ok & first
-    result.add(xk[keep], yk[keep], gap[keep], over[keep], depth[keep], ia[keep], ib[keep], count[keep],
-               gap[keep] * scale[keep])
+    sim_delta = np.where((rep >= 0)[None], delta, 0)
+    lead = np.argmax(sim_delta != 0, axis=1)
+    lead_delta = sim_delta[np.arange(len(delta)), lead]
+    return np.where(lead_delta != 0, lead_delta > 0, first)
 
 
 # ----- public API -----------------------------------------------------------------------------------------
