@@ -144,7 +144,7 @@ def test_cleanup_skin_flag(tmp_path, capsys):
     with np.load(out) as got:
         np.testing.assert_array_equal(got["node_index"], want.evaluate().node_index)
     assert main(["eval", str(ir), "--cleanup", "--skin", "0.12", "--out", str(out)]) == 2
-    assert "--skin needs --body" in capsys.readouterr().err
+    assert "--skin needs a body" in capsys.readouterr().err
 
 
 def test_cleanup_is_data_in_the_ir(tmp_path, capsys):
