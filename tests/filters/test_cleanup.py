@@ -3,6 +3,7 @@ beam graph (one ball at a time) and networkx components."""
 
 from __future__ import annotations
 
+import json
 from collections import deque
 
 import networkx as nx
@@ -12,6 +13,7 @@ import trimesh
 from lattices import KINDS, random_lattice
 from ple.algebra.similarity import Translation
 from ple.cli.main import main
+from ple.errors import PleError
 from ple.filters.body import BodyFilter
 from ple.filters.cleanup import cleanup, cleanup_evaluation, skin_anchored
 from ple.io.bodyfile import body_from_trimesh
@@ -142,4 +144,39 @@ def test_cleanup_skin_flag(tmp_path, capsys):
     with np.load(out) as got:
         np.testing.assert_array_equal(got["node_index"], want.evaluate().node_index)
     assert main(["eval", str(ir), "--cleanup", "--skin", "0.12", "--out", str(out)]) == 2
-    assert "--skin needs --body" in capsys.readouterr().err
+    assert "--skin needs a body" in capsys.readouterr().err
+
+
+def test_cleanup_is_data_in_the_ir(tmp_path, capsys):
+    from ple.filters.ir import lattice_from_ir
+    from ple.io.bodyfile import load_body
+    from ple.io.irfile import load_ir
+
+    lat = list(trimmed_lattices())[1]  # an `any` fill
+    mesh = trimesh.Trimesh(lat.filter.body.vertices, lat.filter.body.faces)
+    mesh.export(tmp_path / "t.stl")
+    body = load_body(tmp_path / "t.stl")
+    lat = lat.unfiltered().with_filter(BodyFilter(body, "any"))
+    ev = lat.evaluate()
+    keep, _, _ = reference(ev, anchored_by_brute_force(mesh, ev.center, ev.radius, 0.12))
+    cleaned, _ = cleanup(lat, skin=0.12)
+    save_ir(cleaned, tmp_path / "c.json")
+    data = json.loads((tmp_path / "c.json").read_text())
+    assert data["filter"] == {"cleanup": {"filter": {"body": {"mesh": "t.stl", "mode": "any"}}, "largest": True,
+                                          "skin": 0.12}}
+    back = load_ir(tmp_path / "c.json")
+    np.testing.assert_array_equal(back.evaluate().node_index, ev.node_index[keep])
+    ir = tmp_path / "l.json"
+    save_ir(lat.unfiltered(), ir)
+    out = tmp_path / "cli.json"
+    assert main(["ir", str(ir), "--body", str(tmp_path / "t.stl"), "--fill", "any", "--cleanup", "--skin", "0.12",
+                 "--out", str(out)]) == 0
+    np.testing.assert_array_equal(load_ir(out).evaluate().node_index, ev.node_index[keep])
+    base = {"format": "ple-lattice/1", "nodes": [{"center": [0, 0, 0], "radius": 0.1}]}
+    for bad, message in (({"largest": 1}, "filter.cleanup.largest: expected true or false"),
+                         ({"skin": -1}, "filter.cleanup.skin: must be positive"),
+                         ({"keep": 1}, "filter.cleanup.keep: unknown field"),
+                         ({"filter": {"stencil": {}}}, "filter.cleanup.filter.stencil.")):
+        with pytest.raises(PleError) as err:
+            lattice_from_ir({**base, "filter": {"cleanup": bad}})
+        assert str(err.value).startswith(message), str(err.value)

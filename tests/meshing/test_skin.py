@@ -85,3 +85,18 @@ def test_skin_command(tmp_path, part, capsys):
     assert got.volume == pytest.approx(want.volume, rel=1e-4)  # float32 STL
     assert main(["skin", "cubic", "--thickness", "0.4", "--out", str(out)]) == 2
     assert "needs --body" in capsys.readouterr().err
+
+
+def test_mesh_skin_flag_writes_the_skinned_solid(tmp_path, part, capsys):
+    from ple.cli.main import main
+
+    path = tmp_path / "part.stl"
+    part.export(path)
+    a, b = tmp_path / "a.stl", tmp_path / "b.stl"
+    assert main(["skin", "cubic", "--body", str(path), "--thickness", "0.4", "--out", str(a)]) == 0
+    assert main(["mesh", "cubic", "--body", str(path), "--fill", "any", "--skin", "0.4", "--out", str(b)]) == 0
+    got, want = (trimesh.load(x, force="mesh", process=False) for x in (b, a))  # the same solid as ple skin
+    assert len(got.faces) == len(want.faces) and got.volume == pytest.approx(want.volume, rel=1e-6)
+    assert main(["mesh", "cubic", "--skin", "0.4", "--out", str(b)]) == 2
+    assert "--skin needs a body" in capsys.readouterr().err
+    assert main(["mesh", "cubic", "--body", str(path), "--skin", "0.4", "--check", "--out", str(b)]) == 2

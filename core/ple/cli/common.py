@@ -9,7 +9,7 @@ import sys
 
 from ..algebra.similarity import Translation
 from ..errors import PleError
-from ..filters.body import MODES, OPEN_MODES, BodyFilter, SurfaceDistanceField
+from ..filters.body import MODES, OPEN_MODES, BodyFilter, SurfaceDistanceField, body_of
 from ..filters.cleanup import cleanup
 from ..filters.implicit import VARIANTS, Field, FourierField, ImplicitFilter, TPMSField
 from ..filters.stencil import Stencil
@@ -49,8 +49,8 @@ def max_memory(args=None) -> int:
 def lattice_from_args(args) -> Lattice:
     """The lattice of a command's LATTICE, its program contained (``ple.program.runner``)."""
     lat = with_body_args(args, run_program(args.lattice, args.param, args.timeout, max_memory(args)))
-    if getattr(args, "skin", None) is not None and getattr(args, "body", None) is None:
-        raise PleError("--skin needs --body MESH")
+    if getattr(args, "skin", None) is not None:
+        body_of(lat, "--skin")  # the body the skin lines: --body, or the lattice's own body filter
     if getattr(args, "cleanup", False):
         lat, report = cleanup(lat, getattr(args, "region", None), skin=getattr(args, "skin", None))
         print(report, file=sys.stderr)

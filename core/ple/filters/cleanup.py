@@ -139,11 +139,61 @@ class NodeSet(Filter):
         return self.keys[pos] == k if len(self.keys) else np.zeros(len(k), dtype=bool)
 
 
+class Cleanup(Filter):
+    """A cleanup as data (``{"cleanup": {"filter": F, "largest": true, "skin": T}}``): keeps the
+    nodes that survive the cleanup of what ``part`` keeps of the whole lattice (no part: every
+    node). The survivors are computed once per lattice program (the lattice being filtered,
+    without its filter) and reused by every evaluation of it; ``report`` is the last cleanup's."""
+
+    def __init__(self, part: Filter | None = None, largest: bool = True, skin: float | None = None) -> None:
+        if part is not None and not isinstance(part, Filter):
+            raise PleError(f"a cleanup needs a filter, got {type(part).__name__}")
+        if skin is not None and not skin > 0:
+            raise PleError(f"cleanup: skin thickness must be positive, got {skin!r}")
+        self.part, self.largest, self.skin = part, bool(largest), skin
+        self.report: CleanupReport | None = None
+        self._cache: tuple | None = None
+
+    @staticmethod
+    def _program(lat: Lattice) -> tuple:
+        """What the survivors depend on: the template, counts and the objects placing and grading it."""
+        return ((lat.counts, lat.template_centers.tobytes(), lat.template_radii.tobytes(), tuple(lat.beams)),
+                (lat.u, lat.v, lat.w, lat.placement, lat.becots, lat.group_map, lat.radius_field))
+
+    def survivors(self, lat: Lattice) -> NodeSet:
+        key = self._program(lat)
+        if self._cache is None or self._cache[0][0] != key[0] or any(
+                a is not b for a, b in zip(self._cache[0][1], key[1])):
+            base = lat.unfiltered().with_filter(self.part)
+            if base.node_count() > MAX_CLEANUP_NODES:
+                raise PleError(f"cleanup of {base.node_count():,} nodes (limit {MAX_CLEANUP_NODES:,})")
+            ev = base.evaluate()
+            anchored = None
+            if self.skin is not None:
+                anchored = skin_anchored(body_of(base, "cleanup with a skin"), self.skin, ev.center, ev.radius)
+            out, self.report = cleanup_evaluation(ev, self.largest, anchored)
+            self._cache = (key, NodeSet(lat, out.node_index))
+        return self._cache[1]
+
+    def node_mask(self, lat, node_index, center, radius):
+        return self.survivors(lat).node_mask(lat, node_index, center, radius)
+
+    def __repr__(self) -> str:
+        return f"Cleanup({self.part!r}, largest={self.largest}, skin={self.skin})"
+
+
 def cleanup(lat: Lattice, region=None, largest: bool = True,
             skin: float | None = None) -> tuple[Lattice, CleanupReport]:
     """``lat`` restricted to the cleaned evaluation of ``region`` (default: all of it). With
-    ``skin`` (a thickness), beams ending on the skin of the lattice's body are kept."""
+    ``skin`` (a thickness), beams ending on the skin of the lattice's body are kept. Of the whole
+    lattice, the result is a :class:`Cleanup` of the lattice's filter (data: ``ple ir`` writes it);
+    of a smaller region, the surviving nodes (a ``NodeSet``)."""
     r = lat.region(region)
+    if r == lat.region():
+        f = Cleanup(lat.filter, largest, skin)
+        out = lat.unfiltered().with_filter(f)
+        f.survivors(out)
+        return out, f.report
     if lat.node_count(r) > MAX_CLEANUP_NODES:
         raise PleError(f"cleanup of {lat.node_count(r):,} nodes (limit {MAX_CLEANUP_NODES:,}): give a smaller --region")
     ev = lat.evaluate(r)

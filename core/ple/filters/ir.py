@@ -18,6 +18,7 @@ from ..model.ir import lattice_from_dict, lattice_to_dict
 from ..model.lattice import Lattice
 from .base import And, Filter, Not, Or
 from .body import MODES, OPEN_MODES, BodyFilter, SurfaceDistanceField, body_filters, body_of
+from .cleanup import Cleanup
 from .implicit import TPMS, VARIANTS, FourierField, ImplicitFilter, TPMSField
 from .lil import LiL
 from .stencil import Stencil
@@ -67,6 +68,13 @@ def filter_to_dict(f, base=None) -> dict:
     refused naming its type."""
     if isinstance(f, BodyFilter):
         return {"body": _body_to_dict(f, base)}
+    if isinstance(f, Cleanup):
+        out = {"largest": f.largest}
+        if f.part is not None:
+            out["filter"] = filter_to_dict(f.part, base)
+        if f.skin is not None:
+            out["skin"] = f.skin
+        return {"cleanup": out}
     if isinstance(f, Stencil):
         a = f.array
         return {"stencil": {"shape": list(a.shape), "cells": a.reshape(-1).astype(int).tolist()}}
@@ -79,7 +87,7 @@ def filter_to_dict(f, base=None) -> dict:
     if isinstance(f, Not):
         return {"not": filter_to_dict(f.part, base)}
     raise PleError(f"filter: a {type(f).__name__} cannot be written as data (stencil, lil, implicit, "
-                   "and, or, not can)")
+                   "body, cleanup, and, or, not can)")
 
 
 def _field_to_dict(field) -> dict:
@@ -102,7 +110,8 @@ def filter_from_dict(data, where: str = "filter", depth: int = 0, loader=None) -
     if depth > MAX_DEPTH:
         raise PleError(f"{where}: filters nested deeper than {MAX_DEPTH}")
     if not isinstance(data, dict) or len(data) != 1:
-        raise PleError(f"{where}: expected an object with exactly one of stencil, lil, implicit, body, and, or, not")
+        raise PleError(f"{where}: expected an object with exactly one of stencil, lil, implicit, body, cleanup, "
+                       "and, or, not")
     (kind, body), = data.items()
     here = f"{where}.{kind}"
     if kind in ("and", "or"):
@@ -120,7 +129,16 @@ def filter_from_dict(data, where: str = "filter", depth: int = 0, loader=None) -
         return _implicit(body, here)
     if kind == "body":
         return _body(body, here, loader)
-    raise PleError(f"{here}: unknown filter (expected stencil, lil, implicit, body, and, or, not)")
+    if kind == "cleanup":
+        _keys(body, here, set(), {"filter", "largest", "skin"})
+        largest, skin = body.get("largest", True), body.get("skin")
+        if not isinstance(largest, bool):
+            raise PleError(f"{here}.largest: expected true or false, got {largest!r}")
+        if skin is not None and _number(skin, f"{here}.skin") <= 0:
+            raise PleError(f"{here}.skin: must be positive, got {skin!r}")
+        part = filter_from_dict(body["filter"], f"{here}.filter", depth + 1, loader) if "filter" in body else None
+        return Cleanup(part, largest, skin)
+    raise PleError(f"{here}: unknown filter (expected stencil, lil, implicit, body, cleanup, and, or, not)")
 
 
 def _keys(body, here: str, required: set, optional: set = frozenset()) -> None:
