@@ -22,15 +22,17 @@ def dask_cluster(tmp: Path, workers: int = 2, env: dict | None = None, worker_ar
     procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
                                "--port", "0", "--no-dashboard", "--scheduler-file", str(info)],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)]
+    logs = []
     try:
         deadline = time.monotonic() + 60
         while not info.is_file() and time.monotonic() < deadline:
             time.sleep(0.2)
         address = json.loads(info.read_text())["address"]
         for n in range(workers):
+            logs.append(open(tmp / f"worker{n}.log", "w"))
             procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads",
                                            "1", "--no-nanny", "--no-dashboard", "--name", f"w{n}", *worker_args],
-                                          stdout=subprocess.DEVNULL, stderr=open(tmp / f"worker{n}.log", "w"), env=env))
+                                          stdout=subprocess.DEVNULL, stderr=logs[-1], env=env))
         from dask.distributed import Client
 
         with Client(address, timeout=30) as c:
@@ -40,3 +42,5 @@ def dask_cluster(tmp: Path, workers: int = 2, env: dict | None = None, worker_ar
         for p in procs:
             p.kill()
             p.wait(timeout=30)
+        for log in logs:
+            log.close()

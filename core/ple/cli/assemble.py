@@ -1,5 +1,6 @@
-"""``ple assemble URL --out F``: one file of a partitioned job — a mesh's STL parts concatenated
-(streamed, never all parts in memory), or a filter job's parts as one ``.npz`` evaluation."""
+"""``ple assemble URL [--out F]``: one file of a partitioned job — a mesh's STL parts concatenated
+(streamed, never all parts in memory), a filter job's parts as one ``.npz`` evaluation, a slice
+job's parts as the slice folder of ``ple slice``; a count job's totals are printed."""
 
 from __future__ import annotations
 
