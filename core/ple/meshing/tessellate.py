@@ -24,7 +24,6 @@ U^-i V^-j W^dk V^(j+dj) U^(i+di) — independent of k — so hubs are computed o
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 
 import numpy as np
 import trimesh
@@ -32,157 +31,17 @@ import trimesh
 from ..algebra.vectors import perpendicular_frames
 from ..errors import PleError
 from ..model.lattice import Lattice, Region
-from .achocc import HubGeometry, hub_geometry
-from .chocc import ChoccMesh, cnt_segments, corridor_mesh, sampled_segments
-from .fillet import filleted
+from .hubs import HubTemplate, hub_templates
 from .preview import balls_beams_mesh
 from .styles import style as style_named
 from .unclean import find_unclean, unite
-from .weld import COLLAPSE_GRIDS, collapse_short_edges, grid_spacing
+from .weld import COLLAPSE_GRIDS, grid_spacing
 
 DEFAULT_LEVELS = 4
 DEFAULT_SEGMENTS = 16
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
 MAX_LEVELS = 6
 MAX_CHECK_GROUPS = 500_000  # streamed regions up to this size are checked for unclean hubs first
-
-
-@dataclass
-class HubTemplate:
-    """A hub mesh in the template frame: vertices (m, 3), outward faces (f, 3), per incident
-    beam the ring of vertex ids on its contact circle (clockwise about the beam direction) and
-    the fan faces capping its disk (using one extra vertex, the disk centre)."""
-
-    vertices: np.ndarray
-    faces: np.ndarray
-    rings: list
-    caps: list
-    geometry: HubGeometry
-
-
-def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray, np.ndarray, list]:
-    """§6 refinement on the unit-sphere CNT: ``levels`` 1-to-4 splits (a corridor quad,
-    two triangles, becomes 8 around its centre), arc midpoints snapped to their circle, other
-    new vertices centrally projected. Returns vertices in hub units (centre at 0), faces, rings.
-
-    A new vertex is first placed on the CHoCC hull itself — on a planar triangle, or on the
-    curved corridor at the mean of its corners' corridor coordinates (``ChoccMesh.corridor_point``)
-    — and then projected from the centre. A point of the planar CNT quad near a long arc's chord
-    lies in that circle's cone, and its projection would land on the beam beyond the contact
-    disk, folding into the beam's strip; a point of the hull never does (the centre is inside
-    the hull, so the cones over its faces, corridors and disks do not overlap)."""
-    c = hub.chocc
-    real = hub.slots
-    r_plus = hub.r_plus
-    hull = mesh.vertices.copy()  # positions on the CHoCC hull (unit sphere scale)
-    verts = mesh.vertices * r_plus
-    circle = mesh.vertex_circle.copy()
-    on_circle = circle < real
-    off = ~on_circle
-    if off.any():  # point circles: onto the lattice too
-        u = verts[off] / np.linalg.norm(verts[off], axis=1, keepdims=True)
-        verts[off] = u * hub.exit_distance(u)[:, None]
-    faces = mesh.faces
-    fcor = mesh.face_corridor if mesh.face_corridor is not None else np.full(len(faces), -1)
-    fpar = mesh.face_params if mesh.face_params is not None else np.zeros((len(faces), 3, 2))
-    rings = [r.copy() for r in mesh.rings]
-    frames = perpendicular_frames(c.normals)
-    for _ in range(levels):
-        nv = len(verts)
-        e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-        ekey = np.minimum(e[:, 0], e[:, 1]) * nv + np.maximum(e[:, 0], e[:, 1])
-        uniq, inv = np.unique(ekey, return_inverse=True)
-        inv = inv.reshape(-1)
-        ua, ub = uniq // nv, uniq % nv
-        # hull points of the face-edge midpoints: corridor coordinates on corridors, chords on triangles
-        ecor = np.tile(fcor, 3)
-        epar = 0.5 * (np.concatenate([fpar[:, 0], fpar[:, 1], fpar[:, 2]])
-                      + np.concatenate([fpar[:, 1], fpar[:, 2], fpar[:, 0]]))
-        hmid = 0.5 * (hull[e[:, 0]] + hull[e[:, 1]])
-        onc = np.flatnonzero(ecor >= 0)
-        if len(onc):
-            hmid[onc] = mesh.corridor_point(ecor[onc], epar[onc, 0], epar[onc, 1])
-        # one hull point per edge: a corridor's if any face on it is a corridor (they agree on
-        # the generators shared with triangles)
-        pick = np.full(len(uniq), -1)
-        order = np.argsort(ecor >= 0, kind="stable")  # triangles first, corridors overwrite
-        pick[inv[order]] = order
-        hnew = hmid[pick]
-        mids = 0.5 * (verts[ua] + verts[ub])
-        new_ids = nv + np.arange(len(uniq))
-        is_arc = np.zeros(len(uniq), bool)
-        for ci in range(real):
-            ring = rings[ci]
-            if len(ring) < 2:
-                continue
-            x, y = ring, np.roll(ring, -1)
-            q = np.searchsorted(uniq, np.minimum(x, y) * nv + np.maximum(x, y))
-            is_arc[q] = True
-            mids[q] = _arc_mids(verts[x], verts[y], c.normals[ci], c.alphas[ci], r_plus, frames, ci)
-            hnew[q] = mids[q] / r_plus
-            out = np.empty(2 * len(ring), np.int64)
-            out[0::2], out[1::2] = ring, new_ids[q]
-            rings[ci] = out
-        proj = ~is_arc
-        if proj.any():
-            u = hnew[proj] / np.linalg.norm(hnew[proj], axis=1, keepdims=True)
-            mids[proj] = u * hub.exit_distance(u)[:, None]
-        verts = np.concatenate([verts, mids])
-        hull = np.concatenate([hull, hnew])
-        m = new_ids[inv].reshape(3, -1).T  # midpoints of edges 01, 12, 20 per face
-        v0, v1, v2 = faces.T
-        faces = np.concatenate([np.stack([v0, m[:, 0], m[:, 2]], 1), np.stack([m[:, 0], v1, m[:, 1]], 1),
-                                np.stack([m[:, 2], m[:, 1], v2], 1), m])
-        p0, p1, p2 = fpar[:, 0], fpar[:, 1], fpar[:, 2]
-        p01, p12, p20 = 0.5 * (p0 + p1), 0.5 * (p1 + p2), 0.5 * (p2 + p0)
-        fpar = np.concatenate([np.stack([p0, p01, p20], 1), np.stack([p01, p1, p12], 1),
-                               np.stack([p20, p12, p2], 1), np.stack([p01, p12, p20], 1)])
-        fcor = np.tile(fcor, 4)
-    return verts, faces, rings
-
-
-def _arc_mids(pa, pb, n, alpha, r_plus, frames, ci) -> np.ndarray:
-    """Midpoints of the clockwise arcs (about n) from pa (k, 3) to pb on circle (n, alpha) of S⁺."""
-    e1, e2 = frames[0][ci], frames[1][ci]
-    ta, tb = np.arctan2(pa @ e2, pa @ e1), np.arctan2(pb @ e2, pb @ e1)
-    d = (ta - tb) % (2 * np.pi)
-    d[d > 2 * np.pi - 1e-9] = 0.0
-    t = ta - d / 2
-    return r_plus * (np.cos(alpha) * n + np.sin(alpha) * (np.cos(t)[:, None] * e1 + np.sin(t)[:, None] * e2))
-
-
-def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, levels: int,
-                 segments: int, hint=None, min_edge: float = 0.0, fillet: float | None = None) -> HubTemplate:
-    """Tessellate one junction: ball (center (3,), radius) with beams to the balls
-    (neighbor_centers (S, 3), neighbor_radii (S,)), in the given style. Edges shorter than
-    ``min_edge`` are collapsed (``ple.meshing.weld.collapse_short_edges``) so that the mesh keeps its
-    topology when written in float32."""
-    center = np.asarray(center, float)
-    vec = np.asarray(neighbor_centers, float).reshape(-1, 3) - center
-    lengths = np.linalg.norm(vec, axis=1)
-    if np.any(lengths <= 0):
-        raise PleError("a beam joins two balls with the same centre")
-    dirs = vec / lengths[:, None]
-    hub = hub_geometry(radius, dirs, np.asarray(neighbor_radii, float).reshape(-1), lengths, hint)
-    hub = filleted(hub, fillet)  # optional junction fillet (001_ §6 Eq. 6): projection onto the blend
-    if style == "refined":
-        base = corridor_mesh(hub.chocc, cnt_segments)
-        verts, faces, rings = _refine(base, hub, levels)
-    else:
-        base = corridor_mesh(hub.chocc, cnt_segments if style == "cnt" else sampled_segments(segments))
-        verts, faces, rings = base.vertices * hub.r_plus, base.faces, base.rings
-    if min_edge > 0:
-        faces, rings, _ = collapse_short_edges(verts, faces, rings, min_edge)
-    axial = hub.r_plus * np.cos(hub.alphas)
-    caps = []
-    all_verts = [verts]
-    nv = len(verts)
-    for s in range(hub.slots):
-        q = rings[s][::-1]  # counter-clockwise about the beam: the disk's outward orientation
-        all_verts.append((dirs[s] * axial[s])[None])
-        caps.append(np.stack([np.full(len(q), nv), q, np.roll(q, -1)], axis=1))
-        nv += 1
-    return HubTemplate(np.concatenate(all_verts) + center, faces, [rings[s] for s in range(hub.slots)], caps, hub)
 
 
 def zipper(angles_a: np.ndarray, angles_b: np.ndarray) -> np.ndarray:
@@ -227,9 +86,10 @@ class _Tessellator:
     """Builds region meshes box by box, caching hub templates and beam strips."""
 
     def __init__(self, lat: Lattice, region: Region, style: str, levels: int, segments: int,
-                 fillet: float | None = None):
+                 fillet: float | None = None, batched: bool = True):
         lat.validate()
         self.fillet = fillet
+        self.batched = batched  # hub templates in batches of one CHoCC topology (False: one by one)
         self.lat, self.region, self.style, self.levels, self.segments = lat, region, style, levels, segments
         nn = len(lat.nodes)
         # slots of template node n: (pattern, +1 outgoing | -1 incoming)
@@ -309,6 +169,8 @@ class _Tessellator:
         tids = np.zeros(len(idx), np.int64)
         info = {}
         nv = lat.counts[1]
+        new: dict = {}  # hub shapes not seen yet: key -> (node, own radius, neighbourhood)
+        per_node = []
         for n in range(len(lat.nodes)):
             sel = np.flatnonzero(idx[:, 3] == n)
             if len(sel) == 0:
@@ -341,21 +203,38 @@ class _Tessellator:
             if lat.radius_field is not None:  # the hub's own graded radius, in its frame
                 own = lat.node_balls(idx[reps])[1] / lat.group_factors(idx[reps, 0], idx[reps, 1], idx[reps, 2])
             own_q = np.round(own / self.scale[n]).astype(np.int64)
-            rep_tid = np.zeros(len(reps), np.int64)
-            for u in range(len(reps)):
-                key = (n, q[u].tobytes(), int(own_q[u]))
-                if key not in self.templates:
-                    have = ~np.isnan(local[u, :, 3])
-                    hint_key = (n, have.tobytes())  # the last hub with these beams: likely the same hull
-                    tpl = hub_template(lat.template_centers[n], float(own[u]), local[u, have, :3],
-                                       local[u, have, 3], self.style, self.levels, self.segments,
-                                       self.hints.get(hint_key), self.min_edge, self.fillet)
-                    self.hints[hint_key] = tpl.geometry.base_triangles
-                    slot_of = np.cumsum(have) - 1
-                    self.templates[key] = (len(self.templates), tpl, np.where(have, slot_of, -1))
-                rep_tid[u] = self.templates[key][0]
-            tids[sel] = rep_tid[inv.reshape(-1)]
+            keys = [(n, q[u].tobytes(), int(own_q[u])) for u in range(len(reps))]
+            for u, key in enumerate(keys):
+                if key not in self.templates and key not in new:
+                    new[key] = (n, own[u], local[u])
+            per_node.append((sel, inv.reshape(-1), keys))
+        self._build_templates(new)
+        for sel, inv, keys in per_node:
+            tids[sel] = np.array([self.templates[key][0] for key in keys], np.int64)[inv]
         return tids, m, minv, info
+
+    def _build_templates(self, new: dict) -> None:
+        """Templates of the hub shapes ``new`` (key -> (template node, own radius, neighbourhood
+        (S, 4) with NaN rows for missing beams)), ids in the order of ``new``. Hubs with the same
+        beam slots are built together (``hub_templates``: batches of one CHoCC topology),
+        whatever their template node — the one-group form of group-mapped lattices
+        (``Lattice.explicit``) has one template node per hub."""
+        lat = self.lat
+        by_beams: dict = {}
+        for key, (n, own, local) in new.items():
+            have = ~np.isnan(local[:, 3])
+            by_beams.setdefault(have.tobytes(), []).append((key, n, own, local[have]))
+        built = {}
+        for hint_key, hubs in by_beams.items():  # the last hub with these beams: likely the same hull
+            keys, nodes, own, local = zip(*hubs)
+            local = np.array(local).reshape(len(hubs), -1, 4)
+            tpls, self.hints[hint_key] = hub_templates(
+                lat.template_centers[list(nodes)], np.array(own), local[..., :3], local[..., 3], self.style,
+                self.levels, self.segments, self.hints.get(hint_key), self.min_edge, self.fillet, self.batched)
+            built.update(zip(keys, tpls))
+        for key, (_, _, local) in new.items():
+            have = ~np.isnan(local[:, 3])
+            self.templates[key] = (len(self.templates), built[key], np.where(have, np.cumsum(have) - 1, -1))
 
     # ----- assembly ---------------------------------------------------------------------
     def build(self, box: Region) -> tuple[np.ndarray, np.ndarray]:
