@@ -140,12 +140,7 @@ def roll_planes(normals: np.ndarray, alphas: np.ndarray) -> tuple[np.ndarray, np
     (an oriented triple names one plane), not by the circle pair alone: two circles can share
     two corridors when a small circle sits in the gap between them."""
     n = len(normals)
-    gap = np.arccos(np.clip(normals @ normals.T, -1, 1)) - (alphas[:, None] + alphas[None, :])
-    np.fill_diagonal(gap, np.inf)
-    # the perturbation must stay well below the narrowest gap between caps (near-tangent circles)
-    # pseudo-random, not affine in the index: an affine perturbation keeps symmetric ties
-    wiggle = 0.5 + 0.5 * ((np.sin(np.arange(1, n + 1) * 12.9898) * 43758.5453) % 1.0)
-    alphas = alphas + min(TIE_PERTURBATION, 0.01 * gap.min()) * wiggle
+    alphas = tie_broken(normals, alphas)
     others = np.arange(1, n)
     jj, kk = np.triu_indices(len(others), 1)
     triples = np.stack([np.zeros(len(jj), int), others[jj], others[kk]], axis=1)
@@ -210,6 +205,19 @@ def roll_planes(normals: np.ndarray, alphas: np.ndarray) -> tuple[np.ndarray, np
     for (ti, k), (t2, k2) in twin.items():
         tw[ti, k] = (t2, k2)
     return np.array(triangles, dtype=np.int64), tw
+
+
+def tie_broken(normals: np.ndarray, alphas: np.ndarray) -> np.ndarray:
+    """The half-angles (..., n) plane rolling works with: ``alphas`` perturbed by at most
+    TIE_PERTURBATION so that no four circles touch one plane (normals (..., n, 3))."""
+    n = normals.shape[-2]
+    gap = (np.arccos(np.clip(np.einsum("...ai,...bi->...ab", normals, normals), -1, 1))
+           - (alphas[..., :, None] + alphas[..., None, :]))
+    gap[..., np.arange(n), np.arange(n)] = np.inf
+    # the perturbation must stay well below the narrowest gap between caps (near-tangent circles)
+    # pseudo-random, not affine in the index: an affine perturbation keeps symmetric ties
+    wiggle = 0.5 + 0.5 * ((np.sin(np.arange(1, n + 1) * 12.9898) * 43758.5453) % 1.0)
+    return alphas + np.minimum(TIE_PERTURBATION, 0.01 * gap.min(axis=(-2, -1)))[..., None] * wiggle
 
 
 def _cyclic_key(tri) -> tuple[int, int, int]:
@@ -374,6 +382,8 @@ def chocc(normals, alphas, hint=None) -> Chocc:
         i, j = np.unravel_index(np.argmin(gap), gap.shape)
         raise PleError(f"CHoCC: caps {i} and {j} overlap or touch")
     known = _topology_from_hint(normals, alphas, hint) if hint is not None else None
+    if known is None and hint is not None:  # ties: the hint may still be the hull plane rolling finds
+        known = _topology_from_hint(normals, tie_broken(normals, alphas), hint)
     tris, twin = known if known is not None else roll_planes(normals, alphas)
     pn, pa = apollonius_planes(normals[tris], alphas[tris])
     pts = contact_points(pn[:, :, None, :], pa[:, :, None], normals[tris][:, None, :, :])

@@ -36,7 +36,6 @@ from .achocc import (
 )
 from .chocc import (
     DEGENERATE_ARC,
-    TIE_PERTURBATION,
     Chocc,
     ChoccMesh,
     apollonius_planes,
@@ -46,6 +45,7 @@ from .chocc import (
     corridor_ends,
     corridor_mesh,
     sampled_segments,
+    tie_broken,
 )
 from .fillet import filleted
 from .weld import collapse_short_edges
@@ -301,16 +301,6 @@ def _strict_hull(normals, alphas, tris):
     return np.all(good.sum(axis=-1) == 1, axis=1), (pn, pa, pts, ccw)
 
 
-def _perturbed(normals, alphas):
-    """The half-angles plane rolling uses to break ties (``chocc.roll_planes``), per hub."""
-    n = normals.shape[1]
-    gap = np.arccos(np.clip(np.einsum("hai,hbi->hab", normals, normals), -1, 1)) - (alphas[:, :, None]
-                                                                                      + alphas[:, None, :])
-    gap[:, np.arange(n), np.arange(n)] = np.inf
-    wiggle = 0.5 + 0.5 * ((np.sin(np.arange(1, n + 1) * 12.9898) * 43758.5453) % 1.0)
-    return alphas + np.minimum(TIE_PERTURBATION, 0.01 * gap.min(axis=(1, 2)))[:, None] * wiggle
-
-
 class _Batch:
     """Hubs (H of them) in the representative's topology: CHoCC, CNT and corridors as arrays."""
 
@@ -320,7 +310,7 @@ class _Batch:
         ok, (pn, pa, pts, ccw) = _strict_hull(normals, alphas, self.tris)
         if not ok.all():  # hubs with ties: the topology plane rolling finds for them
             redo = np.flatnonzero(~ok)
-            ok[redo] = _strict_hull(normals[redo], _perturbed(normals[redo], alphas[redo]), self.tris)[0]
+            ok[redo] = _strict_hull(normals[redo], tie_broken(normals[redo], alphas[redo]), self.tris)[0]
         # of the two candidates, the supporting one with the rolling orientation (``chocc.chocc``)
         lim = np.minimum(pa[..., None] + alphas[:, None, None, :], np.pi)
         viol = (np.einsum("htsi,hmi->htsm", pn, normals) - np.cos(lim)).max(axis=-1)

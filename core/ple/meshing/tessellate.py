@@ -28,10 +28,10 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import trimesh
 
-from ..algebra.vectors import perpendicular_frames
+from ..algebra.vectors import perpendicular_frames, unit_rows
 from ..errors import PleError
 from ..model.lattice import Lattice, Region
-from .hubs import HubTemplate, hub_templates
+from .hubs import hub_templates
 from .preview import balls_beams_mesh
 from .styles import style as style_named
 from .unclean import find_unclean, unite
@@ -51,35 +51,37 @@ def zipper(angles_a: np.ndarray, angles_b: np.ndarray) -> np.ndarray:
     Returns faces (ma + mb, 3, 2) of (ring, index) pairs, ring 0 = A, 1 = B, oriented with
     outward normals: the beam traverses A counter-clockwise and B clockwise (the reverse of
     the hubs' rings), so the strip and the hubs close up (§6: a triangle strip choosing the
-    next sample on one ring or the other by angle)."""
-    ma, mb = len(angles_a), len(angles_b)
+    next sample on one ring or the other by angle). ``zippers`` for K strips at once."""
+    return zippers(np.asarray(angles_a)[None], np.asarray(angles_b)[None])[0]
+
+
+def zippers(angles_a: np.ndarray, angles_b: np.ndarray) -> np.ndarray:
+    """``zipper`` of K strips whose rings have the same sizes: angles (K, ma) and (K, mb);
+    faces (K, ma + mb, 3, 2)."""
+    k, ma = angles_a.shape
+    mb = angles_b.shape[1]
     two_pi = 2 * np.pi
+    rows = np.arange(k)[:, None]
     pa = _unwrap_ring(angles_a)
-    rel = (angles_b - angles_a[0] + np.pi) % two_pi - np.pi
-    b0 = int(np.argmin(np.round(np.abs(rel), 9)))
-    order_b = (np.arange(mb) + b0) % mb
-    pb = rel[b0] + _unwrap_ring(angles_b[order_b])
-    key_a = np.append(pa[1:], two_pi)  # a-event s (1..ma): reach A[s]
-    key_b = np.append(pb[1:], rel[b0] + two_pi)
-    keys = np.round(np.concatenate([key_a, key_b]), 9)  # equal angles (symmetric rings) tie robustly
-    is_b = np.concatenate([np.zeros(ma, bool), np.ones(mb, bool)])
-    order = np.lexsort((is_b, keys))
-    is_b = is_b[order]
-    seen_b = np.cumsum(is_b) - is_b  # b-events before each event
-    seen_a = np.cumsum(~is_b) - ~is_b
-    faces = np.zeros((ma + mb, 3, 2), np.int64)
+    rel = (angles_b - angles_a[:, :1] + np.pi) % two_pi - np.pi
+    b0 = np.argmin(np.round(np.abs(rel), 9), axis=1)
+    order_b = (np.arange(mb) + b0[:, None]) % mb
+    rel0 = rel[np.arange(k), b0][:, None]
+    pb = rel0 + _unwrap_ring(angles_b[rows, order_b])
+    key_a = np.concatenate([pa[:, 1:], np.full((k, 1), two_pi)], axis=1)  # a-event s (1..ma): reach A[s]
+    key_b = np.concatenate([pb[:, 1:], rel0 + two_pi], axis=1)
+    keys = np.round(np.concatenate([key_a, key_b], axis=1), 9)  # equal angles (symmetric rings) tie robustly
+    is_b = np.broadcast_to(np.concatenate([np.zeros(ma, bool), np.ones(mb, bool)]), keys.shape)
+    order = np.lexsort((is_b, keys), axis=-1)
+    is_b = is_b[rows, order]
+    seen_b = np.cumsum(is_b, axis=1) - is_b  # b-events before each event
+    seen_a = np.cumsum(~is_b, axis=1) - ~is_b
     # a-event s: (A[s-1], A[s], B[seen_b]); b-event t: (B[t], B[t-1], A[seen_a])
-    sa = seen_a + 1
-    tb = seen_b + 1
-    fa = ~is_b
-    faces[fa, 0] = np.stack([np.zeros(fa.sum(), np.int64), (sa[fa] - 1) % ma], 1)
-    faces[fa, 1] = np.stack([np.zeros(fa.sum(), np.int64), sa[fa] % ma], 1)
-    faces[fa, 2] = np.stack([np.ones(fa.sum(), np.int64), order_b[seen_b[fa] % mb]], 1)
-    fb = is_b
-    faces[fb, 0] = np.stack([np.ones(fb.sum(), np.int64), order_b[tb[fb] % mb]], 1)
-    faces[fb, 1] = np.stack([np.ones(fb.sum(), np.int64), order_b[(tb[fb] - 1) % mb]], 1)
-    faces[fb, 2] = np.stack([np.zeros(fb.sum(), np.int64), seen_a[fb] % ma], 1)
-    return faces
+    sa, tb = seen_a + 1, seen_b + 1
+    ring = np.where(is_b[..., None], [1, 1, 0], [0, 0, 1])
+    ia = np.stack([(sa - 1) % ma, sa % ma, order_b[rows, seen_b % mb]], axis=-1)
+    ib = np.stack([order_b[rows, tb % mb], order_b[rows, (tb - 1) % mb], seen_a % ma], axis=-1)
+    return np.stack([ring, np.where(is_b[..., None], ib, ia)], axis=-1).astype(np.int64)
 
 
 class _Tessellator:
@@ -315,45 +317,65 @@ class _Tessellator:
             inv = inv.reshape(-1)
             order = np.argsort(inv, kind="stable")
             bounds = np.searchsorted(inv[order], np.arange(len(first) + 1))
+            a0s, b0s = src[first], dst[first]
+            rel = np.einsum("uij,ujk->uik", minv[a0s], m[b0s])
+            qrel = np.round(rel[:, :3] / 1e-9).astype(np.int64)
+            keys = [(p, int(tids[a0]), int(tids[b0]), qrel[u].tobytes()) for u, (a0, b0) in enumerate(zip(a0s, b0s))]
+            rings = [(tpl_list[tids[a0]][0].rings[tpl_list[tids[a0]][1][slot_a]],
+                      tpl_list[tids[b0]][0].rings[tpl_list[tids[b0]][1][slot_b]]) for a0, b0 in zip(a0s, b0s)]
+            self._add_strips(keys, rings, a0s, b0s, tids, rel, tpl_list, b)
             for u in range(len(first)):
                 sel = order[bounds[u]:bounds[u + 1]]
-                a0, b0 = src[first[u]], dst[first[u]]
-                ta, sa_map = tpl_list[tids[a0]]
-                tb, sb_map = tpl_list[tids[b0]]
-                ring_a = ta.rings[sa_map[slot_a]]
-                ring_b = tb.rings[sb_map[slot_b]]
-                rel = minv[a0] @ m[b0]
-                key = (p, int(tids[a0]), int(tids[b0]), np.round(rel[:3] / 1e-9).astype(np.int64).tobytes())
-                if key not in self.strips:
-                    self.strips[key] = _strip(ta, ring_a, tb, ring_b, rel,
-                                              lat.template_centers[b.n1], lat.template_centers[b.n2])
-                f = self.strips[key]
-                which, li = f[..., 1], f[..., 0]
-                local = np.where(which == 0, ring_a[np.where(which == 0, li, 0)], ring_b[np.where(which == 1, li, 0)])
+                which, local = self.strips[keys[u]]
                 base = np.where(which[None] == 0, offsets[src[sel]][:, None, None], offsets[dst[sel]][:, None, None])
                 out.append((base + local[None]).reshape(-1, 3))
         return out
 
+    def _add_strips(self, keys, rings, a0s, b0s, tids, rel, tpl_list, beam) -> None:
+        """Cache the strips (ring 0|1 per corner, template vertex id) of the beams ``keys`` not
+        seen yet: zipped together (``_strips``) per pair of ring sizes."""
+        todo: dict = {}
+        for u, key in enumerate(keys):
+            if key not in self.strips and key not in todo:
+                todo[key] = u
+        by_size: dict = {}
+        for u in todo.values():
+            by_size.setdefault((len(rings[u][0]), len(rings[u][1])), []).append(u)
+        ca, cb = self.lat.template_centers[beam.n1], self.lat.template_centers[beam.n2]
+        for us in by_size.values():
+            pa = np.stack([tpl_list[tids[a0s[u]]][0].vertices[rings[u][0]] for u in us])
+            pb = np.stack([tpl_list[tids[b0s[u]]][0].vertices[rings[u][1]] for u in us])
+            f = _strips(pa, pb, rel[us], ca, cb)
+            which, li = f[..., 1], f[..., 0]
+            for k, u in enumerate(us):
+                ring_a, ring_b = rings[u]
+                local = np.where(which[k] == 0, ring_a[np.where(which[k] == 0, li[k], 0)],
+                                 ring_b[np.where(which[k] == 1, li[k], 0)])
+                self.strips[keys[u]] = (which[k], local)
+
 
 def _unwrap_ring(theta: np.ndarray) -> np.ndarray:
-    """Angles of a counter-clockwise ring relative to its first vertex, non-decreasing
+    """Angles of counter-clockwise rings (..., m) relative to their first vertex, non-decreasing
     (coincident vertices whose round-off steps slightly backwards count as zero steps)."""
-    step = np.diff(theta) % (2 * np.pi)
+    step = np.diff(theta, axis=-1) % (2 * np.pi)
     step[step > 2 * np.pi - 1e-9] = 0.0
-    return np.concatenate([[0.0], np.cumsum(step)])
+    return np.concatenate([np.zeros(theta.shape[:-1] + (1,)), np.cumsum(step, axis=-1)], axis=-1)
 
 
-def _strip(ta: HubTemplate, ring_a, tb: HubTemplate, ring_b, rel, ca, cb) -> np.ndarray:
-    """Beam strip faces (k, 3, 2) as (local ring index, ring 0|1), computed in hub A's frame."""
-    pa = ta.vertices[ring_a]
-    pb = tb.vertices[ring_b] @ rel[:3, :3].T + rel[:3, 3]
-    cb_local = rel[:3, :3] @ cb + rel[:3, 3]
-    d = cb_local - ca
-    d /= np.linalg.norm(d)
-    e1, e2 = perpendicular_frames(d[None])
-    ang = lambda p: np.arctan2((p - ca) @ e2[0], (p - ca) @ e1[0])  # noqa: E731
-    a_ccw = np.arange(len(ring_a))[::-1]  # hub rings run clockwise about their outward normal
-    f = zipper(ang(pa[a_ccw]), ang(pb))
+def _strips(pa: np.ndarray, pb: np.ndarray, rel: np.ndarray, ca, cb) -> np.ndarray:
+    """Beam strip faces (K, k, 3, 2) as (local ring index, ring 0|1) of K beams whose rings have
+    the same sizes, computed in hub A's frame: ring vertices pa (K, ma, 3) of hub A, pb (K, mb, 3)
+    of hub B in its own frame, rel (K, 4, 4) B's frame in A's; ca, cb the two ball centres."""
+    pb = np.einsum("kij,kmj->kmi", rel[:, :3, :3], pb) + rel[:, None, :3, 3]
+    d = unit_rows(np.einsum("kij,j->ki", rel[:, :3, :3], cb) + rel[:, :3, 3] - ca)
+    e1, e2 = perpendicular_frames(d)
+
+    def ang(p):
+        q = p - ca
+        return np.arctan2(np.einsum("kmi,ki->km", q, e2), np.einsum("kmi,ki->km", q, e1))
+
+    a_ccw = np.arange(pa.shape[1])[::-1]  # hub rings run clockwise about their outward normal
+    f = zippers(ang(pa[:, a_ccw]), ang(pb))
     out = np.empty_like(f)
     out[..., 1] = f[..., 0]
     out[..., 0] = np.where(f[..., 0] == 0, a_ccw[np.where(f[..., 0] == 0, f[..., 1], 0)], f[..., 1])
