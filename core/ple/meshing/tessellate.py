@@ -23,6 +23,7 @@ U^-i V^-j W^dk V^(j+dj) U^(i+di) — independent of k — so hubs are computed o
 
 from __future__ import annotations
 
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -98,6 +99,7 @@ class _Tessellator:
         self.slots = [[(p, 1) for p, b in enumerate(lat.beams) if b.n1 == n]
                       + [(p, -1) for p, b in enumerate(lat.beams) if b.n2 == n] for n in range(nn)]
         self.templates: dict = {}
+        self.tpl_list: list = []  # (template, slot map) by template id; only appended to
         self.strips: dict = {}
         self.hints: dict = {}
         self.scale = lat.template_radii * KEY_QUANTUM
@@ -237,11 +239,19 @@ class _Tessellator:
         for key, (_, _, local) in new.items():
             have = ~np.isnan(local[:, 3])
             self.templates[key] = (len(self.templates), built[key], np.where(have, np.cumsum(have) - 1, -1))
+            self.tpl_list.append(self.templates[key][1:])
 
     # ----- assembly ---------------------------------------------------------------------
     def build(self, box: Region) -> tuple[np.ndarray, np.ndarray]:
         """Vertices and faces of the hubs of ``box`` and of the beams from them (to balls in
         the region), with capped disks where a beam leaves the region."""
+        return self.assemble(self.prepare(box))
+
+    def prepare(self, box: Region):
+        """The first half of ``build``: the box's nodes (its own and the ghosts at the far ends
+        of its beams) and their hub templates (built here if new). Boxes must be prepared in
+        order, one at a time: template ids (and so the output) then do not depend on how many
+        boxes are assembled at once."""
         lat = self.lat
         nn = len(lat.nodes)
         own = box.node_index(nn)
@@ -257,16 +267,21 @@ class _Tessellator:
         ghosts = np.unique(np.concatenate(ghosts), axis=0) if ghosts else np.zeros((0, 4), np.int64)
         idx = np.concatenate([own, ghosts]).astype(np.int64)
         n_own = len(own)
-        tids, m, minv, info = self.instances(idx)
-        tpl_list = {v[0]: (v[1], v[2]) for v in self.templates.values()}
-        sizes = np.array([len(tpl_list[t][0].vertices) for t in range(len(tpl_list))])
+        return (idx, n_own) + self.instances(idx)
+
+    def assemble(self, prepared) -> tuple[np.ndarray, np.ndarray]:
+        """The second half of ``build``: vertices and faces of a prepared box (``prepare``). Reads
+        the template cache only (and fills the strip cache), so boxes may be assembled at once."""
+        idx, n_own, tids, m, minv, info = prepared
+        tpl_list = self.tpl_list
         order = np.argsort(tids, kind="stable")
-        starts = np.concatenate([[0], np.cumsum(sizes[tids[order]])])
+        ut, first = np.unique(tids[order], return_index=True)
+        sizes = np.array([len(tpl_list[t][0].vertices) for t in ut], np.int64)
+        starts = np.concatenate([[0], np.cumsum(np.repeat(sizes, np.diff(np.append(first, len(order)))))])
         offsets = np.zeros(len(idx), np.int64)
         offsets[order] = starts[:-1]
         verts = np.empty((int(starts[-1]), 3))
         faces = []
-        ut, first = np.unique(tids[order], return_index=True)
         for t, lo, hi in zip(ut, first, np.append(first[1:], len(order))):
             inst = order[lo:hi]
             tpl = tpl_list[t][0]
@@ -297,7 +312,7 @@ class _Tessellator:
         nn = len(lat.nodes)
         lin = ((idx[:, 0] * nv + idx[:, 1]) * nw + idx[:, 2]) * nn + idx[:, 3]
         srt = np.argsort(lin)
-        n_tpl = max(len(tpl_list), 1)
+        n_tpl = int(tids.max()) + 1 if len(tids) else 1
         out = []
         for p, b in enumerate(lat.beams):
             src = np.flatnonzero(idx[:n_own, 3] == b.n1)
@@ -474,9 +489,11 @@ def build_with_unions(tess: _Tessellator, ev, nodes) -> tuple[np.ndarray, np.nda
 
 
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
-                   segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None, _tess=None):
+                   segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None, _tess=None,
+                   workers: int = 1):
     """Stream the region's mesh box by box (bounded memory) as pairs (vertices (V, 3), faces
-    (k, 3)); hubs next to a box boundary are repeated in both boxes (their vertices, not faces)."""
+    (k, 3)); hubs next to a box boundary are repeated in both boxes (their vertices, not faces).
+    ``workers`` threads assemble boxes at once; the stream is the same for any number."""
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
     if lat.group_map is not None:  # groups not similar (Möbius, warps): the general per-hub path
@@ -488,14 +505,20 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
         return
     tess = _tess if _tess is not None else _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style))
     boxes = list(lat.iter_slabs(max_groups=max_groups, region=r))
-    # build the next box in a worker thread while the caller writes this one (numpy releases
-    # the GIL in its large array operations): at most two boxes are held at a time
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        pending = pool.submit(tess.build, boxes[0]) if boxes else None
-        for nxt in boxes[1:] + [None]:
-            done = pending.result()
-            pending = pool.submit(tess.build, nxt) if nxt is not None else None
-            yield done
+    # boxes are prepared (hub templates) in order by one thread and assembled by ``workers``
+    # threads (numpy releases the GIL in its large array operations), the next ones while the
+    # caller writes this one: at most workers + 1 boxes are held at a time, and the output does
+    # not depend on the number of workers
+    workers = max(1, int(workers))
+    with ThreadPoolExecutor(max_workers=1) as prep, ThreadPoolExecutor(max_workers=workers) as pool:
+        pending: deque = deque()
+        for box in boxes:
+            ready = prep.submit(tess.prepare, box)
+            pending.append(pool.submit(lambda ready=ready: tess.assemble(ready.result())))
+            if len(pending) > workers:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
 
 
 def weld_chunks(chunks) -> tuple[np.ndarray, np.ndarray]:
@@ -527,7 +550,8 @@ def output_grid(lat: Lattice, region=None) -> float:
 
 
 def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
-                   segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None):
+                   segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None,
+                   workers: int = 1):
     """The streamed mesh of a region (``iter_triangles``) if it has no unclean hubs: (report,
     chunks). Regions up to MAX_CHECK_GROUPS groups are checked first (``ple.meshing.unclean``;
     the check's hub templates are reused by the stream); report is None for larger regions
@@ -541,4 +565,4 @@ def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: in
     report = tess.find_unclean()[0] if r.groups <= MAX_CHECK_GROUPS else None
     if report is not None and len(report.nodes):
         return report, None
-    return report, iter_triangles(lat, r, style, levels, segments, max_groups, _tess=tess)
+    return report, iter_triangles(lat, r, style, levels, segments, max_groups, _tess=tess, workers=workers)
