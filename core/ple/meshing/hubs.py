@@ -494,7 +494,9 @@ def _collapsed(verts: np.ndarray, faces: np.ndarray, rings: list, tol: float) ->
 
     Hubs with the same short edges in the same order (by length) take the same decisions in the
     first pass of the collapse (link conditions are combinatorial, positions do not move); if no
-    edge is short after that pass, the collapse ends there. So one first pass serves them all."""
+    edge is short after that pass, the collapse ends there. So one first pass serves them all.
+    The order does not matter when no face touches two short edges (a collapse changes only the
+    faces around its own edge, and the link condition of another edge reads only its own)."""
     out: list = [(faces, rings)] * len(verts)
     if tol <= 0:
         return out
@@ -502,9 +504,18 @@ def _collapsed(verts: np.ndarray, faces: np.ndarray, rings: list, tol: float) ->
     d = np.linalg.norm(verts[:, e[:, 0]] - verts[:, e[:, 1]], axis=-1)
     short = d < tol
     groups: dict = {}
+    apart: dict = {}  # short-edge set -> no face touches two of them
     for k in np.flatnonzero(short.any(axis=1)):
         idx = np.flatnonzero(short[k])
-        groups.setdefault(idx[np.argsort(d[k, idx], kind="stable")].tobytes(), []).append(k)
+        key = idx.tobytes()
+        if key not in apart:
+            touch = np.zeros(len(faces), np.int64)
+            for x, y in e[idx]:
+                touch += np.any((faces == x) | (faces == y), axis=1)
+            apart[key] = touch.max() <= 1
+        if not apart[key]:
+            key = b"order" + idx[np.argsort(d[k, idx], kind="stable")].tobytes()
+        groups.setdefault(key, []).append(k)
     for ks in groups.values():
         f1, r1, _ = collapse_short_edges(verts[ks[0]], faces, rings, tol, rounds=1)
         e1 = _edges(f1)
