@@ -65,10 +65,10 @@ def cross(a, b) -> np.ndarray:
 
 
 def perpendicular_frames(normals) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors (e1, e2) orthogonal to each row of unit ``normals`` (M, 3), with
+    """Two unit vectors (e1, e2) orthogonal to each row of unit ``normals`` (..., 3), with
     (e1, e2, n) right-handed; e1 is built from the x axis, or the y axis when n is near x."""
     normals = np.asarray(normals, float)
-    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+    helper = np.where(np.abs(normals[..., :1]) < 0.9, [1.0, 0, 0], [0, 1.0, 0])
     e1 = unit_rows(cross(normals, helper))
     return e1, cross(normals, e1)
 

@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from ..meshing.achocc import hub_geometry
-from ..meshing.tessellate import hub_template
+from ..meshing.hubs import hub_template
 from ..program.sources import load_lattice
 from ..queries.biq import _naive_hits
 from ..queries.rangefinder import PATH_ORDER, cached_plan, lattice_hits

@@ -165,7 +165,7 @@ def parse_implicit(text: str) -> ImplicitFilter:
     return ImplicitFilter(field, level, opts.get("variant", "network"))
 
 
-def add_cluster_args(p: argparse.ArgumentParser) -> None:
+def add_cluster_args(p: argparse.ArgumentParser, workers_help: str = "") -> None:
     """--parts, --scheduler, --workers: the command as a partitioned job (``ple.app.jobs``)."""
     p.add_argument("--parts", metavar="URL", help="write the result as parts of a job to a folder or fsspec URL "
                    "(a manifest records each part; a re-run skips the finished ones)")
@@ -173,7 +173,7 @@ def add_cluster_args(p: argparse.ArgumentParser) -> None:
                    help="with --parts: local (an embedded Dask cluster, default), sync (this process) or a "
                         "Dask scheduler address tcp://HOST:PORT")
     p.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="workers of the embedded local cluster (default: the cores)")
+                   help=f"workers of the embedded local cluster{workers_help} (default: the cores)")
 
 
 def report_job(summary: dict) -> int:

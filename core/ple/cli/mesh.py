@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import sys
 import time
@@ -58,7 +59,7 @@ def register(sub) -> None:
                         "STL/PLY/OBJ; glTF is converted to metres")
     p.add_argument("--box-groups", type=int, default=1 << 14, metavar="N",
                    help="with --parts: node-groups per part (default 16384)")
-    add_cluster_args(p)
+    add_cluster_args(p, "; without --parts, threads assembling the streamed STL's boxes (the same file for any number)")
     p.add_argument("--beam-lattice", action="store_true",
                    help="3MF only: balls and beams with the Beam Lattice extension beside the watertight "
                         "triangle mesh of --style (extensions not required)")
@@ -108,7 +109,7 @@ def run(args) -> int:
         n = len(mesh.faces) - export_mesh(mesh, args.out, args.unit)["dropped_faces"]
     else:
         n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments, max_groups, unit=args.unit,
-                       info=info, fillet=args.fillet)
+                       info=info, fillet=args.fillet, workers=stream_workers(args.workers))
         if info.get("unclean") is not None and len(info["unclean"].nodes):
             print(info["unclean"].line())
     dt = time.perf_counter() - t0
@@ -173,6 +174,13 @@ def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
                        f"{human(tris * 50)}, more than the {human(free)} free in {out_dir}; "
                        "choose a smaller --region or fewer --levels")
     return int(max(1, min(1 << 14, limit // per_group)))
+
+
+def stream_workers(n: int | None) -> int:
+    """Threads assembling the streamed STL's boxes: --workers, default the cores."""
+    if n is not None and n < 1:
+        raise PleError(f"--workers {n}: expected at least 1")
+    return int(n or os.cpu_count() or 1)
 
 
 def _say_unclean(mesh) -> None:

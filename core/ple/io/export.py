@@ -220,10 +220,11 @@ def write_beam_lattice_3mf(path, center, radius, beam_nodes, mesh=None, unit: st
 
 def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: int | None = None,
                segments: int | None = None, max_groups: int = 1 << 14, unit: str = DEFAULT_UNIT,
-               info: dict | None = None, fillet: float | None = None) -> int:
+               info: dict | None = None, fillet: float | None = None, workers: int = 1) -> int:
     """Tessellate a region straight to ``path`` (format from the suffix); returns the number of
-    triangles. Binary STL streams box by box (memory bounded by ``max_groups`` groups), every
-    box snapped to the region's float32 grid; the other formats build the mesh in memory and go
+    triangles. Binary STL streams box by box (memory bounded by ``max_groups`` groups, boxes
+    assembled by ``workers`` threads, the same file for any number), every box snapped to the
+    region's float32 grid; the other formats build the mesh in memory and go
     through ``export_mesh``. Coordinates are in ``unit`` (see there).
 
     Regions up to ``MAX_CHECK_GROUPS`` groups are checked for unclean hubs first
@@ -234,11 +235,12 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
     r = lat.region(region)
     info = {} if info is None else info
     if fmt == "stl" and style != "balls-beams":
-        info["unclean"], chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet)
+        info["unclean"], chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet, workers)
         if chunks is not None:
             return write_stl(path, chunks, header=stl_header(unit), grid=output_grid(lat, r))
     elif fmt == "stl":
-        return write_stl(path, iter_triangles(lat, r, style, levels, segments, max_groups), header=stl_header(unit))
+        return write_stl(path, iter_triangles(lat, r, style, levels, segments, max_groups, workers=workers),
+                         header=stl_header(unit))
     mesh = tessellate(lat, r, style, levels, segments, fillet=fillet)
     info["unclean"] = mesh.metadata.get("ple_unclean")
     stats = export_mesh(mesh, path, unit)

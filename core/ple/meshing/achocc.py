@@ -120,21 +120,8 @@ class HubGeometry:
         it and the exit is the largest of the per-beam exits, each in closed form: on the
         hub ball's cap (cos < sin phi), on the cone (up to the far tangent circle), or on
         the far ball."""
-        t = np.full(len(u), self.radius)
-        if not len(self.dirs):
-            return t
-        r = self.radius
-        sphi, cphi = beam_profile(r, self.other_radii, self.lengths)
-        cu = np.clip(u @ self.dirs.T, -1, 1)  # (V, S)
-        su = np.sqrt(1 - cu**2)
-        den = sphi * cu + cphi * su
-        t_cone = np.where(den > 0, r / np.where(den > 0, den, 1.0), np.inf)
-        x_far = self.lengths + self.other_radii * sphi  # axial end of the cone part
-        ln = self.lengths
-        disc = np.maximum(ln**2 * cu**2 - ln**2 + self.other_radii**2, 0)
-        t_ball = ln * cu + np.sqrt(disc)
-        t_k = np.where(cu <= sphi, r, np.where(t_cone * cu <= x_far, t_cone, t_ball))
-        return np.maximum(t, t_k.max(axis=1))
+        return exit_distances(u[None], np.array([self.radius]), self.dirs[None], self.other_radii[None],
+                              self.lengths[None])[0]
 
     def signed_distance(self, p: np.ndarray) -> np.ndarray:
         """Signed distance (V,) from points (V, 3) to the union of the ball and its beams."""
@@ -143,6 +130,27 @@ class HubGeometry:
             d = np.minimum(d, beam_distance(p, np.zeros(3), self.radius, self.dirs[k] * self.lengths[k],
                                              self.other_radii[k]))
         return d
+
+
+def exit_distances(u: np.ndarray, radius: np.ndarray, dirs: np.ndarray, other_radii: np.ndarray,
+                   lengths: np.ndarray) -> np.ndarray:
+    """``HubGeometry.exit_distance`` of H hubs at once: rays u (H, V, 3), hub radii (H,), beams
+    dirs (H, S, 3), other_radii (H, S), lengths (H, S). Returns (H, V)."""
+    r = np.asarray(radius, float)[:, None]
+    t = np.broadcast_to(r, u.shape[:2])
+    if not dirs.shape[1]:
+        return t.copy()
+    sphi, cphi = beam_profile(r, other_radii, lengths)  # (H, S)
+    sphi, cphi, ln, ro = sphi[:, None], cphi[:, None], lengths[:, None], other_radii[:, None]
+    cu = np.clip(np.einsum("hvi,hsi->hvs", u, dirs), -1, 1)  # (H, V, S)
+    su = np.sqrt(1 - cu**2)
+    den = sphi * cu + cphi * su
+    t_cone = np.where(den > 0, r[..., None] / np.where(den > 0, den, 1.0), np.inf)
+    x_far = ln + ro * sphi  # axial end of the cone part
+    disc = np.maximum(ln**2 * cu**2 - ln**2 + ro**2, 0)
+    t_ball = ln * cu + np.sqrt(disc)
+    t_k = np.where(cu <= sphi, r[..., None], np.where(t_cone * cu <= x_far, t_cone, t_ball))
+    return np.maximum(t, t_k.max(axis=-1))
 
 
 def _seed_points(dirs: np.ndarray) -> np.ndarray:

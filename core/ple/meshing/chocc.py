@@ -140,12 +140,7 @@ def roll_planes(normals: np.ndarray, alphas: np.ndarray) -> tuple[np.ndarray, np
     (an oriented triple names one plane), not by the circle pair alone: two circles can share
     two corridors when a small circle sits in the gap between them."""
     n = len(normals)
-    gap = np.arccos(np.clip(normals @ normals.T, -1, 1)) - (alphas[:, None] + alphas[None, :])
-    np.fill_diagonal(gap, np.inf)
-    # the perturbation must stay well below the narrowest gap between caps (near-tangent circles)
-    # pseudo-random, not affine in the index: an affine perturbation keeps symmetric ties
-    wiggle = 0.5 + 0.5 * ((np.sin(np.arange(1, n + 1) * 12.9898) * 43758.5453) % 1.0)
-    alphas = alphas + min(TIE_PERTURBATION, 0.01 * gap.min()) * wiggle
+    alphas = tie_broken(normals, alphas)
     others = np.arange(1, n)
     jj, kk = np.triu_indices(len(others), 1)
     triples = np.stack([np.zeros(len(jj), int), others[jj], others[kk]], axis=1)
@@ -212,6 +207,19 @@ def roll_planes(normals: np.ndarray, alphas: np.ndarray) -> tuple[np.ndarray, np
     return np.array(triangles, dtype=np.int64), tw
 
 
+def tie_broken(normals: np.ndarray, alphas: np.ndarray) -> np.ndarray:
+    """The half-angles (..., n) plane rolling works with: ``alphas`` perturbed by at most
+    TIE_PERTURBATION so that no four circles touch one plane (normals (..., n, 3))."""
+    n = normals.shape[-2]
+    gap = (np.arccos(np.clip(np.einsum("...ai,...bi->...ab", normals, normals), -1, 1))
+           - (alphas[..., :, None] + alphas[..., None, :]))
+    gap[..., np.arange(n), np.arange(n)] = np.inf
+    # the perturbation must stay well below the narrowest gap between caps (near-tangent circles)
+    # pseudo-random, not affine in the index: an affine perturbation keeps symmetric ties
+    wiggle = 0.5 + 0.5 * ((np.sin(np.arange(1, n + 1) * 12.9898) * 43758.5453) % 1.0)
+    return alphas + np.minimum(TIE_PERTURBATION, 0.01 * gap.min(axis=(-2, -1)))[..., None] * wiggle
+
+
 def _cyclic_key(tri) -> tuple[int, int, int]:
     r = min(range(3), key=lambda c: tri[c])
     return (tri[r], tri[(r + 1) % 3], tri[(r + 2) % 3])
@@ -256,25 +264,29 @@ class Chocc:
 
 
 def corridor_apexes(normals: np.ndarray, alphas: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    """Homogeneous apex (m, 4) of the cone through circles pairs[:, 0], pairs[:, 1] (§4).
+    """Homogeneous apex (m, 4) of the cone through circles pairs[:, 0], pairs[:, 1] (§4)."""
+    return cone_apex(normals[pairs[:, 0]], normals[pairs[:, 1]], alphas[pairs[:, 0]], alphas[pairs[:, 1]])
+
+
+def cone_apex(n1: np.ndarray, n2: np.ndarray, a1: np.ndarray, a2: np.ndarray) -> np.ndarray:
+    """Homogeneous apex (..., 4) of the cone through circles (n1, a1) and (n2, a2) (§4),
+    broadcasting over leading axes (normals (..., 3), half-angles (...)).
 
     In the plane M through O, O1, O2 (Eq. 3) the circles meet M at angles ±a1 (C1) and
     θ ± a2 (C2); the corridor's generators in M are the sides of the cyclic quad joining
     them (Eq. 4–5), and their 2D homogeneous intersection stays finite (w = 0) for equal circles."""
-    n1, n2 = normals[pairs[:, 0]], normals[pairs[:, 1]]
-    a1, a2 = alphas[pairs[:, 0]], alphas[pairs[:, 1]]
     e1 = n1
-    e2 = unit_rows(n2 - np.einsum("mi,mi->m", n2, n1)[:, None] * n1)
-    th = np.arctan2(np.einsum("mi,mi->m", n2, e2), np.einsum("mi,mi->m", n2, n1))
+    e2 = unit_rows(n2 - np.einsum("...i,...i->...", n2, n1)[..., None] * n1)
+    th = np.arctan2(np.einsum("...i,...i->...", n2, e2), np.einsum("...i,...i->...", n2, n1))
 
     def h(phi):
-        return np.stack([np.cos(phi), np.sin(phi), np.ones_like(phi)], axis=1)
+        return np.stack([np.cos(phi), np.sin(phi), np.ones_like(phi)], axis=-1)
 
     line1 = cross(h(a1), h(th - a2))
     line2 = cross(h(-a1), h(th + a2))
     f = cross(line1, line2)
-    out = np.concatenate([f[:, :1] * e1 + f[:, 1:2] * e2, f[:, 2:3]], axis=1)
-    norm = np.linalg.norm(out, axis=1, keepdims=True)
+    out = np.concatenate([f[..., :1] * e1 + f[..., 1:2] * e2, f[..., 2:3]], axis=-1)
+    norm = np.linalg.norm(out, axis=-1, keepdims=True)
     # two point circles: both generator lines coincide (the corridor is one segment)
     return np.where(norm > 0, out / np.where(norm > 0, norm, 1.0), np.array([0, 0, 0, 1.0]))
 
@@ -282,11 +294,38 @@ def corridor_apexes(normals: np.ndarray, alphas: np.ndarray, pairs: np.ndarray) 
 def map_generators(points: np.ndarray, apex: np.ndarray, n2: np.ndarray, a2: np.ndarray) -> np.ndarray:
     """Other ends, on the plane x·n2 = cos(a2), of the cone generators through ``points``
     (m, k, 3) and the homogeneous ``apex`` (m, 4) (§4: A' = L(F, A) ∩ plane of C_j)."""
-    d = apex[:, None, :3] - apex[:, None, 3:] * points
-    t = np.cos(a2)[:, None] - np.einsum("mki,mi->mk", points, n2)
-    den = np.einsum("mki,mi->mk", d, n2)
+    return generator_ends(points, apex[:, None], n2[:, None], np.asarray(a2)[:, None])
+
+
+def generator_ends(points: np.ndarray, apex: np.ndarray, n2: np.ndarray, a2: np.ndarray) -> np.ndarray:
+    """``map_generators`` elementwise: points (..., 3), apex (..., 4), n2 (..., 3), a2 (...)."""
+    d = apex[..., :3] - apex[..., 3:] * points
+    t = np.cos(a2) - np.einsum("...i,...i->...", points, n2)
+    den = np.einsum("...i,...i->...", d, n2)
     t = t / np.where(np.abs(den) > 1e-300, den, 1e-300)
     return points + t[..., None] * d
+
+
+def circle_points(n: np.ndarray, alpha: np.ndarray, e1: np.ndarray, e2: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """Points (..., 3) at angle ``theta`` (...) on circles (n (..., 3), alpha (...)) of the unit
+    sphere, angles measured in the frame (e1, e2) of n; broadcasts."""
+    ring = np.cos(theta)[..., None] * e1 + np.sin(theta)[..., None] * e2
+    return np.cos(alpha)[..., None] * n + np.sin(alpha)[..., None] * ring
+
+
+def corridor_ends(na, nb, aa, ab, fa, fb, th_a0, da, th_b0, db, s, apexes) -> tuple[np.ndarray, np.ndarray]:
+    """Both ends (..., 3) of the generator at arc parameter ``s`` (0..1 from T1 to T2) of the
+    corridor between circles a (na, aa) and b (nb, ab), broadcasting over leading axes (§4).
+
+    The larger circle is swept uniformly in angle (clockwise on a from th_a0 by da,
+    counter-clockwise on b from th_b0 by db, in the frames fa = (e1, e2) of a and fb of b);
+    the other end of each generator follows through the cone's apex (``apexes``: the
+    homogeneous apexes (..., 4) of the cones a -> b and b -> a, ``cone_apex``)."""
+    big = (aa >= ab)[..., None]
+    pa = circle_points(na, aa, fa[0], fa[1], th_a0 - s * da)
+    pb = circle_points(nb, ab, fb[0], fb[1], th_b0 + s * db)
+    return (np.where(big, pa, generator_ends(pb, apexes[1], na, aa)),
+            np.where(big, generator_ends(pa, apexes[0], nb, ab), pb))
 
 
 def _topology_from_hint(normals, alphas, tris):
@@ -343,6 +382,8 @@ def chocc(normals, alphas, hint=None) -> Chocc:
         i, j = np.unravel_index(np.argmin(gap), gap.shape)
         raise PleError(f"CHoCC: caps {i} and {j} overlap or touch")
     known = _topology_from_hint(normals, alphas, hint) if hint is not None else None
+    if known is None and hint is not None:  # ties: the hint may still be the hull plane rolling finds
+        known = _topology_from_hint(normals, tie_broken(normals, alphas), hint)
     tris, twin = known if known is not None else roll_planes(normals, alphas)
     pn, pa = apollonius_planes(normals[tris], alphas[tris])
     pts = contact_points(pn[:, :, None, :], pa[:, :, None], normals[tris][:, None, :, :])
@@ -443,7 +484,9 @@ def corridor_mesh(c: Chocc, arc_segments) -> ChoccMesh:
     face_par = [np.zeros((t, 3, 2))]
     cor_fns: list = [None] * len(c.corridors)
     point = c.alphas == 0.0
-    apexes = corridor_apexes(c.normals, c.alphas, c.corridors[:, :2]) if len(c.corridors) else np.zeros((0, 4))
+    pairs = c.corridors[:, :2]
+    apexes = (cone_apex(c.normals[pairs[:, 0]], c.normals[pairs[:, 1]], c.alphas[pairs[:, 0]], c.alphas[pairs[:, 1]]),
+              cone_apex(c.normals[pairs[:, 1]], c.normals[pairs[:, 0]], c.alphas[pairs[:, 1]], c.alphas[pairs[:, 0]]))
 
     def ang(i, p):
         return np.arctan2(p @ e2[i], p @ e1[i])
@@ -468,19 +511,8 @@ def corridor_mesh(c: Chocc, arc_segments) -> ChoccMesh:
             per_circle_samples[(ci, a)] = per_circle_samples[(ci, b)] = np.zeros(0, np.int64)
             continue
         m = max(1, int(arc_segments(max(da, db))))
-        cor_fns[ci] = _corridor_fn(c, a, b, e1, e2, ang(a, pa0), da, ang(b, pb0), db, apexes[ci:ci + 1])
-        s = np.arange(1, m) / m
-        if m > 1 and c.alphas[a] >= c.alphas[b]:
-            th = ang(a, pa0) - s * da
-            inner_a = _circle_points(c, a, e1, e2, th)
-            inner_b = map_generators(inner_a[None], apexes[ci:ci + 1], c.normals[b:b + 1], c.alphas[b:b + 1])[0]
-        elif m > 1:
-            th = ang(b, pb0) + s * db  # from T1 to T2 is counter-clockwise on b
-            inner_b = _circle_points(c, b, e1, e2, th)
-            rev = corridor_apexes(c.normals, c.alphas, np.array([[b, a]]))
-            inner_a = map_generators(inner_b[None], rev, c.normals[a:a + 1], c.alphas[a:a + 1])[0]
-        else:
-            inner_a = inner_b = np.zeros((0, 3))
+        cor_fns[ci] = _Corridor(c, a, b, (e1, e2), ang(a, pa0), da, ang(b, pb0), db, (apexes[0][ci], apexes[1][ci]))
+        inner_a, inner_b = cor_fns[ci].ends(np.arange(1, m) / m)
         ids_a = np.arange(nv, nv + m - 1)
         ids_b = np.arange(nv + m - 1, nv + 2 * (m - 1))
         nv += 2 * (m - 1)
@@ -524,46 +556,38 @@ def corridor_mesh(c: Chocc, arc_segments) -> ChoccMesh:
                      np.concatenate(face_cor)[keep], np.concatenate(face_par)[keep], cor_fns)
 
 
-def _corridor_fn(c: Chocc, a: int, b: int, e1, e2, th_a0: float, da: float, th_b0: float, db: float, apex):
-    """The corridor between circles a and b as a function (s, t) -> points (§4): the larger
-    circle is swept uniformly in angle (clockwise on a, counter-clockwise on b from T1 to T2),
-    the other end of each generator follows through the apex."""
-    if c.alphas[a] >= c.alphas[b]:
-        def ends(s):
-            pa = _circle_points(c, a, e1, e2, th_a0 - s * da)
-            return pa, map_generators(pa[None], apex, c.normals[b:b + 1], c.alphas[b:b + 1])[0]
-    else:
-        rev = corridor_apexes(c.normals, c.alphas, np.array([[b, a]]))
+class _Corridor:
+    """The corridor between circles a and b of ``c`` as a function (s, t) -> points (§4), see
+    ``corridor_ends``; ``ends(s)`` gives the generator's two ends on a and b."""
 
-        def ends(s):
-            pb = _circle_points(c, b, e1, e2, th_b0 + s * db)
-            return map_generators(pb[None], rev, c.normals[a:a + 1], c.alphas[a:a + 1])[0], pb
+    def __init__(self, c: Chocc, a: int, b: int, frames, th_a0: float, da: float, th_b0: float, db: float,
+                 apexes):
+        e1, e2 = frames
+        na, nb, aa, ab = c.normals[a], c.normals[b], c.alphas[a], c.alphas[b]
+        self.args = (na, nb, aa, ab, (e1[a], e2[a]), (e1[b], e2[b]), th_a0, da, th_b0, db)
+        self.apexes = apexes  # of the cones a -> b and b -> a (``cone_apex``)
 
-    def point(s, t):
-        pa, pb = ends(np.asarray(s, float))
+    def ends(self, s) -> tuple[np.ndarray, np.ndarray]:
+        return corridor_ends(*self.args, np.asarray(s, float), self.apexes)
+
+    def __call__(self, s, t) -> np.ndarray:
+        pa, pb = self.ends(s)
         return (1 - t)[:, None] * pa + t[:, None] * pb
-
-    return point
 
 
 def _corner(c: Chocc, tri: int, circle: int) -> int:
     return int(np.flatnonzero(c.triangles[tri] == circle)[0])
 
 
-def _circle_points(c: Chocc, i: int, e1, e2, theta) -> np.ndarray:
-    ca, sa = np.cos(c.alphas[i]), np.sin(c.alphas[i])
-    return ca * c.normals[i] + sa * (np.cos(theta)[:, None] * e1[i] + np.sin(theta)[:, None] * e2[i])
-
-
 def cnt_segments(delta: float) -> int:
     """Crude Natural Tessellation (§6): one planar quad per corridor; arcs wider than 120°
     get more quads so that a disk's polygon never degenerates to a 2-gon."""
-    return max(1, int(np.ceil(delta / (2 * np.pi / 3) - 1e-9)))
+    return np.maximum(1, np.ceil(np.asarray(delta) / (2 * np.pi / 3) - 1e-9)).astype(np.int64)
 
 
 def sampled_segments(segments: int):
     """Corridors as strips: about ``segments`` generators per full circle."""
-    return lambda delta: max(1, int(np.ceil(delta * segments / (2 * np.pi) - 1e-9)))
+    return lambda delta: np.maximum(1, np.ceil(np.asarray(delta) * segments / (2 * np.pi) - 1e-9)).astype(np.int64)
 
 
 def pair_hull_mesh(normals, alphas, segments: int = 32) -> ChoccMesh:

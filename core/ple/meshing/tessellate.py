@@ -23,169 +23,26 @@ U^-i V^-j W^dk V^(j+dj) U^(i+di) — independent of k — so hubs are computed o
 
 from __future__ import annotations
 
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 
 import numpy as np
 import trimesh
 
-from ..algebra.vectors import perpendicular_frames
+from ..algebra.vectors import perpendicular_frames, unit_rows
 from ..errors import PleError
 from ..model.lattice import Lattice, Region
-from .achocc import HubGeometry, hub_geometry
-from .chocc import ChoccMesh, cnt_segments, corridor_mesh, sampled_segments
-from .fillet import filleted
+from .hubs import hub_templates
 from .preview import balls_beams_mesh
 from .skin import clip_bodies, clip_to_bodies
 from .styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS
 from .styles import style as style_named
 from .unclean import find_unclean, unite
-from .weld import COLLAPSE_GRIDS, collapse_short_edges, grid_spacing
+from .weld import COLLAPSE_GRIDS, grid_spacing
 
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
 MAX_LEVELS = 6
 MAX_CHECK_GROUPS = 500_000  # streamed regions up to this size are checked for unclean hubs first
-
-
-@dataclass
-class HubTemplate:
-    """A hub mesh in the template frame: vertices (m, 3), outward faces (f, 3), per incident
-    beam the ring of vertex ids on its contact circle (clockwise about the beam direction) and
-    the fan faces capping its disk (using one extra vertex, the disk centre)."""
-
-    vertices: np.ndarray
-    faces: np.ndarray
-    rings: list
-    caps: list
-    geometry: HubGeometry
-
-
-def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray, np.ndarray, list]:
-    """§6 refinement on the unit-sphere CNT: ``levels`` 1-to-4 splits (a corridor quad,
-    two triangles, becomes 8 around its centre), arc midpoints snapped to their circle, other
-    new vertices centrally projected. Returns vertices in hub units (centre at 0), faces, rings.
-
-    A new vertex is first placed on the CHoCC hull itself — on a planar triangle, or on the
-    curved corridor at the mean of its corners' corridor coordinates (``ChoccMesh.corridor_point``)
-    — and then projected from the centre. A point of the planar CNT quad near a long arc's chord
-    lies in that circle's cone, and its projection would land on the beam beyond the contact
-    disk, folding into the beam's strip; a point of the hull never does (the centre is inside
-    the hull, so the cones over its faces, corridors and disks do not overlap)."""
-    c = hub.chocc
-    real = hub.slots
-    r_plus = hub.r_plus
-    hull = mesh.vertices.copy()  # positions on the CHoCC hull (unit sphere scale)
-    verts = mesh.vertices * r_plus
-    circle = mesh.vertex_circle.copy()
-    on_circle = circle < real
-    off = ~on_circle
-    if off.any():  # point circles: onto the lattice too
-        u = verts[off] / np.linalg.norm(verts[off], axis=1, keepdims=True)
-        verts[off] = u * hub.exit_distance(u)[:, None]
-    faces = mesh.faces
-    fcor = mesh.face_corridor if mesh.face_corridor is not None else np.full(len(faces), -1)
-    fpar = mesh.face_params if mesh.face_params is not None else np.zeros((len(faces), 3, 2))
-    rings = [r.copy() for r in mesh.rings]
-    frames = perpendicular_frames(c.normals)
-    for _ in range(levels):
-        nv = len(verts)
-        e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-        ekey = np.minimum(e[:, 0], e[:, 1]) * nv + np.maximum(e[:, 0], e[:, 1])
-        uniq, inv = np.unique(ekey, return_inverse=True)
-        inv = inv.reshape(-1)
-        ua, ub = uniq // nv, uniq % nv
-        # hull points of the face-edge midpoints: corridor coordinates on corridors, chords on triangles
-        ecor = np.tile(fcor, 3)
-        epar = 0.5 * (np.concatenate([fpar[:, 0], fpar[:, 1], fpar[:, 2]])
-                      + np.concatenate([fpar[:, 1], fpar[:, 2], fpar[:, 0]]))
-        hmid = 0.5 * (hull[e[:, 0]] + hull[e[:, 1]])
-        onc = np.flatnonzero(ecor >= 0)
-        if len(onc):
-            hmid[onc] = mesh.corridor_point(ecor[onc], epar[onc, 0], epar[onc, 1])
-        # one hull point per edge: a corridor's if any face on it is a corridor (they agree on
-        # the generators shared with triangles)
-        pick = np.full(len(uniq), -1)
-        order = np.argsort(ecor >= 0, kind="stable")  # triangles first, corridors overwrite
-        pick[inv[order]] = order
-        hnew = hmid[pick]
-        mids = 0.5 * (verts[ua] + verts[ub])
-        new_ids = nv + np.arange(len(uniq))
-        is_arc = np.zeros(len(uniq), bool)
-        for ci in range(real):
-            ring = rings[ci]
-            if len(ring) < 2:
-                continue
-            x, y = ring, np.roll(ring, -1)
-            q = np.searchsorted(uniq, np.minimum(x, y) * nv + np.maximum(x, y))
-            is_arc[q] = True
-            mids[q] = _arc_mids(verts[x], verts[y], c.normals[ci], c.alphas[ci], r_plus, frames, ci)
-            hnew[q] = mids[q] / r_plus
-            out = np.empty(2 * len(ring), np.int64)
-            out[0::2], out[1::2] = ring, new_ids[q]
-            rings[ci] = out
-        proj = ~is_arc
-        if proj.any():
-            u = hnew[proj] / np.linalg.norm(hnew[proj], axis=1, keepdims=True)
-            mids[proj] = u * hub.exit_distance(u)[:, None]
-        verts = np.concatenate([verts, mids])
-        hull = np.concatenate([hull, hnew])
-        m = new_ids[inv].reshape(3, -1).T  # midpoints of edges 01, 12, 20 per face
-        v0, v1, v2 = faces.T
-        faces = np.concatenate([np.stack([v0, m[:, 0], m[:, 2]], 1), np.stack([m[:, 0], v1, m[:, 1]], 1),
-                                np.stack([m[:, 2], m[:, 1], v2], 1), m])
-        p0, p1, p2 = fpar[:, 0], fpar[:, 1], fpar[:, 2]
-        p01, p12, p20 = 0.5 * (p0 + p1), 0.5 * (p1 + p2), 0.5 * (p2 + p0)
-        fpar = np.concatenate([np.stack([p0, p01, p20], 1), np.stack([p01, p1, p12], 1),
-                               np.stack([p20, p12, p2], 1), np.stack([p01, p12, p20], 1)])
-        fcor = np.tile(fcor, 4)
-    return verts, faces, rings
-
-
-def _arc_mids(pa, pb, n, alpha, r_plus, frames, ci) -> np.ndarray:
-    """Midpoints of the clockwise arcs (about n) from pa (k, 3) to pb on circle (n, alpha) of S⁺."""
-    e1, e2 = frames[0][ci], frames[1][ci]
-    ta, tb = np.arctan2(pa @ e2, pa @ e1), np.arctan2(pb @ e2, pb @ e1)
-    d = (ta - tb) % (2 * np.pi)
-    d[d > 2 * np.pi - 1e-9] = 0.0
-    t = ta - d / 2
-    return r_plus * (np.cos(alpha) * n + np.sin(alpha) * (np.cos(t)[:, None] * e1 + np.sin(t)[:, None] * e2))
-
-
-def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, levels: int,
-                 segments: int, hint=None, min_edge: float = 0.0, fillet: float | None = None,
-                 target=None) -> HubTemplate:
-    """Tessellate one junction: ball (center (3,), radius) with beams to the balls
-    (neighbor_centers (S, 3), neighbor_radii (S,)), in the given style. Edges shorter than
-    ``min_edge`` are collapsed (``ple.meshing.weld.collapse_short_edges``) so that the mesh keeps its
-    topology when written in float32. ``target``: an optional wrapper of the HubGeometry whose
-    ``exit_distance`` the refined vertices are projected to (default: the lattice, or the fillet)."""
-    center = np.asarray(center, float)
-    vec = np.asarray(neighbor_centers, float).reshape(-1, 3) - center
-    lengths = np.linalg.norm(vec, axis=1)
-    if np.any(lengths <= 0):
-        raise PleError("a beam joins two balls with the same centre")
-    dirs = vec / lengths[:, None]
-    hub = hub_geometry(radius, dirs, np.asarray(neighbor_radii, float).reshape(-1), lengths, hint)
-    hub = filleted(hub, fillet, hint)  # optional junction fillet (001_ §6 Eq. 6): projection onto the blend
-    hub = target(hub) if target is not None else hub
-    if style == "refined":
-        base = corridor_mesh(hub.chocc, cnt_segments)
-        verts, faces, rings = _refine(base, hub, levels)
-    else:
-        base = corridor_mesh(hub.chocc, cnt_segments if style == "cnt" else sampled_segments(segments))
-        verts, faces, rings = base.vertices * hub.r_plus, base.faces, base.rings
-    if min_edge > 0:
-        faces, rings, _ = collapse_short_edges(verts, faces, rings, min_edge)
-    axial = hub.r_plus * np.cos(hub.alphas)
-    caps = []
-    all_verts = [verts]
-    nv = len(verts)
-    for s in range(hub.slots):
-        q = rings[s][::-1]  # counter-clockwise about the beam: the disk's outward orientation
-        all_verts.append((dirs[s] * axial[s])[None])
-        caps.append(np.stack([np.full(len(q), nv), q, np.roll(q, -1)], axis=1))
-        nv += 1
-    return HubTemplate(np.concatenate(all_verts) + center, faces, [rings[s] for s in range(hub.slots)], caps, hub)
 
 
 def zipper(angles_a: np.ndarray, angles_b: np.ndarray) -> np.ndarray:
@@ -195,50 +52,54 @@ def zipper(angles_a: np.ndarray, angles_b: np.ndarray) -> np.ndarray:
     Returns faces (ma + mb, 3, 2) of (ring, index) pairs, ring 0 = A, 1 = B, oriented with
     outward normals: the beam traverses A counter-clockwise and B clockwise (the reverse of
     the hubs' rings), so the strip and the hubs close up (§6: a triangle strip choosing the
-    next sample on one ring or the other by angle)."""
-    ma, mb = len(angles_a), len(angles_b)
+    next sample on one ring or the other by angle). ``zippers`` for K strips at once."""
+    return zippers(np.asarray(angles_a)[None], np.asarray(angles_b)[None])[0]
+
+
+def zippers(angles_a: np.ndarray, angles_b: np.ndarray) -> np.ndarray:
+    """``zipper`` of K strips whose rings have the same sizes: angles (K, ma) and (K, mb);
+    faces (K, ma + mb, 3, 2)."""
+    k, ma = angles_a.shape
+    mb = angles_b.shape[1]
     two_pi = 2 * np.pi
+    rows = np.arange(k)[:, None]
     pa = _unwrap_ring(angles_a)
-    rel = (angles_b - angles_a[0] + np.pi) % two_pi - np.pi
-    b0 = int(np.argmin(np.round(np.abs(rel), 9)))
-    order_b = (np.arange(mb) + b0) % mb
-    pb = rel[b0] + _unwrap_ring(angles_b[order_b])
-    key_a = np.append(pa[1:], two_pi)  # a-event s (1..ma): reach A[s]
-    key_b = np.append(pb[1:], rel[b0] + two_pi)
-    keys = np.round(np.concatenate([key_a, key_b]), 9)  # equal angles (symmetric rings) tie robustly
-    is_b = np.concatenate([np.zeros(ma, bool), np.ones(mb, bool)])
-    order = np.lexsort((is_b, keys))
-    is_b = is_b[order]
-    seen_b = np.cumsum(is_b) - is_b  # b-events before each event
-    seen_a = np.cumsum(~is_b) - ~is_b
-    faces = np.zeros((ma + mb, 3, 2), np.int64)
+    rel = (angles_b - angles_a[:, :1] + np.pi) % two_pi - np.pi
+    b0 = np.argmin(np.round(np.abs(rel), 9), axis=1)
+    order_b = (np.arange(mb) + b0[:, None]) % mb
+    rel0 = rel[np.arange(k), b0][:, None]
+    pb = rel0 + _unwrap_ring(angles_b[rows, order_b])
+    key_a = np.concatenate([pa[:, 1:], np.full((k, 1), two_pi)], axis=1)  # a-event s (1..ma): reach A[s]
+    key_b = np.concatenate([pb[:, 1:], rel0 + two_pi], axis=1)
+    keys = np.round(np.concatenate([key_a, key_b], axis=1), 9)  # equal angles (symmetric rings) tie robustly
+    is_b = np.broadcast_to(np.concatenate([np.zeros(ma, bool), np.ones(mb, bool)]), keys.shape)
+    order = np.lexsort((is_b, keys), axis=-1)
+    is_b = is_b[rows, order]
+    seen_b = np.cumsum(is_b, axis=1) - is_b  # b-events before each event
+    seen_a = np.cumsum(~is_b, axis=1) - ~is_b
     # a-event s: (A[s-1], A[s], B[seen_b]); b-event t: (B[t], B[t-1], A[seen_a])
-    sa = seen_a + 1
-    tb = seen_b + 1
-    fa = ~is_b
-    faces[fa, 0] = np.stack([np.zeros(fa.sum(), np.int64), (sa[fa] - 1) % ma], 1)
-    faces[fa, 1] = np.stack([np.zeros(fa.sum(), np.int64), sa[fa] % ma], 1)
-    faces[fa, 2] = np.stack([np.ones(fa.sum(), np.int64), order_b[seen_b[fa] % mb]], 1)
-    fb = is_b
-    faces[fb, 0] = np.stack([np.ones(fb.sum(), np.int64), order_b[tb[fb] % mb]], 1)
-    faces[fb, 1] = np.stack([np.ones(fb.sum(), np.int64), order_b[(tb[fb] - 1) % mb]], 1)
-    faces[fb, 2] = np.stack([np.zeros(fb.sum(), np.int64), seen_a[fb] % ma], 1)
-    return faces
+    sa, tb = seen_a + 1, seen_b + 1
+    ring = np.where(is_b[..., None], [1, 1, 0], [0, 0, 1])
+    ia = np.stack([(sa - 1) % ma, sa % ma, order_b[rows, seen_b % mb]], axis=-1)
+    ib = np.stack([order_b[rows, tb % mb], order_b[rows, (tb - 1) % mb], seen_a % ma], axis=-1)
+    return np.stack([ring, np.where(is_b[..., None], ib, ia)], axis=-1).astype(np.int64)
 
 
 class _Tessellator:
     """Builds region meshes box by box, caching hub templates and beam strips."""
 
     def __init__(self, lat: Lattice, region: Region, style: str, levels: int, segments: int,
-                 fillet: float | None = None, grid: float | None = None):
+                 fillet: float | None = None, batched: bool = True, grid: float | None = None):
         lat.validate()
         self.fillet = fillet
+        self.batched = batched  # hub templates in batches of one CHoCC topology (False: one by one)
         self.lat, self.region, self.style, self.levels, self.segments = lat, region, style, levels, segments
         nn = len(lat.nodes)
         # slots of template node n: (pattern, +1 outgoing | -1 incoming)
         self.slots = [[(p, 1) for p, b in enumerate(lat.beams) if b.n1 == n]
                       + [(p, -1) for p, b in enumerate(lat.beams) if b.n2 == n] for n in range(nn)]
         self.templates: dict = {}
+        self.tpl_list: list = []  # (template, slot map) by template id; only appended to
         self.strips: dict = {}
         self.hints: dict = {}
         self.scale = lat.template_radii * KEY_QUANTUM
@@ -312,6 +173,8 @@ class _Tessellator:
         tids = np.zeros(len(idx), np.int64)
         info = {}
         nv = lat.counts[1]
+        new: dict = {}  # hub shapes not seen yet: key -> (node, own radius, neighbourhood)
+        per_node = []
         for n in range(len(lat.nodes)):
             sel = np.flatnonzero(idx[:, 3] == n)
             if len(sel) == 0:
@@ -344,26 +207,51 @@ class _Tessellator:
             if lat.radius_field is not None:  # the hub's own graded radius, in its frame
                 own = lat.node_balls(idx[reps])[1] / lat.group_factors(idx[reps, 0], idx[reps, 1], idx[reps, 2])
             own_q = np.round(own / self.scale[n]).astype(np.int64)
-            rep_tid = np.zeros(len(reps), np.int64)
-            for u in range(len(reps)):
-                key = (n, q[u].tobytes(), int(own_q[u]))
-                if key not in self.templates:
-                    have = ~np.isnan(local[u, :, 3])
-                    hint_key = (n, have.tobytes())  # the last hub with these beams: likely the same hull
-                    tpl = hub_template(lat.template_centers[n], float(own[u]), local[u, have, :3],
-                                       local[u, have, 3], self.style, self.levels, self.segments,
-                                       self.hints.get(hint_key), self.min_edge, self.fillet)
-                    self.hints[hint_key] = tpl.geometry.base_triangles
-                    slot_of = np.cumsum(have) - 1
-                    self.templates[key] = (len(self.templates), tpl, np.where(have, slot_of, -1))
-                rep_tid[u] = self.templates[key][0]
-            tids[sel] = rep_tid[inv.reshape(-1)]
+            keys = [(n, q[u].tobytes(), int(own_q[u])) for u in range(len(reps))]
+            for u, key in enumerate(keys):
+                if key not in self.templates and key not in new:
+                    new[key] = (n, own[u], local[u])
+            per_node.append((sel, inv.reshape(-1), keys))
+        self._build_templates(new)
+        for sel, inv, keys in per_node:
+            tids[sel] = np.array([self.templates[key][0] for key in keys], np.int64)[inv]
         return tids, m, minv, info
+
+    def _build_templates(self, new: dict) -> None:
+        """Templates of the hub shapes ``new`` (key -> (template node, own radius, neighbourhood
+        (S, 4) with NaN rows for missing beams)), ids in the order of ``new``. Hubs with the same
+        beam slots are built together (``hub_templates``: batches of one CHoCC topology),
+        whatever their template node — the one-group form of group-mapped lattices
+        (``Lattice.explicit``) has one template node per hub."""
+        lat = self.lat
+        by_beams: dict = {}
+        for key, (n, own, local) in new.items():
+            have = ~np.isnan(local[:, 3])
+            by_beams.setdefault(have.tobytes(), []).append((key, n, own, local[have]))
+        built = {}
+        for hint_key, hubs in by_beams.items():  # the last hub with these beams: likely the same hull
+            keys, nodes, own, local = zip(*hubs)
+            local = np.array(local).reshape(len(hubs), -1, 4)
+            tpls, self.hints[hint_key] = hub_templates(
+                lat.template_centers[list(nodes)], np.array(own), local[..., :3], local[..., 3], self.style,
+                self.levels, self.segments, self.hints.get(hint_key), self.min_edge, self.fillet, self.batched)
+            built.update(zip(keys, tpls))
+        for key, (_, _, local) in new.items():
+            have = ~np.isnan(local[:, 3])
+            self.templates[key] = (len(self.templates), built[key], np.where(have, np.cumsum(have) - 1, -1))
+            self.tpl_list.append(self.templates[key][1:])
 
     # ----- assembly ---------------------------------------------------------------------
     def build(self, box: Region) -> tuple[np.ndarray, np.ndarray]:
         """Vertices and faces of the hubs of ``box`` and of the beams from them (to balls in
         the region), with capped disks where a beam leaves the region."""
+        return self.assemble(self.prepare(box))
+
+    def prepare(self, box: Region):
+        """The first half of ``build``: the box's nodes (its own and the ghosts at the far ends
+        of its beams) and their hub templates (built here if new). Boxes must be prepared in
+        order, one at a time: template ids (and so the output) then do not depend on how many
+        boxes are assembled at once."""
         lat = self.lat
         nn = len(lat.nodes)
         own = box.node_index(nn)
@@ -379,16 +267,21 @@ class _Tessellator:
         ghosts = np.unique(np.concatenate(ghosts), axis=0) if ghosts else np.zeros((0, 4), np.int64)
         idx = np.concatenate([own, ghosts]).astype(np.int64)
         n_own = len(own)
-        tids, m, minv, info = self.instances(idx)
-        tpl_list = {v[0]: (v[1], v[2]) for v in self.templates.values()}
-        sizes = np.array([len(tpl_list[t][0].vertices) for t in range(len(tpl_list))])
+        return (idx, n_own) + self.instances(idx)
+
+    def assemble(self, prepared) -> tuple[np.ndarray, np.ndarray]:
+        """The second half of ``build``: vertices and faces of a prepared box (``prepare``). Reads
+        the template cache only (and fills the strip cache), so boxes may be assembled at once."""
+        idx, n_own, tids, m, minv, info = prepared
+        tpl_list = self.tpl_list
         order = np.argsort(tids, kind="stable")
-        starts = np.concatenate([[0], np.cumsum(sizes[tids[order]])])
+        ut, first = np.unique(tids[order], return_index=True)
+        sizes = np.array([len(tpl_list[t][0].vertices) for t in ut], np.int64)
+        starts = np.concatenate([[0], np.cumsum(np.repeat(sizes, np.diff(np.append(first, len(order)))))])
         offsets = np.zeros(len(idx), np.int64)
         offsets[order] = starts[:-1]
         verts = np.empty((int(starts[-1]), 3))
         faces = []
-        ut, first = np.unique(tids[order], return_index=True)
         for t, lo, hi in zip(ut, first, np.append(first[1:], len(order))):
             inst = order[lo:hi]
             tpl = tpl_list[t][0]
@@ -419,7 +312,7 @@ class _Tessellator:
         nn = len(lat.nodes)
         lin = ((idx[:, 0] * nv + idx[:, 1]) * nw + idx[:, 2]) * nn + idx[:, 3]
         srt = np.argsort(lin)
-        n_tpl = max(len(tpl_list), 1)
+        n_tpl = int(tids.max()) + 1 if len(tids) else 1
         out = []
         for p, b in enumerate(lat.beams):
             src = np.flatnonzero(idx[:n_own, 3] == b.n1)
@@ -439,45 +332,65 @@ class _Tessellator:
             inv = inv.reshape(-1)
             order = np.argsort(inv, kind="stable")
             bounds = np.searchsorted(inv[order], np.arange(len(first) + 1))
+            a0s, b0s = src[first], dst[first]
+            rel = np.einsum("uij,ujk->uik", minv[a0s], m[b0s])
+            qrel = np.round(rel[:, :3] / 1e-9).astype(np.int64)
+            keys = [(p, int(tids[a0]), int(tids[b0]), qrel[u].tobytes()) for u, (a0, b0) in enumerate(zip(a0s, b0s))]
+            rings = [(tpl_list[tids[a0]][0].rings[tpl_list[tids[a0]][1][slot_a]],
+                      tpl_list[tids[b0]][0].rings[tpl_list[tids[b0]][1][slot_b]]) for a0, b0 in zip(a0s, b0s)]
+            self._add_strips(keys, rings, a0s, b0s, tids, rel, tpl_list, b)
             for u in range(len(first)):
                 sel = order[bounds[u]:bounds[u + 1]]
-                a0, b0 = src[first[u]], dst[first[u]]
-                ta, sa_map = tpl_list[tids[a0]]
-                tb, sb_map = tpl_list[tids[b0]]
-                ring_a = ta.rings[sa_map[slot_a]]
-                ring_b = tb.rings[sb_map[slot_b]]
-                rel = minv[a0] @ m[b0]
-                key = (p, int(tids[a0]), int(tids[b0]), np.round(rel[:3] / 1e-9).astype(np.int64).tobytes())
-                if key not in self.strips:
-                    self.strips[key] = _strip(ta, ring_a, tb, ring_b, rel,
-                                              lat.template_centers[b.n1], lat.template_centers[b.n2])
-                f = self.strips[key]
-                which, li = f[..., 1], f[..., 0]
-                local = np.where(which == 0, ring_a[np.where(which == 0, li, 0)], ring_b[np.where(which == 1, li, 0)])
+                which, local = self.strips[keys[u]]
                 base = np.where(which[None] == 0, offsets[src[sel]][:, None, None], offsets[dst[sel]][:, None, None])
                 out.append((base + local[None]).reshape(-1, 3))
         return out
 
+    def _add_strips(self, keys, rings, a0s, b0s, tids, rel, tpl_list, beam) -> None:
+        """Cache the strips (ring 0|1 per corner, template vertex id) of the beams ``keys`` not
+        seen yet: zipped together (``_strips``) per pair of ring sizes."""
+        todo: dict = {}
+        for u, key in enumerate(keys):
+            if key not in self.strips and key not in todo:
+                todo[key] = u
+        by_size: dict = {}
+        for u in todo.values():
+            by_size.setdefault((len(rings[u][0]), len(rings[u][1])), []).append(u)
+        ca, cb = self.lat.template_centers[beam.n1], self.lat.template_centers[beam.n2]
+        for us in by_size.values():
+            pa = np.stack([tpl_list[tids[a0s[u]]][0].vertices[rings[u][0]] for u in us])
+            pb = np.stack([tpl_list[tids[b0s[u]]][0].vertices[rings[u][1]] for u in us])
+            f = _strips(pa, pb, rel[us], ca, cb)
+            which, li = f[..., 1], f[..., 0]
+            for k, u in enumerate(us):
+                ring_a, ring_b = rings[u]
+                local = np.where(which[k] == 0, ring_a[np.where(which[k] == 0, li[k], 0)],
+                                 ring_b[np.where(which[k] == 1, li[k], 0)])
+                self.strips[keys[u]] = (which[k], local)
+
 
 def _unwrap_ring(theta: np.ndarray) -> np.ndarray:
-    """Angles of a counter-clockwise ring relative to its first vertex, non-decreasing
+    """Angles of counter-clockwise rings (..., m) relative to their first vertex, non-decreasing
     (coincident vertices whose round-off steps slightly backwards count as zero steps)."""
-    step = np.diff(theta) % (2 * np.pi)
+    step = np.diff(theta, axis=-1) % (2 * np.pi)
     step[step > 2 * np.pi - 1e-9] = 0.0
-    return np.concatenate([[0.0], np.cumsum(step)])
+    return np.concatenate([np.zeros(theta.shape[:-1] + (1,)), np.cumsum(step, axis=-1)], axis=-1)
 
 
-def _strip(ta: HubTemplate, ring_a, tb: HubTemplate, ring_b, rel, ca, cb) -> np.ndarray:
-    """Beam strip faces (k, 3, 2) as (local ring index, ring 0|1), computed in hub A's frame."""
-    pa = ta.vertices[ring_a]
-    pb = tb.vertices[ring_b] @ rel[:3, :3].T + rel[:3, 3]
-    cb_local = rel[:3, :3] @ cb + rel[:3, 3]
-    d = cb_local - ca
-    d /= np.linalg.norm(d)
-    e1, e2 = perpendicular_frames(d[None])
-    ang = lambda p: np.arctan2((p - ca) @ e2[0], (p - ca) @ e1[0])  # noqa: E731
-    a_ccw = np.arange(len(ring_a))[::-1]  # hub rings run clockwise about their outward normal
-    f = zipper(ang(pa[a_ccw]), ang(pb))
+def _strips(pa: np.ndarray, pb: np.ndarray, rel: np.ndarray, ca, cb) -> np.ndarray:
+    """Beam strip faces (K, k, 3, 2) as (local ring index, ring 0|1) of K beams whose rings have
+    the same sizes, computed in hub A's frame: ring vertices pa (K, ma, 3) of hub A, pb (K, mb, 3)
+    of hub B in its own frame, rel (K, 4, 4) B's frame in A's; ca, cb the two ball centres."""
+    pb = np.einsum("kij,kmj->kmi", rel[:, :3, :3], pb) + rel[:, None, :3, 3]
+    d = unit_rows(np.einsum("kij,j->ki", rel[:, :3, :3], cb) + rel[:, :3, 3] - ca)
+    e1, e2 = perpendicular_frames(d)
+
+    def ang(p):
+        q = p - ca
+        return np.arctan2(np.einsum("kmi,ki->km", q, e2), np.einsum("kmi,ki->km", q, e1))
+
+    a_ccw = np.arange(pa.shape[1])[::-1]  # hub rings run clockwise about their outward normal
+    f = zippers(ang(pa[:, a_ccw]), ang(pb))
     out = np.empty_like(f)
     out[..., 1] = f[..., 0]
     out[..., 0] = np.where(f[..., 0] == 0, a_ccw[np.where(f[..., 0] == 0, f[..., 1], 0)], f[..., 1])
@@ -585,9 +498,11 @@ def build_with_unions(tess: _Tessellator, ev, nodes) -> tuple[np.ndarray, np.nda
 
 
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
-                   segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None, _tess=None):
+                   segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None, _tess=None,
+                   workers: int = 1):
     """Stream the region's mesh box by box (bounded memory) as pairs (vertices (V, 3), faces
-    (k, 3)); hubs next to a box boundary are repeated in both boxes (their vertices, not faces)."""
+    (k, 3)); hubs next to a box boundary are repeated in both boxes (their vertices, not faces).
+    ``workers`` threads assemble boxes at once; the stream is the same for any number."""
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
     if style == "balls-beams" or clip_bodies(lat):  # a preview; or one mesh cut at a body's surface
@@ -599,14 +514,20 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
         r = lat.region()
     tess = _tess if _tess is not None else _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style))
     boxes = list(lat.iter_slabs(max_groups=max_groups, region=r))
-    # build the next box in a worker thread while the caller writes this one (numpy releases
-    # the GIL in its large array operations): at most two boxes are held at a time
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        pending = pool.submit(tess.build, boxes[0]) if boxes else None
-        for nxt in boxes[1:] + [None]:
-            done = pending.result()
-            pending = pool.submit(tess.build, nxt) if nxt is not None else None
-            yield done
+    # boxes are prepared (hub templates) in order by one thread and assembled by ``workers``
+    # threads (numpy releases the GIL in its large array operations), the next ones while the
+    # caller writes this one: at most workers + 1 boxes are held at a time, and the output does
+    # not depend on the number of workers
+    workers = max(1, int(workers))
+    with ThreadPoolExecutor(max_workers=1) as prep, ThreadPoolExecutor(max_workers=workers) as pool:
+        pending: deque = deque()
+        for box in boxes:
+            ready = prep.submit(tess.prepare, box)
+            pending.append(pool.submit(lambda ready=ready: tess.assemble(ready.result())))
+            if len(pending) > workers:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
 
 
 def weld_chunks(chunks) -> tuple[np.ndarray, np.ndarray]:
@@ -638,7 +559,8 @@ def output_grid(lat: Lattice, region=None) -> float:
 
 
 def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
-                   segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None):
+                   segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None,
+                   workers: int = 1):
     """The streamed mesh of a region (``iter_triangles``) if it has no unclean hubs: (report,
     chunks). Regions up to MAX_CHECK_GROUPS groups are checked first (``ple.meshing.unclean``;
     the check's hub templates are reused by the stream); report is None for larger regions
@@ -654,4 +576,4 @@ def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: in
     report = tess.find_unclean()[0] if r.groups <= MAX_CHECK_GROUPS else None
     if report is not None and len(report.nodes):
         return report, None
-    return report, iter_triangles(lat, r, style, levels, segments, max_groups, _tess=tess)
+    return report, iter_triangles(lat, r, style, levels, segments, max_groups, _tess=tess, workers=workers)

@@ -103,7 +103,7 @@ COLLAPSE_GRIDS = 4  # template edges shorter than this many grid spacings (in th
 
 
 def collapse_short_edges(vertices: np.ndarray, faces: np.ndarray, rings: list, tol: float,
-                         keep: np.ndarray | None = None) -> tuple[np.ndarray, list, int]:
+                         keep: np.ndarray | None = None, rounds: int | None = None) -> tuple[np.ndarray, list, int]:
     """Collapse the edges of a closed patch shorter than ``tol`` (shortest first), each only if
     it passes the link condition (the two vertices share exactly the two opposite vertices of
     the edge's faces), so the result stays an oriented 2-manifold with boundary rings.
@@ -111,7 +111,8 @@ def collapse_short_edges(vertices: np.ndarray, faces: np.ndarray, rings: list, t
     ``rings``: lists of vertex ids (the contact rings; a collapsed ring edge leaves its ring one
     vertex shorter). A vertex on a ring, or marked in ``keep``, survives a collapse with a
     vertex that is not. Vertex ids and positions are unchanged (removed vertices become
-    unreferenced). Returns (faces, rings, number of collapses)."""
+    unreferenced). ``rounds``: stop after this many passes over the short edges (default: until
+    none is left or none can be collapsed). Returns (faces, rings, number of collapses)."""
     faces = np.asarray(faces, np.int64).reshape(-1, 3)
     v = np.asarray(vertices, float)
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
@@ -138,7 +139,9 @@ def collapse_short_edges(vertices: np.ndarray, faces: np.ndarray, rings: list, t
         for w in np.asarray(r, np.int64).tolist():
             ring_of.setdefault(w, set()).add(ri)
     done = 0
-    while True:
+    passes = 0
+    while rounds is None or passes < rounds:
+        passes += 1
         cur = np.array([fl[i] for i in np.flatnonzero(live)], np.int64).reshape(-1, 3)
         e = np.concatenate([cur[:, [0, 1]], cur[:, [1, 2]], cur[:, [2, 0]]])
         e = np.unique(np.sort(e, axis=1), axis=0)
@@ -147,7 +150,7 @@ def collapse_short_edges(vertices: np.ndarray, faces: np.ndarray, rings: list, t
         if not len(short):
             break
         progress = 0
-        for x, y in e[short[np.argsort(d[short])]].tolist():
+        for x, y in e[short[np.argsort(d[short], kind="stable")]].tolist():
             if alias[x] != x or alias[y] != y or float(np.linalg.norm(v[x] - v[y])) >= tol:
                 continue
             shared = vf[x] & vf[y]

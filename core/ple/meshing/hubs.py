@@ -1,0 +1,528 @@
+"""Hub templates: the tessellated junction of one ball, alone or in batches (CHoCC paper 001_ §5–6).
+
+``hub_template`` builds one hub: its ACHoCC junction (``ple.meshing.achocc``), the CNT or
+sampled corridors of its CHoCC (``ple.meshing.chocc.corridor_mesh``), the §6 refinement and the
+caps of its contact disks.
+
+``hub_templates`` builds many hubs of one template node that have the same beams (a curved
+steady lattice has one hub shape per (i, j) column). Neighbouring hubs differ only slightly,
+so they share the combinatorics of their CHoCC: which circle triples make the triangles and
+which pairs the corridors, how many strip quads each corridor has, which corridors degenerate
+to an edge. One hub of a group (the representative) is built by ``hub_template``; every other
+hub whose CHoCC has exactly that topology (validated per hub, as ``chocc.chocc`` validates a
+hint) gets its vertices computed as arrays (hubs, …) — triangle vertices, corridor apexes and
+arc samples, refinement and caps — and shares the representative's faces and rings. Hubs that
+differ (another topology, an off-centre fix, an unclean junction, short edges to collapse) are
+the next representatives or are built alone.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..algebra.vectors import cross, perpendicular_frames, unit_rows
+from ..errors import PleError
+from .achocc import (
+    CENTRE_MARGIN,
+    INFLATE,
+    MAX_DISK_REACH,
+    MIN_DISK_RADIUS,
+    HubGeometry,
+    exit_distances,
+    hub_geometry,
+)
+from .chocc import (
+    DEGENERATE_ARC,
+    Chocc,
+    ChoccMesh,
+    apollonius_planes,
+    cnt_segments,
+    cone_apex,
+    contact_points,
+    corridor_ends,
+    corridor_mesh,
+    sampled_segments,
+    tie_broken,
+)
+from .fillet import filleted
+from .weld import collapse_short_edges
+
+BATCH_VERTICES = 1 << 21  # vertices of one batch's largest array level (bounds the batch's memory)
+
+
+@dataclass
+class HubTemplate:
+    """A hub mesh in the template frame: vertices (m, 3), outward faces (f, 3), per incident
+    beam the ring of vertex ids on its contact circle (clockwise about the beam direction) and
+    the fan faces capping its disk (using one extra vertex, the disk centre)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    rings: list
+    caps: list
+    geometry: HubGeometry
+
+
+def _segments(style: str, segments: int):
+    return cnt_segments if style in ("cnt", "refined") else sampled_segments(segments)
+
+
+def refine_arrays(verts, hull, faces, fcor, fpar, rings, real, normals, alphas, r_plus, corridor_point,
+                  exit_distance, levels: int):
+    """§6 refinement of H hubs with one CNT topology: ``levels`` 1-to-4 splits (a corridor quad,
+    two triangles, becomes 8 around its centre), arc midpoints snapped to their circle, other new
+    vertices centrally projected.
+
+    verts (H, V, 3) in hub units (centre at 0), hull (H, V, 3) the same vertices on the CHoCC
+    hull (unit sphere); faces (F, 3), their corridor fcor (F,) (-1: a planar CHoCC triangle) and
+    corridor coordinates fpar (F, 3, 2); rings (per circle, vertex ids) of which the first
+    ``real`` are contact circles; normals (H, n, 3), alphas (H, n), r_plus (H,);
+    ``corridor_point(cor (k,), s (k,), t (k,))`` -> (H, k, 3) points of the curved corridors;
+    ``exit_distance(u (H, k, 3))`` -> (H, k) distance to the lattice along unit rays.
+
+    A new vertex is first placed on the CHoCC hull itself — on a planar triangle, or on the
+    curved corridor at the mean of its corners' corridor coordinates — and then projected from
+    the centre. A point of the planar CNT quad near a long arc's chord lies in that circle's
+    cone, and its projection would land on the beam beyond the contact disk, folding into the
+    beam's strip; a point of the hull never does (the centre is inside the hull, so the cones
+    over its faces, corridors and disks do not overlap). Returns (verts (H, V', 3), faces, rings)."""
+    e1, e2 = perpendicular_frames(normals)
+    rp = np.asarray(r_plus, float)[:, None, None]
+    rings = [np.asarray(r).copy() for r in rings]
+    for _ in range(levels):
+        nv = verts.shape[1]
+        e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+        ekey = np.minimum(e[:, 0], e[:, 1]) * nv + np.maximum(e[:, 0], e[:, 1])
+        uniq, inv = np.unique(ekey, return_inverse=True)
+        inv = inv.reshape(-1)
+        ua, ub = uniq // nv, uniq % nv
+        ecor = np.tile(fcor, 3)
+        epar = 0.5 * (np.concatenate([fpar[:, 0], fpar[:, 1], fpar[:, 2]])
+                      + np.concatenate([fpar[:, 1], fpar[:, 2], fpar[:, 0]]))
+        # one hull point per edge: a corridor's if any face on it is a corridor (they agree on
+        # the generators shared with triangles), else the chord's midpoint on a triangle
+        pick = np.full(len(uniq), -1)
+        order = np.argsort(ecor >= 0, kind="stable")  # triangles first, corridors overwrite
+        pick[inv[order]] = order
+        hnew = 0.5 * (hull[:, e[pick, 0]] + hull[:, e[pick, 1]])
+        onc = np.flatnonzero(ecor[pick] >= 0)
+        if len(onc):
+            p = pick[onc]
+            hnew[:, onc] = corridor_point(ecor[p], epar[p, 0], epar[p, 1])
+        mids = 0.5 * (verts[:, ua] + verts[:, ub])
+        new_ids = nv + np.arange(len(uniq))
+        is_arc = np.zeros(len(uniq), bool)
+        arcs = []
+        for ci in range(real):
+            ring = rings[ci]
+            if len(ring) < 2:
+                continue
+            x, y = ring, np.roll(ring, -1)
+            q = np.searchsorted(uniq, np.minimum(x, y) * nv + np.maximum(x, y))
+            arcs.append((q, x, y, np.full(len(q), ci)))
+            out = np.empty(2 * len(ring), np.int64)
+            out[0::2], out[1::2] = ring, new_ids[q]
+            rings[ci] = out
+        if arcs:
+            q, x, y, ci = (np.concatenate(a) for a in zip(*arcs))
+            is_arc[q] = True
+            mids[:, q] = _arc_mids(verts[:, x], verts[:, y], normals[:, ci], alphas[:, ci], rp, e1[:, ci], e2[:, ci])
+            hnew[:, q] = mids[:, q] / rp
+        proj = ~is_arc
+        if proj.any():
+            u = hnew[:, proj] / np.linalg.norm(hnew[:, proj], axis=-1, keepdims=True)
+            mids[:, proj] = u * exit_distance(u)[..., None]
+        verts = np.concatenate([verts, mids], axis=1)
+        hull = np.concatenate([hull, hnew], axis=1)
+        m = new_ids[inv].reshape(3, -1).T  # midpoints of edges 01, 12, 20 per face
+        v0, v1, v2 = faces.T
+        faces = np.concatenate([np.stack([v0, m[:, 0], m[:, 2]], 1), np.stack([m[:, 0], v1, m[:, 1]], 1),
+                                np.stack([m[:, 2], m[:, 1], v2], 1), m])
+        p0, p1, p2 = fpar[:, 0], fpar[:, 1], fpar[:, 2]
+        p01, p12, p20 = 0.5 * (p0 + p1), 0.5 * (p1 + p2), 0.5 * (p2 + p0)
+        fpar = np.concatenate([np.stack([p0, p01, p20], 1), np.stack([p01, p1, p12], 1),
+                               np.stack([p20, p12, p2], 1), np.stack([p01, p12, p20], 1)])
+        fcor = np.tile(fcor, 4)
+    return verts, faces, rings
+
+
+def _arc_mids(pa, pb, n, alpha, r_plus, e1, e2) -> np.ndarray:
+    """Midpoints of the clockwise arcs (about n) from pa (..., 3) to pb on circles (n (..., 3),
+    alpha (...)) of S⁺ with frames e1, e2 (..., 3)."""
+    dot = lambda p, f: np.einsum("...i,...i->...", p, f)  # noqa: E731
+    ta, tb = np.arctan2(dot(pa, e2), dot(pa, e1)), np.arctan2(dot(pb, e2), dot(pb, e1))
+    d = (ta - tb) % (2 * np.pi)
+    d[d > 2 * np.pi - 1e-9] = 0.0
+    t = ta - d / 2
+    ring = np.cos(t)[..., None] * e1 + np.sin(t)[..., None] * e2
+    return r_plus * (np.cos(alpha)[..., None] * n + np.sin(alpha)[..., None] * ring)
+
+
+def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray, np.ndarray, list]:
+    """``refine_arrays`` of one hub's CNT; its point circles (off-centre fix, seeds) are
+    projected onto the lattice first. Returns vertices in hub units, faces, rings."""
+    c = hub.chocc
+    verts = mesh.vertices * hub.r_plus
+    off = mesh.vertex_circle >= hub.slots
+    if off.any():  # point circles: onto the lattice too
+        u = verts[off] / np.linalg.norm(verts[off], axis=1, keepdims=True)
+        verts[off] = u * hub.exit_distance(u)[:, None]
+    faces = mesh.faces
+    fcor = mesh.face_corridor if mesh.face_corridor is not None else np.full(len(faces), -1)
+    fpar = mesh.face_params if mesh.face_params is not None else np.zeros((len(faces), 3, 2))
+    v, f, rings = refine_arrays(verts[None], mesh.vertices[None], faces, fcor, fpar, mesh.rings, hub.slots,
+                                c.normals[None], c.alphas[None], np.array([hub.r_plus]),
+                                lambda cor, s, t: mesh.corridor_point(cor, s, t)[None],
+                                lambda u: hub.exit_distance(u[0])[None], levels)
+    return v[0], f, rings
+
+
+def _caps(rings: list, nv: int) -> list:
+    """Fan faces capping each contact disk (one extra vertex per disk, ids nv, nv + 1, …):
+    counter-clockwise about the beam, the disk's outward orientation."""
+    caps = []
+    for s, ring in enumerate(rings):
+        q = ring[::-1]
+        caps.append(np.stack([np.full(len(q), nv + s), q, np.roll(q, -1)], axis=1))
+    return caps
+
+
+def _hub_surface(hub, style: str, levels: int, segments: int):
+    """The hub's surface without its caps: (vertices in hub units, faces, rings, CNT or CHoCC mesh)."""
+    base = corridor_mesh(hub.chocc, _segments(style, segments))
+    if style == "refined":
+        verts, faces, rings = _refine(base, hub, levels)
+    else:
+        verts, faces, rings = base.vertices * hub.r_plus, base.faces, base.rings
+    return verts, faces, rings, base
+
+
+def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, levels: int,
+                 segments: int, hint=None, min_edge: float = 0.0, fillet: float | None = None,
+                 _surface: list | None = None, target=None) -> HubTemplate:
+    """Tessellate one junction: ball (center (3,), radius) with beams to the balls
+    (neighbor_centers (S, 3), neighbor_radii (S,)), in the given style. Edges shorter than
+    ``min_edge`` are collapsed (``ple.meshing.weld.collapse_short_edges``) so that the mesh keeps its
+    topology when written in float32. (``_surface``: a list that receives the surface before
+    collapses and the CNT mesh, for ``hub_templates``.) ``target``: an optional wrapper of the
+    HubGeometry whose ``exit_distance`` the refined vertices are projected to (default: the
+    lattice, or the fillet)."""
+    center = np.asarray(center, float)
+    vec = np.asarray(neighbor_centers, float).reshape(-1, 3) - center
+    lengths = np.linalg.norm(vec, axis=1)
+    if np.any(lengths <= 0):
+        raise PleError("a beam joins two balls with the same centre")
+    dirs = vec / lengths[:, None]
+    hub = hub_geometry(radius, dirs, np.asarray(neighbor_radii, float).reshape(-1), lengths, hint)
+    hub = filleted(hub, fillet, hint)  # optional junction fillet (001_ §6 Eq. 6): projection onto the blend
+    hub = target(hub) if target is not None else hub
+    verts, faces, rings, base = _hub_surface(hub, style, levels, segments)
+    if _surface is not None:
+        _surface += [faces, rings, base]
+    if min_edge > 0:
+        faces, rings, _ = collapse_short_edges(verts, faces, rings, min_edge)
+    axial = hub.r_plus * np.cos(hub.alphas)
+    rings = [rings[s] for s in range(hub.slots)]
+    disk_centres = dirs * axial[:, None]
+    return HubTemplate(np.concatenate([verts, disk_centres]) + center, faces, rings,
+                       _caps(rings, len(verts)), hub)
+
+
+# ----- batches ----------------------------------------------------------------------------
+@dataclass
+class _Geometries:
+    """The ACHoCC junctions of H hubs with S ≥ 3 beams (``achocc.hub_geometry`` as arrays):
+    ok (H,) where the hub is clean and needs no inflation loop, r_plus (H,), alphas (H, S)."""
+
+    ok: np.ndarray
+    r_plus: np.ndarray
+    alphas: np.ndarray
+
+
+def _geometries(radius, dirs, other, lengths) -> _Geometries:
+    """r⁺ (§5) and contact circles of H hubs at once; hubs that ``hub_geometry`` would treat
+    specially (unclean, caps touching at r⁺) are marked not ok and are built alone."""
+    r = radius[:, None]
+    sphi = (r - other) / lengths
+    ok = np.all(np.abs(sphi) < 1, axis=1)
+    sphi = np.where(ok[:, None], sphi, 0.0)
+    cphi = np.sqrt(1 - sphi * sphi)
+    i, j = np.triu_indices(dirs.shape[1], 1)
+    cos_t = np.clip(np.einsum("hmi,hmi->hm", dirs[:, i], dirs[:, j]), -1, 1)
+    sin_t = np.sqrt(1 - cos_t**2)
+    ok &= ~np.any((sin_t < 1e-9) & (cos_t > 0), axis=1)
+    # inflated_radius: profiles of beams i and j in the plane of their axes (§5)
+    n1x, n1y = sphi[:, i], cphi[:, i]
+    n2x = sphi[:, j] * cos_t + cphi[:, j] * sin_t
+    n2y = sphi[:, j] * sin_t - cphi[:, j] * cos_t
+    det = n1x * n2y - n1y * n2x
+    safe = np.abs(det) > 1e-12
+    det = np.where(safe, det, 1.0)
+    px = r * (n2y - n1y) / det
+    py = r * (n1x - n2x) / det
+    forward = safe & (px > 0) & (px * cos_t + py * sin_t > 0)
+    cand = np.where(forward, np.hypot(px, py), r)
+    r_plus = np.maximum(radius, cand.max(axis=1)) * (1 + INFLATE)
+    r_plus = np.maximum(r_plus, radius / cphi.min(axis=1) * (1 + 1e-2))
+    # _max_inflation: beyond it the junction is unclean
+    s_max = (MAX_DISK_REACH * lengths - r * sphi) / cphi
+    y_min = MIN_DISK_RADIUS * np.minimum(r, other)
+    s_y = np.where(sphi > 0, (r * cphi - y_min) / np.where(sphi > 0, sphi, 1.0), np.inf)
+    limit = np.sqrt(radius**2 + np.clip(np.minimum(s_max, s_y).min(axis=1), 0.0, None) ** 2)
+    ok &= r_plus <= limit
+    # contact_circles
+    s = np.sqrt(np.maximum(r_plus**2 - radius**2, 0.0))[:, None]
+    x = r * sphi + s * cphi
+    y = r * cphi - s * sphi
+    ok &= np.all((y > 0) & (x < lengths), axis=1)
+    alphas = np.arctan2(np.maximum(y, 0.0), x)
+    ok &= np.all(alphas < np.pi / 2, axis=1)
+    theta = np.arccos(np.clip(np.einsum("hai,hbi->hab", dirs, dirs), -1, 1))
+    gap = theta - (alphas[:, :, None] + alphas[:, None, :])
+    gap[:, np.arange(dirs.shape[1]), np.arange(dirs.shape[1])] = np.inf
+    ok &= gap.min(axis=(1, 2)) > 1e-9
+    return _Geometries(ok, r_plus, alphas)
+
+
+def _strict_hull(normals, alphas, tris):
+    """Which hubs have exactly the triangles ``tris`` as their CHoCC (``chocc._topology_from_hint``
+    per hub): every triangle's plane strictly supports all other circles with the rolling
+    orientation. normals (H, n, 3), alphas (H, n). Returns ok (H,) and the candidates
+    (normals (H, t, 2, 3), angles (H, t, 2), contacts (H, t, 2, 3, 3), ccw (H, t, 2))."""
+    pn, pa = apollonius_planes(normals[:, tris], alphas[:, tris])
+    pts = contact_points(pn[..., None, :], pa[..., None], normals[:, tris][:, :, None])
+    ccw = np.einsum("...i,...i->...", cross(pts[..., 1, :] - pts[..., 0, :], pts[..., 2, :] - pts[..., 0, :]), pn)
+    lim = np.minimum(pa[..., None] + alphas[:, None, None, :], np.pi)
+    viol = np.einsum("htsi,hmi->htsm", pn, normals) - np.cos(lim)
+    own = np.zeros((len(tris), normals.shape[1]), bool)
+    own[np.arange(len(tris))[:, None], tris] = True
+    viol = np.where(own[None, :, None, :], -np.inf, viol)
+    good = (ccw > 1e-12) & (viol.max(axis=-1) <= -1e-9)  # strict: ties go to plane rolling
+    return np.all(good.sum(axis=-1) == 1, axis=1), (pn, pa, pts, ccw)
+
+
+class _Batch:
+    """Hubs (H of them) in the representative's topology: CHoCC, CNT and corridors as arrays."""
+
+    def __init__(self, rep: HubGeometry, normals, alphas, r_plus, style: str, segments: int):
+        c = rep.chocc
+        self.tris, self.cors = c.triangles, c.corridors
+        ok, (pn, pa, pts, ccw) = _strict_hull(normals, alphas, self.tris)
+        if not ok.all():  # hubs with ties: the topology plane rolling finds for them
+            redo = np.flatnonzero(~ok)
+            ok[redo] = _strict_hull(normals[redo], tie_broken(normals[redo], alphas[redo]), self.tris)[0]
+        # of the two candidates, the supporting one with the rolling orientation (``chocc.chocc``)
+        lim = np.minimum(pa[..., None] + alphas[:, None, None, :], np.pi)
+        viol = (np.einsum("htsi,hmi->htsm", pn, normals) - np.cos(lim)).max(axis=-1)
+        key = np.where(viol <= 1e-8, 1.0, 0.0) * 10 + np.sign(np.round(ccw, 14))
+        pick = np.argmax(key, axis=-1)[..., None]
+        self.plane_normals = np.take_along_axis(pn, pick[..., None], axis=2)[:, :, 0]
+        self.plane_alphas = np.take_along_axis(pa, pick, axis=2)[:, :, 0]
+        self.points = np.take_along_axis(pts, pick[..., None, None], axis=2)[:, :, 0]
+        self.normals, self.alphas, self.r_plus = normals, alphas, r_plus
+        self.frames = perpendicular_frames(normals)
+        a, b, t1, t2 = self.cors.T
+        corner = lambda t, x: np.argmax(self.tris[t] == x[:, None], axis=1)  # noqa: E731
+        self.ends = (self.points[:, t1, corner(t1, a)], self.points[:, t2, corner(t2, a)],
+                     self.points[:, t2, corner(t2, b)], self.points[:, t1, corner(t1, b)])  # a0, a1, b1, b0
+        pa0, pa1, pb1, pb0 = self.ends
+        self.th_a0, self.th_b0 = self._angle(a, pa0), self._angle(b, pb0)
+        na, nb, aa, ab = normals[:, a], normals[:, b], alphas[:, a], alphas[:, b]
+        self.apexes = (cone_apex(na, nb, aa, ab), cone_apex(nb, na, ab, aa))  # (H, C, 4) each
+        self.da = self._cw(self.th_a0, self._angle(a, pa1))  # clockwise on a from T1 to T2
+        self.db = self._cw(self._angle(b, pb1), self.th_b0)  # clockwise on b from T2 to T1
+        degenerate = ((np.maximum(self.da, self.db) < DEGENERATE_ARC)
+                      & (np.linalg.norm(pa1 - pa0, axis=-1) < DEGENERATE_ARC)
+                      & (np.linalg.norm(pb1 - pb0, axis=-1) < DEGENERATE_ARC))
+        self.m = np.where(degenerate, 0, _segments(style, segments)(np.maximum(self.da, self.db)))
+        # the same CNT as the representative's: strip quads per corridor, bare-edge corridors
+        ok &= np.all(self.m == self.m[:1], axis=1) & (self.centre_depth() > CENTRE_MARGIN)
+        self.ok = ok
+
+    def _angle(self, i, p):
+        e1, e2 = self.frames[0][:, i], self.frames[1][:, i]
+        return np.arctan2(np.einsum("hci,hci->hc", p, e2), np.einsum("hci,hci->hc", p, e1))
+
+    @staticmethod
+    def _cw(th0, th1):
+        d = (th0 - th1) % (2 * np.pi)
+        return np.where(d > 2 * np.pi - 1e-9, 0.0, d)
+
+    def centre_depth(self) -> np.ndarray:
+        """``achocc._visible_face`` per hub: the smallest depth of the centre below the CNT's
+        face planes (triangles and planar corridor quads); the off-centre fix adds point
+        circles when it is at most CENTRE_MARGIN (those hubs are built alone)."""
+        h = np.round(np.cos(self.plane_alphas), 9).min(axis=1)
+        qa0, qa1, qb1, qb0 = self.ends
+        nrm = cross(qa1 - qb0, qb1 - qa0)
+        ln = np.linalg.norm(nrm, axis=-1)
+        good = ln > 1e-12
+        hq = np.where(good, np.round(np.einsum("hci,hci->hc", nrm, qa0) / np.where(good, ln, 1.0), 9), np.inf)
+        return np.minimum(h, hq.min(axis=1)) if hq.shape[1] else h
+
+    def take(self, keep: np.ndarray) -> None:
+        """Keep the hubs ``keep`` (indices or mask) only."""
+        for name in ("plane_normals", "plane_alphas", "points", "normals", "alphas", "r_plus", "th_a0", "th_b0",
+                     "da", "db", "m", "ok"):
+            setattr(self, name, getattr(self, name)[keep])
+        self.frames = (self.frames[0][keep], self.frames[1][keep])
+        self.apexes = (self.apexes[0][keep], self.apexes[1][keep])
+        self.ends = tuple(e[keep] for e in self.ends)
+
+    def corridor_ends(self, cor: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Both ends (H, k, 3) of the generators at arc parameters s (k,) of corridors cor (k,)."""
+        a, b = self.cors[cor, 0], self.cors[cor, 1]
+        e1, e2 = self.frames
+        return corridor_ends(self.normals[:, a], self.normals[:, b], self.alphas[:, a], self.alphas[:, b],
+                             (e1[:, a], e2[:, a]), (e1[:, b], e2[:, b]), self.th_a0[:, cor], self.da[:, cor],
+                             self.th_b0[:, cor], self.db[:, cor], s[None],
+                             (self.apexes[0][:, cor], self.apexes[1][:, cor]))
+
+    def corridor_point(self, cor, s, t) -> np.ndarray:
+        pa, pb = self.corridor_ends(cor, s)
+        return (1 - t)[None, :, None] * pa + t[None, :, None] * pb
+
+    def cnt_vertices(self) -> np.ndarray:
+        """Vertices (H, V, 3) of the CNT/CHoCC mesh on the unit sphere in ``corridor_mesh``'s order:
+        the triangles' corners, then per corridor its inner samples on a, then on b."""
+        m = self.m[0]
+        cor = np.repeat(np.arange(len(m)), np.maximum(m - 1, 0))
+        step = np.concatenate([np.arange(1, k) for k in m]) if len(cor) else np.zeros(0)
+        pa, pb = self.corridor_ends(cor, step / np.maximum(m[cor], 1))
+        parts = [self.points.reshape(len(self.points), -1, 3)]
+        bounds = np.concatenate([[0], np.cumsum(np.maximum(m - 1, 0))])
+        for lo, hi in zip(bounds[:-1], bounds[1:]):
+            if hi > lo:
+                parts += [pa[:, lo:hi], pb[:, lo:hi]]
+        return np.concatenate(parts, axis=1)
+
+
+def hub_templates(centers, radii, neighbor_centers, neighbor_radii, style: str, levels: int, segments: int,
+                  hint=None, min_edge: float = 0.0, fillet: float | None = None,
+                  batched: bool = True) -> tuple[list, object]:
+    """Templates of H hubs with S beams each: balls (centers (H, 3), radii (H,)) with beams to
+    the balls (neighbor_centers (H, S, 3), neighbor_radii (H, S)).
+    Equal to ``hub_template`` hub by hub (up to round-off), computed in batches of one CHoCC
+    topology (``batched``; False: one by one, the reference path). ``hint``: base triangles of a
+    similar hub. Returns (templates, the last hint)."""
+    radii = np.asarray(radii, float).reshape(-1)
+    centers = np.asarray(centers, float).reshape(len(radii), 3)
+    nbc = np.asarray(neighbor_centers, float).reshape(len(radii), -1, 3)
+    nbr = np.asarray(neighbor_radii, float).reshape(len(radii), -1)
+    h_count, s_count = nbc.shape[:2]
+    out: list = [None] * h_count
+    vec = nbc - centers[:, None]
+    lengths = np.linalg.norm(vec, axis=-1)
+    alone = np.ones(h_count, bool)
+    if batched and s_count >= 3 and not fillet:
+        ok = np.all(lengths > 0, axis=1)
+        dirs = vec / np.where(ok[:, None], lengths, 1.0)[..., None]
+        geo = _geometries(radii, dirs, nbr, np.where(ok[:, None], lengths, 1.0))
+        alone = ~(ok & geo.ok)
+    todo = np.ones(h_count, bool)
+    for h in range(h_count):
+        if not todo[h]:
+            continue
+        surface: list = []
+        out[h] = hub_template(centers[h], radii[h], nbc[h], nbr[h], style, levels, segments, hint, min_edge, fillet,
+                              surface)
+        todo[h] = False
+        hub = out[h].geometry
+        hint = hub.base_triangles
+        if alone[h] or hub.chocc.n != s_count:
+            continue  # no batch: this hub is special (point circles of the off-centre fix)
+        rest = np.flatnonzero(todo & ~alone)
+        if len(rest):
+            _batch_templates(out, hub, surface, np.concatenate([[h], rest]), centers, radii, dirs, nbr, lengths,
+                             geo, style, levels, segments, min_edge)
+            todo[rest] = [out[g] is None for g in rest]
+    return out, hint
+
+
+def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths, geo, style, levels, segments,
+                     min_edge) -> None:
+    """Fill ``out[g]`` for the hubs g of ``hubs[1:]`` that share the CNT of the representative
+    ``hubs[0]`` (``rep``, with its surface ``[faces, rings, base mesh]`` before collapses)."""
+    faces, rings, base = surface
+    normals = unit_rows(dirs[hubs])
+    full = _Batch(rep, normals, geo.alphas[hubs], geo.r_plus[hubs], style, segments)
+    if len(base.vertices) != 3 * len(full.tris) + 2 * np.maximum(full.m[0] - 1, 0).sum():
+        return  # the representative's CNT is not its batch form (point circles, merged corridors)
+    keep = np.flatnonzero(full.ok[1:]) + 1
+    if not len(keep):
+        return
+    per_hub = len(faces) * 3  # about the vertex count after refinement, for the batch size
+    step = max(1, BATCH_VERTICES // max(per_hub, 1))
+    for lo in range(0, len(keep), step):
+        sel = keep[lo:lo + step]
+        batch = copy.copy(full)
+        batch.take(sel)
+        ids = hubs[sel]
+        unit = batch.cnt_vertices()
+        rp = batch.r_plus
+        if style == "refined":
+            verts, f, rg = refine_arrays(
+                unit * rp[:, None, None], unit, base.faces, base.face_corridor, base.face_params, base.rings,
+                dirs.shape[1], batch.normals, batch.alphas, rp, batch.corridor_point,
+                lambda u, ids=ids: exit_distances(u, radii[ids], dirs[ids], nbr[ids], lengths[ids]), levels)
+        else:
+            verts, f, rg = unit * rp[:, None, None], base.faces, base.rings
+        surfaces = _collapsed(verts, f, [rg[s] for s in range(len(rg))], min_edge)
+        caps = {}
+        disk = dirs[ids] * (rp[:, None] * np.cos(batch.alphas))[..., None]
+        allv = np.concatenate([verts, disk], axis=1) + centers[ids][:, None]
+        for k, g in enumerate(ids):
+            if surfaces[k] is None:
+                continue  # its short edges collapse otherwise: built alone
+            fk, rk = surfaces[k]
+            if id(fk) not in caps:
+                caps[id(fk)] = _caps(rk[:dirs.shape[1]], verts.shape[1])
+            c = Chocc(batch.normals[k], batch.alphas[k], batch.tris, batch.plane_normals[k], batch.plane_alphas[k],
+                      batch.points[k], batch.cors, rep.chocc.twin, rep.chocc.rings, rep.chocc.ring_corridors)
+            hub = HubGeometry(float(radii[g]), float(rp[k]), dirs[g], nbr[g], lengths[g], c, dirs.shape[1], True,
+                              batch.alphas[k], batch.tris)
+            out[g] = HubTemplate(allv[k], fk, rk[:dirs.shape[1]], caps[id(fk)], hub)
+
+
+def _edges(faces: np.ndarray) -> np.ndarray:
+    return np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1), axis=0)
+
+
+def _collapsed(verts: np.ndarray, faces: np.ndarray, rings: list, tol: float) -> list:
+    """``collapse_short_edges`` of H hubs with one surface topology: per hub (faces, rings), or
+    None where the batch cannot tell the result (built alone).
+
+    Hubs with the same short edges in the same order (by length) take the same decisions in the
+    first pass of the collapse (link conditions are combinatorial, positions do not move); if no
+    edge is short after that pass, the collapse ends there. So one first pass serves them all.
+    The order does not matter when no face touches two short edges (a collapse changes only the
+    faces around its own edge, and the link condition of another edge reads only its own)."""
+    out: list = [(faces, rings)] * len(verts)
+    if tol <= 0:
+        return out
+    e = _edges(faces)
+    d = np.linalg.norm(verts[:, e[:, 0]] - verts[:, e[:, 1]], axis=-1)
+    short = d < tol
+    groups: dict = {}
+    apart: dict = {}  # short-edge set -> no face touches two of them
+    for k in np.flatnonzero(short.any(axis=1)):
+        idx = np.flatnonzero(short[k])
+        key = idx.tobytes()
+        if key not in apart:
+            touch = np.zeros(len(faces), np.int64)
+            for x, y in e[idx]:
+                touch += np.any((faces == x) | (faces == y), axis=1)
+            apart[key] = touch.max() <= 1
+        if not apart[key]:
+            key = b"order" + idx[np.argsort(d[k, idx], kind="stable")].tobytes()
+        groups.setdefault(key, []).append(k)
+    for ks in groups.values():
+        f1, r1, _ = collapse_short_edges(verts[ks[0]], faces, rings, tol, rounds=1)
+        e1 = _edges(f1)
+        done = np.linalg.norm(verts[ks][:, e1[:, 0]] - verts[ks][:, e1[:, 1]], axis=-1).min(axis=1) >= tol
+        for k, ok in zip(ks, done):
+            out[k] = (f1, r1) if ok else None
+    return out

@@ -1,0 +1,150 @@
+"""Batched hub tessellation (``ple.meshing.hubs.hub_templates``) against the per-hub path.
+
+The batch computes the hubs of one CHoCC topology as arrays; the reference builds every hub
+alone (``hub_template``, plane rolling or a validated hint per hub). The meshes must hold the
+same triangles (up to the order of their corners and of the faces), be watertight and have
+the same volume, and the batch must really batch (fewer per-hub builds than hubs)."""
+
+import numpy as np
+import pytest
+import trimesh
+from ple.meshing import hubs
+from ple.meshing.tessellate import _Tessellator
+from ple.model.lattice import Lattice, Node
+from ple.program.sources import load_lattice
+
+CURVED = '''
+def lattice(n: Range(2, 200) = 6, filtered: bool = False):
+    lat = Lattice()
+    a = lat.add_node(Pt(0, 0, 0), 0.08)
+    for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0)]:
+        lat.add_beam(a, a, *off)
+    lat.set_u(n, Translation(Vec(1, 0, 0)))
+    lat.set_v(n, Rotation(0.03, Vec(0, 0, 1), Pt(-30, 0, 0)))
+    lat.set_w(n, Swirl(0.02, Vec(0, 1, 0), Pt(50, 0, 0), 0.995))
+    if filtered:
+        lat.set_filter(ImplicitFilter(TPMSField("gyroid", 7.0, Translation(Vec(-1, -2, -4))), -0.3, "network"))
+    return lat
+'''
+
+
+def _mesh(lat, style, batched, levels=1, segments=8):
+    r = lat.region()
+    if lat.group_map is not None:  # as ``tessellate``: the one-group form of a group-mapped lattice
+        lat = lat.explicit(r)
+        r = lat.region()
+    tess = _Tessellator(lat, r, style, levels, segments, batched=batched)
+    v, f = tess.build(r)
+    return v, f, len(tess.templates)
+
+
+def _triangles(v, f) -> np.ndarray:
+    """Triangles (F, 3, 3) in a canonical order: each starts at its smallest corner (rounded
+    lexicographic order, which keeps the orientation), faces sorted."""
+    t = v[f]
+    key = np.round(t, 6)
+    first = np.array([np.lexsort(k.T[::-1])[0] for k in key])
+    t = t[np.arange(len(t))[:, None], (first[:, None] + np.arange(3)) % 3]
+    return t[np.lexsort(np.round(t.reshape(len(t), -1), 6).T[::-1])]
+
+
+def _compare(lat, style, monkeypatch, levels=1):
+    calls = []
+    single = hubs.hub_template
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return single(*args, **kwargs)
+
+    v0, f0, _ = _mesh(lat, style, False, levels)
+    monkeypatch.setattr(hubs, "hub_template", counted)
+    v1, f1, n_templates = _mesh(lat, style, True, levels)
+    monkeypatch.undo()
+    assert len(f0) == len(f1)
+    assert np.abs(_triangles(v0, f0) - _triangles(v1, f1)).max() < 1e-9
+    m0, m1 = trimesh.Trimesh(v0, f0, process=False), trimesh.Trimesh(v1, f1, process=False)
+    m0.remove_unreferenced_vertices()
+    m1.remove_unreferenced_vertices()
+    assert m0.is_watertight and m1.is_watertight
+    assert m1.volume == pytest.approx(m0.volume, rel=1e-9)
+    return len(calls), n_templates
+
+
+@pytest.mark.parametrize("style", ["cnt", "chocc", "refined"])
+def test_curved_lattice_batches_equal_per_hub(style, tmp_path, monkeypatch):
+    path = tmp_path / "curved.py"
+    path.write_text(CURVED)
+    lat = load_lattice(str(path))
+    alone, templates = _compare(lat, style, monkeypatch)
+    assert templates > 50 and alone < templates / 3  # most hubs came from batches
+
+
+def test_filtered_curved_lattice_batches_equal_per_hub(tmp_path, monkeypatch):
+    path = tmp_path / "curved.py"
+    path.write_text(CURVED)
+    lat = load_lattice(str(path), params={"n": 8, "filtered": True})
+    assert lat.filter is not None
+    alone, templates = _compare(lat, "cnt", monkeypatch)
+    assert alone < 0.8 * templates  # filtered: many distinct beam sets, each its own batch
+
+
+@pytest.mark.parametrize("preset, counts", [
+    ("thesis_cylindrical", (3, 8, 3)),
+    ("thesis_warped", (5, 5, 4)),
+    ("fig6_3", (5, 5, 4)),
+    ("spherical_shell", None),
+    ("becots_honeycomb", None),
+    ("hier_gyroid", None),
+    ("rectified_warp", None),
+])
+def test_presets_batches_equal_per_hub(preset, counts, monkeypatch):
+    lat = load_lattice(preset)
+    if counts:
+        lat = lat.with_counts(*counts)
+    elif lat.groups > 300:
+        lat = lat.with_counts(*[min(c, 6) for c in lat.counts])
+    alone, templates = _compare(lat, "cnt", monkeypatch)
+    assert alone <= templates
+
+
+def test_random_steady_lattices_batch_equal_per_hub(monkeypatch):
+    """Random steady lattices: a few nodes, random beams, small random similarities."""
+    from ple.algebra.similarity import Rotation, Screw, Translation
+
+    rng = np.random.default_rng(7)
+    for trial in range(4):
+        lat = Lattice()
+        for q in range(2):
+            lat.nodes.append(Node(rng.uniform(0, 0.5, 3) * [1, 1, 1] + [0.5 * q, 0, 0], float(rng.uniform(0.05, 0.09))))
+        for di, dj, dk in [(1, 0, 0), (0, 1, 0), (0, 0, 1)]:
+            lat.add_beam(0, 0, di, dj, dk)
+        lat.add_beam(0, 1, 0, 0, 0)
+        lat.add_beam(1, 0, 1, 0, 0)
+        lat.add_beam(1, 1, 0, 1, 1)
+        lat.set_u(4, Translation((1.5, 0, 0)))
+        lat.set_v(4, Rotation(float(rng.uniform(0.02, 0.06)), (0, 0, 1), (-25.0, 0, 0)))
+        lat.set_w(3, Screw(float(rng.uniform(0.01, 0.04)), (0, 1, 0), (30.0, 0, 0), 0.0))
+        _compare(lat, ["cnt", "refined"][trial % 2], monkeypatch)
+
+
+def test_stream_is_byte_identical_for_any_number_of_workers(tmp_path):
+    """Boxes are prepared in order and assembled by 1 or 3 threads: the same STL bytes; and
+    the same triangles as the in-memory mesh."""
+    from ple.cli.main import main
+    from ple.io.export import read_back, write_mesh
+
+    path = tmp_path / "curved.py"
+    path.write_text(CURVED)
+    lat = load_lattice(str(path), params={"n": 6})
+    outs = []
+    for workers in (1, 3):
+        out = tmp_path / f"w{workers}.stl"
+        n = write_mesh(lat, out, style="cnt", max_groups=24, workers=workers)  # 9 boxes
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1]
+    for workers in (1, 2):
+        assert main(["mesh", str(path), "--style", "chocc", "--workers", str(workers),
+                     "--out", str(tmp_path / f"cli{workers}.stl")]) == 0
+    assert (tmp_path / "cli1.stl").read_bytes() == (tmp_path / "cli2.stl").read_bytes()
+    mesh = read_back(tmp_path / "w1.stl")
+    assert len(mesh.faces) == n and mesh.is_watertight
