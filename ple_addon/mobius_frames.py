@@ -28,7 +28,7 @@ from .corelink import PleError, core, presets
 mobius = core("model.mobius")
 sources = core("program.sources")
 
-PRESETS = ("mobius_slab", "tmi_slab")  # the shipped Möbius presets (Add › PLE Lattice routes them here)
+PRESETS = ("mobius_slab", "tmi_slab")  # the shipped Möbius presets: Add › PLE Lattice › NAME routes here
 SNIPPET_TEXT = "PLE snippet"  # the text block the steady rigs' snippets go to as well
 MAX_NODES = 200_000  # a region larger than this is not drawn live
 MOVE_DIGITS = 7  # matrices compared at this many decimals (float32 frames)
@@ -227,12 +227,6 @@ class PLE_PT_mobius(bpy.types.Panel):  # noqa: N801 - Blender naming
             col.label(text=rig["ple_status"], icon="ERROR")
 
 
-def menu_add(self, context):
-    self.layout.separator()
-    for name in PRESETS:
-        self.layout.operator(PLE_OT_mobius_add.bl_idname, text=f"{name} (Möbius frames)").preset = name
-
-
 def on_depsgraph_update(scene):
     """Redraw the Möbius rigs whose frames or handles moved (called by the add-on's depsgraph handler)."""
     for obj in scene.objects:
@@ -246,11 +240,9 @@ CLASSES = (PLE_OT_mobius_add, PLE_OT_mobius_snippet, PLE_PT_mobius)
 def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
-    bpy.types.PLE_MT_add.append(menu_add)
 
 
 def unregister():
-    bpy.types.PLE_MT_add.remove(menu_add)
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)
     _drawn.clear()

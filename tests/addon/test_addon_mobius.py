@@ -66,10 +66,9 @@ def case_mobius_drag():
     assert {k for k in p if isinstance(k, str)} == {"X", "Y", "Z", "region"}
     lat = load_lattice("mobius_slab")
     assert_drawn(rig, lat)
-    seen = []  # the panel and the Add-menu entries reference what exists (test_addon.CheckedLayout)
+    seen = []  # the panel references what exists (test_addon.CheckedLayout)
     mf.PLE_PT_mobius.draw(type("P", (), {"layout": base.CheckedLayout(seen)})(), bpy.context)
-    mf.menu_add(type("M", (), {"layout": base.CheckedLayout(seen)})(), bpy.context)
-    assert "ple.mobius_add" in seen
+    assert "ple.mobius_snippet" in seen
     for key, pts in (("X", (0, 1, 1j)), ("Y", (1, 2 + 0.08j, 0.92 + 1j))):  # the preset's frames
         assert np.allclose(frame_points(p[key], p[("handle", key)]), pts, atol=1e-6)
     # drag Y (move, turn, scale) and bend it by its handle; drag Z
