@@ -87,6 +87,9 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
     fpar = mesh.face_params if mesh.face_params is not None else np.zeros((len(faces), 3, 2))
     rings = [r.copy() for r in mesh.rings]
     frames = perpendicular_frames(c.normals)
+    # per corridor: is its end a (t = 0) / b (t = 1) a point circle (the corridor is a cone with its apex there)
+    ends = c.corridors[:, :2] if len(c.corridors) else np.zeros((0, 2), np.int64)
+    point_end = np.concatenate([c.alphas[ends] == 0.0, np.zeros((1, 2), bool)])  # row -1: triangles
     for _ in range(levels):
         nv = len(verts)
         e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
@@ -96,8 +99,10 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
         ua, ub = uniq // nv, uniq % nv
         # hull points of the face-edge midpoints: corridor coordinates on corridors, chords on triangles
         ecor = np.tile(fcor, 3)
-        epar = 0.5 * (np.concatenate([fpar[:, 0], fpar[:, 1], fpar[:, 2]])
-                      + np.concatenate([fpar[:, 1], fpar[:, 2], fpar[:, 0]]))
+        apex = _apex_corners(fcor, fpar, point_end)
+        p01, p12, p20 = (_param_mid(fpar[:, i], fpar[:, j], apex[:, i], apex[:, j])
+                         for i, j in ((0, 1), (1, 2), (2, 0)))
+        epar = np.concatenate([p01, p12, p20])
         hmid = 0.5 * (hull[e[:, 0]] + hull[e[:, 1]])
         onc = np.flatnonzero(ecor >= 0)
         if len(onc):
@@ -134,11 +139,26 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
         faces = np.concatenate([np.stack([v0, m[:, 0], m[:, 2]], 1), np.stack([m[:, 0], v1, m[:, 1]], 1),
                                 np.stack([m[:, 2], m[:, 1], v2], 1), m])
         p0, p1, p2 = fpar[:, 0], fpar[:, 1], fpar[:, 2]
-        p01, p12, p20 = 0.5 * (p0 + p1), 0.5 * (p1 + p2), 0.5 * (p2 + p0)
         fpar = np.concatenate([np.stack([p0, p01, p20], 1), np.stack([p01, p1, p12], 1),
                                np.stack([p20, p12, p2], 1), np.stack([p01, p12, p20], 1)])
         fcor = np.tile(fcor, 4)
     return verts, faces, rings
+
+
+def _apex_corners(fcor: np.ndarray, fpar: np.ndarray, point_end: np.ndarray) -> np.ndarray:
+    """Which corners (f, 3) of the faces are the apex of their corridor's cone: the single vertex
+    of a point circle, whose arc parameter s is arbitrary (every generator ends there)."""
+    t = fpar[..., 1]
+    return ((t == 0.0) & point_end[fcor, 0][:, None]) | ((t == 1.0) & point_end[fcor, 1][:, None])
+
+
+def _param_mid(pa: np.ndarray, pb: np.ndarray, apex_a: np.ndarray, apex_b: np.ndarray) -> np.ndarray:
+    """Corridor coordinates (k, 2) of the midpoints of edges with end coordinates pa, pb (k, 2).
+    An edge from a cone's apex is a generator: its midpoint keeps the other end's s (the mean
+    would leave the edge, and the planar triangle sharing it would fold)."""
+    mid = 0.5 * (pa + pb)
+    mid[:, 0] = np.where(apex_a & ~apex_b, pb[:, 0], np.where(apex_b & ~apex_a, pa[:, 0], mid[:, 0]))
+    return mid
 
 
 def _arc_mids(pa, pb, n, alpha, r_plus, frames, ci) -> np.ndarray:
