@@ -132,7 +132,32 @@ def encode_mesh(vertices, faces, fmt: str, unit: str = DEFAULT_UNIT) -> bytes:
     if fmt == "obj":
         return obj_bytes(vertices, faces, unit)
     out = trimesh.Trimesh(np.asarray(vertices, np.float32), faces, process=False)
-    return trimesh.exchange.gltf.export_glb(out, include_normals=False)
+    return glb_with_targets(trimesh.exchange.gltf.export_glb(out, include_normals=False))
+
+
+GL_ARRAY_BUFFER, GL_ELEMENT_ARRAY_BUFFER = 34962, 34963
+
+
+def glb_with_targets(glb: bytes) -> bytes:
+    """A GLB whose buffer views state their target (vertex data or indices), as the Khronos glTF
+    validator asks (trimesh leaves them out). The binary chunk is kept byte for byte."""
+    magic, version, _ = struct.unpack_from("<4sII", glb, 0)
+    n, kind = struct.unpack_from("<I4s", glb, 12)
+    if magic != b"glTF" or kind != b"JSON":
+        raise PleError("not a GLB file")
+    doc = json.loads(glb[20:20 + n])
+    views = doc.get("bufferViews", [])
+    for mesh in doc.get("meshes", []):
+        for prim in mesh.get("primitives", []):
+            for acc in prim.get("attributes", {}).values():
+                views[doc["accessors"][acc]["bufferView"]]["target"] = GL_ARRAY_BUFFER
+            if "indices" in prim:
+                views[doc["accessors"][prim["indices"]]["bufferView"]]["target"] = GL_ELEMENT_ARRAY_BUFFER
+    text = json.dumps(doc, separators=(",", ":")).encode()
+    text += b" " * (-len(text) % 4)  # chunks are 4-byte aligned, JSON padded with spaces
+    rest = glb[20 + n:]
+    head = struct.pack("<4sII", b"glTF", version, 12 + 8 + len(text) + len(rest))
+    return head + struct.pack("<I4s", len(text), b"JSON") + text + rest
 
 
 def export_mesh(mesh: trimesh.Trimesh, path, unit: str = DEFAULT_UNIT, grid: float | None = None) -> dict:
