@@ -6,7 +6,10 @@ STAMP := $(VENV)/.installed
 SYSLIBS := libegl1 libegl-mesa0 libgl1-mesa-dri libxi6 libxxf86vm1 libxfixes3 libxrender1 libxkbcommon0 libsm6
 PIP_FLAGS := --disable-pip-version-check -q
 
-.PHONY: setup syslibs demo test lint bench extension docs clean
+CONSUMER_DEBS := admesh prusa-slicer
+GLTF_VALIDATOR := $(VENV)/node/node_modules/gltf-validator
+
+.PHONY: setup syslibs consumers demo test lint bench extension docs clean
 
 setup: $(STAMP)
 
@@ -19,7 +22,21 @@ syslibs:
 	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq $$missing; \
 	fi
 
-$(STAMP): pyproject.toml | syslibs
+# consumers the tests hand our files to: admesh and PrusaSlicer (apt), the Khronos glTF
+# validator (npm, into the venv); a tool that cannot be installed makes its tests skip, saying so
+consumers:
+	@missing=""; for p in $(CONSUMER_DEBS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	command -v npm >/dev/null || missing="$$missing nodejs npm"; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing consumer tools:$$missing"; \
+	  SUDO=""; [ "$$(id -u)" = 0 ] || SUDO=sudo; \
+	  { $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq $$missing; } \
+	    || echo "warning: could not install$$missing (their tests will skip)"; \
+	fi
+	@test -d $(GLTF_VALIDATOR) || { command -v npm >/dev/null && npm install -s --prefix $(VENV)/node gltf-validator; } \
+	  || echo "warning: could not install gltf-validator with npm (its tests will skip)"
+
+$(STAMP): pyproject.toml | syslibs consumers
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) is required (bpy 5.0.1 needs Python 3.11)"; exit 2; }
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install $(PIP_FLAGS) --upgrade pip

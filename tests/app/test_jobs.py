@@ -185,3 +185,24 @@ def test_lil_count_cli_on_a_real_cluster(tmp_path, cluster, capsys):
     assert main(["assemble", str(tmp_path / "p")]) == 0
     assert f"kept: {nodes:,} nodes, {beams:,} beams" in capsys.readouterr().out
     assert main([*lil_args, "--count"]) == 2 and "give --parts" in capsys.readouterr().err
+
+
+def test_parts_of_an_unclean_lattice_carry_its_unions(tmp_path):
+    from ple.io.export import write_mesh
+
+    name, params = "becots_annulus", []  # at its defaults every hub is unclean
+    job = mesh_job(name, params, "cnt", box_groups=1)
+    assert "united with manifold3d" in job.settings["unclean"] and len(job.parts) == 1
+    assert run_job(job, str(tmp_path / "parts"), "sync", progress=False)["written"] == 1
+    n = assemble_stl(str(tmp_path / "parts"), tmp_path / "all.stl")
+    single = write_mesh(load_lattice(name, params), tmp_path / "single.stl", style="cnt")
+    assert n == single
+    assert (tmp_path / "all.stl").read_bytes()[80:] == (tmp_path / "single.stl").read_bytes()[80:]
+    import trimesh
+
+    mesh = trimesh.load(tmp_path / "all.stl")
+    ref = tessellate(load_lattice(name, params), None, "cnt")
+    assert len(ref.metadata["ple_unclean"].nodes) > 0
+    assert mesh.is_watertight and np.isclose(mesh.volume, ref.volume, rtol=1e-5)
+    clean = mesh_job("octet", ["n=2"], "cnt", box_groups=1)  # a clean lattice keeps its boxes
+    assert clean.settings["unclean"] is None and len(clean.parts) == 8

@@ -301,3 +301,51 @@ def test_blender_importers_read_manifold_meshes(tmp_path):
         scale = 1e-3 if p.endswith(".glb") else 1.0  # Blender shows glTF in metres, Z up like ours
         assert np.allclose(r["lo"], lo * scale, atol=1e-5 * scale)
         assert np.allclose(r["hi"], hi * scale, atol=1e-5 * scale)
+
+
+# ----- huge coordinates (issue 20: a similarity scaled by 1e10) --------------------------
+
+def _scaled_cubic(cell: float, factor: float = 1.0, n: int = 3):
+    from ple import Lattice, Pt, Scaling, Translation, Vec
+
+    lat = Lattice()
+    a = lat.add_node(Pt(0.3 * cell, 0.1 * cell, 0), 0.1 * cell)
+    for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1)]:
+        lat.add_beam(a, a, *off)
+    lat.set_u(n, Scaling(factor, Pt(-cell, 0, 0)) if factor != 1.0 else Translation(Vec(cell, 0, 0)))
+    lat.set_v(n, Translation(Vec(0, cell, 0)))
+    lat.set_w(2, Translation(Vec(0, 0, cell)))
+    return lat
+
+
+def test_keys_of_huge_coordinates_stay_distinct():
+    from ple.meshing.tessellate import quantized
+
+    k = quantized(np.array([1e19, 2e19, 1e19 * (1 + 1e-14), np.nan, 0.5e-9, 1.0]), 1e-9)
+    assert len({row.tobytes() for row in k}) == 5  # 1e19 and 1e19·(1 + 1e-14) share a key
+    assert k[0].tobytes() == k[2].tobytes() and np.all(np.abs(k) < 2**51)
+
+
+@pytest.mark.parametrize("style", ["cnt", "refined"])
+def test_a_lattice_scaled_by_1e10_is_written_closed(tmp_path, style):
+    small = tessellate(_scaled_cubic(1.0), None, style, 1)
+    for fmt in ("stl", "3mf", "glb"):
+        path = tmp_path / f"big.{fmt}"
+        n = write_mesh(_scaled_cubic(1e10), path, style=style, levels=1)
+        back = read_back(path)
+        assert n == len(back.faces) == len(small.faces)
+        scale = 1e-3 if fmt == "glb" else 1.0  # glTF in metres
+        assert_consumer_clean(back, small.volume * (1e10 * scale) ** 3, rel=1e-4)
+
+
+def test_sizes_float32_cannot_hold_are_refused(tmp_path):
+    from ple.errors import PleError
+
+    lat = _scaled_cubic(1.0, factor=1e5)  # groups of size 1 beside groups of size 1e10
+    for fmt in ("stl", "3mf"):
+        with pytest.raises(PleError, match="float32"):
+            write_mesh(lat, tmp_path / f"x.{fmt}", style="cnt")
+        assert not (tmp_path / f"x.{fmt}").exists()
+    ok = _scaled_cubic(1.0, factor=10.0)  # within float32's reach: written closed
+    write_mesh(ok, tmp_path / "ok.stl", style="cnt")
+    assert_consumer_clean(read_back(tmp_path / "ok.stl"))

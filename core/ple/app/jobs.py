@@ -40,7 +40,7 @@ from ..io.files import atomic_path
 from ..io.formats import format_named
 from ..io.slices import slice_meta, write_slices
 from ..meshing.styles import style as style_named
-from ..meshing.tessellate import output_grid, tessellate, tessellation_box
+from ..meshing.tessellate import checked_stream, output_grid, tessellate, tessellation_box
 from ..meshing.weld import snap_triangles
 from ..model.lattice import Evaluation, Lattice, Region
 from ..program.sources import load_lattice, resolve_source
@@ -143,14 +143,23 @@ def sweep_job(source: str, variants: list, style: str, fmt: str, levels=None, re
 def mesh_job(source: str, params: dict, style: str = "refined", levels=None, region=None,
              box_groups: int = 1 << 14) -> Job:
     """One binary-STL part per box of node-groups of ``region`` (``Lattice.iter_slabs`` order).
-    The region's float32 snap grid is computed here, once, and travels with the job."""
+    The region's float32 snap grid is computed here, once, and travels with the job.
+
+    Regions up to ``MAX_CHECK_GROUPS`` groups are checked for unclean hubs first, as the
+    streamed STL is (``checked_stream``); an unclean region is one part, meshed with its
+    manifold3d unions exactly as ``ple mesh`` without parts (``settings["unclean"]`` says so):
+    the unions join neighbourhoods across any box boundary, so they are not split."""
     style_named(style)
     if style == "balls-beams":
         raise PleError("a partitioned mesh needs a closed style (refined, cnt or chocc)")
     lat = load_lattice(source, params)
     r = lat.region(region)
     settings = {"source": str(resolve_source(source)), "params": _params(params), "style": style, "levels": levels,
-                "region": str(r), "grid": output_grid(lat, r)}
+                "region": str(r), "grid": output_grid(lat, r), "unclean": None}
+    report, _ = checked_stream(lat, r, style, levels)  # the stream itself is lazy: only the check runs
+    if report is not None and len(report.nodes):
+        settings["unclean"] = report.line()
+        return Job("mesh", settings, [Part("part_000000.stl", {"box": str(r), "unions": True})])
     parts = [Part(f"part_{n:06d}.stl", {"box": str(box)}) for n, box in enumerate(lat.iter_slabs(box_groups, r))]
     return Job("mesh", settings, parts)
 
@@ -258,6 +267,9 @@ def _sweep_part(settings: dict, part: Part) -> tuple[bytes, dict]:
 
 def _mesh_part(settings: dict, part: Part) -> tuple[bytes, dict]:
     lat = job_lattice(settings)
+    if part.params.get("unions"):  # an unclean region: one mesh with its unions, written as ``ple mesh`` writes it
+        data = mesh_bytes(tessellate(lat, settings["region"], settings["style"], settings["levels"]), "stl")
+        return data, {"triangles": (len(data) - 84) // 50}
     verts, faces = tessellation_box(lat, settings["region"], part.params["box"], settings["style"],
                                     settings["levels"], grid=settings["grid"])
     # the whole region's float32 grid, as the streamed STL (``write_mesh``): the parts close up

@@ -138,6 +138,8 @@ def run_parts(args) -> int:
     if args.box_groups < 1:
         raise PleError(f"--box-groups must be at least 1, got {args.box_groups}")
     job = mesh_job(args.lattice, args.param, args.style, args.levels, args.region, args.box_groups)
+    if job.settings["unclean"]:
+        print(f"{job.settings['unclean']}: one part")
     status = report_job(run_job(job, args.parts, args.scheduler, args.workers))
     if status == 0 and args.out:
         n = assemble_stl(args.parts, args.out)

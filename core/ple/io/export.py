@@ -23,8 +23,8 @@ import trimesh
 
 from ..errors import PleError
 from ..meshing.connectors import constant_radius_connectors
-from ..meshing.tessellate import checked_stream, iter_triangles, output_grid, tessellate, weld_chunks
-from ..meshing.weld import grid_spacing, snap_triangles, weld
+from ..meshing.tessellate import checked_stream, iter_triangles, output_grid, smallest_radius, tessellate, weld_chunks
+from ..meshing.weld import edge_manifold, grid_spacing, snap_triangles, weld
 from ..model.lattice import Lattice
 from .files import atomic_path, atomic_write_text, check_output_dir, write_marker
 from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, from_file_axes, mesh_format, to_file_axes, unit_name
@@ -132,7 +132,32 @@ def encode_mesh(vertices, faces, fmt: str, unit: str = DEFAULT_UNIT) -> bytes:
     if fmt == "obj":
         return obj_bytes(vertices, faces, unit)
     out = trimesh.Trimesh(np.asarray(vertices, np.float32), faces, process=False)
-    return trimesh.exchange.gltf.export_glb(out, include_normals=False)
+    return glb_with_targets(trimesh.exchange.gltf.export_glb(out, include_normals=False))
+
+
+GL_ARRAY_BUFFER, GL_ELEMENT_ARRAY_BUFFER = 34962, 34963
+
+
+def glb_with_targets(glb: bytes) -> bytes:
+    """A GLB whose buffer views state their target (vertex data or indices), as the Khronos glTF
+    validator asks (trimesh leaves them out). The binary chunk is kept byte for byte."""
+    magic, version, _ = struct.unpack_from("<4sII", glb, 0)
+    n, kind = struct.unpack_from("<I4s", glb, 12)
+    if magic != b"glTF" or kind != b"JSON":
+        raise PleError("not a GLB file")
+    doc = json.loads(glb[20:20 + n])
+    views = doc.get("bufferViews", [])
+    for mesh in doc.get("meshes", []):
+        for prim in mesh.get("primitives", []):
+            for acc in prim.get("attributes", {}).values():
+                views[doc["accessors"][acc]["bufferView"]]["target"] = GL_ARRAY_BUFFER
+            if "indices" in prim:
+                views[doc["accessors"][prim["indices"]]["bufferView"]]["target"] = GL_ELEMENT_ARRAY_BUFFER
+    text = json.dumps(doc, separators=(",", ":")).encode()
+    text += b" " * (-len(text) % 4)  # chunks are 4-byte aligned, JSON padded with spaces
+    rest = glb[20 + n:]
+    head = struct.pack("<4sII", b"glTF", version, 12 + 8 + len(text) + len(rest))
+    return head + struct.pack("<I4s", len(text), b"JSON") + text + rest
 
 
 def export_mesh(mesh: trimesh.Trimesh, path, unit: str = DEFAULT_UNIT, grid: float | None = None) -> dict:
@@ -143,10 +168,30 @@ def export_mesh(mesh: trimesh.Trimesh, path, unit: str = DEFAULT_UNIT, grid: flo
     fmt = mesh_format(path)
     unit_name(unit)
     v, f, stats = prepare(mesh.vertices, mesh.faces, fmt, unit, grid)
+    if len(f) and edge_manifold(f)["bad_edges"] and not edge_manifold(mesh.faces)["bad_edges"]:
+        check_float32_range(mesh.vertices, mesh.edges_unique_length.min(), fmt)
+        raise PleError(f"{Path(path).name}: the closed mesh does not stay closed in {fmt}'s float32 coordinates")
     data = encode_mesh(v, f, fmt, unit)
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
     return stats
+
+
+MIN_FEATURE_GRIDS = 16  # the smallest ball radius, in float32 grid steps, that a written mesh keeps closed
+
+
+def check_float32_range(vertices_or_bounds, smallest: float, fmt: str) -> None:
+    """Refuse a mesh whose features (``smallest``: a ball radius or an edge, world units) are
+    finer than float32 can place at its largest coordinate: written, it would not be closed
+    (a similarity scaled by 1e10 puts groups of size 1 beside groups of size 1e10).
+    The tolerance is relative: the float32 grid at the mesh's own size (``grid_spacing``)."""
+    b = np.asarray(vertices_or_bounds, float).reshape(-1, 3)
+    g = grid_spacing(b.min(axis=0), b.max(axis=0))
+    if not smallest >= MIN_FEATURE_GRIDS * g:
+        size = float(np.max(np.abs(b)))
+        raise PleError(f"features of {smallest:.3g} beside coordinates of {size:.3g}: {fmt}'s float32 "
+                       f"coordinates step by {g:.3g} there, too coarse to keep the mesh closed "
+                       f"(mesh a region with a smaller range of sizes, or shrink the lattice's scale factors)")
 
 
 def write_chunks(path, chunks: Iterable, unit: str = DEFAULT_UNIT) -> int:
@@ -234,6 +279,8 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
     fmt = mesh_format(path)
     r = lat.region(region)
     info = {} if info is None else info
+    if style != "balls-beams":
+        check_float32_range(np.array(lat.bounds(r)), smallest_radius(lat, r), fmt)
     if fmt == "stl" and style != "balls-beams":
         info["unclean"], chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet, workers)
         if chunks is not None:

@@ -71,7 +71,7 @@ def _segments(style: str, segments: int):
 
 
 def refine_arrays(verts, hull, faces, fcor, fpar, rings, real, normals, alphas, r_plus, corridor_point,
-                  exit_distance, levels: int):
+                  exit_distance, levels: int, corridors=None):
     """§6 refinement of H hubs with one CNT topology: ``levels`` 1-to-4 splits (a corridor quad,
     two triangles, becomes 8 around its centre), arc midpoints snapped to their circle, other new
     vertices centrally projected.
@@ -88,8 +88,13 @@ def refine_arrays(verts, hull, faces, fcor, fpar, rings, real, normals, alphas, 
     the centre. A point of the planar CNT quad near a long arc's chord lies in that circle's
     cone, and its projection would land on the beam beyond the contact disk, folding into the
     beam's strip; a point of the hull never does (the centre is inside the hull, so the cones
-    over its faces, corridors and disks do not overlap). Returns (verts (H, V', 3), faces, rings)."""
+    over its faces, corridors and disks do not overlap). ``corridors`` (k, ≥2): the circles each
+    corridor joins, to find the corridors that are cones (one end a point circle, alpha 0), whose
+    apex edges are generators. Returns (verts (H, V', 3), faces, rings)."""
     e1, e2 = perpendicular_frames(normals)
+    # per corridor: is its end a (t = 0) / b (t = 1) a point circle (the corridor is a cone with its apex there)
+    ends = np.asarray(corridors)[:, :2] if corridors is not None and len(corridors) else np.zeros((0, 2), np.int64)
+    point_end = np.concatenate([np.asarray(alphas)[0][ends] == 0.0, np.zeros((1, 2), bool)])  # row -1: triangles
     rp = np.asarray(r_plus, float)[:, None, None]
     rings = [np.asarray(r).copy() for r in rings]
     for _ in range(levels):
@@ -100,8 +105,10 @@ def refine_arrays(verts, hull, faces, fcor, fpar, rings, real, normals, alphas, 
         inv = inv.reshape(-1)
         ua, ub = uniq // nv, uniq % nv
         ecor = np.tile(fcor, 3)
-        epar = 0.5 * (np.concatenate([fpar[:, 0], fpar[:, 1], fpar[:, 2]])
-                      + np.concatenate([fpar[:, 1], fpar[:, 2], fpar[:, 0]]))
+        apex = _apex_corners(fcor, fpar, point_end)
+        p01, p12, p20 = (_param_mid(fpar[:, i], fpar[:, j], apex[:, i], apex[:, j])
+                         for i, j in ((0, 1), (1, 2), (2, 0)))
+        epar = np.concatenate([p01, p12, p20])
         # one hull point per edge: a corridor's if any face on it is a corridor (they agree on
         # the generators shared with triangles), else the chord's midpoint on a triangle
         pick = np.full(len(uniq), -1)
@@ -142,11 +149,26 @@ def refine_arrays(verts, hull, faces, fcor, fpar, rings, real, normals, alphas, 
         faces = np.concatenate([np.stack([v0, m[:, 0], m[:, 2]], 1), np.stack([m[:, 0], v1, m[:, 1]], 1),
                                 np.stack([m[:, 2], m[:, 1], v2], 1), m])
         p0, p1, p2 = fpar[:, 0], fpar[:, 1], fpar[:, 2]
-        p01, p12, p20 = 0.5 * (p0 + p1), 0.5 * (p1 + p2), 0.5 * (p2 + p0)
         fpar = np.concatenate([np.stack([p0, p01, p20], 1), np.stack([p01, p1, p12], 1),
                                np.stack([p20, p12, p2], 1), np.stack([p01, p12, p20], 1)])
         fcor = np.tile(fcor, 4)
     return verts, faces, rings
+
+
+def _apex_corners(fcor: np.ndarray, fpar: np.ndarray, point_end: np.ndarray) -> np.ndarray:
+    """Which corners (f, 3) of the faces are the apex of their corridor's cone: the single vertex
+    of a point circle, whose arc parameter s is arbitrary (every generator ends there)."""
+    t = fpar[..., 1]
+    return ((t == 0.0) & point_end[fcor, 0][:, None]) | ((t == 1.0) & point_end[fcor, 1][:, None])
+
+
+def _param_mid(pa: np.ndarray, pb: np.ndarray, apex_a: np.ndarray, apex_b: np.ndarray) -> np.ndarray:
+    """Corridor coordinates (k, 2) of the midpoints of edges with end coordinates pa, pb (k, 2).
+    An edge from a cone's apex is a generator: its midpoint keeps the other end's s (the mean
+    would leave the edge, and the planar triangle sharing it would fold)."""
+    mid = 0.5 * (pa + pb)
+    mid[:, 0] = np.where(apex_a & ~apex_b, pb[:, 0], np.where(apex_b & ~apex_a, pa[:, 0], mid[:, 0]))
+    return mid
 
 
 def _arc_mids(pa, pb, n, alpha, r_plus, e1, e2) -> np.ndarray:
@@ -176,7 +198,7 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
     v, f, rings = refine_arrays(verts[None], mesh.vertices[None], faces, fcor, fpar, mesh.rings, hub.slots,
                                 c.normals[None], c.alphas[None], np.array([hub.r_plus]),
                                 lambda cor, s, t: mesh.corridor_point(cor, s, t)[None],
-                                lambda u: hub.exit_distance(u[0])[None], levels)
+                                lambda u: hub.exit_distance(u[0])[None], levels, c.corridors)
     return v[0], f, rings
 
 
@@ -467,7 +489,8 @@ def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths
             verts, f, rg = refine_arrays(
                 unit * rp[:, None, None], unit, base.faces, base.face_corridor, base.face_params, base.rings,
                 dirs.shape[1], batch.normals, batch.alphas, rp, batch.corridor_point,
-                lambda u, ids=ids: exit_distances(u, radii[ids], dirs[ids], nbr[ids], lengths[ids]), levels)
+                lambda u, ids=ids: exit_distances(u, radii[ids], dirs[ids], nbr[ids], lengths[ids]), levels,
+                batch.cors)
         else:
             verts, f, rg = unit * rp[:, None, None], base.faces, base.rings
         surfaces = _collapsed(verts, f, [rg[s] for s in range(len(rg))], min_edge)

@@ -202,7 +202,7 @@ class _Tessellator:
                 local[..., :3] = np.einsum("nab,nsb->nsa", minv[reps, :3, :3], c) + minv[reps, None, :3, 3]
                 local[..., 3] = rad.reshape(len(reps), s) / f[:, None]
                 local[~ex] = np.nan
-            q = np.where(np.isnan(local), -(2**62), np.round(local / self.scale[n])).astype(np.int64)
+            q = quantized(local, self.scale[n])
             own = np.full(len(reps), lat.template_radii[n])
             if lat.radius_field is not None:  # the hub's own graded radius, in its frame
                 own = lat.node_balls(idx[reps])[1] / lat.group_factors(idx[reps, 0], idx[reps, 1], idx[reps, 2])
@@ -334,7 +334,7 @@ class _Tessellator:
             bounds = np.searchsorted(inv[order], np.arange(len(first) + 1))
             a0s, b0s = src[first], dst[first]
             rel = np.einsum("uij,ujk->uik", minv[a0s], m[b0s])
-            qrel = np.round(rel[:, :3] / 1e-9).astype(np.int64)
+            qrel = quantized(rel[:, :3], 1e-9)
             keys = [(p, int(tids[a0]), int(tids[b0]), qrel[u].tobytes()) for u, (a0, b0) in enumerate(zip(a0s, b0s))]
             rings = [(tpl_list[tids[a0]][0].rings[tpl_list[tids[a0]][1][slot_a]],
                       tpl_list[tids[b0]][0].rings[tpl_list[tids[b0]][1][slot_b]]) for a0, b0 in zip(a0s, b0s)]
@@ -552,10 +552,40 @@ def weld_chunks(chunks) -> tuple[np.ndarray, np.ndarray]:
     return verts[first[order]][used], renumber[faces]
 
 
+def quantized(x: np.ndarray, quantum: float) -> np.ndarray:
+    """Integer keys (..., 2) of values x (NaN: a key of its own): whole multiples of
+    ``quantum`` while they fit in 2⁵⁰, beyond that the exponent and the leading 40 bits of the
+    mantissa (a relative quantum), so huge coordinates (a similarity scaled by 1e10) never
+    overflow into one shared key."""
+    x = np.asarray(x, float)
+    nan = np.isnan(x)
+    x = np.where(nan, 0.0, x)
+    small = np.abs(x) < quantum * 2.0**50
+    mant, ex = np.frexp(np.where(small, 0.0, x))
+    a = np.where(small, np.round(np.where(small, x, 0.0) / quantum), np.round(mant * 2.0**40)).astype(np.int64)
+    b = np.where(small, 0, ex.astype(np.int64) + 4096)
+    b = np.where(nan, -1, b)
+    return np.stack([a, b], axis=-1)
+
+
 def output_grid(lat: Lattice, region=None) -> float:
     """The float32 snap grid of a region's output (``ple.meshing.weld.grid_spacing`` of its
     bounds): one grid for every streamed box and every job part of the region, so they close up."""
     return grid_spacing(*lat.bounds(lat.region(region)))
+
+
+def smallest_radius(lat: Lattice, region=None) -> float:
+    """The smallest ball radius of a region (world units): the smallest template radius times
+    the smallest group scale factor, found at the region's corner groups (powers of
+    similarities scale monotonically along each axis). Lattices placed by other maps, or with
+    graded radii (no lower bound known): inf."""
+    if lat.group_map is not None or lat.radius_field is not None or not len(lat.nodes):
+        return float("inf")
+    r = lat.region(region)
+    corners = np.array([[i, j, k] for i in (r.i0, max(r.i1 - 1, r.i0)) for j in (r.j0, max(r.j1 - 1, r.j0))
+                        for k in (r.k0, max(r.k1 - 1, r.k0))])
+    f = lat.group_factors(corners[:, 0], corners[:, 1], corners[:, 2])
+    return float(np.min(lat.template_radii) * np.min(f))
 
 
 def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
