@@ -151,16 +151,11 @@ def unite(mesh_vertices, mesh_faces, center, radius, beam_nodes, nodes):
             ball[x] = unit.scale([rad[x]] * 3).translate(list(c[x]))
         return ball[x]
 
+    parts = [ball_of(int(x)) for x in nodes]
     mark = np.zeros(len(c), bool)
     mark[nodes] = True
     bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
-    beams = bn[mark[bn[:, 0]] | mark[bn[:, 1]]]
-    # a ball with a beam lies in that beam's hull: only bare balls are parts of their own
-    # (same union, ~20 % less boolean work: fewer coincident sphere vertices)
-    has_beam = np.zeros(len(c), bool)
-    has_beam[beams.reshape(-1)] = True
-    parts = [ball_of(int(x)) for x in nodes if not has_beam[x]]
-    for x, y in beams:
+    for x, y in bn[mark[bn[:, 0]] | mark[bn[:, 1]]]:
         # the cone-beam is the convex hull of its balls; built from the very ball meshes, so the
         # boolean meets coincident vertices (resolved symbolically), never near-tangent surfaces
         parts.append(manifold3d.Manifold.batch_hull([ball_of(int(x)), ball_of(int(y))]))
