@@ -161,17 +161,10 @@ def unite(mesh_vertices, mesh_faces, center, radius, beam_nodes, nodes):
         parts.append(manifold3d.Manifold.batch_hull([ball_of(int(x)), ball_of(int(y))]))
     local = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add)
     if len(mesh_faces):
-        # in 64 bits where manifold3d has them: float32 input would round away thin features
-        # of the fast mesh and fold them (self-intersections in the union's output)
-        if hasattr(manifold3d, "Mesh64"):
-            mesh = manifold3d.Mesh64(vert_properties=np.asarray(mesh_vertices, np.float64),
-                                     tri_verts=np.asarray(mesh_faces, np.uint64))
-        else:  # pragma: no cover - manifold3d < 3
-            mesh = manifold3d.Mesh(vert_properties=np.asarray(mesh_vertices, np.float32),
-                                   tri_verts=np.asarray(mesh_faces, np.uint32))
-        base = manifold3d.Manifold(mesh)
+        base = manifold3d.Manifold(manifold3d.Mesh(vert_properties=np.asarray(mesh_vertices, np.float32),
+                                                   tri_verts=np.asarray(mesh_faces, np.uint32)))
         if base.status() != manifold3d.Error.NoError:
             raise PleError(f"the clean part of the mesh is not a manifold ({base.status()})")
         local = base + local
-    out = local.to_mesh64() if hasattr(local, "to_mesh64") else local.to_mesh()
+    out = local.to_mesh()
     return np.asarray(out.vert_properties[:, :3], float), np.asarray(out.tri_verts, np.int64)
