@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..clg.grid import parse_bounds
+from ..model.budget import fast_bounds
 from ..queries.biq import pmc
 from .clg import add_slice_args, slice_with
 from .common import add_lattice_args, lattice_from_args
@@ -21,7 +22,9 @@ def register(sub) -> None:
 def run(args) -> int:
     lat = lattice_from_args(args)
     if args.bounds is None:
-        lo, hi = lat.bounds()
+        lo, hi, exact = fast_bounds(lat)  # end groups only where exact: a huge lattice answers at once
+        if not exact:
+            lo, hi = lat.bounds()
     else:
         lo, hi = parse_bounds(args.bounds, None, None)
     return slice_with(lambda p: pmc(lat, p), np.asarray(lo, float), np.asarray(hi, float), args)

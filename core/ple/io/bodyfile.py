@@ -14,9 +14,11 @@ import trimesh
 from ..algebra.similarity import Similarity
 from ..errors import PleError
 from ..filters.body import Body
+from .inputs import check_input_file
 
 BODY_SUFFIXES = ("stl", "obj", "ply", "3mf", "glb", "gltf", "off")
 MAX_BODY_TRIANGLES = 20_000_000
+MAX_BODY_BYTES = 1 << 30  # a binary STL of 20 M triangles; read whole by trimesh, so checked first
 
 
 def load_body(path, placement: Similarity | None = None, open: str = "error", name: str | None = None) -> Body:  # noqa: A002
@@ -26,8 +28,10 @@ def load_body(path, placement: Similarity | None = None, open: str = "error", na
     suffix = path.suffix.lower().lstrip(".")
     if suffix not in BODY_SUFFIXES:
         raise PleError(f"{name}: unknown body mesh format {suffix!r} (expected .{', .'.join(BODY_SUFFIXES)})")
-    if not path.is_file():
-        raise PleError(f"{name}: no such body mesh file")
+    try:  # a regular file within the limit: a folder, FIFO (would block) or device is named as such
+        check_input_file(path, "body mesh file", MAX_BODY_BYTES)
+    except PleError as exc:
+        raise PleError(f"{name}: {str(exc).removeprefix(str(path) + ': ')}") from None
     try:
         mesh = trimesh.load(str(path), force="mesh", process=False)
     except Exception as exc:  # noqa: BLE001 - any reader failure is a bad file, named
