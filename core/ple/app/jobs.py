@@ -32,6 +32,7 @@ from ..meshing.styles import style as style_named
 from ..meshing.tessellate import output_grid, tessellate, tessellation_box
 from ..meshing.weld import snap_triangles
 from ..model.lattice import Evaluation, Region
+from ..program.runner import run_program
 from ..program.sources import load_lattice, resolve_source
 
 FORMAT = "ple-job/1"
@@ -58,14 +59,19 @@ class Job:
 
 
 # ----- locations ------------------------------------------------------------------------------------
-def location(url: str):
-    """(filesystem, root path) of a local folder or an fsspec URL; created if missing."""
+def location(url: str, create: bool = True):
+    """(filesystem, root path) of a local folder or an fsspec URL; created if missing (else, with
+    ``create`` False, an error: reading a job never creates anything)."""
     try:
         fs, root = fsspec.core.url_to_fs(str(url))
     except (ValueError, ImportError) as exc:
         raise PleError(f"--out {url}: not a usable location ({exc})") from None
     if fs.isfile(root):
         raise PleError(f"--out {url}: is a file, not a folder")
+    if not create:
+        if not fs.isdir(root):
+            raise PleError(f"{url}: no such folder of job parts")
+        return fs, root
     try:
         fs.makedirs(root, exist_ok=True)
     except OSError as exc:
@@ -92,7 +98,7 @@ def read_manifest(fs, root: str) -> dict:
         return {}
     try:
         data = json.loads(fs.cat_file(path))
-    except ValueError:
+    except (ValueError, RecursionError):  # RecursionError: JSON nested beyond Python's stack
         raise PleError(f"{path}: not a valid job manifest (JSON); move it away to start afresh") from None
     if not isinstance(data, dict) or data.get("format") != FORMAT or not isinstance(data.get("parts"), dict):
         raise PleError(f"{path}: not a {FORMAT} manifest; choose an empty --out")
@@ -127,14 +133,25 @@ def sweep_job(source: str, variants: list, style: str, fmt: str, levels=None, re
     return Job("sweep", settings, [Part(v.filename, dict(v.params)) for v in variants])
 
 
+MAX_PARTS = 100_000  # parts of one job: its manifest and task list are held whole
+
+
+def _check_parts(r, box_groups: int, flag: str) -> None:
+    parts = -(-r.groups // max(1, int(box_groups)))
+    if parts > MAX_PARTS:
+        raise PleError(f"region {r}: {r.groups:,} node-groups make at least {parts:,} parts of {box_groups:,} "
+                       f"(limit {MAX_PARTS:,}); choose a larger {flag} or a smaller --region")
+
+
 def mesh_job(source: str, params: dict, style: str = "refined", levels=None, region=None,
              box_groups: int = 1 << 14) -> Job:
     """One binary-STL part per box of node-groups of ``region`` (``Lattice.iter_slabs`` order)."""
     style_named(style)
     if style == "balls-beams":
         raise PleError("a partitioned mesh needs a closed style (refined, cnt or chocc)")
-    lat = load_lattice(source, params)
+    lat = run_program(source, params)  # contained (ple.program.runner), as every command's program
     r = lat.region(region)
+    _check_parts(r, box_groups, "--box-groups")
     settings = {"source": str(resolve_source(source)), "params": _params(params), "style": style, "levels": levels,
                 "region": str(r)}
     parts = [Part(f"part_{n:06d}.stl", {"box": str(box)}) for n, box in enumerate(lat.iter_slabs(box_groups, r))]
@@ -144,8 +161,9 @@ def mesh_job(source: str, params: dict, style: str = "refined", levels=None, reg
 def filter_job(lat_source: str, params: dict, region=None, slab_groups: int = 1 << 18, filter_spec=None) -> Job:
     """One ``.npz`` part per slab of a (filtered) lattice: its kept nodes and the beams whose
     from-group lies in the slab (both ends kept), ends given as node indices."""
-    lat = load_lattice(lat_source, params)
+    lat = run_program(lat_source, params)
     r = lat.region(region)
+    _check_parts(r, slab_groups, "slab size")
     settings = {"source": str(resolve_source(lat_source)), "params": _params(params), "region": str(r),
                 "filter": filter_spec}
     parts = [Part(f"part_{n:06d}.npz", {"box": str(box)}) for n, box in enumerate(lat.iter_slabs(slab_groups, r))]
@@ -223,7 +241,7 @@ _PARTS = {"sweep": _sweep_part, "mesh": _mesh_part, "filter": _filter_part}
 def assemble_stl(url: str, out, chunk: int = 1 << 22) -> int:
     """One binary STL of a partitioned mesh: the parts' triangle records concatenated, streamed
     (never all parts in memory). Returns the triangle count."""
-    fs, root = location(url)
+    fs, root = location(url, create=False)
     manifest = read_manifest(fs, root)
     if manifest.get("kind") != "mesh":
         raise PleError(f"{url}: not a partitioned mesh (kind {manifest.get('kind')!r})")
@@ -245,7 +263,7 @@ def assemble_stl(url: str, out, chunk: int = 1 << 22) -> int:
 
 def load_filter_parts(url: str):
     """The Evaluation of a partitioned filter job (beam ends resolved to rows)."""
-    fs, root = location(url)
+    fs, root = location(url, create=False)
     manifest = read_manifest(fs, root)
     if manifest.get("kind") != "filter":
         raise PleError(f"{url}: not a partitioned filter job")

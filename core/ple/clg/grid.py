@@ -9,7 +9,7 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 from ..errors import PleError
-from ..model.budget import require
+from ..model.budget import HUGE, require
 
 MAX_VOXELS = 1 << 32  # 4 GiB of bool output
 MAX_PIXELS = 1 << 26  # per printer layer
@@ -31,6 +31,8 @@ def parse_bounds(text: str | None, lo, hi) -> tuple[np.ndarray, np.ndarray]:
     a, b = np.array(vals[:3]), np.array(vals[3:])
     if np.any(b <= a):
         raise PleError(f"--bounds {text!r}: each upper bound must exceed its lower bound")
+    if not np.all(np.abs(np.concatenate([a, b])) <= HUGE):  # sizes b - a stay finite
+        raise PleError(f"--bounds {text!r}: coordinates must lie within ±{HUGE:g}")
     return a, b
 
 

@@ -16,9 +16,9 @@ from ..errors import PleError
 from ..io.export import export_mesh
 from ..io.files import atomic_path
 from ..io.inputs import load_npy
-from ..model.budget import require
 from ..io.slices import write_pmc_slices
 from ..meshing.clg import mesh_clg
+from ..model.budget import require
 from ..program.clg_sources import run_clg
 from .common import add_program_limits, max_memory
 

@@ -87,7 +87,7 @@ def _solid_manifold(m, comp, segments: int, max_bytes: float | None = None):
     g = comp.groups()
     lin, move, _ = comp.copies(g)
     unions = []
-    for ci, template in enumerate(templates):
+    for template in templates:
         copies = [template.transform(_similarity_3x4(lin[n], move[n])) for n in range(len(g))]
         unions.append(m.Manifold.batch_boolean(copies, m.OpType.Add) if len(copies) > 1 else copies[0])
     return _expr(m, comp.solid, unions)

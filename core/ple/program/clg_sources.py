@@ -96,10 +96,10 @@ def run_clg(source: str, params=None, timeout: float | None = DEFAULT_TIMEOUT, m
     """``load_clg`` with a program contained in a child process (``ple.program.runner``): at most
     ``timeout`` seconds and ``memory`` bytes; ``sys.exit``, ``os._exit`` and any exception become one
     error naming the program. A ``ple-clg/1`` file is data and loads in-process."""
+    check_timeout(timeout)
     path = resolve_clg(source)
     if path.suffix == ".json":
         return load_clg(source, params)
-    check_timeout(timeout)
     clg = Job(lambda: load_clg(source, params), str(path), timeout, memory, what="the CLG program",
               hints=hints).result()
     if not isinstance(clg, CLG):  # pragma: no cover - load_clg checks it in the child
