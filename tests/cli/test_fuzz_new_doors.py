@@ -202,7 +202,7 @@ for out, needle in (("userdir", ".npy"), ("outdir.npy", "folder"), ("o.txt", ".n
 case(ANY, "clg", "pmc", "plate", "--points", "pts.npy", "--out", "/dev/null")
 # voxels, slices, renders, meshes: sizes refused before allocating
 for grid, needle in (("0,0,0", "at least 1"), ("-1,2,2", "at least 1"), ("2000,2000,2000", "voxels"),
-                     ("1200,1200,1200", "voxels"), ("600,600,600", "--max-memory"),
+                     ("1200,1200,1200", "voxels"), ("1000,1000,1000", "--max-memory"),
                      ("a,b,c", "integers"), ("10,10", "NX,NY,NZ"),
                      ("99999999999999999999,1,1", "voxels")):
     case(REFUSE, "clg", "voxelize", "plate", "--grid", grid, "--max-memory", "1G", "--out", "v.npy", needle=needle)
