@@ -286,7 +286,7 @@ case(REFUSE, "skin", "cubic", "--param", "n=10000", "--body", "box.stl", "--thic
 for mesh in ("empty.stl", "garbage.stl", "fifo.stl", "dir.stl", "missing.stl", "nan.obj", "hugecount.stl"):
     case(REFUSE, "fit", mesh, "--out", "f.npz", needle=mesh)
 for extra, needle in ((("--bound", "0"), "--bound"), (("--bound", "-1"), "--bound"), (("--bound", "nan"), "--bound"),
-                      (("--orders", "0"), "--orders"), (("--orders", "200"), "--max-memory"),
+                      (("--orders", "0"), "--orders"), (("--orders", "256"), "--max-memory"),
                       (("--orders", "-8"), "--orders"),
                       (("--orders", "100000"), "--orders"), (("--orders", "a"), "--orders"),
                       (("--orders", ""), "--orders"),
