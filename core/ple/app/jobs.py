@@ -100,7 +100,8 @@ def read_manifest(fs, root: str) -> dict:
         data = json.loads(fs.cat_file(path))
     except (ValueError, RecursionError):  # RecursionError: JSON nested beyond Python's stack
         raise PleError(f"{path}: not a valid job manifest (JSON); move it away to start afresh") from None
-    if not isinstance(data, dict) or data.get("format") != FORMAT or not isinstance(data.get("parts"), dict):
+    if (not isinstance(data, dict) or data.get("format") != FORMAT or not isinstance(data.get("parts"), dict)
+            or not isinstance(data.get("order", []), list)):
         raise PleError(f"{path}: not a {FORMAT} manifest; choose an empty --out")
     return data
 
@@ -245,10 +246,13 @@ def assemble_stl(url: str, out, chunk: int = 1 << 22) -> int:
     manifest = read_manifest(fs, root)
     if manifest.get("kind") != "mesh":
         raise PleError(f"{url}: not a partitioned mesh (kind {manifest.get('kind')!r})")
-    missing = [p for p in manifest["order"] if p not in valid_parts(fs, root, manifest)]
+    order = manifest.get("order") or []
+    if not order:
+        raise PleError(f"{url}: the job manifest lists no parts (its \"order\"); re-run the job")
+    missing = [p for p in order if p not in valid_parts(fs, root, manifest)]
     if missing:
         raise PleError(f"{url}: {len(missing)} part(s) missing or damaged (e.g. {missing[0]}); re-run the job")
-    total = sum(manifest["parts"][p]["triangles"] for p in manifest["order"])
+    total = sum(manifest["parts"][p]["triangles"] for p in order)
     if total >= 2**32:
         raise PleError(f"{total:,} triangles do not fit one binary STL")
     with atomic_path(out) as tmp, open(tmp, "wb") as dst:

@@ -42,7 +42,7 @@ def load_mesh(path: str):
 
 
 MAX_ORDER = 256  # the fit samples an N³ grid
-GRID_BYTES = 64  # per sample of an order's grid: inside flags, the FFT (complex) and its copies
+GRID_BYTES = 256  # per sample of an order's grid: inside flags, winding numbers, the FFT and copies (256³ passed 3 GiB)
 
 
 def run(args) -> int:
