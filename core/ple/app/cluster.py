@@ -82,12 +82,22 @@ def run_tasks(client, fn, args_list: list[tuple], items: list):
             yield futures[fut], exc
 
 
+def check_scheduler(scheduler: str | None, workers: int | None) -> None:
+    """``--scheduler``/``--workers`` as ``dask_client`` takes them, checked before any work."""
+    if scheduler not in (None, "local", "sync") and "://" not in str(scheduler):
+        raise PleError(f"--scheduler {scheduler!r}: expected local, sync or an address such as tcp://HOST:8786")
+    if workers is not None and workers < 1:
+        raise PleError(f"--workers {workers}: must be at least 1")
+
+
 def run_job(job: Job, url: str, scheduler: str | None = "local", workers: int | None = None,
             progress: bool | None = None, client=None) -> dict:
     """Compute every part of ``job`` not already written and valid under ``url``; returns a
     summary (written, skipped, failed, manifest, seconds). ``client``: an existing Dask client
     (then ``scheduler`` is ignored)."""
     t0 = time.perf_counter()
+    if client is None:
+        check_scheduler(scheduler, workers)  # before the folder is created
     fs, root = location(url)
     old = read_manifest(fs, root)
     if old and (old.get("kind") != job.kind or old.get("settings") != job.settings):

@@ -43,6 +43,7 @@ from ..meshing.styles import style as style_named
 from ..meshing.tessellate import checked_stream, output_grid, tessellate, tessellation_box
 from ..meshing.weld import snap_triangles
 from ..model.lattice import Evaluation, Lattice, Region
+from ..program.runner import run_program
 from ..program.sources import load_lattice, resolve_source
 from ..queries.biq import pmc
 
@@ -71,14 +72,19 @@ class Job:
 
 
 # ----- locations ------------------------------------------------------------------------------------
-def location(url: str):
-    """(filesystem, root path) of a local folder or an fsspec URL; created if missing."""
+def location(url: str, create: bool = True):
+    """(filesystem, root path) of a local folder or an fsspec URL; created if missing (else, with
+    ``create`` False, an error: reading a job never creates anything)."""
     try:
         fs, root = fsspec.core.url_to_fs(str(url))
     except (ValueError, ImportError) as exc:
         raise PleError(f"--out {url}: not a usable location ({exc})") from None
     if fs.isfile(root):
         raise PleError(f"--out {url}: is a file, not a folder")
+    if not create:
+        if not fs.isdir(root):
+            raise PleError(f"{url}: no such folder of job parts")
+        return fs, root
     try:
         fs.makedirs(root, exist_ok=True)
     except OSError as exc:
@@ -105,9 +111,10 @@ def read_manifest(fs, root: str) -> dict:
         return {}
     try:
         data = json.loads(fs.cat_file(path))
-    except ValueError:
+    except (ValueError, RecursionError):  # RecursionError: JSON nested beyond Python's stack
         raise PleError(f"{path}: not a valid job manifest (JSON); move it away to start afresh") from None
-    if not isinstance(data, dict) or data.get("format") != FORMAT or not isinstance(data.get("parts"), dict):
+    if (not isinstance(data, dict) or data.get("format") != FORMAT or not isinstance(data.get("parts"), dict)
+            or not isinstance(data.get("order", []), list)):
         raise PleError(f"{path}: not a {FORMAT} manifest; choose an empty --out")
     return data
 
@@ -140,6 +147,16 @@ def sweep_job(source: str, variants: list, style: str, fmt: str, levels=None, re
     return Job("sweep", settings, [Part(v.filename, dict(v.params)) for v in variants])
 
 
+MAX_PARTS = 100_000  # parts of one job: its manifest and task list are held whole
+
+
+def _check_parts(r, box_groups: int, flag: str) -> None:
+    parts = -(-r.groups // max(1, int(box_groups)))
+    if parts > MAX_PARTS:
+        raise PleError(f"region {r}: {r.groups:,} node-groups make at least {parts:,} parts of {box_groups:,} "
+                       f"(limit {MAX_PARTS:,}); choose a larger {flag} or a smaller --region")
+
+
 def mesh_job(source: str, params: dict, style: str = "refined", levels=None, region=None,
              box_groups: int = 1 << 14) -> Job:
     """One binary-STL part per box of node-groups of ``region`` (``Lattice.iter_slabs`` order).
@@ -152,8 +169,9 @@ def mesh_job(source: str, params: dict, style: str = "refined", levels=None, reg
     style_named(style)
     if style == "balls-beams":
         raise PleError("a partitioned mesh needs a closed style (refined, cnt or chocc)")
-    lat = load_lattice(source, params)
+    lat = run_program(source, params)  # contained (ple.program.runner), as every command's program
     r = lat.region(region)
+    _check_parts(r, box_groups, "--box-groups")
     settings = {"source": str(resolve_source(source)), "params": _params(params), "style": style, "levels": levels,
                 "region": str(r), "grid": output_grid(lat, r), "unclean": None}
     report, _ = checked_stream(lat, r, style, levels)  # the stream itself is lazy: only the check runs
@@ -167,8 +185,9 @@ def mesh_job(source: str, params: dict, style: str = "refined", levels=None, reg
 def filter_job(lat_source: str, params: dict, region=None, slab_groups: int = 1 << 18, filter_spec=None) -> Job:
     """One ``.npz`` part per slab of a (filtered) lattice: its kept nodes and the beams whose
     from-group lies in the slab (both ends kept), ends given as node indices."""
-    lat = load_lattice(lat_source, params)
+    lat = run_program(lat_source, params)
     r = lat.region(region)
+    _check_parts(r, slab_groups, "slab size")
     settings = {"source": str(resolve_source(lat_source)), "params": _params(params), "region": str(r),
                 "filter": filter_spec}
     parts = [Part(f"part_{n:06d}.npz", {"box": str(box)}) for n, box in enumerate(lat.iter_slabs(slab_groups, r))]
@@ -364,7 +383,7 @@ _PARTS = {"sweep": _sweep_part, "mesh": _mesh_part, "filter": _filter_part, "cou
 def assemble_stl(url: str, out, chunk: int = 1 << 22) -> int:
     """One binary STL of a partitioned mesh: the parts' triangle records concatenated, streamed
     (never all parts in memory). Returns the triangle count."""
-    fs, root = location(url)
+    fs, root = location(url, create=False)
     manifest = _complete(url, fs, root, "mesh")
     total = sum(manifest["parts"][p]["triangles"] for p in manifest["order"])
     if total >= 2**32:
@@ -381,7 +400,7 @@ def assemble_stl(url: str, out, chunk: int = 1 << 22) -> int:
 
 def load_filter_parts(url: str):
     """The Evaluation of a partitioned filter job (beam ends resolved to rows)."""
-    fs, root = location(url)
+    fs, root = location(url, create=False)
     manifest = read_manifest(fs, root)
     if manifest.get("kind") != "filter":
         raise PleError(f"{url}: not a partitioned filter job")
@@ -413,6 +432,8 @@ def _complete(url: str, fs, root: str, kind: str) -> dict:
     manifest = read_manifest(fs, root)
     if manifest.get("kind") != kind:
         raise PleError(f"{url}: not a partitioned {kind} job (kind {manifest.get('kind')!r})")
+    if not manifest.get("order"):
+        raise PleError(f"{url}: the job manifest lists no parts (its \"order\"); re-run the job")
     missing = [p for p in manifest["order"] if p not in valid_parts(fs, root, manifest)]
     if missing:
         raise PleError(f"{url}: {len(missing)} part(s) missing or damaged (e.g. {missing[0]}); re-run the job")
@@ -421,7 +442,7 @@ def _complete(url: str, fs, root: str, kind: str) -> dict:
 
 def iter_slice_parts(url: str) -> Iterator[tuple[int, float, np.ndarray]]:
     """(index, z, mask) of every layer of a partitioned slice job, one part in memory at a time."""
-    fs, root = location(url)
+    fs, root = location(url, create=False)
     manifest = _complete(url, fs, root, "slice")
     for name in manifest["order"]:
         with fs.open(posixpath.join(root, name), "rb") as fh, np.load(io.BytesIO(fh.read())) as z:

@@ -9,9 +9,12 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 from ..errors import PleError
+from ..model.budget import HUGE, require
 
 MAX_VOXELS = 1 << 32  # 4 GiB of bool output
 MAX_PIXELS = 1 << 26  # per printer layer
+MAX_LAYERS = 100_000  # printer layers of one slicing (one PNG each)
+GROUP_BYTES = 3 * 8 + 16 * 8  # a listed group and its copy's 4x4 matrix
 BATCH = 1 << 18  # points per membership call
 
 
@@ -28,6 +31,8 @@ def parse_bounds(text: str | None, lo, hi) -> tuple[np.ndarray, np.ndarray]:
     a, b = np.array(vals[:3]), np.array(vals[3:])
     if np.any(b <= a):
         raise PleError(f"--bounds {text!r}: each upper bound must exceed its lower bound")
+    if not np.all(np.abs(np.concatenate([a, b])) <= HUGE):  # sizes b - a stay finite
+        raise PleError(f"--bounds {text!r}: coordinates must lie within ±{HUGE:g}")
     return a, b
 
 
@@ -43,14 +48,25 @@ def _membership(pmc: Callable, pts: np.ndarray) -> np.ndarray:
     return out
 
 
-def voxelize(pmc: Callable, lo, hi, shape, progress: Callable | None = None, slabs: int | None = None) -> np.ndarray:
-    """bool (NX, NY, NZ): is each voxel centre inside? computed one x-slab at a time (only the first
-    ``slabs`` x-slabs when given: a timing baseline)."""
+def check_grid(shape, grids: int = 1, max_bytes: float | None = None) -> tuple[int, int, int]:
+    """(NX, NY, NZ) of ``--grid``, refused when ``grids`` bool arrays of it (plus the output) exceed
+    ``MAX_VOXELS`` or need more than ``max_bytes`` (``ple.model.budget``)."""
     nx, ny, nz = (int(x) for x in shape)
     if min(nx, ny, nz) < 1:
         raise PleError(f"--grid {nx},{ny},{nz}: every count must be at least 1")
-    if nx * ny * nz > MAX_VOXELS:
+    if nx * ny * nz * grids > MAX_VOXELS:
         raise PleError(f"--grid {nx},{ny},{nz}: {nx * ny * nz:.3g} voxels exceed the limit {MAX_VOXELS:.3g}")
+    if max_bytes is not None:
+        require(nx * ny * nz * (grids + 1), f"--grid {nx},{ny},{nz}: {nx * ny * nz:.3g} voxels", max_bytes,
+                "choose a coarser --grid")
+    return nx, ny, nz
+
+
+def voxelize(pmc: Callable, lo, hi, shape, progress: Callable | None = None, slabs: int | None = None,
+             max_bytes: float | None = None) -> np.ndarray:
+    """bool (NX, NY, NZ): is each voxel centre inside? computed one x-slab at a time (only the first
+    ``slabs`` x-slabs when given: a timing baseline)."""
+    nx, ny, nz = check_grid(shape, 1, max_bytes)
     xs, ys, zs = (axis_centres(lo[a], hi[a], n) for a, n in zip(range(3), (nx, ny, nz)))
     xs = xs[:slabs] if slabs is not None else xs
     out = np.empty((len(xs), ny, nz), bool)
@@ -68,7 +84,12 @@ def layer_grid(lo, hi, layer: float, pixel: float):
     for name, v in (("--layer", layer), ("--pixel", pixel)):
         if not np.isfinite(v) or v <= 0:
             raise PleError(f"{name} {v}: must be a positive number")
-    n = [max(1, int(np.ceil((hi[a] - lo[a]) / step - 1e-9))) for a, step in ((0, pixel), (1, pixel), (2, layer))]
+    nf = [max(1.0, float(np.ceil((hi[a] - lo[a]) / step - 1e-9))) for a, step in ((0, pixel), (1, pixel), (2, layer))]
+    if not nf[2] <= MAX_LAYERS:  # counted as floats first: a tiny step over a huge box is no integer overflow
+        raise PleError(f"--layer {layer}: {nf[2]:.3g} layers exceed the limit {MAX_LAYERS:,}")
+    if not nf[0] * nf[1] <= MAX_PIXELS:
+        raise PleError(f"--pixel {pixel}: {nf[0]:.3g}x{nf[1]:.3g} pixels per layer exceed the limit {MAX_PIXELS:.3g}")
+    n = [int(x) for x in nf]
     if n[0] * n[1] > MAX_PIXELS:
         raise PleError(f"--pixel {pixel}: {n[0]}x{n[1]} pixels per layer exceed the limit {MAX_PIXELS:.3g}")
     xs = lo[0] + (np.arange(n[0]) + 0.5) * pixel
@@ -90,15 +111,14 @@ def iter_slices(pmc: Callable, lo, hi, layer: float, pixel: float, layers: range
         yield k, float(z), _membership(pmc, flat).reshape(gx.shape)
 
 
-def voxelize_clg(comp, lo, hi, shape, progress: Callable | None = None) -> np.ndarray:
+def voxelize_clg(comp, lo, hi, shape, progress: Callable | None = None, max_bytes: float | None = None) -> np.ndarray:
     """Voxels of a compiled CLG by chunk copies (§5.6): each copy classifies only the voxels of its
     own bounding box (the boxes of its positive primitives' bounding balls), the chunk unions are
     OR-ed and the solid is combined from them; the same centres and result as PMC per voxel."""
-    nx, ny, nz = (int(x) for x in shape)
-    if min(nx, ny, nz) < 1:
-        raise PleError(f"--grid {nx},{ny},{nz}: every count must be at least 1")
-    if nx * ny * nz * (len(comp.names) + 1) > MAX_VOXELS:
-        raise PleError(f"--grid {nx},{ny},{nz}: {nx * ny * nz:.3g} voxels exceed the limit")
+    nx, ny, nz = check_grid(shape, len(comp.names) + 1, max_bytes)
+    r = comp.region if comp.region is not None else comp.lat.region(None)
+    if max_bytes is not None:  # the groups are listed (int64 i, j, k) and their copies' matrices made
+        require(r.groups * GROUP_BYTES, f"the {r.groups:,} chunk copies of the voxels", max_bytes)
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     n = np.array([nx, ny, nz])
     axes = [axis_centres(lo[a], hi[a], n[a]) for a in range(3)]

@@ -21,10 +21,11 @@ from dataclasses import dataclass, field
 
 from ..algebra.similarity import commute
 from ..errors import PleError
-from ..model.lattice import Lattice
+from ..model.lattice import MAX_COUNT, Lattice
 from .field import FieldSolid
 
 MAX_DEPTH = 8  # recursive CLG nesting limit (§10.1: infinite recursions must not be defined)
+MAX_SCALE = 1e6  # a primitive at most 10⁶ times its node's radius: squares of radii stay finite
 OPS = ("union", "intersection", "difference")
 FRAMES = ("world", "beam")
 
@@ -105,6 +106,8 @@ def _scale(s, where: str) -> float:
         raise PleError(f"{where}: expected a number, got {s!r}")
     if s <= 0:
         raise PleError(f"{where}: must be > 0, got {s!r}")
+    if s > MAX_SCALE:
+        raise PleError(f"{where}: {s!r} is beyond the largest scale {MAX_SCALE:g} of a node's radius")
     return float(s)
 
 
@@ -274,6 +277,9 @@ def _node(lat: Lattice, ref, where: str) -> NodeRef:
     di, dj, dk, n = (ref.di, ref.dj, ref.dk, ref.n) if isinstance(ref, NodeRef) else ref
     if isinstance(n, bool):
         raise PleError(f"{where}: unknown node {n!r}")
+    for d, name in ((di, "di"), (dj, "dj"), (dk, "dk")):
+        if not -MAX_COUNT <= d <= MAX_COUNT:  # as a beam's offset (ple.model.schema)
+            raise PleError(f"{where}: {name} {d} is outside ±{MAX_COUNT:,}")
     try:
         return NodeRef(int(di), int(dj), int(dk), lat.node_id(n))
     except PleError:

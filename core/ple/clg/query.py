@@ -23,6 +23,7 @@ import numpy as np
 from ..algebra.elements import beam_distance, enclosing_ball
 from ..algebra.vectors import cross
 from ..errors import PleError
+from ..model.budget import fast_bounds
 from ..model.lattice import Lattice, Node
 from ..queries import biq
 from ..queries.rangefinder import lattice_hits
@@ -74,7 +75,8 @@ class Compiled:
         keep = [m for m, c in enumerate(owner) if self.names[c] in positive]
         box = aux.copy()
         box.nodes = [nodes[m] for m in keep]
-        self.lo, self.hi = box.bounds(region)
+        lo, hi, exact = fast_bounds(box, region)  # end groups only, where exact (ple.model.budget)
+        self.lo, self.hi = (lo, hi) if exact else box.bounds(region)
         self.scale = float(np.max(self.hi - self.lo))
         self.step_radius = float(np.median([x.radius for x in nodes])) * lat.placement.factor
         # per chunk: its distinct positive leaves (their union bounds the chunk)

@@ -18,7 +18,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    fs, root = location(args.parts)
+    fs, root = location(args.parts, create=False)  # reading parts creates nothing
     kind = read_manifest(fs, root).get("kind")
     if kind == "count":
         totals = count_totals(args.parts)

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import importlib
 import json
+import math
 import pkgutil
 
 from .. import bench
-from ..io.files import atomic_write_text
+from ..errors import PleError
+from ..io.files import atomic_write_text, check_output_file
 
 
 def register(sub) -> None:
@@ -21,11 +23,26 @@ def register(sub) -> None:
         bp = bsub.add_parser(info.name, help=(module.__doc__ or "").strip().splitlines()[0])
         module.add_arguments(bp)
         bp.add_argument("--out", help="also write the JSON to this file")
-        bp.set_defaults(func=_runner(module))
+        bp.set_defaults(func=_runner(module, bp))
 
 
-def _runner(module):
+def _check_numbers(args, parser) -> None:
+    """Every numeric option finite and not negative; at least 1 where its default is (counts,
+    repeats, sizes): checked before the benchmark runs, not after minutes of it."""
+    for name, value in vars(args).items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or name == "seed":
+            continue
+        default = parser.get_default(name)
+        least = 1 if isinstance(default, (int, float)) and default >= 1 else 0
+        if not math.isfinite(value) or value < least:
+            raise PleError(f"--{name.replace('_', '-')} {value}: expected a number of at least {least}")
+
+
+def _runner(module, parser):
     def run(args) -> int:
+        _check_numbers(args, parser)
+        if args.out:
+            check_output_file(args.out)
         result = module.run(args)
         text = json.dumps(result, indent=1)
         print(text)

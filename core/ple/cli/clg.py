@@ -15,14 +15,18 @@ from ..clg.rays import render, trace
 from ..errors import PleError
 from ..io.export import export_mesh
 from ..io.files import atomic_path
+from ..io.inputs import load_npy
 from ..io.slices import write_pmc_slices
 from ..meshing.clg import mesh_clg
-from ..program.clg_sources import load_clg
+from ..model.budget import require
+from ..program.clg_sources import run_clg
+from .common import add_program_limits, max_memory
 
 
 def _source(p) -> None:
     p.add_argument("source", metavar="SOURCE", help="a ple-clg/1 .json, a program .py defining clg(), or a preset")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help="a program input")
+    add_program_limits(p)  # a program runs contained: --timeout, --max-memory (docs/reliability.md)
 
 
 def register(sub) -> None:
@@ -74,14 +78,11 @@ def add_slice_args(q, out_required: bool = True) -> None:
 
 
 def _load(args):
-    return compiled(load_clg(args.source, args.param))
+    return compiled(run_clg(args.source, args.param, args.timeout, max_memory(args)))
 
 
 def _npy(path: str, what: str, cols: int) -> np.ndarray:
-    try:
-        a = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise PleError(f"{what} {path}: cannot read a .npy array ({exc})") from None
+    a = load_npy(path, what)  # a regular file, header checked first, no archives or pickles (ple.io.inputs)
     if a.ndim != 2 or a.shape[1] != cols or not np.issubdtype(a.dtype, np.number):
         raise PleError(f"{what} {path}: expected a numeric array of shape (n, {cols}), got {a.shape}")
     a = a.astype(float)
@@ -136,7 +137,7 @@ def run_voxelize(args) -> int:
     comp = _load(args)
     lo, hi = parse_bounds(args.bounds, comp.lo, comp.hi)
     bar = Progress(len(comp.names), "voxelize")
-    vox = voxelize_clg(comp, lo, hi, shape, bar.update)
+    vox = voxelize_clg(comp, lo, hi, shape, bar.update, max_memory(args))
     bar.close()
     _save_npy(args.out, vox)
     print(f"wrote {args.out}: {vox.shape} voxels, {int(vox.sum())} inside")
@@ -177,6 +178,9 @@ def _pair(text: str, what: str, kind=float):
     return a, b
 
 
+RENDER_PIXEL_BYTES = 200
+
+
 def run_render(args) -> int:
     try:
         from PIL import Image
@@ -184,6 +188,13 @@ def run_render(args) -> int:
         raise PleError("render needs Pillow (pip install pillow)") from None
     size = _pair(args.size, "--size", int)
     view = _pair(args.view, "--view")
+    if not all(np.isfinite(view)):
+        raise PleError(f"--view {args.view!r}: expected two finite angles")
+    if min(size) < 1 or size[0] * size[1] > 1 << 24:
+        raise PleError(f"--size {args.size!r}: expected 1..16M pixels")
+    # camera rays (48 B), the picture and its masks, and one pass's trace temporaries
+    require(size[0] * size[1] * RENDER_PIXEL_BYTES, f"--size {args.size}: a {size[0]}x{size[1]} picture",
+            max_memory(args), "choose a smaller --size")
     if args.passes < 1 or args.passes > 8:
         raise PleError(f"--passes {args.passes}: expected 1..8")
     comp = _load(args)
@@ -202,7 +213,7 @@ def run_render(args) -> int:
 
 def run_mesh(args) -> int:
     comp = _load(args)
-    mesh = mesh_clg(comp.clg, segments=args.segments)
+    mesh = mesh_clg(comp.clg, segments=args.segments, max_bytes=max_memory(args))
     export_mesh(mesh, args.out)
     print(f"wrote {args.out}: {len(mesh.faces)} triangles, volume {mesh.volume:.6g}, "
           f"watertight {mesh.is_watertight}")

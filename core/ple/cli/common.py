@@ -112,6 +112,8 @@ def parse_grade(text: str, body=None) -> RadiusField:
         if len(a) != 3 or len(b) != 3:
             raise ValueError
         return LinearGradient(a, b, float(parts[2]), float(parts[3]))
+    except PleError as exc:
+        raise PleError(f"--grade {text!r}: {exc}") from None
     except ValueError:
         raise PleError(f"--grade {text!r}: expected AX,AY,AZ:BX,BY,BZ:F0:F1 or surface:DEPTH:F0:F1") from None
 

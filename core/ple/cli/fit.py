@@ -11,14 +11,17 @@ With ``--out F.json`` the field is written as inline ``ple-clg/1`` data instead,
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
-import trimesh
 
 from ..clg.field import FieldSolid, field_to_dict
 from ..errors import PleError
 from ..filters.fit import fit_mesh
+from ..io.bodyfile import read_mesh
 from ..io.files import atomic_write_text, save_npz
+from ..model.budget import require
+from .common import add_budget_args, max_memory
 
 
 def register(sub) -> None:
@@ -26,6 +29,7 @@ def register(sub) -> None:
     p.add_argument("mesh", help="a closed triangle mesh (.stl, .obj, .ply, .glb, .off)")
     p.add_argument("--out", required=True,
                    help="output coefficients .npz, or .json: a ple-clg/1 material's inline field")
+    add_budget_args(p)
     p.add_argument("--bound", type=float, default=0.02, help="Hausdorff bound in cell units (default 0.02)")
     p.add_argument("--orders", default="8,16,32,64", help="candidate orders N, tried in order (default 8,16,32,64)")
     p.add_argument("--max-terms", type=int, default=None, help="keep about this many largest coefficients")
@@ -36,14 +40,13 @@ def register(sub) -> None:
 
 
 def load_mesh(path: str):
-    """Vertices and faces of a mesh file (trimesh's readers), as one mesh."""
-    try:
-        mesh = trimesh.load(path, force="mesh", process=False)
-    except (OSError, ValueError) as exc:
-        raise PleError(f"mesh {path}: {exc}") from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise PleError(f"mesh {path}: no triangles")
+    """Vertices and faces of a mesh file, read within limits (``ple.io.bodyfile.read_mesh``)."""
+    mesh = read_mesh(path, f"mesh {path}")
     return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
+
+
+MAX_ORDER = 256  # the fit samples an N³ grid
+GRID_BYTES = 256  # per sample of an order's grid: inside flags, winding numbers, the FFT and copies (256³ passed 3 GiB)
 
 
 def run(args) -> int:
@@ -53,6 +56,14 @@ def run(args) -> int:
         orders = [int(x) for x in args.orders.split(",") if x.strip()]
     except ValueError:
         raise PleError(f"--orders {args.orders!r}: expected integers like 8,16,32") from None
+    if not orders or not all(2 <= n <= MAX_ORDER for n in orders):
+        raise PleError(f"--orders {args.orders!r}: each order must be in 2..{MAX_ORDER}")
+    require(max(orders) ** 3 * GRID_BYTES, f"--orders {args.orders}: a {max(orders)}³ grid", max_memory(args),
+            "choose smaller --orders")
+    if not (math.isfinite(args.bound) and args.bound > 0):
+        raise PleError(f"--bound {args.bound}: must be a positive number")
+    if args.max_terms is not None and args.max_terms < 1:
+        raise PleError(f"--max-terms {args.max_terms}: must be at least 1")
     v, f = load_mesh(args.mesh)
     transform = {"scale": 1.0, "offset": [0.0, 0.0, 0.0]}
     if args.normalize:

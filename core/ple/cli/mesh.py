@@ -23,7 +23,7 @@ from ..measure.integrals import lattice_volume
 from ..meshing.selfcheck import count_self_intersections
 from ..meshing.skin import skin
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
-from ..meshing.tessellate import _check_style, tessellate
+from ..meshing.tessellate import _check_style, check_fillet, tessellate
 from ..model.budget import (
     CHECK_TRIANGLE_BYTES,
     MESH_TRIANGLE_BYTES,
@@ -70,6 +70,9 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    check_fillet(args.fillet, args.style)  # before any work
+    if args.fillet and (args.parts or args.beam_lattice):
+        raise PleError("--fillet shapes a single mesh file of style refined (not --parts or --beam-lattice)")
     if args.parts:
         return run_parts(args)
     if not args.out:

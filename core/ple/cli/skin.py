@@ -3,13 +3,16 @@ with the lattice that fills it (by ``--fill``, default any) into one watertight 
 
 from __future__ import annotations
 
+import math
+
 from ..errors import PleError
 from ..filters.body import body_of
 from ..io.export import export_mesh
 from ..meshing.skin import skin
-from ..meshing.styles import STYLES
+from ..meshing.styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS, STYLES
 from ..meshing.tessellate import tessellate
-from .common import add_lattice_args, lattice_from_args
+from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, mesh_triangles, require
+from .common import add_lattice_args, lattice_from_args, max_memory
 
 MAX_SKIN_NODES = 2_000_000  # the lattice is meshed in memory before the Booleans
 
@@ -28,12 +31,20 @@ def register(sub) -> None:
 def run(args) -> int:
     if args.body is None:
         raise PleError("ple skin needs --body MESH")
+    for flag, v in (("--thickness", args.thickness), ("--edge", args.edge), ("--skin", args.skin)):  # before any work
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise PleError(f"{flag} {v}: must be a positive number")
     args.skin = args.thickness if args.thickness is not None else args.skin
     if args.skin is None:
         raise PleError("ple skin needs --thickness T")
     lat = lattice_from_args(args)
     if lat.node_count() > MAX_SKIN_NODES:
         raise PleError(f"{lat.node_count():,} nodes (limit {MAX_SKIN_NODES:,} for a skinned mesh)")
+    r = lat.region(None)  # the lattice is meshed in memory, twice (trimesh and manifold3d's copy)
+    tris = mesh_triangles(lat, r, args.style, DEFAULT_LEVELS, DEFAULT_SEGMENTS)
+    require(2 * tris * MESH_TRIANGLE_BYTES + evaluation_bytes(lat, r),
+            f"{tris:,.3g} triangles ({args.style}) of the lattice to skin", max_memory(args),
+            "choose a smaller lattice or --style cnt")
     body = body_of(lat, "ple skin")
     solid = skin(body, args.skin, tessellate(lat, style=args.style, cut=False), args.edge)
     export_mesh(solid, args.out)

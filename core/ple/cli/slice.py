@@ -12,6 +12,7 @@ from ..app.jobs import assemble_slices, slice_job
 from ..clg.grid import parse_bounds
 from ..errors import PleError
 from ..filters.ir import filter_to_dict
+from ..model.budget import fast_bounds
 from ..queries.biq import pmc
 from .clg import add_slice_args, slice_with
 from .common import add_cluster_args, add_lattice_args, lattice_from_args, report_job
@@ -32,7 +33,9 @@ def run(args) -> int:
         raise PleError("give --out DIR (or --parts URL for a partitioned slice job)")
     lat = lattice_from_args(args)
     if args.bounds is None:
-        lo, hi = lat.bounds()
+        lo, hi, exact = fast_bounds(lat)  # end groups only where exact: a huge lattice answers at once
+        if not exact:
+            lo, hi = lat.bounds()
     else:
         lo, hi = parse_bounds(args.bounds, None, None)
     if args.parts:

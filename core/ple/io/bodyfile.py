@@ -14,20 +14,31 @@ import trimesh
 from ..algebra.similarity import Similarity
 from ..errors import PleError
 from ..filters.body import Body
+from .inputs import check_input_file
 
 BODY_SUFFIXES = ("stl", "obj", "ply", "3mf", "glb", "gltf", "off")
 MAX_BODY_TRIANGLES = 20_000_000
+MAX_BODY_BYTES = 1 << 30  # a binary STL of 20 M triangles; read whole by trimesh, so checked first
 
 
 def load_body(path, placement: Similarity | None = None, open: str = "error", name: str | None = None) -> Body:  # noqa: A002
     """The body in mesh file ``path``, placed by ``placement``."""
+    return body_from_trimesh(read_mesh(path, name), placement, str(path), open, name or str(path))
+
+
+def read_mesh(path, name: str | None = None) -> trimesh.Trimesh:
+    """The triangles of mesh file ``path`` (STL, OBJ, PLY, 3MF, GLB, OFF), read within limits: a
+    regular file of at most 1 GiB, at most 20 M triangles, finite vertices; every failure of the
+    reader is one error naming the file (``name``: how the user gave it, e.g. ``--body F``)."""
     path = Path(path)
     name = name or str(path)
     suffix = path.suffix.lower().lstrip(".")
     if suffix not in BODY_SUFFIXES:
         raise PleError(f"{name}: unknown body mesh format {suffix!r} (expected .{', .'.join(BODY_SUFFIXES)})")
-    if not path.is_file():
-        raise PleError(f"{name}: no such body mesh file")
+    try:  # a regular file within the limit: a folder, FIFO (would block) or device is named as such
+        check_input_file(path, "body mesh file", MAX_BODY_BYTES)
+    except PleError as exc:
+        raise PleError(f"{name}: {str(exc).removeprefix(str(path) + ': ')}") from None
     try:
         mesh = trimesh.load(str(path), force="mesh", process=False)
     except Exception as exc:  # noqa: BLE001 - any reader failure is a bad file, named
@@ -36,7 +47,11 @@ def load_body(path, placement: Similarity | None = None, open: str = "error", na
         raise PleError(f"{name}: the mesh is empty (no triangles)")
     if len(mesh.faces) > MAX_BODY_TRIANGLES:
         raise PleError(f"{name}: {len(mesh.faces):,} triangles (limit {MAX_BODY_TRIANGLES:,})")
-    return body_from_trimesh(mesh, placement, str(path), open, name)
+    v = np.asarray(mesh.vertices, dtype=float)
+    bad = int(np.count_nonzero(~np.isfinite(v).all(axis=1))) if v.ndim == 2 else 0
+    if bad:
+        raise PleError(f"{name}: {bad} of {len(v)} vertices are NaN or infinite")
+    return mesh
 
 
 def body_from_trimesh(mesh, placement: Similarity | None = None, source: str | None = None,

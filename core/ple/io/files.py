@@ -116,6 +116,16 @@ def _destination(path: Path) -> tuple[Path, str]:
     raise PleError(f"{path}: is {what}; not writing over it (give a file name)")
 
 
+def check_output_file(path) -> None:
+    """Refuse, before any work, an output file that ``atomic_path`` would refuse (a folder, block
+    device or socket; a missing folder)."""
+    path = Path(path)
+    target, how = _destination(path)
+    parent = target.parent if str(target.parent) else Path(".")
+    if how == "file" and not parent.is_dir():
+        raise PleError(f"{path}: output folder {parent} does not exist")
+
+
 @contextlib.contextmanager
 def atomic_path(path) -> Iterator[Path]:
     """Yield a temporary path for the output ``path``; on success its content goes to ``path``

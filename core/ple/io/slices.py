@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -11,9 +12,18 @@ import numpy as np
 
 from ..clg.grid import iter_slices
 from ..errors import PleError
-from .files import atomic_path, atomic_write_text
+from .files import (
+    atomic_path,
+    atomic_write_text,
+    check_output_dir,
+    make_temp_dir,
+    remove_stale_temporaries,
+    replace_dir,
+    write_marker,
+)
 
 SLICES_FORMAT = "ple-slices/1"
+KIND = "ple-slices"  # the output folder's marker (ple.io.files): only such a folder is replaced
 
 
 def slice_meta(lo, hi, layer: float, pixel: float) -> dict:
@@ -24,13 +34,32 @@ def slice_meta(lo, hi, layer: float, pixel: float) -> dict:
 
 
 def write_slices(out_dir, layers: Iterable, meta: dict, progress=None) -> dict:
-    """Write ``layer_00000.png`` … from (index, z, mask) items and ``manifest.json``; returns it."""
+    """Write ``layer_00000.png`` … from (index, z, mask) items and ``manifest.json``; returns it.
+    The folder appears complete or not at all (written beside it, then renamed); a slices folder
+    written by PLE (its marker) is replaced, a new or empty one used, any other refused
+    (``ple.io.files.check_output_dir``: nothing of the user's is overwritten)."""
     try:
-        from PIL import Image
+        from PIL import Image  # noqa: F401 - checked before anything is written
     except ImportError:
         raise PleError("writing PNG slices needs Pillow (pip install pillow)") from None
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    check_output_dir(out, KIND)
+    parent = out.parent if str(out.parent) else Path(".")
+    remove_stale_temporaries(parent)
+    tmp = make_temp_dir(parent, out.name)
+    try:
+        manifest = _write_layers(tmp, layers, meta, progress)
+        write_marker(tmp, KIND, "ple slice")
+        replace_dir(tmp, out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+    return manifest
+
+
+def _write_layers(out: Path, layers: Iterable, meta: dict, progress=None) -> dict:
+    from PIL import Image
+
     files, zs, filled = [], [], []
     shape = None
     for k, z, mask in layers:

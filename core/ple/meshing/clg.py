@@ -17,6 +17,7 @@ from ..clg.field import FieldSolid
 from ..clg.model import CLG, Prim
 from ..clg.query import compiled, frame_of
 from ..errors import PleError
+from ..model.budget import MESH_TRIANGLE_BYTES, require
 
 MAX_TRIANGLES = 20_000_000  # estimated output size beyond which meshing is refused
 
@@ -70,30 +71,40 @@ def _expr(m, tree, parts):
     return m.Manifold.batch_boolean(vals, m.OpType.Subtract) if len(vals) > 1 else vals[0]
 
 
-def _solid_manifold(m, comp, segments: int):
+def _solid_manifold(m, comp, segments: int, max_bytes: float | None = None):
     unit = _unit_sphere(m, segments)
-    g = comp.groups()
-    lin, move, _ = comp.copies(g)
-    unions = []
+    r = comp.region if comp.region is not None else comp.lat.region(None)
+    groups = r.groups  # counted before the groups are listed: a huge pattern is refused first
+    templates = []
     for ci in range(len(comp.names)):
         parts = [_leaf(m, comp, prim, unit, segments) for prim in comp.leaves[ci]]
         template = _expr(m, comp.trees[ci], parts)
-        est = template.num_tri() * len(g)
+        est = template.num_tri() * groups
         if est > MAX_TRIANGLES:
             raise PleError(f"chunk {comp.names[ci]!r}: about {est:.3g} triangles exceed the meshing limit "
                            f"{MAX_TRIANGLES:.0e}; use fewer groups or --segments")
+        templates.append(template)
+    total = sum(t.num_tri() for t in templates) * groups
+    if max_bytes is not None:
+        require(total * MESH_TRIANGLE_BYTES, f"{total:.3g} triangles of the CLG mesh ({groups:,} groups)", max_bytes,
+                "use fewer groups or --segments")
+    g = comp.groups()
+    lin, move, _ = comp.copies(g)
+    unions = []
+    for template in templates:
         copies = [template.transform(_similarity_3x4(lin[n], move[n])) for n in range(len(g))]
         unions.append(m.Manifold.batch_boolean(copies, m.OpType.Add) if len(copies) > 1 else copies[0])
     return _expr(m, comp.solid, unions)
 
 
-def mesh_clg(clg: CLG, segments: int = 32, region=None):
+def mesh_clg(clg: CLG, segments: int = 32, region=None, max_bytes: float | None = None):
     """A watertight trimesh of the CLG solid (of the chunk copies at the groups of ``region``, a
-    ``Region``, if given: the add-on's preview of its drawn region)."""
+    ``Region``, if given: the add-on's preview of its drawn region). Refused before meshing when
+    its estimated triangles exceed ``MAX_TRIANGLES`` or need more than ``max_bytes``."""
     if segments < 8 or segments > 512:
         raise PleError(f"--segments {segments}: expected 8..512")
     m = _manifold()
-    solid = _solid_manifold(m, compiled(clg, region), segments)
+    solid = _solid_manifold(m, compiled(clg, region), segments, max_bytes)
     out = solid.to_mesh()
     verts = np.asarray(out.vert_properties, float)[:, :3]
     faces = np.asarray(out.tri_verts, np.int64)

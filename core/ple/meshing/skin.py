@@ -49,10 +49,11 @@ def inward_offset(body: Body, thickness: float, edge: float | None = None):
     edge = float(edge or thickness / 2)
     g = edge / 2  # samples twice as fine as the level set's grid
     lo, hi = body.lo - 2 * edge, body.hi + 2 * edge
-    dims = np.ceil((hi - lo) / g).astype(int) + 2
-    if int(np.prod(dims)) > MAX_SDF_SAMPLES:
-        raise PleError(f"skin: {int(np.prod(dims)):,} distance samples at edge length {edge:g} "
+    samples = float(np.prod(np.ceil((hi - lo) / g) + 2))  # as a float: no integer overflow at tiny edges
+    if not samples <= MAX_SDF_SAMPLES:
+        raise PleError(f"skin: {samples:,.3g} distance samples at edge length {edge:g} "
                        f"(limit {MAX_SDF_SAMPLES:,}); use a coarser edge length")
+    dims = np.ceil((hi - lo) / g).astype(int) + 2
     axes = [lo[a] + g * np.arange(dims[a]) for a in range(3)]
     pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     sd = _band_signed_distance(body, pts, thickness - 2 * g, thickness + 2 * g, g)

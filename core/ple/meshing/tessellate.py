@@ -23,6 +23,7 @@ U^-i V^-j W^dk V^(j+dj) U^(i+di) — independent of k — so hubs are computed o
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 
@@ -413,11 +414,22 @@ def _in(idx: np.ndarray, r: Region) -> np.ndarray:
             & (idx[:, 2] >= r.k0) & (idx[:, 2] < r.k1))
 
 
-def _check_fillet(fillet, style: str):
-    """A fillet (size in ball radii) shapes only the refined style's projected vertices."""
-    if fillet and style != "refined":
-        raise PleError(f"a fillet needs the refined style, not {style!r}")
-    return fillet or None
+MAX_FILLET = 10.0  # ball radii: a blend far beyond the ball is no junction fillet (and b = ln 2 / (s r) underflows)
+
+
+def check_fillet(fillet, style: str):
+    """A fillet (size in ball radii, 0 < size <= MAX_FILLET) shapes only the refined style's
+    projected vertices; None when there is none."""
+    if fillet is None or fillet == 0:  # 0: none
+        return None
+    if not (math.isfinite(fillet) and 0 < fillet <= MAX_FILLET):
+        raise PleError(f"--fillet {fillet}: expected a size in ball radii in (0, {MAX_FILLET:g}]")
+    if style != "refined":
+        raise PleError(f"--fillet: a fillet needs the refined style, not {style!r}")
+    return float(fillet)
+
+
+_check_fillet = check_fillet
 
 
 def _check_style(style: str, levels: int | None, segments: int | None) -> tuple[int, int]:

@@ -50,10 +50,13 @@ class RadiusField(ABC):
         return f
 
 
+MAX_FACTOR = 1e6  # a radius factor beyond this is a typo, and f0 + (f1 - f0) t would lose f1 to rounding
+
+
 def _positive(x, what: str) -> float:
     x = float(x)
-    if not np.isfinite(x) or x <= 0:
-        raise PleError(f"{what} must be a positive number, got {x!r}")
+    if not np.isfinite(x) or x <= 0 or x > MAX_FACTOR:
+        raise PleError(f"{what} must be a positive number up to {MAX_FACTOR:g}, got {x!r}")
     return x
 
 
@@ -65,8 +68,8 @@ class LinearGradient(RadiusField):
         self.a, self.b = Pt(a), Pt(b)
         self.d = self.b - self.a
         self.dd = float(self.d @ self.d)
-        if self.dd == 0:
-            raise PleError("a gradient needs two distinct points")
+        if not 0 < self.dd < np.inf or not (np.all(np.isfinite(self.a)) and np.all(np.isfinite(self.b))):
+            raise PleError("a gradient needs two distinct finite points (their distance squared finite)")
         self.f0, self.f1 = _positive(f0, "gradient factor f0"), _positive(f1, "gradient factor f1")
         self.bound = max(self.f0, self.f1)
 

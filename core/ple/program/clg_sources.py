@@ -3,7 +3,6 @@ slider conventions as ``lattice()``), or a CLG preset (``presets/clg/``)."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from ..clg import model
@@ -11,8 +10,12 @@ from ..clg.field import FieldSolid
 from ..clg.ir import clg_from_dict
 from ..clg.model import CLG
 from ..errors import PleError
+from ..io.inputs import check_input_file, read_input_file, read_json
 from .presets import preset_dir
+from .runner import CLI_HINTS, DEFAULT_TIMEOUT, Hints, Job, check_timeout
 from .runtime import API, Program, parse_params, run_source
+
+MAX_JSON_DEPTH = 256  # a ple-clg/1 file's JSON nesting: its pattern, chunk expressions and nested materials
 
 CLG_API = {"CLG": CLG, "Ball": model.Ball, "Beam": model.Beam, "HollowBeam": model.HollowBeam,
            "ExtendedHub": model.ExtendedHub, "Connector": model.Connector, "Union": model.Union,
@@ -57,10 +60,10 @@ def clg_preset_names() -> list[str]:
 def resolve_clg(source: str) -> Path:
     p = Path(source)
     if p.suffix in (".py", ".json"):
-        if not p.is_file():
-            raise PleError(f"{source}: no such file")
+        check_input_file(p, f"CLG {p.suffix} file")  # a folder, FIFO or device is named as such
         return p
-    for ext in (".py", ".json"):
+    plain = source and all(c.isalnum() or c in "_-" for c in source) and not source.startswith(("_", "-"))
+    for ext in (".py", ".json") if plain else ():  # only plain names: a name cannot reach outside the presets
         entry = clg_preset_folder() / (source + ext)
         if entry.is_file():
             return Path(str(entry))
@@ -74,11 +77,32 @@ def load_clg(source: str, params: list[str] | dict | None = None) -> CLG:
     if path.suffix == ".json":
         if params:
             raise PleError(f"{source}: a .json CLG file has no parameters")
+        data = read_json(path, "ple-clg/1 file", MAX_JSON_DEPTH)  # size, UTF-8, depth, digits (ple.io.inputs)
         try:
-            data = json.loads(path.read_text())
-        except json.JSONDecodeError as exc:
-            raise PleError(f"{source}: not valid JSON ({exc.msg}, line {exc.lineno})") from None
-        return clg_from_dict(data)
-    prog = compile_clg_program(path.read_text(), str(path))
+            return clg_from_dict(data)
+        except PleError as exc:
+            raise PleError(f"{source}: {exc}") from None
+    raw = read_input_file(path, "CLG program file")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise PleError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+    prog = compile_clg_program(text, str(path))
     values = parse_params(prog, params) if isinstance(params, list) else dict(params or {})
     return prog.run(**values)
+
+
+def run_clg(source: str, params=None, timeout: float | None = DEFAULT_TIMEOUT, memory: int | None = None,
+            hints: Hints = CLI_HINTS) -> CLG:
+    """``load_clg`` with a program contained in a child process (``ple.program.runner``): at most
+    ``timeout`` seconds and ``memory`` bytes; ``sys.exit``, ``os._exit`` and any exception become one
+    error naming the program. A ``ple-clg/1`` file is data and loads in-process."""
+    check_timeout(timeout)
+    path = resolve_clg(source)
+    if path.suffix == ".json":
+        return load_clg(source, params)
+    clg = Job(lambda: load_clg(source, params), str(path), timeout, memory, what="the CLG program",
+              hints=hints).result()
+    if not isinstance(clg, CLG):  # pragma: no cover - load_clg checks it in the child
+        raise PleError(f"{path}: clg() must return a CLG")
+    return clg
