@@ -187,7 +187,7 @@ def write_bad(tmp_path, kind):
 
 
 @pytest.mark.parametrize("kind, message", [("open", "not closed: 3 edges"), ("empty", "empty"),
-                                           ("nan", "1 of 8 vertices are NaN"), ("missing", "no such body mesh"),
+                                           ("nan", "1 of 8 vertices are NaN"), ("missing", "no such file"),
                                            ("flat", "encloses no volume")])
 def test_bad_bodies_exit_2_naming_the_problem(tmp_path, capsys, kind, message):
     path = write_bad(tmp_path, kind)
@@ -224,7 +224,7 @@ def test_ir_body_is_relative_to_the_json_file_and_round_trips(tmp_path, cases):
     # the path is resolved against the JSON file, not the working directory; a missing mesh is refused
     data["filter"]["body"]["mesh"] = "parts/nope.stl"
     out.write_text(json.dumps(data))
-    with pytest.raises(PleError, match=r"filter\.body\.mesh 'parts/nope.stl': no such body mesh file"):
+    with pytest.raises(PleError, match=r"filter\.body\.mesh 'parts/nope.stl': no such file \(expected a body mesh"):
         load_ir(out)
     data["filter"]["body"]["mode"] = "half"
     out.write_text(json.dumps(data))

@@ -81,8 +81,11 @@ def test_skin_command(tmp_path, part, capsys):
     got = trimesh.load(out, force="mesh", process=False)
     body = body_from_trimesh(part)
     want = skin(body, 0.4, tessellate(load_lattice("cubic").with_filter(BodyFilter(body, "any")), cut=False))
-    assert want.is_watertight and len(got.faces) == len(want.faces)
-    assert got.volume == pytest.approx(want.volume, rel=1e-4)  # float32 STL
+    # the file as read back (float32; slivers of a few float32 steps collapsed before writing) is closed
+    merged = trimesh.Trimesh(got.vertices, got.faces)  # vertices merged by position, as a slicer reads STL
+    assert want.is_watertight and merged.is_watertight
+    assert abs(len(got.faces) - len(want.faces)) <= 0.01 * len(want.faces)
+    assert got.volume == pytest.approx(want.volume, rel=1e-4)
     assert main(["skin", "cubic", "--thickness", "0.4", "--out", str(out)]) == 2
     assert "needs --body" in capsys.readouterr().err
 

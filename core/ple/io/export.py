@@ -24,7 +24,7 @@ import trimesh
 from ..errors import PleError
 from ..meshing.connectors import constant_radius_connectors
 from ..meshing.tessellate import checked_stream, iter_triangles, output_grid, smallest_radius, tessellate, weld_chunks
-from ..meshing.weld import edge_manifold, grid_spacing, snap_triangles, weld
+from ..meshing.weld import COLLAPSE_GRIDS, collapse_short_edges, edge_manifold, grid_spacing, snap_triangles, weld
 from ..model.lattice import Lattice
 from .files import atomic_path, atomic_write_text, check_output_dir, write_marker
 from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, from_file_axes, mesh_format, to_file_axes, unit_name
@@ -169,12 +169,29 @@ def export_mesh(mesh: trimesh.Trimesh, path, unit: str = DEFAULT_UNIT, grid: flo
     unit_name(unit)
     v, f, stats = prepare(mesh.vertices, mesh.faces, fmt, unit, grid)
     if len(f) and edge_manifold(f)["bad_edges"] and not edge_manifold(mesh.faces)["bad_edges"]:
+        # edges of a few float32 steps (a Boolean's slivers) pinch when snapped: collapse them in
+        # 64 bits first (link condition: the mesh stays a closed 2-manifold), then snap again
+        verts, faces = shortened(mesh.vertices, mesh.faces)
+        v, f, stats = prepare(verts, faces, fmt, unit, grid)
+    if len(f) and edge_manifold(f)["bad_edges"] and not edge_manifold(mesh.faces)["bad_edges"]:
         check_float32_range(mesh.vertices, mesh.edges_unique_length.min(), fmt)
         raise PleError(f"{Path(path).name}: the closed mesh does not stay closed in {fmt}'s float32 coordinates")
     data = encode_mesh(v, f, fmt, unit)
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
     return stats
+
+
+def shortened(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
+    """A closed mesh with its edges shorter than ``COLLAPSE_GRIDS`` float32 steps at its size
+    collapsed (``ple.meshing.weld.collapse_short_edges``); unreferenced vertices dropped."""
+    v = np.asarray(vertices, float)
+    g = grid_spacing(v.min(axis=0), v.max(axis=0))
+    f, _, _ = collapse_short_edges(v, faces, [], COLLAPSE_GRIDS * g)
+    used = np.unique(f)
+    remap = np.full(len(v), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return v[used], remap[f]
 
 
 MIN_FEATURE_GRIDS = 16  # the smallest ball radius, in float32 grid steps, that a written mesh keeps closed

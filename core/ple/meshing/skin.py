@@ -21,6 +21,7 @@ import trimesh
 
 from ..errors import PleError
 from ..filters.body import Body, body_filters
+from .weld import COLLAPSE_GRIDS, grid_spacing
 
 MAX_SDF_SAMPLES = 8_000_000  # grid samples of the signed distance
 
@@ -36,6 +37,11 @@ def _manifold(vertices, faces):
 
 
 def _trimesh(m) -> trimesh.Trimesh:
+    """The Boolean's result with its slivers (features under a few float32 steps at its size,
+    which a float32 file cannot keep apart) removed by manifold3d itself: it stays manifold."""
+    if not m.is_empty():
+        box = np.asarray(m.bounding_box(), float)
+        m = m.simplify(COLLAPSE_GRIDS * grid_spacing(box[:3], box[3:]))
     mesh = m.to_mesh()
     return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts), process=False)
 
