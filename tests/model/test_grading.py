@@ -182,7 +182,7 @@ BASE = {"format": "ple-lattice/1", "nodes": [{"center": [0, 0, 0], "radius": 0.1
     ({"kind": "linear", "a": [0, "x", 0], "b": [1, 1, 1]}, "grade.a[1]: expected a finite number"),
     ({"kind": "linear", "a": [0, 0, 0], "b": [1, 1, 1], "f0": -1}, "grade.f0: must be positive"),
     ({"kind": "linear", "a": [0, 0, 0], "b": [1, 1, 1], "slope": 2}, "grade.slope: unknown field"),
-    ({"kind": "linear", "a": [1, 1, 1], "b": [1, 1, 1]}, "grade: a gradient needs two distinct points"),
+    ({"kind": "linear", "a": [1, 1, 1], "b": [1, 1, 1]}, "grade: a gradient needs two distinct finite points"),
     ({"kind": "grid", "lo": [0, 0, 0], "hi": [1, 1, 1], "values": [[[1, 1], [1, 1]], [[1, 1], [1]]]},
      "grade.values[1][1]: expected 2 numbers"),
     ({"kind": "grid", "lo": [0, 0, 0], "hi": [1, 1, 1], "values": [[[1, 1], [1, 1]], [[1, 0], [1, 1]]]},
