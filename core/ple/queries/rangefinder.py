@@ -244,7 +244,8 @@ def row_candidates(s: Similarity, count: int, c0, r0, qc, qr):
     """Candidate range [lo, hi] of a steady row of balls S**k (c0, r0), k < count, for query
     balls (qc, qr) — the RangeFinder of one row, broadcasting over queries."""
     rm = row_map(s, count)
-    return candidate_range(rm, ball_extents(rm, c0, r0), ball_extents(rm, qc, qr))
+    # one range per query ball, even when the row map has no extents (e.g. one element)
+    return candidate_range(rm, ball_extents(rm, c0, r0), ball_extents(rm, qc, qr), np.shape(np.asarray(qr)))
 
 
 # ----- lattice structure: paths of §7.3.1 ------------------------------------------------------
