@@ -53,6 +53,46 @@ def test_failed_write_leaves_no_file(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["t.stl"]
 
 
+def test_snapped_chunks_match_a_per_corner_snap(tmp_path):
+    """Indexed chunks are snapped once per vertex (``snap_faces``); the file must equal rounding
+    every corner of every triangle to the grid on its own and dropping triangles with two equal
+    corners (computed here independently), for 1 and 3 encoding threads."""
+    rng = np.random.default_rng(3)
+    g = 2.0**-10
+    chunks, expect = [], []
+    for k in (40, 0, 300):
+        v = rng.uniform(-4, 4, size=(k // 2 + 3, 3))
+        near = rng.uniform(-g / 4, g / 4, size=(len(v[1::7]), 3))
+        v[1::7] = v[::7][: len(v[1::7])] + near  # collapse onto a neighbour
+        f = rng.integers(0, len(v), size=(k, 3))
+        chunks.append((v, f))
+        tri = np.round(v[f] / g) * g
+        keep = [len({tuple(c) for c in t}) == 3 for t in tri]
+        expect.append(tri[np.array(keep, bool)].astype(np.float32).reshape(-1, 3, 3))
+    expect = np.concatenate(expect)
+    assert 0 < len(expect) < 340  # some triangles do collapse
+    for workers in (1, 3):
+        path = tmp_path / f"w{workers}.stl"
+        assert write_stl(path, iter(chunks), grid=g, workers=workers) == len(expect)
+        count, rec = read_stl(path)
+        assert np.array_equal(rec["v"], expect)
+
+
+def test_threaded_write_failure_leaves_no_file(tmp_path):
+    path = tmp_path / "t.stl"
+    path.write_bytes(b"old")
+
+    def chunks():
+        for _ in range(5):
+            yield np.zeros((2, 3, 3))
+        raise PleError("boom")
+
+    with pytest.raises(PleError):
+        write_stl(path, chunks(), workers=2)
+    assert path.read_bytes() == b"old"
+    assert [p.name for p in tmp_path.iterdir()] == ["t.stl"]
+
+
 @pytest.mark.parametrize("fmt", ["stl", "ply", "obj", "glb", "3mf"])
 def test_mesh_formats_round_trip(tmp_path, fmt):
     mesh = tessellate(load_lattice("cubic").with_counts(2, 2, 1), style="cnt")

@@ -41,7 +41,7 @@ from ..io.formats import format_named
 from ..io.slices import slice_meta, write_slices
 from ..meshing.styles import style as style_named
 from ..meshing.tessellate import checked_stream, output_grid, tessellate, tessellation_box
-from ..meshing.weld import snap_triangles
+from ..meshing.weld import snap_faces
 from ..model.lattice import Evaluation, Lattice, Region
 from ..program.runner import run_program
 from ..program.sources import load_lattice, resolve_source
@@ -292,7 +292,7 @@ def _mesh_part(settings: dict, part: Part) -> tuple[bytes, dict]:
     verts, faces = tessellation_box(lat, settings["region"], part.params["box"], settings["style"],
                                     settings["levels"], grid=settings["grid"])
     # the whole region's float32 grid, as the streamed STL (``write_mesh``): the parts close up
-    rec = stl_records(snap_triangles(verts[faces], settings["grid"]))
+    rec = stl_records(snap_faces(verts, faces, settings["grid"]))
     return STL_HEADER + np.uint32(len(rec)).tobytes() + rec.tobytes(), {"triangles": int(len(rec))}
 
 

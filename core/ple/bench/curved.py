@@ -53,7 +53,8 @@ def _stream(lat: Lattice, style: str, levels: int, batched: bool, workers: int, 
     r = lat.region()
     t0 = time.perf_counter()
     tess = _Tessellator(lat, r, style, levels, 16, batched=batched)
-    n = write_stl(path, iter_triangles(lat, r, style, levels, _tess=tess, workers=workers), grid=output_grid(lat, r))
+    n = write_stl(path, iter_triangles(lat, r, style, levels, _tess=tess, workers=workers), grid=output_grid(lat, r),
+                  workers=workers)
     dt = time.perf_counter() - t0
     return {"path": "batched" if batched else "per-hub", "workers": workers, "seconds": round(dt, 3),
             "triangles": n, "triangles_per_s": round(n / dt), "hub_templates": len(tess.templates)}

@@ -15,7 +15,9 @@ from __future__ import annotations
 import io
 import json
 import struct
+from collections import deque
 from collections.abc import Iterable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +26,15 @@ import trimesh
 from ..errors import PleError
 from ..meshing.connectors import constant_radius_connectors
 from ..meshing.tessellate import checked_stream, iter_triangles, output_grid, smallest_radius, tessellate, weld_chunks
-from ..meshing.weld import COLLAPSE_GRIDS, collapse_short_edges, edge_manifold, grid_spacing, snap_triangles, weld
+from ..meshing.weld import (
+    COLLAPSE_GRIDS,
+    collapse_short_edges,
+    edge_manifold,
+    grid_spacing,
+    snap_faces,
+    snap_triangles,
+    weld,
+)
 from ..model.lattice import Lattice
 from .files import atomic_path, atomic_write_text, check_output_dir, write_marker
 from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, from_file_axes, mesh_format, to_file_axes, unit_name
@@ -71,7 +81,10 @@ class StlWriter:
 
     def write(self, triangles: np.ndarray, faces: np.ndarray | None = None) -> None:
         """Append triangles (k, 3, 3), or ``vertices[faces]`` for vertices (V, 3), faces (k, 3)."""
-        rec = stl_records(triangles, faces)
+        self.write_records(stl_records(triangles, faces))
+
+    def write_records(self, rec: np.ndarray) -> None:
+        """Append records made by ``stl_records``."""
         self.count += len(rec)
         if self.count > STL_MAX_TRIANGLES:
             raise PleError(f"binary STL holds at most {STL_MAX_TRIANGLES} triangles; use a smaller --region")
@@ -88,20 +101,47 @@ def stl_header(unit: str = DEFAULT_UNIT, what: str = "binary STL") -> bytes:
     return f"PLE {what}, unit {unit}, Z up".encode()[:80].ljust(80, b" ")
 
 
-def write_stl(path, chunks: Iterable, header: bytes = b"PLE binary STL", grid: float | None = None) -> int:
+def stl_chunk(chunk, grid: float | None = None) -> np.ndarray:
+    """The binary STL records of one chunk: triangles (k, 3, 3) or a pair (vertices (V, 3), faces
+    (k, 3)), snapped to the float32 ``grid`` (``ple.meshing.weld``) when given, triangles whose
+    corners then coincide dropped."""
+    if isinstance(chunk, tuple):
+        return stl_records(snap_faces(chunk[0], chunk[1], grid))
+    tri = np.asarray(chunk, float).reshape(-1, 3, 3)
+    return stl_records(snap_triangles(tri, grid) if grid is not None else tri)
+
+
+def write_stl(path, chunks: Iterable, header: bytes = b"PLE binary STL", grid: float | None = None,
+              workers: int = 1) -> int:
     """Write chunks to binary STL atomically; a chunk is triangles (k, 3, 3) or a pair
     (vertices (V, 3), faces (k, 3)). With ``grid`` every vertex is snapped to that float32 grid
     (``ple.meshing.weld``; the same grid for every chunk) and triangles whose corners then
-    coincide are dropped. Returns the number of triangles."""
+    coincide are dropped. ``workers`` threads encode chunks at once (numpy releases the GIL),
+    at most workers + 1 held; the file does not depend on their number. Returns the number of
+    triangles."""
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         w = StlWriter(fh, header)
-        for chunk in chunks:
-            tri = chunk[0][chunk[1]] if isinstance(chunk, tuple) else np.asarray(chunk, float).reshape(-1, 3, 3)
-            if grid is not None:
-                tri = snap_triangles(tri, grid)
-            w.write(tri)
+        for rec in ordered_map(lambda chunk: stl_chunk(chunk, grid), chunks, workers):
+            w.write_records(rec)
         w.close()
     return w.count
+
+
+def ordered_map(fn, items: Iterable, workers: int = 1):
+    """``map(fn, items)`` computed by ``workers`` threads, in order, with at most workers + 1 results
+    pending (bounded memory whatever the number of items)."""
+    workers = max(1, int(workers))
+    if workers == 1:
+        yield from map(fn, items)
+        return
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        pending: deque = deque()
+        for item in items:
+            pending.append(pool.submit(fn, item))
+            if len(pending) > workers:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
 
 
 def prepare(vertices, faces, fmt: str, unit: str = DEFAULT_UNIT, grid: float | None = None):
@@ -301,10 +341,10 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
     if fmt == "stl" and style != "balls-beams":
         info["unclean"], chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet, workers)
         if chunks is not None:
-            return write_stl(path, chunks, header=stl_header(unit), grid=output_grid(lat, r))
+            return write_stl(path, chunks, header=stl_header(unit), grid=output_grid(lat, r), workers=workers)
     elif fmt == "stl":
         return write_stl(path, iter_triangles(lat, r, style, levels, segments, max_groups, workers=workers),
-                         header=stl_header(unit))
+                         header=stl_header(unit), workers=workers)
     mesh = tessellate(lat, r, style, levels, segments, fillet=fillet)
     info["unclean"] = mesh.metadata.get("ple_unclean")
     stats = export_mesh(mesh, path, unit)

@@ -282,15 +282,18 @@ class _Tessellator:
         offsets = np.zeros(len(idx), np.int64)
         offsets[order] = starts[:-1]
         verts = np.empty((int(starts[-1]), 3))
+        index = np.int32 if len(verts) < 2**31 else np.int64  # half the memory traffic of the largest array
+        offsets = offsets.astype(index)
         faces = []
         for t, lo, hi in zip(ut, first, np.append(first[1:], len(order))):
             inst = order[lo:hi]
             tpl = tpl_list[t][0]
-            v = np.einsum("nab,mb->nma", m[inst, :3, :3], tpl.vertices) + m[inst, None, :3, 3]
-            verts[starts[lo]:starts[hi]] = v.reshape(-1, 3)  # the block of template t is contiguous
+            block = verts[starts[lo]:starts[hi]].reshape(len(inst), -1, 3)  # template t's block is contiguous
+            np.matmul(tpl.vertices, m[inst, :3, :3].transpose(0, 2, 1), out=block)
+            block += m[inst, None, :3, 3]
             mine = inst[inst < n_own]
             if len(mine):
-                faces.append((tpl.faces[None] + offsets[mine][:, None, None]).reshape(-1, 3))
+                faces.append((tpl.faces[None].astype(index) + offsets[mine][:, None, None]).reshape(-1, 3))
         # caps where a beam leaves the region
         for sel, nb, exists, inside in info.values():
             own_sel = sel < n_own
@@ -300,9 +303,9 @@ class _Tessellator:
                     inst = cut[tids[cut] == t]
                     tpl, slot_of = tpl_list[t]
                     cap = tpl.caps[slot_of[s]]
-                    faces.append((cap[None] + offsets[inst][:, None, None]).reshape(-1, 3))
+                    faces.append((cap[None].astype(index) + offsets[inst][:, None, None]).reshape(-1, 3))
         faces += self._beams(idx, n_own, tids, m, minv, offsets, tpl_list)
-        faces = np.concatenate(faces) if faces else np.zeros((0, 3), np.int64)
+        faces = np.concatenate(faces, dtype=index, casting="same_kind") if faces else np.zeros((0, 3), np.int64)
         return verts, faces
 
     def _beams(self, idx, n_own, tids, m, minv, offsets, tpl_list) -> list:
@@ -367,7 +370,7 @@ class _Tessellator:
                 ring_a, ring_b = rings[u]
                 local = np.where(which[k] == 0, ring_a[np.where(which[k] == 0, li[k], 0)],
                                  ring_b[np.where(which[k] == 1, li[k], 0)])
-                self.strips[keys[u]] = (which[k], local)
+                self.strips[keys[u]] = (which[k], local.astype(np.int32))  # template vertex ids
 
 
 def _unwrap_ring(theta: np.ndarray) -> np.ndarray:
