@@ -7,9 +7,12 @@ User mistakes (PleError) print one line on stderr and exit with status 2.
 from __future__ import annotations
 
 import argparse
+import ast
 import importlib
+import importlib.util
 import pkgutil
 import sys
+from pathlib import Path
 
 from .. import cli
 from ..errors import PleError
@@ -25,14 +28,33 @@ def command_names() -> list[str]:
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
-    """The parser of every sub-command, or of ``only`` (the one about to run)."""
+    """The parser of ``only`` (the sub-command about to run, imported with what it uses); with no
+    sub-command, the list of them with their one-line help read from their source, none
+    imported (``ple --help`` starts at once)."""
     parser = argparse.ArgumentParser(prog="ple", description="PLE — the Programmed Lattice Editor.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in command_names():
-        if only is None or name == only:
+        if only is None:
+            sub.add_parser(name, help=command_help(name))
+        elif name == only:
             importlib.import_module(f"{cli.__name__}.{name}").register(sub)
     return parser
+
+
+def command_help(name: str) -> str:
+    """The ``help=`` a sub-command's module gives its parser (``sub.add_parser(name, help=…)``), read
+    with ``ast`` without importing the module; its docstring's first line if it gives none."""
+    spec = importlib.util.find_spec(f"{cli.__name__}.{name}")
+    tree = ast.parse(Path(spec.origin).read_text(encoding="utf-8"))
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "add_parser"
+                and node.args and isinstance(node.args[0], ast.Constant) and node.args[0].value == name):
+            for kw in node.keywords:
+                if kw.arg == "help" and isinstance(kw.value, ast.Constant):
+                    return str(kw.value.value)
+    doc = (ast.get_docstring(tree) or "").strip()
+    return doc.splitlines()[0] if doc else ""
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import ast
 import json
 from importlib import resources
 from pathlib import Path
 
 from ..errors import PleError
-from .runtime import ROOT_PACKAGE, load_program_file
+from ..io.inputs import read_input_file
+
+ROOT_PACKAGE = __package__.rsplit(".", 1)[0]  # "ple", or the vendored copy's full name in Blender
 
 
 def preset_dir():
@@ -39,4 +42,10 @@ def preset_description(name: str) -> str:
         raise PleError(f"unknown preset {name!r}")
     if path.suffix == ".json":
         return str(json.loads(path.read_text()).get("description", ""))
-    return load_program_file(path).description
+    # the first line of the program's docstring, read without running it (``ple presets`` starts at once)
+    text = read_input_file(path, "program file").decode("utf-8", "replace")
+    try:
+        doc = ast.get_docstring(ast.parse(text, str(path))) or ""
+    except SyntaxError as exc:
+        raise PleError(f"{path}:{exc.lineno}: syntax error: {exc.msg}") from None
+    return doc.strip().splitlines()[0] if doc.strip() else ""
