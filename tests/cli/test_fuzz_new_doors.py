@@ -328,7 +328,10 @@ for extra, needle in ((("body", "--sample", "-1"), "--sample"), (("body", "--rep
                       (("body", "--body", "garbage.stl"), "garbage.stl"),
                       (("body", "--body", "missing.stl"), "missing"),
                       (("mesh", "--lattice", "nope"), "nope"), (("mesh", "--big", "100000"), "--big"),
-                      (("mesh", "--region", "-1"), "--region"), (("mesh", "--out", "userdir"), "folder")):
+                      (("mesh", "--region", "-1"), "--region"), (("mesh", "--out", "userdir"), "folder"),
+                      (("mesh", "--warped", "-3"), "--warped"), (("mesh", "--levels", "9"), "--levels"),
+                      (("curved", "--n", "1"), "--n 1"), (("curved", "--styles", "cnt,zigzag"), "zigzag"),
+                      (("curved", "--warped-n", "500"), "--warped-n"), (("startup", "--runs", "0"), "--runs")):
     case(REFUSE, "bench", *extra, needle=needle)
 
 

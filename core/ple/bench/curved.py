@@ -1,15 +1,26 @@
-"""Curved lattices to binary STL: batched hub templates against the per-hub path (same run), 1 vs 2 workers.
+"""Meshing throughput of regular, curved and warped lattices to binary STL (issue 14): batched
+hub templates against the per-hub path in the same run, 1 vs 2 workers, the STL writer alone.
 
-The curved lattice of issue 14: translation U, rotation V (about z), swirl W, one ball and 4
-beam-patterns — every (i, j) column has its own hub shape. Each row streams the region to a
-binary STL (``iter_triangles`` + ``write_stl``, the cleanliness check left out) and reports
-triangles per second; ``stl_writer_only`` writes the same triangles again from memory (the
-ceiling of this machine). A regular (cubic) lattice of the same size is the reference."""
+Lattices:
+- ``curved`` n³: translation U, rotation V (about z), swirl W, one ball and 4 beam-patterns —
+  every (i, j) column has its own hub shape (issue 14's 40³ lattice);
+- ``regular`` n³: the same beams on translations (one hub shape per boundary case);
+- ``warped`` n³: the ``warped`` preset (bent U, screwed V, tapered W; 10⁶ beams at n = 70).
+
+Each row streams the whole lattice to a binary STL in a child process of its own (so its peak
+memory, VmHWM, is its own): ``iter_triangles`` + ``write_stl`` with the float32 snap — the path
+``ple mesh`` takes once the cleanliness check has passed (the check is timed separately:
+``check_s`` and the unclean hubs it finds; a lattice with unclean hubs needs unions, see
+``ple bench mesh``'s clean_vs_unclean). ``stl_writer_only`` writes the same triangles again from
+memory (the ceiling on this machine)."""
 
 from __future__ import annotations
 
+import json
 import os
 import resource
+import subprocess
+import sys
 import tempfile
 import time
 
@@ -18,12 +29,21 @@ from ..errors import PleError
 from ..io.export import write_stl
 from ..meshing.tessellate import _Tessellator, iter_triangles, output_grid
 from ..model.lattice import Lattice
+from ..program.sources import load_lattice
+
+CHILD = """
+import json, sys
+from ple.bench.curved import child_row
+print(json.dumps(child_row(*json.loads(sys.argv[1]))))
+"""
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--n", type=int, default=30, help="the n³-group curved lattice (default 30; the issue's is 40)")
+    p.add_argument("--n", type=int, default=40, help="the n³ curved and regular lattices (default 40, the issue's)")
+    p.add_argument("--warped-n", type=int, default=70, help="the n³ warped lattice (default 70: 10⁶ beams; 0 skips)")
     p.add_argument("--levels", type=int, default=2, help="refinement levels of the refined rows (default 2)")
     p.add_argument("--styles", default="cnt,refined", help="comma-separated styles (default cnt,refined)")
+    p.add_argument("--no-per-hub", action="store_true", help="skip the per-hub baseline rows (slow)")
 
 
 def curved_lattice(n: int, radius: float = 0.08) -> Lattice:
@@ -49,6 +69,16 @@ def regular_lattice(n: int, radius: float = 0.08) -> Lattice:
     return lat
 
 
+def bench_lattice(name: str, n: int) -> Lattice:
+    if name == "curved":
+        return curved_lattice(n)
+    if name == "regular":
+        return regular_lattice(n)
+    if name == "warped":
+        return load_lattice("warped", {"n": n})
+    raise PleError(f"unknown bench lattice {name!r}")
+
+
 def _stream(lat: Lattice, style: str, levels: int, batched: bool, workers: int, path: str) -> dict:
     r = lat.region()
     t0 = time.perf_counter()
@@ -68,25 +98,70 @@ def _writer_only(lat: Lattice, style: str, levels: int, path: str) -> dict:
     return {"seconds": round(dt, 3), "triangles": n, "triangles_per_s": round(n / dt)}
 
 
+def _check(lat: Lattice, style: str, levels: int) -> dict:
+    t0 = time.perf_counter()
+    report, _ = _Tessellator(lat, lat.region(), style, levels, 16).find_unclean()
+    return {"check_s": round(time.perf_counter() - t0, 3), "unclean_hubs": int(len(report.nodes))}
+
+
+def child_row(lattice: str, n: int, style: str, levels: int, kind: str, workers: int) -> dict:
+    """One measurement in this (child) process: ``kind`` is batched, per-hub, writer or check."""
+    lat = bench_lattice(lattice, n)
+    with tempfile.TemporaryDirectory(prefix="ple-bench-curved-") as d:
+        path = os.path.join(d, "out.stl")
+        if kind == "writer":
+            row = _writer_only(lat, style, levels, path)
+        elif kind == "check":
+            row = _check(lat, style, levels)
+        else:
+            row = _stream(lat, style, levels, kind == "batched", workers, path)
+    row["peak_rss_gb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6, 3)  # VmHWM, KB on Linux
+    return row
+
+
+def _child(*spec) -> dict:
+    env = dict(os.environ)
+    core = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    env["PYTHONPATH"] = core + os.pathsep + env.get("PYTHONPATH", "")
+    out = subprocess.run([sys.executable, "-c", CHILD, json.dumps(spec)], capture_output=True, text=True, env=env)
+    if out.returncode != 0:
+        raise PleError(f"bench row {spec} failed: {out.stderr.strip().splitlines()[-1:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def rows(n: int, warped_n: int, styles: list[str], levels: int, per_hub: bool = True) -> list[dict]:
+    """The table of issue 14: per lattice and style, the batched path on 1 and 2 workers, the
+    per-hub path (curved only: the baseline), the writer alone, and the cleanliness check."""
+    plan = [("curved", n, s) for s in styles] + [("regular", n, s) for s in styles]
+    if warped_n:
+        plan.append(("warped", warped_n, "cnt"))  # refined 10⁶ beams is ~20 GB of STL
+    out = []
+    for name, size, style in plan:
+        lv = levels if style == "refined" else 0
+        runs = [_child(name, size, style, lv, "per-hub", 1)] if per_hub and name == "curved" else []
+        runs += [_child(name, size, style, lv, "batched", w) for w in (1, 2)]
+        row = {"lattice": name, "n": size, "groups": size**3, "style": style, "levels": lv, "runs": runs,
+               "stl_writer_only": _child(name, size, style, lv, "writer", 1),
+               "cleanliness_check": _child(name, size, style, lv, "check", 1)}
+        best = min(r["seconds"] for r in runs if r["path"] == "batched")
+        row["best_triangles_per_s"] = round(runs[-1]["triangles"] / best)
+        if runs[0]["path"] == "per-hub":
+            row["speedup_vs_per_hub"] = round(runs[0]["seconds"] / best, 2)
+        out.append(row)
+    return out
+
+
 def run(args) -> dict:
     if not 2 <= args.n <= 200:
         raise PleError(f"--n {args.n}: expected 2..200")
+    if args.warped_n and not 2 <= args.warped_n <= 200:
+        raise PleError(f"--warped-n {args.warped_n}: expected 0 or 2..200")
+    if not 0 <= args.levels <= 4:
+        raise PleError(f"--levels {args.levels}: expected 0..4")
     styles = [s.strip() for s in args.styles.split(",") if s.strip()]
-    rows = []
-    with tempfile.TemporaryDirectory(prefix="ple-bench-curved-") as d:
-        path = os.path.join(d, "out.stl")
-        for name, lat in (("curved", curved_lattice(args.n)), ("regular", regular_lattice(args.n))):
-            for style in styles:
-                levels = args.levels if style == "refined" else 0
-                runs = [_stream(lat, style, levels, False, 1, path)] if name == "curved" else []
-                runs += [_stream(lat, style, levels, True, w, path) for w in (1, 2)]
-                row = {"lattice": name, "groups": lat.groups, "beams": lat.beam_count(), "style": style,
-                       "levels": levels, "runs": runs}
-                if name == "curved":
-                    base = runs[0]["seconds"]
-                    row["speedup_batched_1_worker"] = round(base / runs[1]["seconds"], 2)
-                    row["speedup_batched_2_workers"] = round(base / runs[2]["seconds"], 2)
-                    row["stl_writer_only"] = _writer_only(lat, style, levels, path)
-                rows.append(row)
-    return {"benchmark": "curved", "n": args.n, "machine": f"{os.cpu_count()} cores (shared, loaded)",
-            "rows": rows, "peak_rss_gb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6, 2)}
+    bad = [s for s in styles if s not in ("cnt", "chocc", "refined")]
+    if bad or not styles:
+        raise PleError(f"--styles {args.styles!r}: expected some of cnt, chocc, refined")
+    return {"benchmark": "curved", "n": args.n, "machine": f"{os.cpu_count()} cores",
+            "load_average_at_start": list(os.getloadavg()),
+            "rows": rows(args.n, args.warped_n, styles, args.levels, not args.no_per_hub)}

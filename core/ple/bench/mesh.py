@@ -19,6 +19,8 @@ from ..io.export import write_stl
 from ..meshing.tessellate import _Tessellator, build_with_unions, tessellate
 from ..program.sources import load_lattice
 from ._timing import best_of
+from .curved import rows as lattice_rows
+from .startup import startup_rows
 
 CHILD = """
 import json, resource, sys, time
@@ -38,6 +40,10 @@ def add_arguments(p) -> None:
     p.add_argument("--big", type=int, default=70, help="n for the n³ lattice of the 10⁶-beam run (default 70)")
     p.add_argument("--style", default="cnt", help="style of the big run (default cnt)")
     p.add_argument("--region", type=int, default=10, help="n for the n³-group manifold3d comparison (default 10)")
+    p.add_argument("--curved", type=int, default=40, help="n of the curved and regular n³ rows (default 40; 0 skips)")
+    p.add_argument("--warped", type=int, default=70, help="n of the warped n³ row (default 70: 10⁶ beams; 0 skips)")
+    p.add_argument("--levels", type=int, default=2, help="refinement levels of the refined rows (default 2)")
+    p.add_argument("--no-per-hub", action="store_true", help="skip the per-hub baseline rows (slow)")
 
 
 def _stl_rate(lat) -> dict:
@@ -122,6 +128,12 @@ def run(args) -> dict:
     for flag, n in (("--big", args.big), ("--region", args.region)):
         if not 2 <= n <= 1000:
             raise PleError(f"{flag} {n}: expected 2..1000")
+    for flag, n in (("--curved", args.curved), ("--warped", args.warped)):
+        if n and not 2 <= n <= 200:
+            raise PleError(f"{flag} {n}: expected 0 (skip) or 2..200")
+    if not 0 <= args.levels <= 4:
+        raise PleError(f"--levels {args.levels}: expected 0..4")
+    load = list(os.getloadavg())
     lat = load_lattice(args.lattice)
     big = _big(args.lattice, args.big, args.style)  # first: a forked child starts with its parent's RSS
     region = lat.with_counts(args.region, args.region, args.region)
@@ -134,7 +146,11 @@ def run(args) -> dict:
                        "volume": float(mesh.volume), "watertight": bool(mesh.is_watertight)}
     m_time, m_vol, m_tri = _manifold_union(region)
     unclean = _unclean_cost(region)
+    # issue 14's table: regular, curved and warped lattices per style, per-hub baseline, writer alone
+    lattices = lattice_rows(args.curved, args.warped, ["cnt", "refined"], args.levels, not args.no_per_hub) \
+        if args.curved else []
     return {"benchmark": "mesh", "lattice": args.lattice, "machine": f"{os.cpu_count()} cores",
+            "load_average_at_start": load, "startup": startup_rows(10), "lattices": lattices,
             "stl_write": _stl_rate(lat),
             "big_lattice": big,
             "region_vs_manifold3d": {"groups": region.groups, "beams": region.beam_count(), "ple": ours,
