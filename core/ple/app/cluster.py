@@ -10,7 +10,9 @@ program that raises) is recorded by name in the manifest; the others go on.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
+import functools
 import json
 import os
 import posixpath
@@ -23,7 +25,7 @@ from .jobs import FORMAT, MANIFEST, Job, compute_part, location, read_manifest, 
 from .progress import Progress
 
 CONNECT_TIMEOUT = 5  # seconds to reach a scheduler before giving up with a message
-RETRIES = 2  # reruns of a part whose worker died (Dask also reruns lost tasks by itself)
+RETRIES = 2  # reruns of a part that raised other than a PleError (Dask reruns the parts of a dead worker itself)
 SAVE_EVERY = 1.0  # seconds between two writes of a running job's manifest
 
 
@@ -61,25 +63,139 @@ def _warm() -> None:
     and with it the job code (``ple.app.jobs``), so no part pays the library's import."""
 
 
-def run_tasks(client, fn, args_list: list[tuple], items: list):
+def run_tasks(client, fn, args_list: list[tuple], items: list, label: str = "tasks", names: list | None = None,
+              progress: bool | None = None):
     """Yield ``(item, result or exception)`` as the calls ``fn(*args)`` finish, on Dask
     (``client``) or in this process (``client`` None). A PleError, or a task whose worker died
-    more than RETRIES times, comes back as its exception; nothing else stops the others."""
+    more than Dask allows, comes back as its exception; nothing else stops the others.
+
+    Progress (on a terminal, or ``progress`` True): Dask's own bar on Dask, after the dashboard's
+    address, the project's bar (``names`` as its notes) in this process; both on stderr, so the
+    command's result on stdout stays clean."""
+    names = names or [""] * len(items)
     if client is None:
-        for item, args in zip(items, args_list):
-            try:
-                yield item, fn(*args)
-            except PleError as exc:
-                yield item, exc
+        bar = Progress(len(items), label, enabled=progress)
+        try:
+            for item, args, name in zip(items, args_list, names):
+                try:
+                    result = fn(*args)
+                except PleError as exc:
+                    result = exc
+                yield item, result
+                bar.update(1, name)
+        finally:
+            bar.close()
         return
     from dask.distributed import as_completed  # optional: only distributed runs need Dask
 
-    futures = {client.submit(fn, *args, retries=RETRIES, pure=False): item for item, args in zip(items, args_list)}
-    for fut in as_completed(futures):
+    futures = {client.submit(_kept_errors, fn, *args, retries=RETRIES, pure=False): item
+               for item, args in zip(items, args_list)}
+    bar = DaskBar(client, futures, label) if (sys.stderr.isatty() if progress is None else progress) else None
+    finished = False
+    try:
+        for fut in as_completed(futures):
+            try:
+                result = fut.result()
+            except Exception as exc:  # KilledWorker (its worker died too often), or a bug: reported by name
+                result = exc
+            yield futures[fut], result
+            if bar is not None:
+                bar.follow(futures)
+        finished = True
+    finally:
+        if bar is not None:
+            bar.close(wait=finished)
+
+
+def _kept_errors(fn, *args):
+    """``fn(*args)``, a PleError returned rather than raised: a bad part is a result (reported by
+    name), not an erred task that Dask would retry and that would stop Dask's progress bar."""
+    try:
+        return fn(*args)
+    except PleError as exc:
+        return exc
+
+
+class DaskBar:
+    """Dask's text progress bar (``distributed.diagnostics.progressbar.TextProgressBar``) over a
+    job's futures, drawn on stderr; it listens to the scheduler on the client's event loop (its
+    thread), while this thread consumes the results. An erred task stops Dask's bar: ``follow``
+    then starts another over the futures still pending, drawn against the job's total."""
+
+    def __init__(self, client, futures, label: str) -> None:
+        self.client, self.label, self.total, self.t0 = client, label, max(1, len(futures)), time.perf_counter()
+        link = dashboard(client)
+        if link:
+            print(f"dask dashboard: {link}", file=sys.stderr, flush=True)
+        self._start(list(futures))
+
+    def _start(self, futures) -> None:
+        self.bar = _stderr_bar_class()(futures, scheduler=self.client.scheduler.address, interval="200ms",
+                                       loop=self.client.loop, start=False)
+        self.bar.label, self.bar.total, self.bar._start_time = self.label, self.total, self.t0
+        self.listening = asyncio.run_coroutine_threadsafe(self.bar.listen(), self.client.loop.asyncio_loop)
+
+    def follow(self, futures) -> None:
+        """After a result: a bar stopped by an erred task gives way to one over the pending futures."""
+        if self.listening.done() and getattr(self.bar, "status", None) == "error":
+            pending = [f for f in futures if f.status == "pending"]
+            if pending:
+                self._start(pending)
+
+    def close(self, wait: bool = True, timeout: float = 5.0) -> None:
+        """Wait for the bar's last drawing (the scheduler's next report; not when the job was
+        interrupted), then stop it: no listener outlives the job."""
         try:
-            yield futures[fut], fut.result()
-        except Exception as exc:  # PleError from the task, or KilledWorker: reported by name
-            yield futures[fut], exc
+            if wait:
+                self.listening.result(timeout=timeout)
+        except Exception:  # a timeout, or the connection lost: the bar only stops
+            pass
+        finally:
+            self.listening.cancel()
+
+
+@functools.cache
+def _stderr_bar_class():
+    """Dask's ``TextProgressBar`` drawing on stderr (it writes to stdout, which carries the
+    command's result), its last state kept on its line, against the job's total."""
+    from distributed.diagnostics.progress import format_time
+    from distributed.diagnostics.progressbar import TextProgressBar  # optional: only distributed runs need Dask
+
+    class StderrBar(TextProgressBar):
+        label, total, drawn = "", 1, False
+
+        def _draw_bar(self, remaining, all, **kwargs):
+            done = min(self.total, max(0, self.total - remaining))  # of the job's total (see ``follow``)
+            bar = "#" * (self.width * done // self.total)
+            sys.stderr.write(f"\r{self.label} [{bar:<{self.width}}] | {100 * done // self.total}% Completed | "
+                             f"{format_time(self.elapsed)}")
+            sys.stderr.flush()
+            self.drawn = True
+
+        def _draw_stop(self, **kwargs):
+            if self.drawn:  # the last state stays on its line
+                sys.stderr.write("\n")
+                sys.stderr.flush()
+            self.drawn = False
+
+        async def listen(self):
+            try:
+                await super().listen()
+            finally:  # also when cancelled (an interrupted job): the line ends, the connection closes
+                self._draw_stop()
+                comm = getattr(self, "comm", None)
+                if comm is not None:
+                    comm.abort()
+
+    return StderrBar
+
+
+def dashboard(client) -> str | None:
+    """The address of the scheduler's dashboard, or None when it runs without one."""
+    try:
+        return client.dashboard_link if "dashboard" in client.scheduler_info().get("services", {}) else None
+    except (KeyError, AttributeError, OSError):
+        return None
 
 
 def check_scheduler(scheduler: str | None, workers: int | None) -> None:
@@ -113,28 +229,24 @@ def run_job(job: Job, url: str, scheduler: str | None = "local", workers: int | 
         write_atomic(fs, path, (json.dumps(manifest, indent=1) + "\n").encode())
 
     save()
-    bar = Progress(len(todo), job.kind, enabled=progress)
     if todo:
         if client is not None:
-            _run_parts(client, job, todo, url, manifest, save, bar)
+            _run_parts(client, job, todo, url, manifest, save, progress)
         else:
             with dask_client(scheduler, workers) as c:
-                if c is not None and progress is not False and sys.stderr.isatty():
-                    print(f"dask dashboard: {c.dashboard_link}", file=sys.stderr)
-                _run_parts(c, job, todo, url, manifest, save, bar)
-    bar.close()
+                _run_parts(c, job, todo, url, manifest, save, progress)
     return {"written": len(todo) - len(manifest["failures"]), "skipped": len(done), "failed": manifest["failures"],
             "manifest": f"{url.rstrip('/')}/{MANIFEST}", "seconds": round(time.perf_counter() - t0, 3)}
 
 
-def _run_parts(client, job: Job, todo, url, manifest, save, bar) -> None:
+def _run_parts(client, job: Job, todo, url, manifest, save, progress) -> None:
     """Every part of ``todo`` through ``run_tasks``; the manifest is saved at most every
     SAVE_EVERY seconds and at the end (a part finished but not yet recorded when the client dies
     is only computed again), so thousands of small parts do not rewrite it thousands of times."""
     args = [(job.kind, job.settings, part, url) for part in todo]
     last = -SAVE_EVERY  # the first finished part is recorded at once
     try:
-        for part, result in run_tasks(client, compute_part, args, todo):
+        for part, result in run_tasks(client, compute_part, args, todo, job.kind, [p.name for p in todo], progress):
             if isinstance(result, Exception):
                 error = str(result) if isinstance(result, PleError) else f"{type(result).__name__}: {result}"
                 manifest["failures"][part.name] = {"params": part.params, "error": error}
@@ -143,6 +255,5 @@ def _run_parts(client, job: Job, todo, url, manifest, save, bar) -> None:
             if time.monotonic() - last >= SAVE_EVERY:
                 save()
                 last = time.monotonic()
-            bar.update(1, part.name)
     finally:
         save()
