@@ -8,13 +8,12 @@ from __future__ import annotations
 import json
 import os
 import re
-import select
-import subprocess
 import sys
 import threading
 import time
 from pathlib import Path
 
+from daskcluster import on_terminal
 from ple.app.cluster import dask_client, run_job, run_tasks
 from ple.app.jobs import mesh_job
 from ple.errors import PleError
@@ -23,38 +22,9 @@ ROOT = Path(__file__).resolve().parents[2]
 MESH = ["mesh", "cubic", "--param", "n=4", "--style", "cnt", "--box-groups", "8"]
 
 
-def under_terminal(args: list[str], timeout: float = 120) -> tuple[int, str, str]:
-    """Run ``ple ARGS`` with stderr on a pseudo-terminal (so it is a tty) and stdout on a pipe;
-    returns (exit status, stdout, stderr)."""
-    master, slave = os.openpty()
+def under_terminal(args: list[str]) -> tuple[int, str, str]:
     path = os.pathsep.join([str(ROOT / "core"), str(ROOT), os.environ.get("PYTHONPATH", "")])
-    env = dict(os.environ, PYTHONPATH=path)
-    proc = subprocess.Popen([sys.executable, "-m", "ple.cli", *args], stdout=subprocess.PIPE, stderr=slave,
-                            stdin=subprocess.DEVNULL, env=env, cwd=ROOT)
-    os.close(slave)
-    out = []
-    reader = threading.Thread(target=lambda: out.append(proc.stdout.read()))
-    reader.start()
-    err, deadline = b"", time.monotonic() + timeout
-    try:
-        while time.monotonic() < deadline:
-            if select.select([master], [], [], 0.2)[0]:
-                try:
-                    chunk = os.read(master, 1 << 16)
-                except OSError:  # the terminal's other side closed: the command ended
-                    break
-                if not chunk:
-                    break
-                err += chunk
-            elif proc.poll() is not None:
-                break
-        proc.wait(timeout=max(1.0, deadline - time.monotonic()))
-    finally:
-        proc.kill()
-        os.close(master)
-        reader.join(timeout=30)
-        proc.stdout.close()
-    return proc.returncode, out[0].decode(), err.decode()
+    return on_terminal([sys.executable, "-m", "ple.cli", *args], dict(os.environ, PYTHONPATH=path), ROOT)
 
 
 def _hashes(folder: Path) -> dict:

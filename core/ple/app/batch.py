@@ -30,7 +30,7 @@ from ..model.budget import MESH_TRIANGLE_BYTES, default_max_memory, mesh_triangl
 from ..program.runner import DEFAULT_TIMEOUT, run_program
 from ..program.runtime import Param, load_program_file, parse_param_value
 from ..program.sources import resolve_source
-from .cluster import dask_client, run_tasks
+from .cluster import dask_client, run_tasks, showing
 
 KIND = "ple-batch"  # the output-folder marker's kind
 MAX_VARIANTS = 10_000  # per batch (the plan is listed before anything is written)
@@ -149,7 +149,7 @@ def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", f
     failures = []
     t0 = time.perf_counter()
     if todo:
-        with dask_client(scheduler, jobs) as client:
+        with dask_client(scheduler, jobs, showing(None if progress else False)) as client:
             tasks = [(path, v.params, style, levels, region, str(out / v.filename), limits) for v in todo]
             for v, result in run_tasks(client, _run_variant, tasks, todo, "batch", [v.filename for v in todo],
                                        None if progress else False):

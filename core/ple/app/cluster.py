@@ -18,6 +18,8 @@ import os
 import posixpath
 import sys
 import time
+import urllib.error
+import urllib.request
 from collections.abc import Iterator
 
 from ..errors import PleError
@@ -30,10 +32,13 @@ SAVE_EVERY = 1.0  # seconds between two writes of a running job's manifest
 
 
 @contextlib.contextmanager
-def dask_client(scheduler: str | None = "local", workers: int | None = None) -> Iterator:
+def dask_client(scheduler: str | None = "local", workers: int | None = None,
+                dashboard: bool | None = None) -> Iterator:
     """A ``dask.distributed.Client``: ``local`` (default) starts an embedded cluster of
     ``workers`` processes (default: the cores), an address joins a running scheduler; ``sync``
-    yields None (no Dask)."""
+    yields None (no Dask). The embedded cluster serves Dask's dashboard (on a free port) when
+    ``dashboard`` is true, by default when stderr is a terminal: where its address is printed
+    (``run_tasks``), not for runs that nobody watches."""
     scheduler = scheduler or "local"
     if scheduler == "sync":
         yield None
@@ -42,8 +47,9 @@ def dask_client(scheduler: str | None = "local", workers: int | None = None) -> 
 
     if scheduler == "local":  # its logs stay quiet: a failed part is reported by name, not as a worker's traceback
         n = max(1, int(workers or os.cpu_count() or 1))
-        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                          silence_logs=50) as cluster, Client(cluster) as client:
+        # its web server on a free port in any case (its health checks), the dashboard's pages only when shown
+        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, silence_logs=50, dashboard_address=":0",
+                          scheduler_kwargs={"dashboard": showing(dashboard)}) as cluster, Client(cluster) as client:
             client.run(_warm)
             yield client
         return
@@ -56,6 +62,12 @@ def dask_client(scheduler: str | None = "local", workers: int | None = None) -> 
     with client:
         client.run(_warm)
         yield client
+
+
+def showing(progress: bool | None) -> bool:
+    """Whether a job's progress (and its dashboard's address) is shown: ``progress``, by default
+    when stderr is a terminal."""
+    return sys.stderr.isatty() if progress is None else bool(progress)
 
 
 def _warm() -> None:
@@ -90,7 +102,7 @@ def run_tasks(client, fn, args_list: list[tuple], items: list, label: str = "tas
 
     futures = {client.submit(_kept_errors, fn, *args, retries=RETRIES, pure=False): item
                for item, args in zip(items, args_list)}
-    bar = DaskBar(client, futures, label) if (sys.stderr.isatty() if progress is None else progress) else None
+    bar = DaskBar(client, futures, label) if showing(progress) else None
     finished = False
     try:
         for fut in as_completed(futures):
@@ -124,7 +136,7 @@ class DaskBar:
 
     def __init__(self, client, futures, label: str) -> None:
         self.client, self.label, self.total, self.t0 = client, label, max(1, len(futures)), time.perf_counter()
-        link = dashboard(client)
+        link = dashboard_link(client)
         if link:
             print(f"dask dashboard: {link}", file=sys.stderr, flush=True)
         self._start(list(futures))
@@ -190,12 +202,21 @@ def _stderr_bar_class():
     return StderrBar
 
 
-def dashboard(client) -> str | None:
-    """The address of the scheduler's dashboard, or None when it runs without one."""
-    try:
-        return client.dashboard_link if "dashboard" in client.scheduler_info().get("services", {}) else None
-    except (KeyError, AttributeError, OSError):
+def dashboard_link(client) -> str | None:
+    """The address of the scheduler's dashboard, or None when it serves none (an embedded
+    cluster started without one, a scheduler started with ``--no-dashboard``: their web server
+    answers 404 there). An address that cannot be reached from here is still given (a tunnel may
+    reach it)."""
+    if "dashboard" not in client.scheduler_info().get("services", {}):
         return None
+    link = client.dashboard_link
+    try:  # HEAD: the dashboard's page is not rendered (a page that only answers GET says 405)
+        urllib.request.urlopen(urllib.request.Request(link, method="HEAD"), timeout=CONNECT_TIMEOUT).close()
+    except urllib.error.HTTPError as exc:
+        return None if exc.code == 404 else link
+    except OSError:
+        pass
+    return link
 
 
 def check_scheduler(scheduler: str | None, workers: int | None) -> None:
@@ -233,7 +254,7 @@ def run_job(job: Job, url: str, scheduler: str | None = "local", workers: int | 
         if client is not None:
             _run_parts(client, job, todo, url, manifest, save, progress)
         else:
-            with dask_client(scheduler, workers) as c:
+            with dask_client(scheduler, workers, showing(progress)) as c:
                 _run_parts(c, job, todo, url, manifest, save, progress)
     return {"written": len(todo) - len(manifest["failures"]), "skipped": len(done), "failed": manifest["failures"],
             "manifest": f"{url.rstrip('/')}/{MANIFEST}", "seconds": round(time.perf_counter() - t0, 3)}
