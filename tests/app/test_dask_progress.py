@@ -37,6 +37,7 @@ def test_dask_bar_and_dashboard_on_a_terminal_stdout_clean(tmp_path):
     assert code == 0, err[-2000:]
     assert re.search(r"dask dashboard: http://[\w.\-]+:\d+/status", err)
     assert "mesh [" in err and "| 100% Completed |" in err  # Dask's bar, drawn on stderr to its end
+    assert "Warning" not in err and "Traceback" not in err and "Error" not in err  # a clean start and stop
     assert re.fullmatch(r"8 part\(s\) written, 0 already there, 0 failed \([\d.]+ s\); manifest \S+\n", out)
     job = mesh_job("cubic", ["n=4"], "cnt", box_groups=8)
     run_job(job, str(tmp_path / "sync"), "sync", progress=False)  # the single-process reference
@@ -62,6 +63,7 @@ def test_failing_variants_under_a_terminal(tmp_path):
     summary = json.loads(out)
     assert summary["written"] == 2 and [f["file"] for f in summary["failed"]] == ["cubic__n-0.stl"]
     assert "batch [" in err and "| 100% Completed |" in err and "dask dashboard:" in err
+    assert "Warning" not in err and "Traceback" not in err
 
 
 def slow_or_broken(i: int) -> int:

@@ -5,7 +5,8 @@ process, one part after the other: the reference path).
 
 A worker killed in the middle of a part loses nothing: Dask reruns the part on another worker,
 and the part is written atomically, so no half-written part remains. A part that fails (a
-program that raises) is recorded by name in the manifest; the others go on.
+program that raises) is recorded by name in the manifest; the others go on. On a terminal a
+job shows Dask's own progress bar and the address of its dashboard, both on stderr.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from .jobs import FORMAT, MANIFEST, Job, compute_part, location, read_manifest, 
 from .progress import Progress
 
 CONNECT_TIMEOUT = 5  # seconds to reach a scheduler before giving up with a message
+PROBE_TIMEOUT = 2  # seconds to ask a scheduler's web server whether it serves a dashboard
 RETRIES = 2  # reruns of a part that raised other than a PleError (Dask reruns the parts of a dead worker itself)
 SAVE_EVERY = 1.0  # seconds between two writes of a running job's manifest
 
@@ -211,7 +213,7 @@ def dashboard_link(client) -> str | None:
         return None
     link = client.dashboard_link
     try:  # HEAD: the dashboard's page is not rendered (a page that only answers GET says 405)
-        urllib.request.urlopen(urllib.request.Request(link, method="HEAD"), timeout=CONNECT_TIMEOUT).close()
+        urllib.request.urlopen(urllib.request.Request(link, method="HEAD"), timeout=PROBE_TIMEOUT).close()
     except urllib.error.HTTPError as exc:
         return None if exc.code == 404 else link
     except OSError:
