@@ -49,7 +49,6 @@ def build_zip(tmp: Path) -> Path:
 def run(args) -> int:
     from ple.app.batch import plan, prepare_output_dir
     from ple.app.cluster import dask_client, run_tasks
-    from ple.app.progress import Progress
     from ple.errors import PleError
     from ple.io.files import atomic_write_text
 
@@ -78,20 +77,16 @@ def run(args) -> int:
                 with start, dask_client(args.scheduler, workers) as client:
                     data = build_zip(Path(tmp)).read_bytes()
                     addon = (hashlib.sha256(data).hexdigest(), data)
-                    bar = Progress(len(todo), "blender batch")
                     if client is not None:
                         addon = client.scatter(addon, broadcast=True)  # the zip travels once per worker
-                        if sys.stderr.isatty():
-                            print(f"dask dashboard: {client.dashboard_link}", file=sys.stderr)
                     tasks = [(addon, job, v.params, str((out / v.filename).resolve())) for v in todo]
-                    for v, result in run_tasks(client, blender_variant, tasks, todo):
+                    for v, result in run_tasks(client, blender_variant, tasks, todo, "blender batch",
+                                               [v.filename for v in todo]):
                         if isinstance(result, Exception):
                             manifest["failures"].append({"file": v.filename, "params": v.params, "error": str(result)})
                         else:
                             manifest["outputs"].append(result)
                         atomic_write_text(manifest_path, json.dumps(manifest, indent=1) + "\n")
-                        bar.update(1, v.filename)
-                bar.close()
     except PleError as exc:
         print(f"ple_addon.batch: error: {exc}", file=sys.stderr)
         return 2

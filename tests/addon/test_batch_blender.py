@@ -12,27 +12,36 @@ from pathlib import Path
 
 import pytest
 import trimesh
-from daskcluster import dask_cluster
+from dask.distributed import Client
+from daskcluster import dask_cluster, in_flight, kill_when, on_terminal
 from ple.meshing.tessellate import tessellate
 from ple.program.sources import load_lattice
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def run_batch(out: Path, tmp: Path, *extra: str, sweep: str = "radius=0.1,0.2,0.3") -> subprocess.CompletedProcess:
-    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp / "blender-user"))
-    return subprocess.run([sys.executable, "-m", "ple_addon.batch", "--program", "cubic", "--param", "n=2",
-                           "--param", sweep, "--style", "cnt", "--out", str(out), *extra],
-                          cwd=ROOT, capture_output=True, text=True, timeout=900, env=env)
+def batch_argv(out: Path, *extra: str, sweep: str = "radius=0.1,0.2,0.3", n: int = 2) -> list[str]:
+    return [sys.executable, "-m", "ple_addon.batch", "--program", "cubic", "--param", f"n={n}", "--param", sweep,
+            "--style", "cnt", "--out", str(out), *extra]
 
 
-def check_outputs(out: Path, count: int, objects_at_start: int = 0) -> list:
+def batch_env(tmp: Path) -> dict:
+    return dict(os.environ, BLENDER_USER_RESOURCES=str(tmp / "blender-user"))
+
+
+def run_batch(out: Path, tmp: Path, *extra: str, sweep: str = "radius=0.1,0.2,0.3",
+              n: int = 2) -> subprocess.CompletedProcess:
+    return subprocess.run(batch_argv(out, *extra, sweep=sweep, n=n), cwd=ROOT, capture_output=True, text=True,
+                          timeout=900, env=batch_env(tmp))
+
+
+def check_outputs(out: Path, count: int, objects_at_start: int = 0, n: int = 2) -> list:
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["engine"] == "blender"
     assert len(manifest["outputs"]) == count
     for entry in manifest["outputs"]:
         mesh = trimesh.load(out / entry["file"])
-        truth = tessellate(load_lattice("cubic", {"n": 2, "radius": entry["params"]["radius"]}), style="cnt")
+        truth = tessellate(load_lattice("cubic", {"n": n, "radius": entry["params"]["radius"]}), style="cnt")
         assert mesh.is_watertight
         assert len(mesh.faces) == len(truth.faces) == entry["triangles"]
         assert abs(mesh.volume - truth.volume) <= 1e-5 * truth.volume
@@ -55,14 +64,56 @@ def test_embedded_cluster_exports_the_core_meshes_reports_failures_and_resumes(t
     assert json.loads(again.stdout[again.stdout.index("{"):])["skipped"] == 3
 
 
-def test_real_scheduler_and_worker_process(tmp_path):
+def blender_workers(tmp: Path, workers: int):
+    """``dask_cluster`` whose workers can run Blender tasks: ``ple_addon.batch`` preloaded (bpy
+    imported on their main thread), Blender's user resources in ``tmp``."""
     path = [str(ROOT / "core"), str(ROOT), os.environ.get("PYTHONPATH", "")]
-    env = {"BLENDER_USER_RESOURCES": str(tmp_path / "worker-user"), "PYTHONPATH": os.pathsep.join(path)}
-    with dask_cluster(tmp_path, workers=1, env=env, worker_args=("--preload", "ple_addon.batch")) as (address, procs):
-        res = run_batch(tmp_path / "out", tmp_path, "--scheduler", address, sweep="radius=0.1,0.2")
-        assert res.returncode == 0, res.stderr[-3000:]
+    env = {"BLENDER_USER_RESOURCES": str(tmp / "worker-user"), "PYTHONPATH": os.pathsep.join(path)}
+    return dask_cluster(tmp, workers=workers, env=env, worker_args=("--preload", "ple_addon.batch"))
+
+
+def test_real_scheduler_and_worker_process(tmp_path):
+    """On a terminal, the Blender door shows Dask's progress bar on stderr (this scheduler has no
+    dashboard: no address is printed) and its JSON summary alone on stdout."""
+    with blender_workers(tmp_path, 1) as (address, procs):
+        code, out, err = on_terminal(batch_argv(tmp_path / "out", "--scheduler", address, sweep="radius=0.1,0.2"),
+                                     batch_env(tmp_path), ROOT)
+        assert code == 0, err[-3000:]
+        assert json.loads(out)["written"] == 2
+        assert "blender batch [" in err and "| 100% Completed |" in err and "dashboard" not in err
         outputs = check_outputs(tmp_path / "out", 2)
         assert {e["worker_pid"] for e in outputs} == {procs[1].pid}  # the dask worker process ran bpy
+
+
+def test_a_killed_worker_loses_no_variant(tmp_path):
+    """One of two ``dask worker`` processes SIGKILLed while it has a variant in flight: its
+    variants are exported again by the other, every file equals the one-process run's, and no
+    half-written file remains."""
+    sweep, count = "radius=0.1:0.3:8", 8  # variants of a few hundred ms each: the kill lands mid-job
+    out = tmp_path / "out"
+    with blender_workers(tmp_path, 2) as (address, procs), Client(address, timeout=30) as client:
+        with subprocess.Popen(batch_argv(out, "--scheduler", address, sweep=sweep, n=14), cwd=ROOT, text=True,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=batch_env(tmp_path)) as job:
+            def some_done_and_w1_busy() -> bool:
+                manifest = out / "manifest.json"
+                return (manifest.is_file() and bool(json.loads(manifest.read_text())["outputs"])
+                        and bool(in_flight(client)["w1"]))
+
+            try:
+                killed = kill_when(procs[2], some_done_and_w1_busy)
+                stdout, stderr = job.communicate(timeout=600)
+            finally:
+                job.kill()
+    assert job.returncode == 0, stderr[-3000:]
+    assert json.loads(stdout[stdout.index("{"):])["written"] == count
+    outputs = check_outputs(out, count, n=14)
+    after = [e for e in outputs if (out / e["file"]).stat().st_mtime > killed]
+    assert after and {e["worker_pid"] for e in after} == {procs[1].pid}  # the survivor went on after the kill
+    assert not [p.name for p in out.iterdir() if ".part" in p.name]  # no half-written file
+    ref = run_batch(tmp_path / "ref", tmp_path, "--scheduler", "sync", sweep=sweep, n=14)
+    assert ref.returncode == 0, ref.stderr[-3000:]
+    assert {e["file"]: (out / e["file"]).read_bytes() for e in outputs} == \
+        {e["file"]: (tmp_path / "ref" / e["file"]).read_bytes() for e in outputs}
 
 
 def test_template_blend_and_saved_variants_in_one_process(tmp_path):
@@ -71,7 +122,7 @@ def test_template_blend_and_saved_variants_in_one_process(tmp_path):
             "cam = bpy.data.objects.new('Camera', bpy.data.cameras.new('Camera')); "
             "bpy.context.scene.collection.objects.link(cam); "
             f"bpy.ops.wm.save_as_mainfile(filepath={str(template)!r})")
-    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender-user"))
+    env = batch_env(tmp_path)
     subprocess.run([sys.executable, "-c", make], check=True, capture_output=True, timeout=300, env=env)
     out = tmp_path / "out"
     res = run_batch(out, tmp_path, "--scheduler", "sync", "--blend", str(template), "--save-blend",

@@ -5,14 +5,14 @@ path; a worker killed mid-job changes nothing; a re-run recomputes nothing that 
 from __future__ import annotations
 
 import json
-import signal
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from daskcluster import dask_cluster
+from dask.distributed import Client
+from daskcluster import dask_cluster, in_flight, kill_when
 from ple.app.batch import plan
 from ple.app.cluster import run_job
 from ple.app.jobs import (
@@ -76,15 +76,18 @@ def test_a_killed_worker_loses_nothing(tmp_path, cluster):
     result = {}
     thread = threading.Thread(target=lambda: result.update(run_job(job, str(out), address, progress=False)))
     thread.start()
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and not (out / "manifest.json").is_file():
-        time.sleep(0.05)
-    while time.monotonic() < deadline and not json.loads((out / "manifest.json").read_text())["parts"]:
-        time.sleep(0.05)
-    procs[1].send_signal(signal.SIGKILL)  # one worker dies in the middle of the job
+
+    def some_parts_done_and_w1_busy() -> bool:  # the killed worker has a part in flight
+        manifest = out / "manifest.json"
+        return (manifest.is_file() and bool(json.loads(manifest.read_text())["parts"])
+                and bool(in_flight(client)["w1"]))
+
+    with Client(address, timeout=30) as client:
+        killed = kill_when(procs[2], some_parts_done_and_w1_busy)  # one worker dies in the middle of the job
     thread.join(timeout=600)
     assert result["written"] == len(job.parts) and not result["failed"]
     assert not list(out.glob("*.tmp-*"))  # no half-written part
+    assert any((out / name).stat().st_mtime > killed for name in _hashes(out))  # the job went on after the kill
     ref = run_job(job, str(tmp_path / "ref"), "sync", progress=False)
     assert ref["written"] == len(job.parts) and _hashes(out) == _hashes(tmp_path / "ref")
 

@@ -4,8 +4,8 @@ A sweep gives each input either one value (``thickness=0.05``), a list
 (``thickness=0.05,0.07``) or a range ``lo:hi:n`` (n evenly spaced values, ends included);
 the variants are the Cartesian product. Each variant is built, meshed and written to
 ``DIR/<stem>__<name>-<value>….<ext>``; ``DIR/manifest.json`` records what was produced.
-Finished outputs are skipped on a re-run (resume), the work runs on a process pool and
-progress goes to stderr.
+Finished outputs are skipped on a re-run (resume), the variants run as Dask tasks
+(``ple.app.cluster``) and progress goes to stderr.
 """
 
 from __future__ import annotations
@@ -30,8 +30,7 @@ from ..model.budget import MESH_TRIANGLE_BYTES, default_max_memory, mesh_triangl
 from ..program.runner import DEFAULT_TIMEOUT, run_program
 from ..program.runtime import Param, load_program_file, parse_param_value
 from ..program.sources import resolve_source
-from .cluster import dask_client, run_tasks
-from .progress import Progress
+from .cluster import dask_client, run_tasks, showing
 
 KIND = "ple-batch"  # the output-folder marker's kind
 MAX_VARIANTS = 10_000  # per batch (the plan is listed before anything is written)
@@ -149,21 +148,17 @@ def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", f
     jobs = max(1, min(jobs or os.cpu_count() or 1, len(todo) or 1))
     failures = []
     t0 = time.perf_counter()
-    bar = Progress(len(todo), "batch", enabled=None if progress else False)
     if todo:
-        with dask_client(scheduler, jobs) as client:
-            for v, result in run_tasks(client, _run_variant, [(path, v.params, style, levels, region,
-                                                               str(out / v.filename), limits) for v in todo], todo):
+        with dask_client(scheduler, jobs, showing(None if progress else False)) as client:
+            tasks = [(path, v.params, style, levels, region, str(out / v.filename), limits) for v in todo]
+            for v, result in run_tasks(client, _run_variant, tasks, todo, "batch", [v.filename for v in todo],
+                                       None if progress else False):
                 if isinstance(result, Exception):
                     error = str(result) if isinstance(result, PleError) else f"worker died: {result}"
                     failures.append({"file": v.filename, "params": v.params, "error": error})
                 else:
                     manifest["outputs"].append(result)
                 atomic_write_text(manifest_path, json.dumps(manifest, indent=1) + "\n")
-                if bar:
-                    bar.update(1, v.filename)
-    if bar:
-        bar.close()
     manifest["failures"] = failures
     atomic_write_text(manifest_path, json.dumps(manifest, indent=1) + "\n")
     return {"written": len(todo) - len(failures), "skipped": len(variants) - len(todo), "failed": failures,

@@ -5,17 +5,22 @@ process, one part after the other: the reference path).
 
 A worker killed in the middle of a part loses nothing: Dask reruns the part on another worker,
 and the part is written atomically, so no half-written part remains. A part that fails (a
-program that raises) is recorded by name in the manifest; the others go on.
+program that raises) is recorded by name in the manifest; the others go on. On a terminal a
+job shows Dask's own progress bar and the address of its dashboard, both on stderr.
 """
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
+import functools
 import json
 import os
 import posixpath
 import sys
 import time
+import urllib.error
+import urllib.request
 from collections.abc import Iterator
 
 from ..errors import PleError
@@ -23,15 +28,19 @@ from .jobs import FORMAT, MANIFEST, Job, compute_part, location, read_manifest, 
 from .progress import Progress
 
 CONNECT_TIMEOUT = 5  # seconds to reach a scheduler before giving up with a message
-RETRIES = 2  # reruns of a part whose worker died (Dask also reruns lost tasks by itself)
+PROBE_TIMEOUT = 2  # seconds to ask a scheduler's web server whether it serves a dashboard
+RETRIES = 2  # reruns of a part that raised other than a PleError (Dask reruns the parts of a dead worker itself)
 SAVE_EVERY = 1.0  # seconds between two writes of a running job's manifest
 
 
 @contextlib.contextmanager
-def dask_client(scheduler: str | None = "local", workers: int | None = None) -> Iterator:
+def dask_client(scheduler: str | None = "local", workers: int | None = None,
+                dashboard: bool | None = None) -> Iterator:
     """A ``dask.distributed.Client``: ``local`` (default) starts an embedded cluster of
     ``workers`` processes (default: the cores), an address joins a running scheduler; ``sync``
-    yields None (no Dask)."""
+    yields None (no Dask). The embedded cluster serves Dask's dashboard (on a free port) when
+    ``dashboard`` is true, by default when stderr is a terminal: where its address is printed
+    (``run_tasks``), not for runs that nobody watches."""
     scheduler = scheduler or "local"
     if scheduler == "sync":
         yield None
@@ -40,8 +49,9 @@ def dask_client(scheduler: str | None = "local", workers: int | None = None) -> 
 
     if scheduler == "local":  # its logs stay quiet: a failed part is reported by name, not as a worker's traceback
         n = max(1, int(workers or os.cpu_count() or 1))
-        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                          silence_logs=50) as cluster, Client(cluster) as client:
+        # its web server on a free port in any case (its health checks), the dashboard's pages only when shown
+        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, silence_logs=50, dashboard_address=":0",
+                          scheduler_kwargs={"dashboard": showing(dashboard)}) as cluster, Client(cluster) as client:
             client.run(_warm)
             yield client
         return
@@ -56,30 +66,159 @@ def dask_client(scheduler: str | None = "local", workers: int | None = None) -> 
         yield client
 
 
+def showing(progress: bool | None) -> bool:
+    """Whether a job's progress (and its dashboard's address) is shown: ``progress``, by default
+    when stderr is a terminal."""
+    return sys.stderr.isatty() if progress is None else bool(progress)
+
+
 def _warm() -> None:
     """Run on each worker when the client connects: unpickling this function imports this module
     and with it the job code (``ple.app.jobs``), so no part pays the library's import."""
 
 
-def run_tasks(client, fn, args_list: list[tuple], items: list):
+def run_tasks(client, fn, args_list: list[tuple], items: list, label: str = "tasks", names: list | None = None,
+              progress: bool | None = None):
     """Yield ``(item, result or exception)`` as the calls ``fn(*args)`` finish, on Dask
     (``client``) or in this process (``client`` None). A PleError, or a task whose worker died
-    more than RETRIES times, comes back as its exception; nothing else stops the others."""
+    more than Dask allows, comes back as its exception; nothing else stops the others.
+
+    Progress (on a terminal, or ``progress`` True): Dask's own bar on Dask, after the dashboard's
+    address, the project's bar (``names`` as its notes) in this process; both on stderr, so the
+    command's result on stdout stays clean."""
+    names = names or [""] * len(items)
     if client is None:
-        for item, args in zip(items, args_list):
-            try:
-                yield item, fn(*args)
-            except PleError as exc:
-                yield item, exc
+        bar = Progress(len(items), label, enabled=progress)
+        try:
+            for item, args, name in zip(items, args_list, names):
+                try:
+                    result = fn(*args)
+                except PleError as exc:
+                    result = exc
+                yield item, result
+                bar.update(1, name)
+        finally:
+            bar.close()
         return
     from dask.distributed import as_completed  # optional: only distributed runs need Dask
 
-    futures = {client.submit(fn, *args, retries=RETRIES, pure=False): item for item, args in zip(items, args_list)}
-    for fut in as_completed(futures):
+    futures = {client.submit(_kept_errors, fn, *args, retries=RETRIES, pure=False): item
+               for item, args in zip(items, args_list)}
+    bar = DaskBar(client, futures, label) if showing(progress) else None
+    finished = False
+    try:
+        for fut in as_completed(futures):
+            try:
+                result = fut.result()
+            except Exception as exc:  # KilledWorker (its worker died too often), or a bug: reported by name
+                result = exc
+            yield futures[fut], result
+            if bar is not None:
+                bar.follow(futures)
+        finished = True
+    finally:
+        if bar is not None:
+            bar.close(wait=finished)
+
+
+def _kept_errors(fn, *args):
+    """``fn(*args)``, a PleError returned rather than raised: a bad part is a result (reported by
+    name), not an erred task that Dask would retry and that would stop Dask's progress bar."""
+    try:
+        return fn(*args)
+    except PleError as exc:
+        return exc
+
+
+class DaskBar:
+    """Dask's text progress bar (``distributed.diagnostics.progressbar.TextProgressBar``) over a
+    job's futures, drawn on stderr; it listens to the scheduler on the client's event loop (its
+    thread), while this thread consumes the results. An erred task stops Dask's bar: ``follow``
+    then starts another over the futures still pending, drawn against the job's total."""
+
+    def __init__(self, client, futures, label: str) -> None:
+        self.client, self.label, self.total, self.t0 = client, label, max(1, len(futures)), time.perf_counter()
+        link = dashboard_link(client)
+        if link:
+            print(f"dask dashboard: {link}", file=sys.stderr, flush=True)
+        self._start(list(futures))
+
+    def _start(self, futures) -> None:
+        self.bar = _stderr_bar_class()(futures, scheduler=self.client.scheduler.address, interval="200ms",
+                                       loop=self.client.loop, start=False)
+        self.bar.label, self.bar.total, self.bar._start_time = self.label, self.total, self.t0
+        self.listening = asyncio.run_coroutine_threadsafe(self.bar.listen(), self.client.loop.asyncio_loop)
+
+    def follow(self, futures) -> None:
+        """After a result: a bar stopped by an erred task gives way to one over the pending futures."""
+        if self.listening.done() and getattr(self.bar, "status", None) == "error":
+            pending = [f for f in futures if f.status == "pending"]
+            if pending:
+                self._start(pending)
+
+    def close(self, wait: bool = True, timeout: float = 5.0) -> None:
+        """Wait for the bar's last drawing (the scheduler's next report; not when the job was
+        interrupted), then stop it: no listener outlives the job."""
         try:
-            yield futures[fut], fut.result()
-        except Exception as exc:  # PleError from the task, or KilledWorker: reported by name
-            yield futures[fut], exc
+            if wait:
+                self.listening.result(timeout=timeout)
+        except Exception:  # a timeout, or the connection lost: the bar only stops
+            pass
+        finally:
+            self.listening.cancel()
+
+
+@functools.cache
+def _stderr_bar_class():
+    """Dask's ``TextProgressBar`` drawing on stderr (it writes to stdout, which carries the
+    command's result), its last state kept on its line, against the job's total."""
+    from distributed.diagnostics.progress import format_time
+    from distributed.diagnostics.progressbar import TextProgressBar  # optional: only distributed runs need Dask
+
+    class StderrBar(TextProgressBar):
+        label, total, drawn = "", 1, False
+
+        def _draw_bar(self, remaining, all, **kwargs):
+            done = min(self.total, max(0, self.total - remaining))  # of the job's total (see ``follow``)
+            bar = "#" * (self.width * done // self.total)
+            sys.stderr.write(f"\r{self.label} [{bar:<{self.width}}] | {100 * done // self.total}% Completed | "
+                             f"{format_time(self.elapsed)}")
+            sys.stderr.flush()
+            self.drawn = True
+
+        def _draw_stop(self, **kwargs):
+            if self.drawn:  # the last state stays on its line
+                sys.stderr.write("\n")
+                sys.stderr.flush()
+            self.drawn = False
+
+        async def listen(self):
+            try:
+                await super().listen()
+            finally:  # also when cancelled (an interrupted job): the line ends, the connection closes
+                self._draw_stop()
+                comm = getattr(self, "comm", None)
+                if comm is not None:
+                    comm.abort()
+
+    return StderrBar
+
+
+def dashboard_link(client) -> str | None:
+    """The address of the scheduler's dashboard, or None when it serves none (an embedded
+    cluster started without one, a scheduler started with ``--no-dashboard``: their web server
+    answers 404 there). An address that cannot be reached from here is still given (a tunnel may
+    reach it)."""
+    if "dashboard" not in client.scheduler_info().get("services", {}):
+        return None
+    link = client.dashboard_link
+    try:  # HEAD: the dashboard's page is not rendered (a page that only answers GET says 405)
+        urllib.request.urlopen(urllib.request.Request(link, method="HEAD"), timeout=PROBE_TIMEOUT).close()
+    except urllib.error.HTTPError as exc:
+        return None if exc.code == 404 else link
+    except OSError:
+        pass
+    return link
 
 
 def check_scheduler(scheduler: str | None, workers: int | None) -> None:
@@ -113,28 +252,24 @@ def run_job(job: Job, url: str, scheduler: str | None = "local", workers: int | 
         write_atomic(fs, path, (json.dumps(manifest, indent=1) + "\n").encode())
 
     save()
-    bar = Progress(len(todo), job.kind, enabled=progress)
     if todo:
         if client is not None:
-            _run_parts(client, job, todo, url, manifest, save, bar)
+            _run_parts(client, job, todo, url, manifest, save, progress)
         else:
-            with dask_client(scheduler, workers) as c:
-                if c is not None and progress is not False and sys.stderr.isatty():
-                    print(f"dask dashboard: {c.dashboard_link}", file=sys.stderr)
-                _run_parts(c, job, todo, url, manifest, save, bar)
-    bar.close()
+            with dask_client(scheduler, workers, showing(progress)) as c:
+                _run_parts(c, job, todo, url, manifest, save, progress)
     return {"written": len(todo) - len(manifest["failures"]), "skipped": len(done), "failed": manifest["failures"],
             "manifest": f"{url.rstrip('/')}/{MANIFEST}", "seconds": round(time.perf_counter() - t0, 3)}
 
 
-def _run_parts(client, job: Job, todo, url, manifest, save, bar) -> None:
+def _run_parts(client, job: Job, todo, url, manifest, save, progress) -> None:
     """Every part of ``todo`` through ``run_tasks``; the manifest is saved at most every
     SAVE_EVERY seconds and at the end (a part finished but not yet recorded when the client dies
     is only computed again), so thousands of small parts do not rewrite it thousands of times."""
     args = [(job.kind, job.settings, part, url) for part in todo]
     last = -SAVE_EVERY  # the first finished part is recorded at once
     try:
-        for part, result in run_tasks(client, compute_part, args, todo):
+        for part, result in run_tasks(client, compute_part, args, todo, job.kind, [p.name for p in todo], progress):
             if isinstance(result, Exception):
                 error = str(result) if isinstance(result, PleError) else f"{type(result).__name__}: {result}"
                 manifest["failures"][part.name] = {"params": part.params, "error": error}
@@ -143,6 +278,5 @@ def _run_parts(client, job: Job, todo, url, manifest, save, bar) -> None:
             if time.monotonic() - last >= SAVE_EVERY:
                 save()
                 last = time.monotonic()
-            bar.update(1, part.name)
     finally:
         save()

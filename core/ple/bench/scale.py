@@ -42,7 +42,7 @@ def _peak_rss_mb(client) -> float:
 
 def _run(job, url: str, workers: int) -> dict:
     """One run of ``job`` on a fresh embedded cluster of ``workers`` (started before the clock)."""
-    with dask_client("local", workers) as client:
+    with dask_client("local", workers, dashboard=False) as client:
         t0 = time.perf_counter()
         res = run_job(job, url, client=client, progress=False)
         wall = time.perf_counter() - t0
@@ -89,7 +89,7 @@ def _throughput(job, tmp: str, name: str, repeat: int, unit: str) -> dict:
 def _overhead(tmp: str) -> dict:
     """Seconds per part of a job whose parts do almost nothing (a 1-group filter slab each)."""
     job = filter_job("cubic", ["n=8"], None, 1)
-    with dask_client("local", 2) as client:
+    with dask_client("local", 2, dashboard=False) as client:
         t0 = time.perf_counter()
         run_job(job, f"{tmp}/tiny", client=client, progress=False)
         dt = time.perf_counter() - t0
@@ -116,7 +116,7 @@ def _billion(tmp: str, beams: float, slab: int) -> dict:
     coarse = load_lattice("lil_regular_coarse", {"span": n - 1.0})
     spec = filter_to_dict(lil(fine, coarse).filter)
     job = count_job("thesis_regular", [f"n={n}"], None, slab, spec)
-    with dask_client("local", 2) as client:
+    with dask_client("local", 2, dashboard=False) as client:
         t0 = time.perf_counter()
         res = run_job(job, f"{tmp}/billion", client=client, progress=False)
         wall = time.perf_counter() - t0
