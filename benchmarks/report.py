@@ -107,6 +107,95 @@ def plot(biq, lil) -> Path | None:
     return out
 
 
+def curved_section(d) -> list[str]:
+    """Issue 14's table (``ple bench curved``, also the ``lattices`` rows of ``ple bench mesh``)."""
+    la = d.get("load_average_at_start", [None])[0]
+    out = ["## Curved lattices (`ple bench curved`)", "",
+           "Regular, curved and warped lattices streamed to binary STL (float32 snap included), each run in a "
+           "child process of its own (peak memory is that run's VmHWM): the per-hub path "
+           "(`_Tessellator(batched=False)`, one CHoCC per hub shape) as the baseline, the batched hub templates on "
+           "1 and 2 workers, the STL writer alone on the same triangles (this machine's ceiling), and the "
+           "cleanliness check `ple mesh` runs first. The curved lattice: translation U, rotation V about z, swirl W, "
+           "one ball, 4 beam-patterns (every (i, j) column its own hub shape); regular: the same beams on "
+           "translations; warped: the `warped` preset."
+           + (f" Load average at the start: {la:.2f}." if la is not None else ""), "",
+           "![Triangles per second, per-hub vs batched vs the writer alone](img/curved_throughput.png)", "",
+           "| lattice | style | triangles | per-hub | batched, 1 worker | batched, 2 workers | speed-up vs per-hub "
+           "| writer alone | peak memory | check (unclean hubs) |", "|---|---|---|---|---|---|---|---|---|---|"]
+
+    def cell(r):
+        return "–" if r is None else f"{r['seconds']:.2f} s, {r['triangles_per_s'] / 1e6:.2f} M/s"
+
+    for row in d["rows"]:
+        runs = {(r["path"], r["workers"]): r for r in row["runs"]}
+        style = row["style"] + (f" L{row['levels']}" if row["style"] == "refined" else "")
+        peak = max(r["peak_rss_gb"] for r in row["runs"])
+        chk = row["cleanliness_check"]
+        sp = row.get("speedup_vs_per_hub")
+        out.append(f"| {row['lattice']} {row['n']}³ | {style} | {row['runs'][-1]['triangles']:,} | "
+                   f"{cell(runs.get(('per-hub', 1)))} | {cell(runs.get(('batched', 1)))} | "
+                   f"{cell(runs.get(('batched', 2)))} | {'–' if sp is None else f'{sp:.1f}×'} | "
+                   f"{cell(row['stl_writer_only'])} | {peak:.2f} GB | "
+                   f"{chk['check_s']:.1f} s ({chk['unclean_hubs']:,}) |")
+    return out + ["", "Raw JSON: `benchmarks/results/curved.json`.", ""]
+
+
+def plot_curved(d) -> Path | None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    if not d or not d.get("rows"):
+        return None
+    labels, series = [], {"per-hub": [], "batched, 1 worker": [], "batched, 2 workers": [], "writer alone": []}
+    for row in d["rows"]:
+        runs = {(r["path"], r["workers"]): r for r in row["runs"]}
+        labels.append(f"{row['lattice']} {row['n']}³\n{row['style']}")
+        for name, key in (("per-hub", ("per-hub", 1)), ("batched, 1 worker", ("batched", 1)),
+                          ("batched, 2 workers", ("batched", 2))):
+            series[name].append(runs[key]["triangles_per_s"] / 1e6 if key in runs else 0.0)
+        series["writer alone"].append(row["stl_writer_only"]["triangles_per_s"] / 1e6)
+    fig, ax = plt.subplots(figsize=(8, 3.6))
+    width = 0.2
+    colors = ["#999", "#e0b070", "#d08a3c", "#4a7ab0"]
+    for k, (name, vals) in enumerate(series.items()):
+        ax.bar([i + (k - 1.5) * width for i in range(len(labels))], vals, width, label=name, color=colors[k])
+    ax.axhline(2.0, color="#c33", lw=1, ls="--", label="issue 14's target, 2 M/s")
+    ax.set_xticks(range(len(labels)), labels, fontsize=8)
+    ax.set_ylabel("million triangles / s to binary STL")
+    ax.set_title("Curved lattices mesh as fast as regular ones")
+    ax.legend(frameon=False, fontsize=7, ncol=3)
+    fig.tight_layout()
+    out = DOCS / "img" / "curved_throughput.png"
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def startup_section(d) -> list[str]:
+    rows = d.get("startup") or d.get("commands")
+    if not rows:
+        return []
+    out = ["## Start-up (`ple bench startup`)", "", "Whole processes, 10 runs each, interleaved; target: `ple presets` "
+           "median ≤ 0.3 s.", "", "| command | median | min | max |", "|---|---|---|---|"]
+    for name, r in rows.items():
+        out.append(f"| `{name}` | {r['median_s']:.3f} s | {r['min_s']:.3f} s | {r['max_s']:.3f} s |")
+    return out + [""]
+
+
+def _kept_sections(path: Path, generated: set[str]) -> list[str]:
+    """The sections of the existing page that no benchmark here generates (written by hand: the
+    seeds' tables, CLG, body fill), kept as they are, in their order."""
+    if not path.is_file():
+        return []
+    out, keep = [], False
+    for line in path.read_text().splitlines():
+        if line.startswith("## "):
+            keep = line not in generated
+        if keep:
+            out.append(line)
+    return out + ([""] if out else [])
+
+
 def write_report() -> Path:
     biq, lil, mesh, becots, ev = (_load(n) for n in ("biq", "lil", "mesh", "becots", "eval"))
     machine = _load("machine") or {}
@@ -125,10 +214,17 @@ def write_report() -> Path:
     measure = _load("measure")
     if measure:
         lines += measure_section(measure)
+    curved, startup = _load("curved"), _load("startup")
+    if curved:
+        plot_curved(curved)
+        lines += curved_section(curved)
+    if startup:
+        lines += startup_section(startup)
     for title, name, d in (("BeCOTS RangeFinder", "becots", becots), ("Lazy evaluation", "eval", ev)):
         if d:
             lines += generic_section(title, name, d)
     out = DOCS / "performance.md"
+    lines += _kept_sections(out, {x for x in lines if x.startswith("## ")})
     out.write_text("\n".join(lines) + "\n")
     return out
 
