@@ -197,7 +197,7 @@ def _preset_items(self, context):
     return [(n, n, f"CLG preset {n}") for n in clg_sources.clg_preset_names()]
 
 
-class PLE_OT_clg_add(bpy.types.Operator):  # noqa: N801 - Blender naming
+class PLE_OT_clg_add(ops.SourceAdd, bpy.types.Operator):  # noqa: N801 - Blender naming
     """Add a PLE CLG rig from a CLG preset, a program defining clg() (.py), a ple-clg/1 file (.json)
     or a text block"""
 
@@ -217,38 +217,10 @@ class PLE_OT_clg_add(bpy.types.Operator):  # noqa: N801 - Blender naming
     region: IntVectorProperty(name="Region", size=3, min=1, default=(3, 3, 3),
                               description="Node-groups per direction drawn and previewed")
 
-    @classmethod
-    def poll(cls, context):
-        return context.scene is not None
+    what = ".py CLG program or .json ple-clg/1 file"
 
-    def invoke(self, context, event):
-        if self.source == "FILE" and not self.filepath:
-            context.window_manager.fileselect_add(self)
-            return {"RUNNING_MODAL"}
-        return context.window_manager.invoke_props_dialog(self)
-
-    def source_text(self):
-        """(Text datablock, kind, default name, file on disk or "")."""
-        if self.source == "TEXT":
-            text = bpy.data.texts.get(self.text)
-            if text is None:
-                raise PleError(f"no text block named {self.text!r}")
-            kind = "IR" if text.as_string().lstrip().startswith("{") else "PROGRAM"
-            return text, kind, Path(text.name).stem, ""
-        if self.source == "PRESET":
-            path = clg_sources.resolve_clg(self.preset)
-        else:
-            path = Path(bpy.path.abspath(self.filepath))
-            if path.suffix not in (".py", ".json") or not path.is_file():
-                raise PleError(f"{self.filepath!r}: expected an existing .py CLG program or .json ple-clg/1 file")
-        try:
-            body = path.read_text()
-        except OSError as exc:
-            raise PleError(f"{path}: cannot read ({exc.strerror})") from None
-        text = bpy.data.texts.new(path.name)
-        text.from_string(body)
-        return text, ("IR" if path.suffix == ".json" else "PROGRAM"), path.stem, \
-            (str(path) if self.source == "FILE" else "")
+    def preset_file(self) -> Path:
+        return clg_sources.resolve_clg(self.preset)
 
     def execute(self, context):
         try:

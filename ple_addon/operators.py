@@ -83,23 +83,18 @@ class RigOperator:
         return {"FINISHED"}
 
 
-class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
-    """Add a PLE lattice rig from a preset, a program (.py), an IR file (.json) or a text block"""
+class SourceAdd:
+    """What the Add operators share (a lattice, a CLG): the source chosen (a preset, a file, a text
+    block) read into a Text datablock. ``preset_file()`` resolves the preset; ``what`` names the
+    kinds of file accepted in the error message."""
 
-    bl_idname = "ple.lattice_add"
-    bl_label = "Add PLE Lattice"
-    bl_options = {"REGISTER", "UNDO"}
+    what = ".py program or .json IR file"
 
-    source: EnumProperty(name="From", items=[
-        ("PRESET", "Preset", "a lattice program shipped with PLE"),
-        ("FILE", "File", "a lattice program .py or a data-only IR .json"),
-        ("TEXT", "Text Block", "a text block of this file holding a program or an IR")], default="PRESET")
-    preset: EnumProperty(name="Preset", items=_preset_items)
-    filepath: StringProperty(name="File", subtype="FILE_PATH")
-    text: StringProperty(name="Text Block")
-    name: StringProperty(name="Name", description="Name of the lattice object (default: the source's)")
-    region: IntVectorProperty(name="Region", size=3, min=1, default=(3, 3, 3),
-                              description="Node-groups per direction drawn in full")
+    def preset_file(self) -> Path:
+        path = presets.preset_path(self.preset)
+        if path is None:
+            raise PleError(f"unknown preset {self.preset!r}")
+        return path
 
     @classmethod
     def poll(cls, context):
@@ -120,13 +115,11 @@ class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
             kind = "IR" if text.as_string().lstrip().startswith("{") else "PROGRAM"
             return text, kind, Path(text.name).stem, ""
         if self.source == "PRESET":
-            path = presets.preset_path(self.preset)
-            if path is None:
-                raise PleError(f"unknown preset {self.preset!r}")
+            path = self.preset_file()
         else:
             path = Path(bpy.path.abspath(self.filepath))
             if path.suffix not in (".py", ".json") or not path.is_file():
-                raise PleError(f"{self.filepath!r}: expected an existing .py program or .json IR file")
+                raise PleError(f"{self.filepath!r}: expected an existing {self.what}")
         try:
             body = path.read_text()
         except OSError as exc:
@@ -135,6 +128,25 @@ class PLE_OT_lattice_add(bpy.types.Operator):  # noqa: N801 - Blender naming
         text.from_string(body)
         linked = str(path) if self.source == "FILE" else ""  # a preset is not the user's file
         return text, ("IR" if path.suffix == ".json" else "PROGRAM"), path.stem, linked
+
+
+class PLE_OT_lattice_add(SourceAdd, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Add a PLE lattice rig from a preset, a program (.py), an IR file (.json) or a text block"""
+
+    bl_idname = "ple.lattice_add"
+    bl_label = "Add PLE Lattice"
+    bl_options = {"REGISTER", "UNDO"}
+
+    source: EnumProperty(name="From", items=[
+        ("PRESET", "Preset", "a lattice program shipped with PLE"),
+        ("FILE", "File", "a lattice program .py or a data-only IR .json"),
+        ("TEXT", "Text Block", "a text block of this file holding a program or an IR")], default="PRESET")
+    preset: EnumProperty(name="Preset", items=_preset_items)
+    filepath: StringProperty(name="File", subtype="FILE_PATH")
+    text: StringProperty(name="Text Block")
+    name: StringProperty(name="Name", description="Name of the lattice object (default: the source's)")
+    region: IntVectorProperty(name="Region", size=3, min=1, default=(3, 3, 3),
+                              description="Node-groups per direction drawn in full")
 
     def execute(self, context):
         if self.source == "PRESET" and self.preset in mobius_frames.PRESETS:  # its frames are Möbius frames

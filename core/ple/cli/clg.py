@@ -29,45 +29,39 @@ def _source(p) -> None:
     add_program_limits(p)  # a program runs contained: --timeout, --max-memory (docs/reliability.md)
 
 
+def _action(cmds, name: str, func, help: str):
+    """One action's parser: the source arguments and its function."""
+    q = cmds.add_parser(name, help=help)
+    _source(q)
+    q.set_defaults(func=func)
+    return q
+
+
 def register(sub) -> None:
     p = sub.add_parser("clg", help="Constructive Lattice Geometry: PMC, voxels, slices, rays, renders, meshes")
     cmds = p.add_subparsers(dest="clg_command", metavar="ACTION")
     cmds.required = True
-    q = cmds.add_parser("info", help="chunks, primitives, materials, nesting depth and the box")
-    _source(q)
-    q.set_defaults(func=run_info)
-    q = cmds.add_parser("pmc", help="point membership of points (n, 3) .npy -> bool (n,) .npy")
-    _source(q)
+    _action(cmds, "info", run_info, "chunks, primitives, materials, nesting depth and the box")
+    q = _action(cmds, "pmc", run_pmc, "point membership of points (n, 3) .npy -> bool (n,) .npy")
     q.add_argument("--points", required=True)
     q.add_argument("--out", required=True)
-    q.set_defaults(func=run_pmc)
-    q = cmds.add_parser("voxelize", help="bool voxels (NX, NY, NZ) .npy of the voxel centres")
-    _source(q)
+    q = _action(cmds, "voxelize", run_voxelize, "bool voxels (NX, NY, NZ) .npy of the voxel centres")
     q.add_argument("--grid", required=True, metavar="NX,NY,NZ")
     q.add_argument("--bounds", metavar="x0,y0,z0,x1,y1,z1", help="default: the solid's box")
     q.add_argument("--out", required=True)
-    q.set_defaults(func=run_voxelize)
-    q = cmds.add_parser("slice", help="printer slices: one 1-bit PNG per layer + manifest.json")
-    _source(q)
+    q = _action(cmds, "slice", run_slice, "printer slices: one 1-bit PNG per layer + manifest.json")
     add_slice_args(q)
-    q.set_defaults(func=run_slice)
-    q = cmds.add_parser("ray", help="first-hit distances of rays (n, 6) .npy -> (n,) .npy (inf: a miss)")
-    _source(q)
+    q = _action(cmds, "ray", run_ray, "first-hit distances of rays (n, 6) .npy -> (n,) .npy (inf: a miss)")
     q.add_argument("--rays", required=True)
     q.add_argument("--out", required=True)
-    q.set_defaults(func=run_ray)
-    q = cmds.add_parser("render", help="a shaded picture (progressive passes)")
-    _source(q)
+    q = _action(cmds, "render", run_render, "a shaded picture (progressive passes)")
     q.add_argument("--out", required=True, help="output .png")
     q.add_argument("--size", default="640,480", metavar="W,H")
     q.add_argument("--view", default="35,25", metavar="AZIMUTH,ELEVATION", help="degrees")
     q.add_argument("--passes", type=int, default=4)
-    q.set_defaults(func=run_render)
-    q = cmds.add_parser("mesh", help="a watertight mesh of the solid (manifold3d booleans)")
-    _source(q)
+    q = _action(cmds, "mesh", run_mesh, "a watertight mesh of the solid (manifold3d booleans)")
     q.add_argument("--out", required=True, help="output mesh (.stl, .ply, .obj, .glb, .3mf)")
     q.add_argument("--segments", type=int, default=32, help="circle segments of balls and beams")
-    q.set_defaults(func=run_mesh)
 
 
 def add_slice_args(q, out_required: bool = True) -> None:
