@@ -5,10 +5,12 @@ alone (``hub_template``, plane rolling or a validated hint per hub). The meshes 
 same triangles (up to the order of their corners and of the faces), be watertight and have
 the same volume, and the batch must really batch (fewer per-hub builds than hubs)."""
 
+from concurrent.futures import ProcessPoolExecutor
+
 import numpy as np
 import pytest
 import trimesh
-from ple.meshing import hubs
+from ple.meshing import hubs, tessellate
 from ple.meshing.tessellate import _Tessellator
 from ple.model.lattice import Lattice, Node
 from ple.program.sources import load_lattice
@@ -127,7 +129,7 @@ def test_random_steady_lattices_batch_equal_per_hub(monkeypatch):
         _compare(lat, ["cnt", "refined"][trial % 2], monkeypatch)
 
 
-def test_stream_is_byte_identical_for_any_number_of_workers(tmp_path):
+def test_stream_is_byte_identical_for_any_number_of_workers(tmp_path, monkeypatch):
     """Boxes are prepared in order and assembled by 1 or 3 threads: the same STL bytes; and
     the same triangles as the in-memory mesh."""
     from ple.cli.main import main
@@ -142,6 +144,23 @@ def test_stream_is_byte_identical_for_any_number_of_workers(tmp_path):
         n = write_mesh(lat, out, style="cnt", max_groups=24, workers=workers)  # 9 boxes
         outs.append(out.read_bytes())
     assert outs[0] == outs[1]
+    # hub templates in tasks of 5 hub shapes, computed by the template processes (workers > 1)
+    monkeypatch.setattr(tessellate, "TEMPLATE_CHUNK", 5)
+    tasks = []
+
+    class Counted(ProcessPoolExecutor):
+        def map(self, fn, args):
+            args = list(args)
+            tasks.append(len(args))
+            return super().map(fn, args)
+
+    monkeypatch.setattr(tessellate, "ProcessPoolExecutor", Counted)
+    for workers in (1, 2):
+        out = tmp_path / f"t{workers}.stl"
+        write_mesh(lat, out, style="refined", levels=1, workers=workers)
+        outs.append(out.read_bytes())
+    assert outs[2] == outs[3]
+    assert sum(k > 1 for k in tasks) >= 2  # the start-up map, then template tasks run in the processes
     for workers in (1, 2):
         assert main(["mesh", str(path), "--style", "chocc", "--workers", str(workers),
                      "--out", str(tmp_path / f"cli{workers}.stl")]) == 0

@@ -82,7 +82,7 @@ def bench_lattice(name: str, n: int) -> Lattice:
 def _stream(lat: Lattice, style: str, levels: int, batched: bool, workers: int, path: str) -> dict:
     r = lat.region()
     t0 = time.perf_counter()
-    tess = _Tessellator(lat, r, style, levels, 16, batched=batched)
+    tess = _Tessellator(lat, r, style, levels, 16, batched=batched, workers=workers)
     n = write_stl(path, iter_triangles(lat, r, style, levels, _tess=tess, workers=workers), grid=output_grid(lat, r),
                   workers=workers)
     dt = time.perf_counter() - t0

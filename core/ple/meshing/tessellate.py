@@ -24,8 +24,11 @@ U^-i V^-j W^dk V^(j+dj) U^(i+di) — independent of k — so hubs are computed o
 from __future__ import annotations
 
 import math
+import multiprocessing
+import os
+import weakref
 from collections import deque
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 
 import numpy as np
 import trimesh
@@ -44,6 +47,12 @@ from .weld import COLLAPSE_GRIDS, grid_spacing
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
 MAX_LEVELS = 6
 MAX_CHECK_GROUPS = 500_000  # streamed regions up to this size are checked for unclean hubs first
+TEMPLATE_CHUNK = 768  # hub shapes per template task (fixed: the output must not depend on the workers)
+
+
+def _hub_templates_task(args):
+    """``hub_templates`` in a template process (``_Tessellator.pool``)."""
+    return hub_templates(*args)
 
 
 def zipper(angles_a: np.ndarray, angles_b: np.ndarray) -> np.ndarray:
@@ -90,7 +99,7 @@ class _Tessellator:
     """Builds region meshes box by box, caching hub templates and beam strips."""
 
     def __init__(self, lat: Lattice, region: Region, style: str, levels: int, segments: int,
-                 fillet: float | None = None, batched: bool = True, grid: float | None = None):
+                 fillet: float | None = None, batched: bool = True, grid: float | None = None, workers: int = 1):
         lat.validate()
         self.fillet = fillet
         self.batched = batched  # hub templates in batches of one CHoCC topology (False: one by one)
@@ -113,6 +122,19 @@ class _Tessellator:
         fmin = float(np.min(lat.group_factors(corners[:, 0], corners[:, 1], corners[:, 2])))
         self.min_edge = COLLAPSE_GRIDS * self.grid / fmin
         self.excluded = None  # sorted linear keys of nodes meshed elsewhere (``ple.meshing.unclean``)
+        # hub templates of a box are built by ``workers`` processes (the CHoCC per topology is Python
+        # work that threads cannot share); forked here, before any thread of the stream starts
+        self.pool = None
+        if workers > 1 and fillet is None and hasattr(os, "fork"):
+            self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"))
+            list(self.pool.map(int, range(workers)))  # start them now
+            weakref.finalize(self, self.pool.shutdown, wait=False)
+
+    def close_pool(self) -> None:
+        """Stop the template processes (the templates built stay)."""
+        if self.pool is not None:
+            self.pool.shutdown()
+            self.pool = None
 
     def _key(self, idx: np.ndarray) -> np.ndarray:
         _, nv, nw = self.lat.counts
@@ -229,14 +251,25 @@ class _Tessellator:
         for key, (n, own, local) in new.items():
             have = ~np.isnan(local[:, 3])
             by_beams.setdefault(have.tobytes(), []).append((key, n, own, local[have]))
-        built = {}
+        # tasks of at most TEMPLATE_CHUNK hubs, each from the hint its beam set had before this call:
+        # the same tasks and results whatever the number of processes computing them
+        tasks, args = [], []
         for hint_key, hubs in by_beams.items():  # the last hub with these beams: likely the same hull
-            keys, nodes, own, local = zip(*hubs)
-            local = np.array(local).reshape(len(hubs), -1, 4)
-            tpls, self.hints[hint_key] = hub_templates(
-                lat.template_centers[list(nodes)], np.array(own), local[..., :3], local[..., 3], self.style,
-                self.levels, self.segments, self.hints.get(hint_key), self.min_edge, self.fillet, self.batched)
+            for lo in range(0, len(hubs), TEMPLATE_CHUNK):
+                keys, nodes, own, local = zip(*hubs[lo:lo + TEMPLATE_CHUNK])
+                local = np.array(local).reshape(len(keys), -1, 4)
+                tasks.append((hint_key, keys))
+                args.append((lat.template_centers[list(nodes)], np.array(own), local[..., :3], local[..., 3],
+                             self.style, self.levels, self.segments, self.hints.get(hint_key), self.min_edge,
+                             self.fillet, self.batched))
+        if self.pool is not None and len(args) > 1:
+            results = list(self.pool.map(_hub_templates_task, args))
+        else:
+            results = [hub_templates(*a) for a in args]
+        built = {}
+        for (hint_key, keys), (tpls, hint) in zip(tasks, results):
             built.update(zip(keys, tpls))
+            self.hints[hint_key] = hint
         for key, (_, _, local) in new.items():
             have = ~np.isnan(local[:, 3])
             self.templates[key] = (len(self.templates), built[key], np.where(have, np.cumsum(have) - 1, -1))
@@ -527,13 +560,21 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
     if lat.group_map is not None:  # groups not similar (Möbius, warps): the general per-hub path
         lat = lat.explicit(r)
         r = lat.region()
-    tess = _tess if _tess is not None else _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style))
-    boxes = list(lat.iter_slabs(max_groups=max_groups, region=r))
+    workers = max(1, int(workers))
+    tess = _tess if _tess is not None else _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style),
+                                                        workers=workers)
+    try:
+        yield from _stream_boxes(tess, list(lat.iter_slabs(max_groups=max_groups, region=r)), workers)
+    finally:
+        tess.close_pool()
+
+
+def _stream_boxes(tess: _Tessellator, boxes: list, workers: int):
+    """``iter_triangles``' boxes: prepared in order by one thread, assembled by ``workers``."""
     # boxes are prepared (hub templates) in order by one thread and assembled by ``workers``
     # threads (numpy releases the GIL in its large array operations), the next ones while the
     # caller writes this one: at most workers + 1 boxes are held at a time, and the output does
     # not depend on the number of workers
-    workers = max(1, int(workers))
     with ThreadPoolExecutor(max_workers=1) as prep, ThreadPoolExecutor(max_workers=workers) as pool:
         pending: deque = deque()
         for box in boxes:
@@ -617,8 +658,9 @@ def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: in
     r = lat.region(region)
     if clip_bodies(lat):  # cut at a body's surface: one Boolean of the whole mesh, in memory
         return None, None
-    tess = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style))
+    tess = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style), workers=max(1, int(workers)))
     report = tess.find_unclean()[0] if r.groups <= MAX_CHECK_GROUPS else None
     if report is not None and len(report.nodes):
+        tess.close_pool()
         return report, None
     return report, iter_triangles(lat, r, style, levels, segments, max_groups, _tess=tess, workers=workers)
