@@ -112,7 +112,7 @@ def run(args) -> int:
         n = len(mesh.faces) - export_mesh(mesh, args.out, args.unit)["dropped_faces"]
     else:
         n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments, max_groups, unit=args.unit,
-                       info=info, fillet=args.fillet, workers=stream_workers(args.workers))
+                       info=info, fillet=args.fillet, workers=stream_workers(args.workers), max_memory=max_memory(args))
         if info.get("unclean") is not None and len(info["unclean"].nodes):
             print(info["unclean"].line())
     dt = time.perf_counter() - t0

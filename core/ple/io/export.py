@@ -25,7 +25,15 @@ import trimesh
 
 from ..errors import PleError
 from ..meshing.connectors import constant_radius_connectors
-from ..meshing.tessellate import checked_stream, iter_triangles, output_grid, smallest_radius, tessellate, weld_chunks
+from ..meshing.tessellate import (
+    _check_style,
+    checked_stream,
+    iter_triangles,
+    output_grid,
+    smallest_radius,
+    tessellate,
+    weld_chunks,
+)
 from ..meshing.weld import (
     COLLAPSE_GRIDS,
     collapse_short_edges,
@@ -35,6 +43,7 @@ from ..meshing.weld import (
     snap_triangles,
     weld,
 )
+from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, mesh_triangles, require
 from ..model.lattice import Lattice
 from .files import atomic_path, atomic_write_text, check_output_dir, write_marker
 from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, from_file_axes, mesh_format, to_file_axes, unit_name
@@ -322,7 +331,8 @@ def write_beam_lattice_3mf(path, center, radius, beam_nodes, mesh=None, unit: st
 
 def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: int | None = None,
                segments: int | None = None, max_groups: int = 1 << 14, unit: str = DEFAULT_UNIT,
-               info: dict | None = None, fillet: float | None = None, workers: int = 1) -> int:
+               info: dict | None = None, fillet: float | None = None, workers: int = 1,
+               max_memory: float | None = None) -> int:
     """Tessellate a region straight to ``path`` (format from the suffix); returns the number of
     triangles. Binary STL streams box by box (memory bounded by ``max_groups`` groups, boxes
     assembled by ``workers`` threads, the same file for any number), every box snapped to the
@@ -331,7 +341,8 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
 
     Regions up to ``MAX_CHECK_GROUPS`` groups are checked for unclean hubs first
     (``ple.meshing.tessellate.checked_stream``); an unclean one is meshed in memory with its
-    unions. ``info["unclean"]`` gets the report (None when not checked)."""
+    unions, refused (PleError, no file) if its estimate exceeds ``max_memory`` bytes.
+    ``info["unclean"]`` gets the report (None when not checked)."""
     unit_name(unit)
     fmt = mesh_format(path)
     r = lat.region(region)
@@ -342,6 +353,13 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
         info["unclean"], chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet, workers)
         if chunks is not None:
             return write_stl(path, chunks, header=stl_header(unit), grid=output_grid(lat, r), workers=workers)
+        if max_memory is not None and info["unclean"] is not None:  # the unions are computed in memory
+            lv, sg = _check_style(style, levels, segments)
+            tris = mesh_triangles(lat, r, style, lv, sg)
+            require(tris * MESH_TRIANGLE_BYTES + evaluation_bytes(lat, r),
+                    f"{len(info['unclean'].nodes):,} unclean hubs need exact unions, made in memory: "
+                    f"{tris:,.3g} triangles ({style}) of region {r}", max_memory,
+                    "choose a smaller --region or fewer --levels")
     elif fmt == "stl":
         return write_stl(path, iter_triangles(lat, r, style, levels, segments, max_groups, workers=workers),
                          header=stl_header(unit), workers=workers)
