@@ -8,7 +8,6 @@ environment (an independent copy of the vendored one) and from numbers computed 
 
 from __future__ import annotations
 
-import os
 import re
 import subprocess
 import sys
@@ -17,6 +16,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import test_addon as base  # the shared installer and bpy-side helpers
+from test_addon import (  # noqa: F401 - bpy-side helpers the cases use
+    new_rig,
+    part,
+    region_arrays,
+    update,
+    zip_path,  # noqa: F401 - the fixture building the zip
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -28,17 +35,8 @@ CASES = ["becots_redraw", "becots_apply_presets", "becots_named_return", "becots
          "program_file", "menu_keymap_prefs", "tessellate_steps", "live_errors_reported", "trust_per_file"]
 
 
-@pytest.fixture(scope="module")
-def zip_path(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("addon_live")
-    build = subprocess.run([sys.executable, "-m", "ple_addon.build", "--out", str(tmp)], cwd=ROOT,
-                           capture_output=True, text=True)
-    assert build.returncode == 0, build.stdout + build.stderr
-    return Path(build.stdout.strip().splitlines()[-1])
-
-
 @pytest.mark.parametrize("case", CASES)
-def test_addon_live(zip_path, case, tmp_path):
+def test_addon_live(zip_path, case, tmp_path):  # noqa: F811 - the imported fixture
     res = subprocess.run([sys.executable, __file__, str(zip_path), case], cwd=tmp_path, capture_output=True,
                          text=True, timeout=600)
     assert f"{case} OK" in res.stdout, (res.stdout[-4000:] + res.stderr[-4000:])
@@ -46,31 +44,6 @@ def test_addon_live(zip_path, case, tmp_path):
 
 # ----- bpy side (runs in the subprocess) ------------------------------------------------------------
 bpy = ple_ext = core = None
-
-
-def update():
-    bpy.context.view_layer.update()
-
-
-def new_rig(preset="cubic", **kw):
-    assert bpy.ops.ple.lattice_add(source="PRESET", preset=preset, **kw) == {"FINISHED"}
-    return bpy.context.active_object
-
-
-def part(rig, key):
-    return ple_ext.rig.parts(rig)[key]
-
-
-def region_arrays(rig):
-    me = part(rig, "region").data
-    co = np.zeros(len(me.vertices) * 3, np.float32)
-    me.attributes["position"].data.foreach_get("vector", co)
-    rad = np.zeros(len(me.vertices), np.float32)
-    if len(me.vertices):
-        me.attributes["ple_radius"].data.foreach_get("value", rad)
-    ed = np.zeros(len(me.edges) * 2, np.int32)
-    me.edges.foreach_get("vertices", ed)
-    return co.reshape(-1, 3), rad, ed.reshape(-1, 2)
 
 
 def assert_region_is(rig, lat, region, atol=1e-5):
@@ -783,27 +756,22 @@ def case_menu_keymap_prefs():
     assert prefs.job_seconds == 600.0
 
 
-def setup(zip_path: str) -> None:
-    """Install and enable the zip in this (fresh) process; sets ``bpy``, ``ple_ext`` and ``core``."""
+def setup(path: str) -> None:
+    """Install and enable the zip in this (fresh) process (``test_addon.install``); sets ``bpy``,
+    ``ple_ext`` and ``core`` here too."""
     global bpy, ple_ext, core
-    os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp()
     import importlib
 
-    import bpy as _bpy
-    import ple as _core
-
-    bpy, core = _bpy, _core
+    base.install(path)
+    bpy, ple_ext, core = base.bpy, base.ple_ext, base.core
     for name in ("algebra.precision", "algebra.similarity", "filters", "meshing.preview", "meshing.styles",
                  "meshing.tessellate", "model.budget", "model.cage", "model.ir", "program.presets",
                  "program.runtime", "program.snippets", "program.sources"):
         importlib.import_module(f"ple.{name}")
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)
-    ple_ext = importlib.import_module("bl_ext.user_default.ple")
 
 
-def main(zip_path: str, case: str) -> None:
-    setup(zip_path)
+def main(path: str, case: str) -> None:
+    setup(path)
     globals()[f"case_{case}"]()
     print(f"{case} OK")
 
