@@ -148,3 +148,57 @@ def test_stream_is_byte_identical_for_any_number_of_workers(tmp_path):
     assert (tmp_path / "cli1.stl").read_bytes() == (tmp_path / "cli2.stl").read_bytes()
     mesh = read_back(tmp_path / "w1.stl")
     assert len(mesh.faces) == n and mesh.is_watertight
+
+
+def _hub_shapes(h: int, seed: int) -> tuple:
+    """H hubs like the unclean ones of the curved bench lattice's boundary (an acute j and
+    diagonal beam next to a short W beam), slowly turning as along a row, the W beam from
+    short (unclean, caps shrunk) to long (clean)."""
+    rng = np.random.default_rng(seed)
+    base = np.array([[1, 0, 0], [-0.015, 0.9999, 0], [0.2466, 0, 0.9691], [0.4514, 0.8923, 0], [-1, 0, 0]])
+    t = np.linspace(0, 1, h)[:, None, None]
+    d = base[None] + t * rng.normal(0, 0.01, (5, 3))
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    length = np.array([1.0, 1.8899, 0.7167, 2.1514, 1.0]) * (1 + t[..., 0] * rng.uniform(-0.05, 0.05, 5))
+    length[:, 2] *= np.linspace(0.3, 1.3, h)
+    centers = rng.normal(0, 1, (h, 3))
+    return centers, np.full(h, 0.08), centers[:, None] + d * length[..., None], np.full((h, 5), 0.08)
+
+
+def _compare_templates(args, style, levels, min_edge, monkeypatch):
+    """hub_templates batched against hub by hub: the same triangles (to 1e-9), r⁺ and clean
+    flags; returns (the per-hub templates, the number of per-hub builds of the batched path)."""
+    calls = []
+    single = hubs.hub_template
+
+    def counted(*a, **k):
+        calls.append(1)
+        return single(*a, **k)
+
+    ref, _ = hubs.hub_templates(*args, style, levels, 16, min_edge=min_edge, batched=False)
+    monkeypatch.setattr(hubs, "hub_template", counted)
+    out, _ = hubs.hub_templates(*args, style, levels, 16, min_edge=min_edge)
+    monkeypatch.undo()
+    for a, b in zip(ref, out):
+        assert a.geometry.clean == b.geometry.clean
+        assert b.geometry.r_plus == pytest.approx(a.geometry.r_plus, rel=1e-12)
+        assert np.abs(b.geometry.alphas - a.geometry.alphas).max() < 1e-12
+        fa, fb = np.concatenate([a.faces, *a.caps]), np.concatenate([b.faces, *b.caps])
+        assert len(fa) == len(fb)
+        assert np.abs(_triangles(a.vertices, fa) - _triangles(b.vertices, fb)).max() < 1e-9
+    return ref, len(calls)
+
+
+@pytest.mark.parametrize("style, levels", [("cnt", 0), ("chocc", 0), ("refined", 2)])
+def test_unclean_hubs_batch_equal_per_hub(style, levels, monkeypatch):
+    """Unclean junctions (r⁺ capped by ``_max_inflation``, overlapping caps shrunk to their
+    share) are batched like clean ones, with their own clean flag."""
+    from ple.meshing.achocc import contact_circles
+
+    args = _hub_shapes(60, 3)
+    ref, alone = _compare_templates(args, style, levels, 0.0, monkeypatch)
+    unclean = [t.geometry for t in ref if not t.geometry.clean]
+    shrunk = [g for g in unclean
+              if np.any(g.alphas < contact_circles(g.radius, g.r_plus, g.dirs, g.other_radii, g.lengths, False)[0])]
+    assert 10 < len(unclean) < len(ref) and len(shrunk) > 5  # both kinds, and caps really shrunk
+    assert alone < len(unclean) / 2

@@ -12,7 +12,7 @@ to an edge. One hub of a group (the representative) is built by ``hub_template``
 hub whose CHoCC has exactly that topology (validated per hub, as ``chocc.chocc`` validates a
 hint) gets its vertices computed as arrays (hubs, …) — triangle vertices, corridor apexes and
 arc samples, refinement and caps — and shares the representative's faces and rings. Hubs that
-differ (another topology, an off-centre fix, an unclean junction, short edges to collapse) are
+differ (another topology, an off-centre fix, clean or not, short edges to collapse) are
 the next representatives or are built alone.
 """
 
@@ -30,6 +30,7 @@ from .achocc import (
     INFLATE,
     MAX_DISK_REACH,
     MIN_DISK_RADIUS,
+    UNCLEAN_GAP,
     HubGeometry,
     exit_distances,
     hub_geometry,
@@ -257,16 +258,20 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
 @dataclass
 class _Geometries:
     """The ACHoCC junctions of H hubs with S ≥ 3 beams (``achocc.hub_geometry`` as arrays):
-    ok (H,) where the hub is clean and needs no inflation loop, r_plus (H,), alphas (H, S)."""
+    ok (H,) where the batch can tell the junction (no inflation loop, every contact circle a
+    real circle under a hemisphere), r_plus (H,), alphas (H, S), clean (H,)."""
 
     ok: np.ndarray
     r_plus: np.ndarray
     alphas: np.ndarray
+    clean: np.ndarray
 
 
 def _geometries(radius, dirs, other, lengths) -> _Geometries:
-    """r⁺ (§5) and contact circles of H hubs at once; hubs that ``hub_geometry`` would treat
-    specially (unclean, caps touching at r⁺) are marked not ok and are built alone."""
+    """r⁺ (§5) and contact circles of H hubs at once, clean or not (``hub_geometry``: an unclean
+    hub's r⁺ is capped at ``_max_inflation``'s limit and its overlapping caps shrunk to their
+    share); hubs that ``hub_geometry`` would treat otherwise (clean caps touching at r⁺: the
+    inflation loop; a contact circle shrunk to a point) are marked not ok and are built alone."""
     r = radius[:, None]
     sphi = (r - other) / lengths
     ok = np.all(np.abs(sphi) < 1, axis=1)
@@ -289,24 +294,32 @@ def _geometries(radius, dirs, other, lengths) -> _Geometries:
     cand = np.where(forward, np.hypot(px, py), r)
     r_plus = np.maximum(radius, cand.max(axis=1)) * (1 + INFLATE)
     r_plus = np.maximum(r_plus, radius / cphi.min(axis=1) * (1 + 1e-2))
-    # _max_inflation: beyond it the junction is unclean
+    # _max_inflation: beyond it the junction is unclean and r⁺ stays inside the beams
     s_max = (MAX_DISK_REACH * lengths - r * sphi) / cphi
     y_min = MIN_DISK_RADIUS * np.minimum(r, other)
     s_y = np.where(sphi > 0, (r * cphi - y_min) / np.where(sphi > 0, sphi, 1.0), np.inf)
     limit = np.sqrt(radius**2 + np.clip(np.minimum(s_max, s_y).min(axis=1), 0.0, None) ** 2)
-    ok &= r_plus <= limit
-    # contact_circles
+    clean = r_plus <= limit
+    r_plus = np.where(clean, r_plus, np.maximum(limit, radius))
+    # contact_circles (strict only for clean hubs)
     s = np.sqrt(np.maximum(r_plus**2 - radius**2, 0.0))[:, None]
     x = r * sphi + s * cphi
     y = r * cphi - s * sphi
-    ok &= np.all((y > 0) & (x < lengths), axis=1)
+    ok &= ~clean | np.all((y > 0) & (x < lengths), axis=1)
     alphas = np.arctan2(np.maximum(y, 0.0), x)
-    ok &= np.all(alphas < np.pi / 2, axis=1)
+    n = dirs.shape[1]
     theta = np.arccos(np.clip(np.einsum("hai,hbi->hab", dirs, dirs), -1, 1))
     gap = theta - (alphas[:, :, None] + alphas[:, None, :])
-    gap[:, np.arange(dirs.shape[1]), np.arange(dirs.shape[1])] = np.inf
-    ok &= gap.min(axis=(1, 2)) > 1e-9
-    return _Geometries(ok, r_plus, alphas)
+    gap[:, np.arange(n), np.arange(n)] = np.inf
+    touching = gap.min(axis=(1, 2)) <= 1e-9
+    ok &= ~(clean & touching)  # the inflation loop of hub_geometry: built alone
+    # unclean caps overlapping at the allowed r⁺: each shrunk to its share (hub_geometry)
+    share = (theta - UNCLEAN_GAP) * alphas[:, :, None] / np.maximum(alphas[:, :, None] + alphas[:, None, :], 1e-300)
+    share[:, np.arange(n), np.arange(n)] = np.inf
+    shrunk = np.clip(np.minimum(alphas, share.min(axis=2)), 0.0, None)
+    alphas = np.where(touching[:, None], shrunk, alphas)
+    ok &= np.all((alphas > 0) & (alphas < np.pi / 2), axis=1)
+    return _Geometries(ok, r_plus, alphas, clean)
 
 
 def _strict_hull(normals, alphas, tris):
@@ -456,7 +469,7 @@ def hub_templates(centers, radii, neighbor_centers, neighbor_radii, style: str, 
         hint = hub.base_triangles
         if alone[h] or hub.chocc.n != s_count:
             continue  # no batch: this hub is special (point circles of the off-centre fix)
-        rest = np.flatnonzero(todo & ~alone)
+        rest = np.flatnonzero(todo & ~alone & (geo.clean == hub.clean))
         if len(rest):
             _batch_templates(out, hub, surface, np.concatenate([[h], rest]), centers, radii, dirs, nbr, lengths,
                              geo, style, levels, segments, min_edge)
@@ -505,8 +518,8 @@ def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths
                 caps[id(fk)] = _caps(rk[:dirs.shape[1]], verts.shape[1])
             c = Chocc(batch.normals[k], batch.alphas[k], batch.tris, batch.plane_normals[k], batch.plane_alphas[k],
                       batch.points[k], batch.cors, rep.chocc.twin, rep.chocc.rings, rep.chocc.ring_corridors)
-            hub = HubGeometry(float(radii[g]), float(rp[k]), dirs[g], nbr[g], lengths[g], c, dirs.shape[1], True,
-                              batch.alphas[k], batch.tris)
+            hub = HubGeometry(float(radii[g]), float(rp[k]), dirs[g], nbr[g], lengths[g], c, dirs.shape[1],
+                              bool(geo.clean[g]), batch.alphas[k], batch.tris)
             out[g] = HubTemplate(allv[k], fk, rk[:dirs.shape[1]], caps[id(fk)], hub)
 
 
