@@ -202,3 +202,53 @@ def test_unclean_hubs_batch_equal_per_hub(style, levels, monkeypatch):
               if np.any(g.alphas < contact_circles(g.radius, g.r_plus, g.dirs, g.other_radii, g.lengths, False)[0])]
     assert 10 < len(unclean) < len(ref) and len(shrunk) > 5  # both kinds, and caps really shrunk
     assert alone < len(unclean) / 2
+
+
+def _canonical_faces(faces) -> list:
+    """Faces as sorted tuples, each rotated to start at its smallest id (keeps orientation)."""
+    f = np.asarray(faces).reshape(-1, 3)
+    f = f[np.arange(len(f))[:, None], (np.argmin(f, axis=1)[:, None] + np.arange(3)) % 3]
+    return sorted(map(tuple, f.tolist()))
+
+
+@pytest.mark.parametrize("tol", [0.004, 0.008, 0.015])
+def test_patch_collapse_equals_whole_surface_collapse(tol):
+    """``_Surface.collapse`` (the patch around a hub's short edges) gives the faces and rings
+    of ``collapse_short_edges`` on the whole surface, on refined hubs whose short edges touch
+    each other and need several passes."""
+    from ple.meshing.weld import collapse_short_edges
+
+    c, r, nb, nr = _hub_shapes(12, 5)
+    several = told = 0
+    for h in range(12):
+        got: list = []
+        hubs.hub_template(c[h], r[h], nb[h], nr[h], "refined", 2, 16, _surface=got)
+        faces, rings, _ = got
+        verts = hubs._hub_surface(hubs.hub_geometry(r[h], unit := (nb[h] - c[h]) / np.linalg.norm(
+            nb[h] - c[h], axis=1)[:, None], nr[h], np.linalg.norm(nb[h] - c[h], axis=1)), "refined", 2, 16)[0]
+        assert unit.shape == (5, 3)
+        surface = hubs._Surface(faces, rings, len(verts))
+        e = surface.edges
+        short = np.linalg.norm(verts[e[:, 0]] - verts[e[:, 1]], axis=1) < tol
+        f0, r0, n0 = collapse_short_edges(verts, faces, rings, tol)
+        local = surface.collapse(verts, short, tol)
+        if local is None:  # not local: left to the per-hub path
+            continue
+        f1, r1, _ = local
+        assert _canonical_faces(f0) == _canonical_faces(f1)
+        assert all(np.array_equal(a, b) for a, b in zip(r0, r1))
+        several += collapse_short_edges(verts, faces, rings, tol, rounds=1)[2] < n0
+        told += 1
+    assert several > 0 and told >= 8  # some hubs took more than one pass; most were told
+
+
+@pytest.mark.parametrize("min_edge", [6.6e-5, 2e-4])
+def test_refined_collapses_batch_equal_per_hub(min_edge, monkeypatch):
+    """Refined hubs with short edges (clustered, several passes): batched collapses give the
+    per-hub triangles, and hubs with collapses are batched (those whose collapse order round-off
+    decides are built alone)."""
+    args = _hub_shapes(40, 11)
+    ref, alone = _compare_templates(args, "refined", 2, min_edge, monkeypatch)
+    plain, _ = hubs.hub_templates(*args, "refined", 2, 16, batched=False)
+    collapsed = sum(len(a.faces) < len(b.faces) for a, b in zip(ref, plain))
+    assert collapsed > 10 and alone < collapsed

@@ -471,26 +471,29 @@ def hub_templates(centers, radii, neighbor_centers, neighbor_radii, style: str, 
             continue  # no batch: this hub is special (point circles of the off-centre fix)
         rest = np.flatnonzero(todo & ~alone & (geo.clean == hub.clean))
         if len(rest):
-            _batch_templates(out, hub, surface, np.concatenate([[h], rest]), centers, radii, dirs, nbr, lengths,
-                             geo, style, levels, segments, min_edge)
+            ties = _batch_templates(out, hub, surface, np.concatenate([[h], rest]), centers, radii, dirs, nbr,
+                                    lengths, geo, style, levels, segments, min_edge)
+            for g in ties:  # this topology, but collapses the batch cannot tell: alone, no new batch
+                out[g] = hub_template(centers[g], radii[g], nbc[g], nbr[g], style, levels, segments, hint, min_edge)
             todo[rest] = [out[g] is None for g in rest]
     return out, hint
 
 
 def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths, geo, style, levels, segments,
-                     min_edge) -> None:
+                     min_edge) -> list:
     """Fill ``out[g]`` for the hubs g of ``hubs[1:]`` that share the CNT of the representative
-    ``hubs[0]`` (``rep``, with its surface ``[faces, rings, base mesh]`` before collapses)."""
+    ``hubs[0]`` (``rep``, with its surface ``[faces, rings, base mesh]`` before collapses).
+    Returns the hubs of this CNT whose collapses the batch cannot tell (``_collapsed``)."""
     faces, rings, base = surface
     normals = unit_rows(dirs[hubs])
     full = _Batch(rep, normals, geo.alphas[hubs], geo.r_plus[hubs], style, segments)
     if len(base.vertices) != 3 * len(full.tris) + 2 * np.maximum(full.m[0] - 1, 0).sum():
-        return  # the representative's CNT is not its batch form (point circles, merged corridors)
+        return []  # the representative's CNT is not its batch form (point circles, merged corridors)
     keep = np.flatnonzero(full.ok[1:]) + 1
-    if not len(keep):
-        return
+    ties: list = []
     per_hub = len(faces) * 3  # about the vertex count after refinement, for the batch size
     step = max(1, BATCH_VERTICES // max(per_hub, 1))
+    topology = None
     for lo in range(0, len(keep), step):
         sel = keep[lo:lo + step]
         batch = copy.copy(full)
@@ -506,13 +509,16 @@ def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths
                 batch.cors)
         else:
             verts, f, rg = unit * rp[:, None, None], base.faces, base.rings
-        surfaces = _collapsed(verts, f, [rg[s] for s in range(len(rg))], min_edge)
+        if topology is None:  # the same faces and rings for every chunk
+            topology = _Surface(f, [rg[s] for s in range(len(rg))], verts.shape[1])
+        surfaces = _collapsed(verts, topology, min_edge)
         caps = {}
         disk = dirs[ids] * (rp[:, None] * np.cos(batch.alphas))[..., None]
         allv = np.concatenate([verts, disk], axis=1) + centers[ids][:, None]
         for k, g in enumerate(ids):
             if surfaces[k] is None:
-                continue  # its short edges collapse otherwise: built alone
+                ties.append(g)
+                continue
             fk, rk = surfaces[k]
             if id(fk) not in caps:
                 caps[id(fk)] = _caps(rk[:dirs.shape[1]], verts.shape[1])
@@ -521,44 +527,72 @@ def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths
             hub = HubGeometry(float(radii[g]), float(rp[k]), dirs[g], nbr[g], lengths[g], c, dirs.shape[1],
                               bool(geo.clean[g]), batch.alphas[k], batch.tris)
             out[g] = HubTemplate(allv[k], fk, rk[:dirs.shape[1]], caps[id(fk)], hub)
+    return ties
 
 
 def _edges(faces: np.ndarray) -> np.ndarray:
     return np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1), axis=0)
 
 
-def _collapsed(verts: np.ndarray, faces: np.ndarray, rings: list, tol: float) -> list:
-    """``collapse_short_edges`` of H hubs with one surface topology: per hub (faces, rings), or
-    None where the batch cannot tell the result (built alone).
+class _Surface:
+    """One surface topology of a batch: faces (F, 3) over nv vertices, rings, its edges (E, 2)
+    (sorted, as ``collapse_short_edges`` lists them) and the number of faces at each vertex."""
 
-    Hubs with the same short edges in the same order (by length) take the same decisions in the
-    first pass of the collapse (link conditions are combinatorial, positions do not move); if no
-    edge is short after that pass, the collapse ends there. So one first pass serves them all.
-    The order does not matter when no face touches two short edges (a collapse changes only the
-    faces around its own edge, and the link condition of another edge reads only its own)."""
-    out: list = [(faces, rings)] * len(verts)
+    def __init__(self, faces: np.ndarray, rings: list, nv: int):
+        self.faces = np.asarray(faces, np.int64).reshape(-1, 3)
+        self.rings, self.nv = rings, nv
+        self.edges = _edges(self.faces)
+        self.degree = np.bincount(self.faces.ravel(), minlength=nv)
+
+    def collapse(self, verts: np.ndarray, short: np.ndarray, tol: float, rings_deep: int = 4):
+        """``collapse_short_edges`` of one hub (verts (nv, 3), its short edges ``short`` (E,)
+        mask), run on the patch of faces around them: its faces are the only ones a collapse
+        reads or changes as long as every vertex of a changed face, and every edge still short,
+        has all its faces in the patch (then the passes take the same short edges in the same
+        order). The patch grows by a ring of faces until that holds. Returns (faces: the
+        untouched faces in order, then the patch's; rings; the patch's vertex ids), or None
+        where the patch would not stay local."""
+        mark = np.zeros(self.nv, bool)
+        mark[self.edges[short].ravel()] = True
+        for _ in range(rings_deep):
+            patch = mark[self.faces].any(axis=1)
+            sub = self.faces[patch]
+            inner = np.bincount(sub.ravel(), minlength=self.nv) == self.degree
+            f1, r1, _ = collapse_short_edges(verts, sub, self.rings, tol)
+            gone = np.zeros(self.nv, bool)
+            gone[sub.ravel()] = True
+            gone[f1.ravel()] = False
+            e1 = _edges(f1)
+            left = e1[np.linalg.norm(verts[e1[:, 0]] - verts[e1[:, 1]], axis=1) < tol]
+            if inner[sub[gone[sub].any(axis=1)]].all() and inner[left].all():
+                return np.concatenate([self.faces[~patch], f1]), r1, np.unique(sub)
+            mark[sub.ravel()] = True
+        return None
+
+
+def _ties(points: np.ndarray, tol: float) -> bool:
+    """Whether two distances under ``tol`` between points (k, 3) (every edge a collapse can see
+    in the patch joins two of them) are equal up to round-off, or one is ``tol``: the order or
+    the choice of the collapses there is then decided by round-off, which differs between the
+    batch's and the per-hub path's vertices."""
+    i, j = np.triu_indices(len(points), 1)
+    d = np.sort(np.linalg.norm(points[i] - points[j], axis=1))
+    d = d[d < tol * (1 + 1e-9)]
+    return bool(len(d) and (d[-1] > tol * (1 - 1e-9) or np.any(np.diff(d) <= 1e-9 * tol)))
+
+
+def _collapsed(verts: np.ndarray, surface: _Surface, tol: float) -> list:
+    """``collapse_short_edges`` of H hubs (verts (H, nv, 3)) with one surface topology: per hub
+    (faces, rings), the same triangles as the collapse of the whole surface, or None where the
+    batch cannot tell them (built alone). Hubs without short edges share the surface; each other
+    hub is collapsed on the patch around its short edges (``_Surface.collapse``) unless round-off
+    may order its collapses otherwise than on the per-hub path (``_ties``)."""
+    out: list = [(surface.faces, surface.rings)] * len(verts)
     if tol <= 0:
         return out
-    e = _edges(faces)
-    d = np.linalg.norm(verts[:, e[:, 0]] - verts[:, e[:, 1]], axis=-1)
-    short = d < tol
-    groups: dict = {}
-    apart: dict = {}  # short-edge set -> no face touches two of them
+    e = surface.edges
+    short = np.linalg.norm(verts[:, e[:, 0]] - verts[:, e[:, 1]], axis=-1) < tol
     for k in np.flatnonzero(short.any(axis=1)):
-        idx = np.flatnonzero(short[k])
-        key = idx.tobytes()
-        if key not in apart:
-            touch = np.zeros(len(faces), np.int64)
-            for x, y in e[idx]:
-                touch += np.any((faces == x) | (faces == y), axis=1)
-            apart[key] = touch.max() <= 1
-        if not apart[key]:
-            key = b"order" + idx[np.argsort(d[k, idx], kind="stable")].tobytes()
-        groups.setdefault(key, []).append(k)
-    for ks in groups.values():
-        f1, r1, _ = collapse_short_edges(verts[ks[0]], faces, rings, tol, rounds=1)
-        e1 = _edges(f1)
-        done = np.linalg.norm(verts[ks][:, e1[:, 0]] - verts[ks][:, e1[:, 1]], axis=-1).min(axis=1) >= tol
-        for k, ok in zip(ks, done):
-            out[k] = (f1, r1) if ok else None
+        local = surface.collapse(verts[k], short[k], tol)
+        out[k] = None if local is None or _ties(verts[k, local[2]], tol) else local[:2]
     return out
