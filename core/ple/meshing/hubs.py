@@ -52,6 +52,8 @@ from .fillet import filleted
 from .weld import collapse_short_edges
 
 BATCH_VERTICES = 1 << 21  # vertices of one batch's largest array level (bounds the batch's memory)
+SNAP = 2.0**-24  # grid (hub units) of the positions whose lengths decide short-edge collapses
+SNAP_GUARD = 1e-11  # round-off between the batch's and the per-hub path's vertices (hub units), with margin
 
 
 @dataclass
@@ -245,8 +247,8 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
     verts, faces, rings, base = _hub_surface(hub, style, levels, segments)
     if _surface is not None:
         _surface += [faces, rings, base]
-    if min_edge > 0:
-        faces, rings, _ = collapse_short_edges(verts, faces, rings, min_edge)
+    if min_edge > 0:  # lengths of snapped positions: the batch (``_collapsed``) sees the same ones
+        faces, rings, _ = collapse_short_edges(_snapped(verts), faces, rings, min_edge)
     axial = hub.r_plus * np.cos(hub.alphas)
     rings = [rings[s] for s in range(hub.slots)]
     disk_centres = dirs * axial[:, None]
@@ -570,29 +572,38 @@ class _Surface:
         return None
 
 
-def _ties(points: np.ndarray, tol: float) -> bool:
-    """Whether two distances under ``tol`` between points (k, 3) (every edge a collapse can see
-    in the patch joins two of them) are equal up to round-off, or one is ``tol``: the order or
-    the choice of the collapses there is then decided by round-off, which differs between the
-    batch's and the per-hub path's vertices."""
-    i, j = np.triu_indices(len(points), 1)
-    d = np.sort(np.linalg.norm(points[i] - points[j], axis=1))
-    d = d[d < tol * (1 + 1e-9)]
-    return bool(len(d) and (d[-1] > tol * (1 - 1e-9) or np.any(np.diff(d) <= 1e-9 * tol)))
+def _snapped(verts: np.ndarray) -> np.ndarray:
+    """Vertices (..., 3) in hub units on the SNAP grid. Short-edge collapses read only lengths,
+    and their order among edges of equal length (symmetric arcs and corridors have many) would
+    otherwise be decided by round-off, which differs between the batch and the per-hub path."""
+    return np.round(verts / SNAP) * SNAP
+
+
+def _unsure(verts: np.ndarray) -> np.ndarray:
+    """Which coordinates (..., 3) lie within SNAP_GUARD of a SNAP rounding boundary (the two
+    paths may snap them differently)."""
+    frac = np.abs(verts / SNAP - np.floor(verts / SNAP) - 0.5)
+    return frac < SNAP_GUARD / SNAP
 
 
 def _collapsed(verts: np.ndarray, surface: _Surface, tol: float) -> list:
-    """``collapse_short_edges`` of H hubs (verts (H, nv, 3)) with one surface topology: per hub
-    (faces, rings), the same triangles as the collapse of the whole surface, or None where the
-    batch cannot tell them (built alone). Hubs without short edges share the surface; each other
-    hub is collapsed on the patch around its short edges (``_Surface.collapse``) unless round-off
-    may order its collapses otherwise than on the per-hub path (``_ties``)."""
+    """``collapse_short_edges`` of H hubs (verts (H, nv, 3) in hub units) with one surface
+    topology on their snapped positions (as ``hub_template``): per hub (faces, rings), the same
+    triangles as the collapse of the whole surface, or None where the batch cannot tell them
+    (built alone): a coordinate that decides a length near ``tol`` or in a collapse's patch
+    may snap otherwise on the per-hub path (``_unsure``). Hubs without short edges share the
+    surface; each other hub is collapsed on the patch around its short edges
+    (``_Surface.collapse``)."""
     out: list = [(surface.faces, surface.rings)] * len(verts)
     if tol <= 0:
         return out
+    snapped = _snapped(verts)
+    unsure = _unsure(verts).any(axis=-1)  # (H, nv)
     e = surface.edges
-    short = np.linalg.norm(verts[:, e[:, 0]] - verts[:, e[:, 1]], axis=-1) < tol
-    for k in np.flatnonzero(short.any(axis=1)):
-        local = surface.collapse(verts[k], short[k], tol)
-        out[k] = None if local is None or _ties(verts[k, local[2]], tol) else local[:2]
+    d = np.linalg.norm(snapped[:, e[:, 0]] - snapped[:, e[:, 1]], axis=-1)
+    short = d < tol
+    edge_unsure = (np.abs(d - tol) < 4 * SNAP) & (unsure[:, e[:, 0]] | unsure[:, e[:, 1]])
+    for k in np.flatnonzero(short.any(axis=1) | edge_unsure.any(axis=1)):
+        local = surface.collapse(snapped[k], short[k], tol) if not edge_unsure[k].any() else None
+        out[k] = None if local is None or unsure[k, local[2]].any() else local[:2]
     return out
