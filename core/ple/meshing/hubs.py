@@ -11,9 +11,12 @@ which pairs the corridors, how many strip quads each corridor has, which corrido
 to an edge. One hub of a group (the representative) is built by ``hub_template``; every other
 hub whose CHoCC has exactly that topology (validated per hub, as ``chocc.chocc`` validates a
 hint) gets its vertices computed as arrays (hubs, …) — triangle vertices, corridor apexes and
-arc samples, refinement and caps — and shares the representative's faces and rings. Hubs that
-differ (another topology, an off-centre fix, clean or not, short edges to collapse) are
-the next representatives or are built alone.
+arc samples, refinement and caps — and shares the representative's faces and rings. Unclean
+junctions (r⁺ capped inside the beams, caps shrunk) are batched like clean ones, in batches of
+one clean flag. Short edges are collapsed hub by hub on the patch around them, on snapped
+positions in both paths (equal lengths then tie the same way). Hubs that differ (another
+topology, an off-centre fix, the inflation loop, a coordinate on a snap boundary) are the next
+representatives or are built alone.
 """
 
 from __future__ import annotations
@@ -556,6 +559,7 @@ class _Surface:
         where the patch would not stay local."""
         mark = np.zeros(self.nv, bool)
         mark[self.edges[short].ravel()] = True
+        mark[self.faces[mark[self.faces].any(axis=1)].ravel()] = True  # a collapse's new edges reach one ring out
         for _ in range(rings_deep):
             patch = mark[self.faces].any(axis=1)
             sub = self.faces[patch]
