@@ -167,3 +167,121 @@ def test_stream_is_byte_identical_for_any_number_of_workers(tmp_path, monkeypatc
     assert (tmp_path / "cli1.stl").read_bytes() == (tmp_path / "cli2.stl").read_bytes()
     mesh = read_back(tmp_path / "w1.stl")
     assert len(mesh.faces) == n and mesh.is_watertight
+
+
+def _hub_shapes(h: int, seed: int) -> tuple:
+    """H hubs like the unclean ones of the curved bench lattice's boundary (an acute j and
+    diagonal beam next to a short W beam), slowly turning as along a row, the W beam from
+    short (unclean, caps shrunk) to long (clean)."""
+    rng = np.random.default_rng(seed)
+    base = np.array([[1, 0, 0], [-0.015, 0.9999, 0], [0.2466, 0, 0.9691], [0.4514, 0.8923, 0], [-1, 0, 0]])
+    t = np.linspace(0, 1, h)[:, None, None]
+    d = base[None] + t * rng.normal(0, 0.01, (5, 3))
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    length = np.array([1.0, 1.8899, 0.7167, 2.1514, 1.0]) * (1 + t[..., 0] * rng.uniform(-0.05, 0.05, 5))
+    length[:, 2] *= np.linspace(0.3, 1.3, h)
+    centers = rng.normal(0, 1, (h, 3))
+    return centers, np.full(h, 0.08), centers[:, None] + d * length[..., None], np.full((h, 5), 0.08)
+
+
+def _compare_templates(args, style, levels, min_edge, monkeypatch):
+    """hub_templates batched against hub by hub: the same triangles (to 1e-9), r⁺ and clean
+    flags; returns (the per-hub templates, the number of per-hub builds of the batched path)."""
+    calls = []
+    single = hubs.hub_template
+
+    def counted(*a, **k):
+        calls.append(1)
+        return single(*a, **k)
+
+    ref, _ = hubs.hub_templates(*args, style, levels, 16, min_edge=min_edge, batched=False)
+    monkeypatch.setattr(hubs, "hub_template", counted)
+    out, _ = hubs.hub_templates(*args, style, levels, 16, min_edge=min_edge)
+    monkeypatch.undo()
+    for a, b in zip(ref, out):
+        assert a.geometry.clean == b.geometry.clean
+        assert b.geometry.r_plus == pytest.approx(a.geometry.r_plus, rel=1e-12)
+        assert np.abs(b.geometry.alphas - a.geometry.alphas).max() < 1e-12
+        fa, fb = np.concatenate([a.faces, *a.caps]), np.concatenate([b.faces, *b.caps])
+        assert len(fa) == len(fb)
+        assert np.abs(_triangles(a.vertices, fa) - _triangles(b.vertices, fb)).max() < 1e-9
+    return ref, len(calls)
+
+
+@pytest.mark.parametrize("style, levels", [("cnt", 0), ("chocc", 0), ("refined", 2)])
+def test_unclean_hubs_batch_equal_per_hub(style, levels, monkeypatch):
+    """Unclean junctions (r⁺ capped by ``_max_inflation``, overlapping caps shrunk to their
+    share) are batched like clean ones, with their own clean flag."""
+    from ple.meshing.achocc import contact_circles
+
+    args = _hub_shapes(60, 3)
+    ref, alone = _compare_templates(args, style, levels, 0.0, monkeypatch)
+    unclean = [t.geometry for t in ref if not t.geometry.clean]
+    shrunk = [g for g in unclean
+              if np.any(g.alphas < contact_circles(g.radius, g.r_plus, g.dirs, g.other_radii, g.lengths, False)[0])]
+    assert 10 < len(unclean) < len(ref) and len(shrunk) > 5  # both kinds, and caps really shrunk
+    assert alone < len(unclean) / 2
+
+
+def _canonical_faces(faces) -> list:
+    """Faces as sorted tuples, each rotated to start at its smallest id (keeps orientation)."""
+    f = np.asarray(faces).reshape(-1, 3)
+    f = f[np.arange(len(f))[:, None], (np.argmin(f, axis=1)[:, None] + np.arange(3)) % 3]
+    return sorted(map(tuple, f.tolist()))
+
+
+@pytest.mark.parametrize("tol", [0.004, 0.008, 0.015])
+def test_patch_collapse_equals_whole_surface_collapse(tol):
+    """``_Surface.collapse`` (the patch around a hub's short edges) gives the faces and rings
+    of ``collapse_short_edges`` on the whole surface, on refined hubs whose short edges touch
+    each other and need several passes."""
+    from ple.meshing.weld import collapse_short_edges
+
+    c, r, nb, nr = _hub_shapes(12, 5)
+    several = told = 0
+    for h in range(12):
+        got: list = []
+        hubs.hub_template(c[h], r[h], nb[h], nr[h], "refined", 2, 16, _surface=got)
+        faces, rings, _ = got
+        verts = hubs._hub_surface(hubs.hub_geometry(r[h], unit := (nb[h] - c[h]) / np.linalg.norm(
+            nb[h] - c[h], axis=1)[:, None], nr[h], np.linalg.norm(nb[h] - c[h], axis=1)), "refined", 2, 16)[0]
+        assert unit.shape == (5, 3)
+        surface = hubs._Surface(faces, rings, len(verts))
+        e = surface.edges
+        short = np.linalg.norm(verts[e[:, 0]] - verts[e[:, 1]], axis=1) < tol
+        f0, r0, n0 = collapse_short_edges(verts, faces, rings, tol)
+        local = surface.collapse(verts, short, tol)
+        if local is None:  # not local: left to the per-hub path
+            continue
+        f1, r1, _ = local
+        assert _canonical_faces(f0) == _canonical_faces(f1)
+        assert all(np.array_equal(a, b) for a, b in zip(r0, r1))
+        several += collapse_short_edges(verts, faces, rings, tol, rounds=1)[2] < n0
+        told += 1
+    assert several > 0 and told >= 8  # some hubs took more than one pass; most were told
+
+
+@pytest.mark.parametrize("min_edge", [6.6e-5, 1e-3])
+def test_refined_collapses_batch_equal_per_hub(min_edge, monkeypatch):
+    """Refined hubs with short edges (clustered, of equal length on symmetric arcs, several
+    passes): batched collapses give the per-hub triangles, and almost every hub with collapses
+    is batched (both paths collapse on snapped positions, so round-off does not order them)."""
+    args = _hub_shapes(40, 11)
+    ref, alone = _compare_templates(args, "refined", 2, min_edge, monkeypatch)
+    plain, _ = hubs.hub_templates(*args, "refined", 2, 16, batched=False)
+    collapsed = sum(len(a.faces) < len(b.faces) for a, b in zip(ref, plain))
+    assert collapsed > 10 and alone <= 5
+
+
+def test_unsure_coordinates_are_those_near_a_snap_boundary():
+    """``_unsure`` flags exactly the coordinates that a round-off of SNAP_GUARD can snap to
+    another grid point."""
+    rng = np.random.default_rng(2)
+    base = rng.integers(-2**20, 2**20, (2000, 3)) * hubs.SNAP
+    off = rng.uniform(-1, 1, base.shape) * 2 * hubs.SNAP_GUARD
+    v = base + 0.5 * hubs.SNAP + off  # near a boundary
+    g = rng.uniform(-0.4, 0.4, base.shape) * hubs.SNAP
+    w = base + g  # near a grid point
+    flip = hubs._snapped(v + hubs.SNAP_GUARD) != hubs._snapped(v - hubs.SNAP_GUARD)
+    assert np.array_equal(hubs._unsure(v), np.abs(off) < hubs.SNAP_GUARD)
+    assert flip[~hubs._unsure(v)].sum() == 0 and not hubs._unsure(w).any()

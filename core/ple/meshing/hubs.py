@@ -11,9 +11,12 @@ which pairs the corridors, how many strip quads each corridor has, which corrido
 to an edge. One hub of a group (the representative) is built by ``hub_template``; every other
 hub whose CHoCC has exactly that topology (validated per hub, as ``chocc.chocc`` validates a
 hint) gets its vertices computed as arrays (hubs, …) — triangle vertices, corridor apexes and
-arc samples, refinement and caps — and shares the representative's faces and rings. Hubs that
-differ (another topology, an off-centre fix, an unclean junction, short edges to collapse) are
-the next representatives or are built alone.
+arc samples, refinement and caps — and shares the representative's faces and rings. Unclean
+junctions (r⁺ capped inside the beams, caps shrunk) are batched like clean ones, in batches of
+one clean flag. Short edges are collapsed hub by hub on the patch around them, on snapped
+positions in both paths (equal lengths then tie the same way). Hubs that differ (another
+topology, an off-centre fix, the inflation loop, a coordinate on a snap boundary) are the next
+representatives or are built alone.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from .achocc import (
     INFLATE,
     MAX_DISK_REACH,
     MIN_DISK_RADIUS,
+    UNCLEAN_GAP,
     HubGeometry,
     exit_distances,
     hub_geometry,
@@ -51,6 +55,8 @@ from .fillet import filleted
 from .weld import collapse_short_edges
 
 BATCH_VERTICES = 1 << 21  # vertices of one batch's largest array level (bounds the batch's memory)
+SNAP = 2.0**-24  # grid (hub units) of the positions whose lengths decide short-edge collapses
+SNAP_GUARD = 1e-11  # round-off between the batch's and the per-hub path's vertices (hub units), with margin
 
 
 @dataclass
@@ -244,8 +250,8 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
     verts, faces, rings, base = _hub_surface(hub, style, levels, segments)
     if _surface is not None:
         _surface += [faces, rings, base]
-    if min_edge > 0:
-        faces, rings, _ = collapse_short_edges(verts, faces, rings, min_edge)
+    if min_edge > 0:  # lengths of snapped positions: the batch (``_collapsed``) sees the same ones
+        faces, rings, _ = collapse_short_edges(_snapped(verts), faces, rings, min_edge)
     axial = hub.r_plus * np.cos(hub.alphas)
     rings = [rings[s] for s in range(hub.slots)]
     disk_centres = dirs * axial[:, None]
@@ -257,16 +263,20 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
 @dataclass
 class _Geometries:
     """The ACHoCC junctions of H hubs with S ≥ 3 beams (``achocc.hub_geometry`` as arrays):
-    ok (H,) where the hub is clean and needs no inflation loop, r_plus (H,), alphas (H, S)."""
+    ok (H,) where the batch can tell the junction (no inflation loop, every contact circle a
+    real circle under a hemisphere), r_plus (H,), alphas (H, S), clean (H,)."""
 
     ok: np.ndarray
     r_plus: np.ndarray
     alphas: np.ndarray
+    clean: np.ndarray
 
 
 def _geometries(radius, dirs, other, lengths) -> _Geometries:
-    """r⁺ (§5) and contact circles of H hubs at once; hubs that ``hub_geometry`` would treat
-    specially (unclean, caps touching at r⁺) are marked not ok and are built alone."""
+    """r⁺ (§5) and contact circles of H hubs at once, clean or not (``hub_geometry``: an unclean
+    hub's r⁺ is capped at ``_max_inflation``'s limit and its overlapping caps shrunk to their
+    share); hubs that ``hub_geometry`` would treat otherwise (clean caps touching at r⁺: the
+    inflation loop; a contact circle shrunk to a point) are marked not ok and are built alone."""
     r = radius[:, None]
     sphi = (r - other) / lengths
     ok = np.all(np.abs(sphi) < 1, axis=1)
@@ -289,24 +299,32 @@ def _geometries(radius, dirs, other, lengths) -> _Geometries:
     cand = np.where(forward, np.hypot(px, py), r)
     r_plus = np.maximum(radius, cand.max(axis=1)) * (1 + INFLATE)
     r_plus = np.maximum(r_plus, radius / cphi.min(axis=1) * (1 + 1e-2))
-    # _max_inflation: beyond it the junction is unclean
+    # _max_inflation: beyond it the junction is unclean and r⁺ stays inside the beams
     s_max = (MAX_DISK_REACH * lengths - r * sphi) / cphi
     y_min = MIN_DISK_RADIUS * np.minimum(r, other)
     s_y = np.where(sphi > 0, (r * cphi - y_min) / np.where(sphi > 0, sphi, 1.0), np.inf)
     limit = np.sqrt(radius**2 + np.clip(np.minimum(s_max, s_y).min(axis=1), 0.0, None) ** 2)
-    ok &= r_plus <= limit
-    # contact_circles
+    clean = r_plus <= limit
+    r_plus = np.where(clean, r_plus, np.maximum(limit, radius))
+    # contact_circles (strict only for clean hubs)
     s = np.sqrt(np.maximum(r_plus**2 - radius**2, 0.0))[:, None]
     x = r * sphi + s * cphi
     y = r * cphi - s * sphi
-    ok &= np.all((y > 0) & (x < lengths), axis=1)
+    ok &= ~clean | np.all((y > 0) & (x < lengths), axis=1)
     alphas = np.arctan2(np.maximum(y, 0.0), x)
-    ok &= np.all(alphas < np.pi / 2, axis=1)
+    n = dirs.shape[1]
     theta = np.arccos(np.clip(np.einsum("hai,hbi->hab", dirs, dirs), -1, 1))
     gap = theta - (alphas[:, :, None] + alphas[:, None, :])
-    gap[:, np.arange(dirs.shape[1]), np.arange(dirs.shape[1])] = np.inf
-    ok &= gap.min(axis=(1, 2)) > 1e-9
-    return _Geometries(ok, r_plus, alphas)
+    gap[:, np.arange(n), np.arange(n)] = np.inf
+    touching = gap.min(axis=(1, 2)) <= 1e-9
+    ok &= ~(clean & touching)  # the inflation loop of hub_geometry: built alone
+    # unclean caps overlapping at the allowed r⁺: each shrunk to its share (hub_geometry)
+    share = (theta - UNCLEAN_GAP) * alphas[:, :, None] / np.maximum(alphas[:, :, None] + alphas[:, None, :], 1e-300)
+    share[:, np.arange(n), np.arange(n)] = np.inf
+    shrunk = np.clip(np.minimum(alphas, share.min(axis=2)), 0.0, None)
+    alphas = np.where(touching[:, None], shrunk, alphas)
+    ok &= np.all((alphas > 0) & (alphas < np.pi / 2), axis=1)
+    return _Geometries(ok, r_plus, alphas, clean)
 
 
 def _strict_hull(normals, alphas, tris):
@@ -456,28 +474,31 @@ def hub_templates(centers, radii, neighbor_centers, neighbor_radii, style: str, 
         hint = hub.base_triangles
         if alone[h] or hub.chocc.n != s_count:
             continue  # no batch: this hub is special (point circles of the off-centre fix)
-        rest = np.flatnonzero(todo & ~alone)
+        rest = np.flatnonzero(todo & ~alone & (geo.clean == hub.clean))
         if len(rest):
-            _batch_templates(out, hub, surface, np.concatenate([[h], rest]), centers, radii, dirs, nbr, lengths,
-                             geo, style, levels, segments, min_edge)
+            ties = _batch_templates(out, hub, surface, np.concatenate([[h], rest]), centers, radii, dirs, nbr,
+                                    lengths, geo, style, levels, segments, min_edge)
+            for g in ties:  # this topology, but collapses the batch cannot tell: alone, no new batch
+                out[g] = hub_template(centers[g], radii[g], nbc[g], nbr[g], style, levels, segments, hint, min_edge)
             todo[rest] = [out[g] is None for g in rest]
     return out, hint
 
 
 def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths, geo, style, levels, segments,
-                     min_edge) -> None:
+                     min_edge) -> list:
     """Fill ``out[g]`` for the hubs g of ``hubs[1:]`` that share the CNT of the representative
-    ``hubs[0]`` (``rep``, with its surface ``[faces, rings, base mesh]`` before collapses)."""
+    ``hubs[0]`` (``rep``, with its surface ``[faces, rings, base mesh]`` before collapses).
+    Returns the hubs of this CNT whose collapses the batch cannot tell (``_collapsed``)."""
     faces, rings, base = surface
     normals = unit_rows(dirs[hubs])
     full = _Batch(rep, normals, geo.alphas[hubs], geo.r_plus[hubs], style, segments)
     if len(base.vertices) != 3 * len(full.tris) + 2 * np.maximum(full.m[0] - 1, 0).sum():
-        return  # the representative's CNT is not its batch form (point circles, merged corridors)
+        return []  # the representative's CNT is not its batch form (point circles, merged corridors)
     keep = np.flatnonzero(full.ok[1:]) + 1
-    if not len(keep):
-        return
+    ties: list = []
     per_hub = len(faces) * 3  # about the vertex count after refinement, for the batch size
     step = max(1, BATCH_VERTICES // max(per_hub, 1))
+    topology = None
     for lo in range(0, len(keep), step):
         sel = keep[lo:lo + step]
         batch = copy.copy(full)
@@ -493,59 +514,100 @@ def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths
                 batch.cors)
         else:
             verts, f, rg = unit * rp[:, None, None], base.faces, base.rings
-        surfaces = _collapsed(verts, f, [rg[s] for s in range(len(rg))], min_edge)
+        if topology is None:  # the same faces and rings for every chunk
+            topology = _Surface(f, [rg[s] for s in range(len(rg))], verts.shape[1])
+        surfaces = _collapsed(verts, topology, min_edge)
         caps = {}
         disk = dirs[ids] * (rp[:, None] * np.cos(batch.alphas))[..., None]
         allv = np.concatenate([verts, disk], axis=1) + centers[ids][:, None]
         for k, g in enumerate(ids):
             if surfaces[k] is None:
-                continue  # its short edges collapse otherwise: built alone
+                ties.append(g)
+                continue
             fk, rk = surfaces[k]
             if id(fk) not in caps:
                 caps[id(fk)] = _caps(rk[:dirs.shape[1]], verts.shape[1])
             c = Chocc(batch.normals[k], batch.alphas[k], batch.tris, batch.plane_normals[k], batch.plane_alphas[k],
                       batch.points[k], batch.cors, rep.chocc.twin, rep.chocc.rings, rep.chocc.ring_corridors)
-            hub = HubGeometry(float(radii[g]), float(rp[k]), dirs[g], nbr[g], lengths[g], c, dirs.shape[1], True,
-                              batch.alphas[k], batch.tris)
+            hub = HubGeometry(float(radii[g]), float(rp[k]), dirs[g], nbr[g], lengths[g], c, dirs.shape[1],
+                              bool(geo.clean[g]), batch.alphas[k], batch.tris)
             out[g] = HubTemplate(allv[k], fk, rk[:dirs.shape[1]], caps[id(fk)], hub)
+    return ties
 
 
 def _edges(faces: np.ndarray) -> np.ndarray:
     return np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1), axis=0)
 
 
-def _collapsed(verts: np.ndarray, faces: np.ndarray, rings: list, tol: float) -> list:
-    """``collapse_short_edges`` of H hubs with one surface topology: per hub (faces, rings), or
-    None where the batch cannot tell the result (built alone).
+class _Surface:
+    """One surface topology of a batch: faces (F, 3) over nv vertices, rings, its edges (E, 2)
+    (sorted, as ``collapse_short_edges`` lists them) and the number of faces at each vertex."""
 
-    Hubs with the same short edges in the same order (by length) take the same decisions in the
-    first pass of the collapse (link conditions are combinatorial, positions do not move); if no
-    edge is short after that pass, the collapse ends there. So one first pass serves them all.
-    The order does not matter when no face touches two short edges (a collapse changes only the
-    faces around its own edge, and the link condition of another edge reads only its own)."""
-    out: list = [(faces, rings)] * len(verts)
+    def __init__(self, faces: np.ndarray, rings: list, nv: int):
+        self.faces = np.asarray(faces, np.int64).reshape(-1, 3)
+        self.rings, self.nv = rings, nv
+        self.edges = _edges(self.faces)
+        self.degree = np.bincount(self.faces.ravel(), minlength=nv)
+
+    def collapse(self, verts: np.ndarray, short: np.ndarray, tol: float, rings_deep: int = 4):
+        """``collapse_short_edges`` of one hub (verts (nv, 3), its short edges ``short`` (E,)
+        mask), run on the patch of faces around them: its faces are the only ones a collapse
+        reads or changes as long as every vertex of a changed face, and every edge still short,
+        has all its faces in the patch (then the passes take the same short edges in the same
+        order). The patch grows by a ring of faces until that holds. Returns (faces: the
+        untouched faces in order, then the patch's; rings; the patch's vertex ids), or None
+        where the patch would not stay local."""
+        mark = np.zeros(self.nv, bool)
+        mark[self.edges[short].ravel()] = True
+        mark[self.faces[mark[self.faces].any(axis=1)].ravel()] = True  # a collapse's new edges reach one ring out
+        for _ in range(rings_deep):
+            patch = mark[self.faces].any(axis=1)
+            sub = self.faces[patch]
+            inner = np.bincount(sub.ravel(), minlength=self.nv) == self.degree
+            f1, r1, _ = collapse_short_edges(verts, sub, self.rings, tol)
+            gone = np.zeros(self.nv, bool)
+            gone[sub.ravel()] = True
+            gone[f1.ravel()] = False
+            e1 = _edges(f1)
+            left = e1[np.linalg.norm(verts[e1[:, 0]] - verts[e1[:, 1]], axis=1) < tol]
+            if inner[sub[gone[sub].any(axis=1)]].all() and inner[left].all():
+                return np.concatenate([self.faces[~patch], f1]), r1, np.unique(sub)
+            mark[sub.ravel()] = True
+        return None
+
+
+def _snapped(verts: np.ndarray) -> np.ndarray:
+    """Vertices (..., 3) in hub units on the SNAP grid. Short-edge collapses read only lengths,
+    and their order among edges of equal length (symmetric arcs and corridors have many) would
+    otherwise be decided by round-off, which differs between the batch and the per-hub path."""
+    return np.round(verts / SNAP) * SNAP
+
+
+def _unsure(verts: np.ndarray) -> np.ndarray:
+    """Which coordinates (..., 3) lie within SNAP_GUARD of a SNAP rounding boundary (the two
+    paths may snap them differently)."""
+    frac = np.abs(verts / SNAP - np.floor(verts / SNAP) - 0.5)
+    return frac < SNAP_GUARD / SNAP
+
+
+def _collapsed(verts: np.ndarray, surface: _Surface, tol: float) -> list:
+    """``collapse_short_edges`` of H hubs (verts (H, nv, 3) in hub units) with one surface
+    topology on their snapped positions (as ``hub_template``): per hub (faces, rings), the same
+    triangles as the collapse of the whole surface, or None where the batch cannot tell them
+    (built alone): a coordinate that decides a length near ``tol`` or in a collapse's patch
+    may snap otherwise on the per-hub path (``_unsure``). Hubs without short edges share the
+    surface; each other hub is collapsed on the patch around its short edges
+    (``_Surface.collapse``)."""
+    out: list = [(surface.faces, surface.rings)] * len(verts)
     if tol <= 0:
         return out
-    e = _edges(faces)
-    d = np.linalg.norm(verts[:, e[:, 0]] - verts[:, e[:, 1]], axis=-1)
+    snapped = _snapped(verts)
+    unsure = _unsure(verts).any(axis=-1)  # (H, nv)
+    e = surface.edges
+    d = np.linalg.norm(snapped[:, e[:, 0]] - snapped[:, e[:, 1]], axis=-1)
     short = d < tol
-    groups: dict = {}
-    apart: dict = {}  # short-edge set -> no face touches two of them
-    for k in np.flatnonzero(short.any(axis=1)):
-        idx = np.flatnonzero(short[k])
-        key = idx.tobytes()
-        if key not in apart:
-            touch = np.zeros(len(faces), np.int64)
-            for x, y in e[idx]:
-                touch += np.any((faces == x) | (faces == y), axis=1)
-            apart[key] = touch.max() <= 1
-        if not apart[key]:
-            key = b"order" + idx[np.argsort(d[k, idx], kind="stable")].tobytes()
-        groups.setdefault(key, []).append(k)
-    for ks in groups.values():
-        f1, r1, _ = collapse_short_edges(verts[ks[0]], faces, rings, tol, rounds=1)
-        e1 = _edges(f1)
-        done = np.linalg.norm(verts[ks][:, e1[:, 0]] - verts[ks][:, e1[:, 1]], axis=-1).min(axis=1) >= tol
-        for k, ok in zip(ks, done):
-            out[k] = (f1, r1) if ok else None
+    edge_unsure = (np.abs(d - tol) < 4 * SNAP) & (unsure[:, e[:, 0]] | unsure[:, e[:, 1]])
+    for k in np.flatnonzero(short.any(axis=1) | edge_unsure.any(axis=1)):
+        local = surface.collapse(snapped[k], short[k], tol) if not edge_unsure[k].any() else None
+        out[k] = None if local is None or unsure[k, local[2]].any() else local[:2]
     return out
