@@ -47,14 +47,19 @@ def add_arguments(p) -> None:
 
 
 def curved_lattice(n: int, radius: float = 0.08) -> Lattice:
-    """Translation U, rotation V about z, swirl W (rotation about y with a slight shrink)."""
+    """Translation U, rotation V about z, swirl W (rotation about y with a slight shrink). At
+    n = 40 the rows turn by 46° (V) and 13° (W): 4,800 distinct hub shapes, and clean (no unclean
+    hub: ``ple mesh`` streams it). The sharper first version (V 0.03 rad about x = -30, W
+    0.008 rad about x = 120) stretched V-beams to 2.1 and shrank W-beams to 0.64 at the far rows:
+    6 % of its hubs were unclean there, and ``ple mesh`` unites those exactly, in memory
+    (issue 13) — not the streamed path this benchmark is about."""
     lat = Lattice()
     a = lat.add_node((0.0, 0.0, 0.0), radius)
     for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0)]:
         lat.add_beam(a, a, *off)
     lat.set_u(n, Translation((1.0, 0.0, 0.0)))
-    lat.set_v(n, Rotation(0.03, (0.0, 0.0, 1.0), (-30.0, 0.0, 0.0)))
-    lat.set_w(n, Swirl(0.008, (0.0, 1.0, 0.0), (120.0, 0.0, 0.0), 0.998))
+    lat.set_v(n, Rotation(0.02, (0.0, 0.0, 1.0), (-45.0, 0.0, 0.0)))
+    lat.set_w(n, Swirl(0.006, (0.0, 1.0, 0.0), (160.0, 0.0, 0.0), 0.998))
     return lat
 
 
