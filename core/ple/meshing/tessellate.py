@@ -506,7 +506,8 @@ def build_with_unions(tess: _Tessellator, ev, nodes) -> tuple[np.ndarray, np.nda
     used = np.unique(faces)
     remap = np.full(len(verts), -1, np.int64)
     remap[used] = np.arange(len(used))
-    return unite(verts[used], remap[faces], ev.center, ev.radius, ev.beam_nodes, nodes)
+    return unite(verts[used], remap[faces], ev.center, ev.radius, ev.beam_nodes, nodes,
+                 tess.grid)
 
 
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,

@@ -28,6 +28,8 @@ import numpy as np
 from ..algebra.elements import segment_distance
 from ..errors import PleError
 from ..queries.overlaps import non_incident_pairs
+from .selfcheck import self_intersections
+from .weld import COLLAPSE_GRIDS, edge_manifold, weld
 
 TRIM = 0.5  # beams are tested from half their contact distance on (the rest is inside S⁺ of their hub)
 SPHERE_SEGMENTS = 32
@@ -101,9 +103,14 @@ def _unit_sphere(manifold3d):
     return s.scale([k, k, k])
 
 
-def unite(mesh_vertices, mesh_faces, center, radius, beam_nodes, nodes):
+def unite(mesh_vertices, mesh_faces, center, radius, beam_nodes, nodes, grid: float):
     """The manifold3d union of a closed mesh with the balls ``nodes`` and every beam incident
-    to one of them (convex hull of its two balls). Returns (vertices, faces)."""
+    to one of them (convex hull of its two balls), on the float32 grid ``grid`` (the region's
+    ``ple.meshing.weld.grid_spacing``). Returns (vertices, faces).
+
+    The Boolean runs on 64-bit input (``Mesh64``: float32 input moves vertices by up to half a
+    float32 step, and the union keeps the folds that makes); its result is then put on the grid
+    (``on_grid``), so the mesh in memory is the mesh every float32 file holds."""
     try:
         import manifold3d
     except ImportError as exc:  # pragma: no cover - a dev/runtime dependency
@@ -127,11 +134,103 @@ def unite(mesh_vertices, mesh_faces, center, radius, beam_nodes, nodes):
         # boolean meets coincident vertices (resolved symbolically), never near-tangent surfaces
         parts.append(manifold3d.Manifold.batch_hull([ball_of(int(x)), ball_of(int(y))]))
     local = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add)
+    box = np.asarray(local.bounding_box(), float).reshape(2, 3)
     if len(mesh_faces):
-        base = manifold3d.Manifold(manifold3d.Mesh(vert_properties=np.asarray(mesh_vertices, np.float32),
-                                                   tri_verts=np.asarray(mesh_faces, np.uint32)))
+        base = manifold3d.Manifold(manifold3d.Mesh64(
+            vert_properties=np.ascontiguousarray(mesh_vertices, np.float64),
+            tri_verts=np.ascontiguousarray(mesh_faces, np.uint64)))
         if base.status() != manifold3d.Error.NoError:
             raise PleError(f"the clean part of the mesh is not a manifold ({base.status()})")
         local = base + local
-    out = local.to_mesh()
-    return np.asarray(out.vert_properties[:, :3], float), np.asarray(out.tri_verts, np.int64)
+    out = local.to_mesh64()
+    v, f = np.asarray(out.vert_properties[:, :3], float), np.asarray(out.tri_verts, np.int64)
+    return on_grid(v, f, grid, box)
+
+
+MAX_REPAIR_ROUNDS = 12
+
+
+def on_grid(vertices, faces, grid: float, box) -> tuple[np.ndarray, np.ndarray]:
+    """A closed, self-intersection-free mesh moved onto the float32 grid ``grid`` so that it stays
+    so: its edges under ``COLLAPSE_GRIDS`` grid steps are collapsed in 64 bits (link condition),
+    the vertices snapped and welded (``ple.meshing.weld.weld``); then, while the exact check
+    (``ple.meshing.selfcheck``) finds faces of ``box`` (2, 3) that the rounding made meet (slivers
+    of the Boolean tilted by half a step), the shortest edge of the thinner face of each pair is
+    collapsed onto one of its grid vertices. Returns (vertices on the grid, faces)."""
+    v = np.asarray(vertices, float)
+    f = np.asarray(faces, np.int64)
+    for _ in range(MAX_REPAIR_ROUNDS):
+        e = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
+        e = e[np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1) < COLLAPSE_GRIDS * grid]
+        n = len(f)
+        if not len(e) or len(f := collapse_edges(v, f, e)) == n:
+            break
+    v, f, _ = weld(v, f, grid)
+    lo, hi = np.asarray(box, float).reshape(2, 3) + np.array([[-1.0], [1.0]]) * COLLAPSE_GRIDS * grid
+    for _ in range(MAX_REPAIR_ROUNDS):
+        tri = v[f]
+        near = np.flatnonzero(np.all((tri.max(axis=1) >= lo) & (tri.min(axis=1) <= hi), axis=1))
+        pairs = near[self_intersections(v, f[near])]
+        if not len(pairs):
+            break
+        f = collapse_edges(v, f, _thinner_edges(v, f, pairs))
+    else:
+        raise PleError(f"the union of the unclean hubs keeps {len(pairs)} self-intersecting face pairs "
+                       "on the float32 grid")
+    if edge_manifold(f)["bad_edges"]:
+        raise PleError("the union of the unclean hubs is not closed on the float32 grid")
+    used = np.unique(f)
+    remap = np.full(len(v), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return v[used], remap[f]
+
+
+def _thinner_edges(v, f, pairs) -> np.ndarray:
+    """For each intersecting face pair, the shortest edge (2 vertex ids) of its face with the
+    smaller least altitude (twice the area over the longest edge)."""
+    tri = v[f[pairs]]  # (P, 2, 3, 3)
+    e = np.linalg.norm(tri[:, :, [1, 2, 0]] - tri, axis=3)  # edge k runs from corner k to k+1
+    area2 = np.linalg.norm(np.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0]), axis=2)
+    alt = area2 / np.maximum(e.max(axis=2), 1e-300)
+    which = np.argmin(alt, axis=1)
+    face = pairs[np.arange(len(pairs)), which]
+    k = np.argmin(e[np.arange(len(pairs)), which], axis=1)
+    return np.stack([f[face, k], f[face, (k + 1) % 3]], axis=1)
+
+
+def collapse_edges(v, f, edges) -> np.ndarray:
+    """Collapse ``edges`` (E, 2) of a closed oriented mesh where the link condition holds, each
+    onto the one of its two vertices that flips none of the moved faces; collapses of one call
+    touch disjoint vertex neighbourhoods (so each one's test holds for all). Returns faces."""
+    f = np.asarray(f, np.int64)
+    order = np.argsort(f.ravel(), kind="stable")
+    starts = np.searchsorted(f.ravel()[order], np.arange(len(v) + 1))
+    fan = lambda x: order[starts[x]:starts[x + 1]] // 3  # noqa: E731 - faces around vertex x
+    taken: set = set()
+    alias = np.arange(len(v))
+    drop: list = []
+    edges = np.unique(np.sort(np.asarray(edges, np.int64).reshape(-1, 2), axis=1), axis=0)
+    length = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
+    for x, y in edges[np.argsort(length, kind="stable")].tolist():
+        fx, fy = set(fan(x).tolist()), set(fan(y).tolist())
+        ring = {w for t in fx | fy for w in f[t].tolist()}
+        if x == y or ring & taken:
+            continue
+        shared = fx & fy
+        nx, ny = {w for t in fx for w in f[t].tolist()} - {x}, {w for t in fy for w in f[t].tolist()} - {y}
+        if len(shared) != 2 or nx & ny != {w for t in shared for w in f[t].tolist()} - {x, y}:
+            continue  # the link condition fails: the collapse would pinch the surface
+        for keep, gone, moved in ((x, y, fy - shared), (y, x, fx - shared)):
+            moved = f[sorted(moved)]
+            before = v[moved]
+            after = v[np.where(moved == gone, keep, moved)]
+            nb = np.cross(before[:, 1] - before[:, 0], before[:, 2] - before[:, 0])
+            na = np.cross(after[:, 1] - after[:, 0], after[:, 2] - after[:, 0])
+            if np.all(np.einsum("ij,ij->i", nb, na) > 0):
+                alias[gone] = keep
+                drop.extend(shared)
+                taken |= ring
+                break
+    keep_f = np.ones(len(f), bool)
+    keep_f[drop] = False
+    return alias[f[keep_f]]
