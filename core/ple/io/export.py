@@ -305,7 +305,7 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
     elif fmt == "stl":
         return write_stl(path, iter_triangles(lat, r, style, levels, segments, max_groups, workers=workers),
                          header=stl_header(unit))
-    mesh = tessellate(lat, r, style, levels, segments, fillet=fillet)
+    mesh = tessellate(lat, r, style, levels, segments, fillet=fillet, unclean=info.get("unclean"))
     info["unclean"] = mesh.metadata.get("ple_unclean")
     stats = export_mesh(mesh, path, unit)
     return len(mesh.faces) - stats["dropped_faces"]  # as written (the weld may drop slivers)

@@ -29,7 +29,7 @@ from ..algebra.elements import segment_distance
 from ..errors import PleError
 from ..queries.overlaps import non_incident_pairs
 from .selfcheck import self_intersections
-from .weld import COLLAPSE_GRIDS, edge_manifold, weld
+from .weld import COLLAPSE_GRIDS, edge_manifold, snap, weld
 
 TRIM = 0.5  # beams are tested from half their contact distance on (the rest is inside S⁺ of their hub)
 SPHERE_SEGMENTS = 32
@@ -153,28 +153,43 @@ MAX_REPAIR_ROUNDS = 12
 def on_grid(vertices, faces, grid: float, box) -> tuple[np.ndarray, np.ndarray]:
     """A closed, self-intersection-free mesh moved onto the float32 grid ``grid`` so that it stays
     so: its edges under ``COLLAPSE_GRIDS`` grid steps are collapsed in 64 bits (link condition),
-    the vertices snapped and welded (``ple.meshing.weld.weld``); then, while the exact check
-    (``ple.meshing.selfcheck``) finds faces of ``box`` (2, 3) that the rounding made meet (slivers
-    of the Boolean tilted by half a step), the shortest edge of the thinner face of each pair is
-    collapsed onto one of its grid vertices. Returns (vertices on the grid, faces)."""
+    the vertices snapped and welded (``ple.meshing.weld.weld``); then, in ``box`` (2, 3), while the
+    exact check (``ple.meshing.selfcheck``) finds faces that meet when rounded once more, to twice
+    the grid (slivers of the Boolean that a rounding tilts: a file in other units, glTF's metres,
+    rounds the grid values again), the shortest edge of the thinner face of each pair is collapsed
+    onto one of its grid vertices, and so is the shortest edge of every cap flatter than
+    ``COLLAPSE_GRIDS`` grid steps. The exact check on the grid has the last word (PleError if it
+    finds any pair). Returns (vertices on the grid, faces)."""
     v = np.asarray(vertices, float)
     f = np.asarray(faces, np.int64)
     for _ in range(MAX_REPAIR_ROUNDS):
         e = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
         e = e[np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1) < COLLAPSE_GRIDS * grid]
         n = len(f)
-        if not len(e) or len(f := collapse_edges(v, f, e)) == n:
+        if not len(e) or len(f := collapse_edges(v, f, e, [])[0]) == n:
             break
     v, f, _ = weld(v, f, grid)
     lo, hi = np.asarray(box, float).reshape(2, 3) + np.array([[-1.0], [1.0]]) * COLLAPSE_GRIDS * grid
+    tri = v[f]
+    near = np.flatnonzero(np.all((tri.max(axis=1) >= lo) & (tri.min(axis=1) <= hi), axis=1))
     for _ in range(MAX_REPAIR_ROUNDS):
-        tri = v[f]
-        near = np.flatnonzero(np.all((tri.max(axis=1) >= lo) & (tri.min(axis=1) <= hi), axis=1))
-        pairs = near[self_intersections(v, f[near])]
-        if not len(pairs):
-            break
-        f = collapse_edges(v, f, _thinner_edges(v, f, pairs))
-    else:
+        # a probe: the faces rounded once more, to twice the grid (a file in other units, glTF's
+        # metres, rounds the grid values again): faces that fold there are too thin to keep
+        probe = near[self_intersections(snap(v, 2 * grid), f[near])]
+        # and caps flatter than the grid, which any rounding may fold onto their neighbours
+        t = v[f[near]]
+        e = np.linalg.norm(t[:, [1, 2, 0]] - t, axis=2)
+        flat = near[np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+                    < COLLAPSE_GRIDS * grid * e.max(axis=1)]
+        k = np.argmin(np.linalg.norm(v[f[flat][:, [1, 2, 0]]] - v[f[flat]], axis=2), axis=1)
+        edges = np.concatenate([_thinner_edges(v, f, probe), np.stack([f[flat, k], f[flat, (k + 1) % 3]], axis=1)])
+        n = len(f)
+        if len(edges):
+            f, near = collapse_edges(v, f, edges, near)
+        if len(f) == n:
+            break  # nothing (more) can be collapsed (link condition, flips): the exact check decides
+    pairs = near[self_intersections(v, f[near])]
+    if len(pairs):
         raise PleError(f"the union of the unclean hubs keeps {len(pairs)} self-intersecting face pairs "
                        "on the float32 grid")
     if edge_manifold(f)["bad_edges"]:
@@ -188,6 +203,7 @@ def on_grid(vertices, faces, grid: float, box) -> tuple[np.ndarray, np.ndarray]:
 def _thinner_edges(v, f, pairs) -> np.ndarray:
     """For each intersecting face pair, the shortest edge (2 vertex ids) of its face with the
     smaller least altitude (twice the area over the longest edge)."""
+    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
     tri = v[f[pairs]]  # (P, 2, 3, 3)
     e = np.linalg.norm(tri[:, :, [1, 2, 0]] - tri, axis=3)  # edge k runs from corner k to k+1
     area2 = np.linalg.norm(np.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0]), axis=2)
@@ -198,10 +214,11 @@ def _thinner_edges(v, f, pairs) -> np.ndarray:
     return np.stack([f[face, k], f[face, (k + 1) % 3]], axis=1)
 
 
-def collapse_edges(v, f, edges) -> np.ndarray:
+def collapse_edges(v, f, edges, near):
     """Collapse ``edges`` (E, 2) of a closed oriented mesh where the link condition holds, each
     onto the one of its two vertices that flips none of the moved faces; collapses of one call
-    touch disjoint vertex neighbourhoods (so each one's test holds for all). Returns faces."""
+    touch disjoint vertex neighbourhoods (so each one's test holds for all). Returns (faces, the
+    face ids ``near`` still standing, renumbered)."""
     f = np.asarray(f, np.int64)
     order = np.argsort(f.ravel(), kind="stable")
     starts = np.searchsorted(f.ravel()[order], np.arange(len(v) + 1))
@@ -233,4 +250,6 @@ def collapse_edges(v, f, edges) -> np.ndarray:
                 break
     keep_f = np.ones(len(f), bool)
     keep_f[drop] = False
-    return alias[f[keep_f]]
+    renumber = np.cumsum(keep_f) - 1
+    near = np.asarray(near, np.int64)
+    return alias[f[keep_f]], renumber[near[keep_f[near]]]
