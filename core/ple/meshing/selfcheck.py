@@ -52,7 +52,7 @@ def _exact_integers(x: np.ndarray) -> np.ndarray:
     ex[mant == 0] = np.iinfo(np.int64).max
     shift = ex - ex.min(axis=1, keepdims=True)
     shift[mant == 0] = 0
-    return mi * np.vectorize(lambda k: 1 << int(k), otypes=[object])(shift)
+    return mi << shift.astype(object)
 
 
 def _exact_orient(a, b, c, d) -> np.ndarray:

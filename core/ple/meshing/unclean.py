@@ -134,7 +134,10 @@ def unite(mesh_vertices, mesh_faces, center, radius, beam_nodes, nodes, grid: fl
         # boolean meets coincident vertices (resolved symbolically), never near-tangent surfaces
         parts.append(manifold3d.Manifold.batch_hull([ball_of(int(x)), ball_of(int(y))]))
     local = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add)
-    box = np.asarray(local.bounding_box(), float).reshape(2, 3)
+    # every point of the parts lies within ``reach`` of the centre of one of their balls
+    involved = np.unique(np.concatenate([np.asarray(nodes, np.int64), bn[mark[bn[:, 0]] | mark[bn[:, 1]]].ravel()]))
+    length = np.linalg.norm(c[bn[:, 0]] - c[bn[:, 1]], axis=1)[mark[bn[:, 0]] | mark[bn[:, 1]]]
+    reach = float(np.max(rad[involved])) + (float(length.max()) / 2 if len(length) else 0.0)
     if len(mesh_faces):
         base = manifold3d.Manifold(manifold3d.Mesh64(
             vert_properties=np.ascontiguousarray(mesh_vertices, np.float64),
@@ -144,16 +147,17 @@ def unite(mesh_vertices, mesh_faces, center, radius, beam_nodes, nodes, grid: fl
         local = base + local
     out = local.to_mesh64()
     v, f = np.asarray(out.vert_properties[:, :3], float), np.asarray(out.tri_verts, np.int64)
-    return on_grid(v, f, grid, box)
+    return on_grid(v, f, grid, c[involved], reach)
 
 
 MAX_REPAIR_ROUNDS = 12
 
 
-def on_grid(vertices, faces, grid: float, box) -> tuple[np.ndarray, np.ndarray]:
+def on_grid(vertices, faces, grid: float, centers, reach: float) -> tuple[np.ndarray, np.ndarray]:
     """A closed, self-intersection-free mesh moved onto the float32 grid ``grid`` so that it stays
     so: its edges under ``COLLAPSE_GRIDS`` grid steps are collapsed in 64 bits (link condition),
-    the vertices snapped and welded (``ple.meshing.weld.weld``); then, in ``box`` (2, 3), while the
+    the vertices snapped and welded (``ple.meshing.weld.weld``); then, on the faces with a corner within
+    ``reach`` of one of ``centers`` (K, 3) (the united parts), while the
     exact check (``ple.meshing.selfcheck``) finds faces that meet when rounded once more, to twice
     the grid (slivers of the Boolean that a rounding tilts: a file in other units, glTF's metres,
     rounds the grid values again), the shortest edge of the thinner face of each pair is collapsed
@@ -169,9 +173,11 @@ def on_grid(vertices, faces, grid: float, box) -> tuple[np.ndarray, np.ndarray]:
         if not len(e) or len(f := collapse_edges(v, f, e, [])[0]) == n:
             break
     v, f, _ = weld(v, f, grid)
-    lo, hi = np.asarray(box, float).reshape(2, 3) + np.array([[-1.0], [1.0]]) * COLLAPSE_GRIDS * grid
-    tri = v[f]
-    near = np.flatnonzero(np.all((tri.max(axis=1) >= lo) & (tri.min(axis=1) <= hi), axis=1))
+    from scipy.spatial import cKDTree  # noqa: PLC0415 - optional package
+
+    tree = cKDTree(np.asarray(centers, float).reshape(-1, 3))
+    d, _ = tree.query(v, distance_upper_bound=reach + COLLAPSE_GRIDS * grid)
+    near = np.flatnonzero(np.isfinite(d)[f].any(axis=1))
     for _ in range(MAX_REPAIR_ROUNDS):
         # a probe: the faces rounded once more, to twice the grid (a file in other units, glTF's
         # metres, rounds the grid values again): faces that fold there are too thin to keep
