@@ -296,16 +296,18 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
     fmt = mesh_format(path)
     r = lat.region(region)
     info = {} if info is None else info
+    checked = None  # the stream's report, reused by the in-memory mesh (the check runs once)
     if style != "balls-beams":
         check_float32_range(np.array(lat.bounds(r)), smallest_radius(lat, r), fmt)
     if fmt == "stl" and style != "balls-beams":
-        info["unclean"], chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet, workers)
+        checked, chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet, workers)
+        info["unclean"] = checked
         if chunks is not None:
             return write_stl(path, chunks, header=stl_header(unit), grid=output_grid(lat, r))
     elif fmt == "stl":
         return write_stl(path, iter_triangles(lat, r, style, levels, segments, max_groups, workers=workers),
                          header=stl_header(unit))
-    mesh = tessellate(lat, r, style, levels, segments, fillet=fillet, unclean=info.get("unclean"))
+    mesh = tessellate(lat, r, style, levels, segments, fillet=fillet, unclean=checked)
     info["unclean"] = mesh.metadata.get("ple_unclean")
     stats = export_mesh(mesh, path, unit)
     return len(mesh.faces) - stats["dropped_faces"]  # as written (the weld may drop slivers)
