@@ -347,10 +347,12 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
     fmt = mesh_format(path)
     r = lat.region(region)
     info = {} if info is None else info
+    checked = None  # the stream's report, reused by the in-memory mesh (the check runs once)
     if style != "balls-beams":
         check_float32_range(np.array(lat.bounds(r)), smallest_radius(lat, r), fmt)
     if fmt == "stl" and style != "balls-beams":
-        info["unclean"], chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet, workers)
+        checked, chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet, workers)
+        info["unclean"] = checked
         if chunks is not None:
             return write_stl(path, chunks, header=stl_header(unit), grid=output_grid(lat, r), workers=workers)
         if max_memory is not None and info["unclean"] is not None:  # the unions are computed in memory
@@ -363,7 +365,7 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
     elif fmt == "stl":
         return write_stl(path, iter_triangles(lat, r, style, levels, segments, max_groups, workers=workers),
                          header=stl_header(unit), workers=workers)
-    mesh = tessellate(lat, r, style, levels, segments, fillet=fillet)
+    mesh = tessellate(lat, r, style, levels, segments, fillet=fillet, unclean=checked)
     info["unclean"] = mesh.metadata.get("ple_unclean")
     stats = export_mesh(mesh, path, unit)
     return len(mesh.faces) - stats["dropped_faces"]  # as written (the weld may drop slivers)

@@ -4,8 +4,8 @@ A closed mesh that intersects itself counts the overlapping parts twice (slicers
 ``self_intersections`` finds every pair of faces that meet other than in their shared
 vertices or edge:
 
-- broad phase: a uniform grid over the faces' bounding boxes (cell size from the median box),
-  candidate pairs from shared cells, kept where the boxes overlap;
+- broad phase: a uniform grid (cell size from the median box) over boxes of slices of the faces
+  (a long needle gets small boxes along its length), pairs of faces with overlapping slices;
 - narrow phase, vectorized: orientation predicates ``orient3d`` in float64 with a static
   error bound (Shewchuk's filter); the few undecided signs are recomputed exactly with
   integers (the floats' exact values), so every decision is exact.
@@ -52,7 +52,7 @@ def _exact_integers(x: np.ndarray) -> np.ndarray:
     ex[mant == 0] = np.iinfo(np.int64).max
     shift = ex - ex.min(axis=1, keepdims=True)
     shift[mant == 0] = 0
-    return mi * np.vectorize(lambda k: 1 << int(k), otypes=[object])(shift)
+    return mi << shift.astype(object)
 
 
 def _exact_orient(a, b, c, d) -> np.ndarray:
@@ -78,20 +78,40 @@ def _orient2d(a, b, c) -> np.ndarray:
     return s
 
 
+def _pieces(tri: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Boxes covering each triangle (k, 3, 3) in slices across its length: slice i of a triangle
+    with apex a (opposite its shortest edge bc) is the hull of a + s(b − a), a + s(c − a) for s in
+    [i/m, (i+1)/m], m = ⌈longest edge / h⌉. Returns (face id, box lo, box hi) per slice: a needle
+    (a beam strip's triangle) gets small boxes along its length instead of one box across it."""
+    e = np.linalg.norm(tri[:, [1, 2, 0]] - tri, axis=2)  # edge k runs from corner k to k+1
+    short = np.argmin(e, axis=1)
+    apex = tri[np.arange(len(tri)), (short + 2) % 3]
+    b = tri[np.arange(len(tri)), short] - apex
+    c = tri[np.arange(len(tri)), (short + 1) % 3] - apex
+    m = np.maximum(np.ceil(e.max(axis=1) / h), 1).astype(np.int64)
+    face = np.repeat(np.arange(len(tri)), m)
+    i = np.arange(len(face)) - np.repeat(np.cumsum(m) - m, m)
+    s0, s1 = (i / m[face])[:, None], ((i + 1) / m[face])[:, None]
+    a, b, c = apex[face], b[face], c[face]
+    pts = np.stack([a + s0 * b, a + s0 * c, a + s1 * b, a + s1 * c], axis=1)
+    return face, pts.min(axis=1), pts.max(axis=1)
+
+
 def candidate_pairs(tri: np.ndarray) -> np.ndarray:
-    """Pairs (P, 2) of face ids (i < j) whose bounding boxes overlap."""
+    """Pairs (P, 2) of face ids (i < j) whose slices' boxes (``_pieces``) overlap: every pair of
+    faces that meets, found with a uniform grid over the slices."""
     n = len(tri)
     if n < 2:
         return np.zeros((0, 2), np.int64)
-    lo, hi = tri.min(axis=1), tri.max(axis=1)
-    ext = (hi - lo).max(axis=1)
+    ext = (tri.max(axis=1) - tri.min(axis=1)).max(axis=1)
     h = max(float(np.median(ext)) * 2.0, 1e-12)
+    face, lo, hi = _pieces(tri, h)
     origin = lo.min(axis=0)
     clo = np.floor((lo - origin) / h).astype(np.int64)
     chi = np.floor((hi - origin) / h).astype(np.int64)
     span = chi - clo + 1
     cnt = span.prod(axis=1)
-    ids = np.repeat(np.arange(n), cnt)
+    ids = np.repeat(np.arange(len(face)), cnt)
     k = np.arange(len(ids)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
     sy, sz = span[ids, 1], span[ids, 2]
     cx = clo[ids, 0] + k // (sy * sz)
@@ -115,10 +135,9 @@ def candidate_pairs(tri: np.ndarray) -> np.ndarray:
         second = first + 1 + np.arange(len(first)) - np.repeat(np.cumsum(fo) - fo, fo)
         lo_e = hi_e
         a, b2 = ids[first], ids[second]
-        p = np.stack([np.minimum(a, b2), np.maximum(a, b2)], axis=1)
-        p = p[p[:, 0] != p[:, 1]]
-        ok = np.all((lo[p[:, 0]] <= hi[p[:, 1]]) & (lo[p[:, 1]] <= hi[p[:, 0]]), axis=1)
-        out.append(p[ok])
+        fa, fb = face[a], face[b2]
+        ok = (fa != fb) & np.all((lo[a] <= hi[b2]) & (lo[b2] <= hi[a]), axis=1)
+        out.append(np.stack([np.minimum(fa, fb)[ok], np.maximum(fa, fb)[ok]], axis=1))
     if not out:
         return np.zeros((0, 2), np.int64)
     p = np.concatenate(out)

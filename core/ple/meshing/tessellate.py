@@ -498,7 +498,7 @@ def tessellation_box(lat: Lattice, region, box, style: str = "refined", levels: 
 
 def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
                segments: int | None = None, check_clean: bool = True, fillet: float | None = None,
-               cut: bool = True) -> trimesh.Trimesh:
+               cut: bool = True, unclean=None) -> trimesh.Trimesh:
     """The mesh of a region (default: the whole lattice) as one trimesh.
 
     ``levels``: refinement levels of ``refined`` (default 4); ``segments``: generators per full
@@ -509,7 +509,8 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     clean rest is meshed on the fast path and united with their balls and beams by manifold3d;
     ``mesh.metadata["ple_unclean"]`` holds the report (None when not checked). A lattice filling a
     body by ``any`` is cut at the body's surface (``ple.meshing.skin.clip_to_bodies``) unless
-    ``cut`` is False (for a skin, which cuts and unites in one run of Booleans)."""
+    ``cut`` is False (for a skin, which cuts and unites in one run of Booleans). ``unclean``: the
+    region's report when the caller has it already (``checked_stream``), so the check runs once."""
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
     bodies = clip_bodies(lat)
@@ -522,7 +523,9 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
         return balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
     tess = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style))
     report = None
-    if check_clean:
+    if unclean is not None and lat.group_map is None:  # rows of this region's evaluation
+        report, ev = unclean, lat.evaluate(r)
+    elif check_clean:
         report, ev = tess.find_unclean()
     if report is not None and len(report.nodes):
         verts, faces = build_with_unions(tess, ev, report.nodes)
@@ -542,7 +545,8 @@ def build_with_unions(tess: _Tessellator, ev, nodes) -> tuple[np.ndarray, np.nda
     used = np.unique(faces)
     remap = np.full(len(verts), -1, np.int64)
     remap[used] = np.arange(len(used))
-    return unite(verts[used], remap[faces], ev.center, ev.radius, ev.beam_nodes, nodes)
+    return unite(verts[used], remap[faces], ev.center, ev.radius, ev.beam_nodes, nodes,
+                 tess.grid)
 
 
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,

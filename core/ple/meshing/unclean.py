@@ -28,6 +28,8 @@ import numpy as np
 from ..algebra.elements import segment_distance
 from ..errors import PleError
 from ..queries.overlaps import non_incident_pairs
+from .selfcheck import self_intersections
+from .weld import COLLAPSE_GRIDS, edge_manifold, snap, weld
 
 TRIM = 0.5  # beams are tested from half their contact distance on (the rest is inside S⁺ of their hub)
 SPHERE_SEGMENTS = 32
@@ -101,9 +103,14 @@ def _unit_sphere(manifold3d):
     return s.scale([k, k, k])
 
 
-def unite(mesh_vertices, mesh_faces, center, radius, beam_nodes, nodes):
+def unite(mesh_vertices, mesh_faces, center, radius, beam_nodes, nodes, grid: float):
     """The manifold3d union of a closed mesh with the balls ``nodes`` and every beam incident
-    to one of them (convex hull of its two balls). Returns (vertices, faces)."""
+    to one of them (convex hull of its two balls), on the float32 grid ``grid`` (the region's
+    ``ple.meshing.weld.grid_spacing``). Returns (vertices, faces).
+
+    The Boolean runs on 64-bit input (``Mesh64``: float32 input moves vertices by up to half a
+    float32 step, and the union keeps the folds that makes); its result is then put on the grid
+    (``on_grid``), so the mesh in memory is the mesh every float32 file holds."""
     try:
         import manifold3d
     except ImportError as exc:  # pragma: no cover - a dev/runtime dependency
@@ -127,11 +134,128 @@ def unite(mesh_vertices, mesh_faces, center, radius, beam_nodes, nodes):
         # boolean meets coincident vertices (resolved symbolically), never near-tangent surfaces
         parts.append(manifold3d.Manifold.batch_hull([ball_of(int(x)), ball_of(int(y))]))
     local = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add)
+    # every point of the parts lies within ``reach`` of the centre of one of their balls
+    involved = np.unique(np.concatenate([np.asarray(nodes, np.int64), bn[mark[bn[:, 0]] | mark[bn[:, 1]]].ravel()]))
+    length = np.linalg.norm(c[bn[:, 0]] - c[bn[:, 1]], axis=1)[mark[bn[:, 0]] | mark[bn[:, 1]]]
+    reach = float(np.max(rad[involved])) + (float(length.max()) / 2 if len(length) else 0.0)
     if len(mesh_faces):
-        base = manifold3d.Manifold(manifold3d.Mesh(vert_properties=np.asarray(mesh_vertices, np.float32),
-                                                   tri_verts=np.asarray(mesh_faces, np.uint32)))
+        base = manifold3d.Manifold(manifold3d.Mesh64(
+            vert_properties=np.ascontiguousarray(mesh_vertices, np.float64),
+            tri_verts=np.ascontiguousarray(mesh_faces, np.uint64)))
         if base.status() != manifold3d.Error.NoError:
             raise PleError(f"the clean part of the mesh is not a manifold ({base.status()})")
         local = base + local
-    out = local.to_mesh()
-    return np.asarray(out.vert_properties[:, :3], float), np.asarray(out.tri_verts, np.int64)
+    out = local.to_mesh64()
+    v, f = np.asarray(out.vert_properties[:, :3], float), np.asarray(out.tri_verts, np.int64)
+    return on_grid(v, f, grid, c[involved], reach)
+
+
+MAX_REPAIR_ROUNDS = 12
+
+
+def on_grid(vertices, faces, grid: float, centers, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """A closed, self-intersection-free mesh moved onto the float32 grid ``grid`` so that it stays
+    so: its edges under ``COLLAPSE_GRIDS`` grid steps are collapsed in 64 bits (link condition),
+    the vertices snapped and welded (``ple.meshing.weld.weld``); then, on the faces with a corner within
+    ``reach`` of one of ``centers`` (K, 3) (the united parts), while the
+    exact check (``ple.meshing.selfcheck``) finds faces that meet when rounded once more, to twice
+    the grid (slivers of the Boolean that a rounding tilts: a file in other units, glTF's metres,
+    rounds the grid values again), the shortest edge of the thinner face of each pair is collapsed
+    onto one of its grid vertices, and so is the shortest edge of every cap flatter than
+    ``COLLAPSE_GRIDS`` grid steps. The exact check on the grid has the last word (PleError if it
+    finds any pair). Returns (vertices on the grid, faces)."""
+    v = np.asarray(vertices, float)
+    f = np.asarray(faces, np.int64)
+    for _ in range(MAX_REPAIR_ROUNDS):
+        e = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
+        e = e[np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1) < COLLAPSE_GRIDS * grid]
+        n = len(f)
+        if not len(e) or len(f := collapse_edges(v, f, e, [])[0]) == n:
+            break
+    v, f, _ = weld(v, f, grid)
+    from scipy.spatial import cKDTree  # noqa: PLC0415 - optional package
+
+    tree = cKDTree(np.asarray(centers, float).reshape(-1, 3))
+    d, _ = tree.query(v, distance_upper_bound=reach + COLLAPSE_GRIDS * grid)
+    near = np.flatnonzero(np.isfinite(d)[f].any(axis=1))
+    for _ in range(MAX_REPAIR_ROUNDS):
+        # a probe: the faces rounded once more, to twice the grid (a file in other units, glTF's
+        # metres, rounds the grid values again): faces that fold there are too thin to keep
+        probe = near[self_intersections(snap(v, 2 * grid), f[near])]
+        # and caps flatter than the grid, which any rounding may fold onto their neighbours
+        t = v[f[near]]
+        e = np.linalg.norm(t[:, [1, 2, 0]] - t, axis=2)
+        flat = near[np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+                    < COLLAPSE_GRIDS * grid * e.max(axis=1)]
+        k = np.argmin(np.linalg.norm(v[f[flat][:, [1, 2, 0]]] - v[f[flat]], axis=2), axis=1)
+        edges = np.concatenate([_thinner_edges(v, f, probe), np.stack([f[flat, k], f[flat, (k + 1) % 3]], axis=1)])
+        n = len(f)
+        if len(edges):
+            f, near = collapse_edges(v, f, edges, near)
+        if len(f) == n:
+            break  # nothing (more) can be collapsed (link condition, flips): the exact check decides
+    pairs = near[self_intersections(v, f[near])]
+    if len(pairs):
+        raise PleError(f"the union of the unclean hubs keeps {len(pairs)} self-intersecting face pairs "
+                       "on the float32 grid")
+    if edge_manifold(f)["bad_edges"]:
+        raise PleError("the union of the unclean hubs is not closed on the float32 grid")
+    used = np.unique(f)
+    remap = np.full(len(v), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return v[used], remap[f]
+
+
+def _thinner_edges(v, f, pairs) -> np.ndarray:
+    """For each intersecting face pair, the shortest edge (2 vertex ids) of its face with the
+    smaller least altitude (twice the area over the longest edge)."""
+    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+    tri = v[f[pairs]]  # (P, 2, 3, 3)
+    e = np.linalg.norm(tri[:, :, [1, 2, 0]] - tri, axis=3)  # edge k runs from corner k to k+1
+    area2 = np.linalg.norm(np.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0]), axis=2)
+    alt = area2 / np.maximum(e.max(axis=2), 1e-300)
+    which = np.argmin(alt, axis=1)
+    face = pairs[np.arange(len(pairs)), which]
+    k = np.argmin(e[np.arange(len(pairs)), which], axis=1)
+    return np.stack([f[face, k], f[face, (k + 1) % 3]], axis=1)
+
+
+def collapse_edges(v, f, edges, near):
+    """Collapse ``edges`` (E, 2) of a closed oriented mesh where the link condition holds, each
+    onto the one of its two vertices that flips none of the moved faces; collapses of one call
+    touch disjoint vertex neighbourhoods (so each one's test holds for all). Returns (faces, the
+    face ids ``near`` still standing, renumbered)."""
+    f = np.asarray(f, np.int64)
+    order = np.argsort(f.ravel(), kind="stable")
+    starts = np.searchsorted(f.ravel()[order], np.arange(len(v) + 1))
+    fan = lambda x: order[starts[x]:starts[x + 1]] // 3  # noqa: E731 - faces around vertex x
+    taken: set = set()
+    alias = np.arange(len(v))
+    drop: list = []
+    edges = np.unique(np.sort(np.asarray(edges, np.int64).reshape(-1, 2), axis=1), axis=0)
+    length = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
+    for x, y in edges[np.argsort(length, kind="stable")].tolist():
+        fx, fy = set(fan(x).tolist()), set(fan(y).tolist())
+        ring = {w for t in fx | fy for w in f[t].tolist()}
+        if x == y or ring & taken:
+            continue
+        shared = fx & fy
+        nx, ny = {w for t in fx for w in f[t].tolist()} - {x}, {w for t in fy for w in f[t].tolist()} - {y}
+        if len(shared) != 2 or nx & ny != {w for t in shared for w in f[t].tolist()} - {x, y}:
+            continue  # the link condition fails: the collapse would pinch the surface
+        for keep, gone, moved in ((x, y, fy - shared), (y, x, fx - shared)):
+            moved = f[sorted(moved)]
+            before = v[moved]
+            after = v[np.where(moved == gone, keep, moved)]
+            nb = np.cross(before[:, 1] - before[:, 0], before[:, 2] - before[:, 0])
+            na = np.cross(after[:, 1] - after[:, 0], after[:, 2] - after[:, 0])
+            if np.all(np.einsum("ij,ij->i", nb, na) > 0):
+                alias[gone] = keep
+                drop.extend(shared)
+                taken |= ring
+                break
+    keep_f = np.ones(len(f), bool)
+    keep_f[drop] = False
+    renumber = np.cumsum(keep_f) - 1
+    near = np.asarray(near, np.int64)
+    return alias[f[keep_f]], renumber[near[keep_f[near]]]
