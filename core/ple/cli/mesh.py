@@ -159,7 +159,8 @@ def run_parts(args) -> int:
 
 def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
     """Refuse a mesh whose estimated memory (or, streamed, file) exceeds the limits; returns the
-    node-groups per streamed box so that one box fits the memory limit."""
+    node-groups per streamed box so that the boxes alive at once (--workers + 1) fit the memory
+    limit."""
     limit = max_memory(args)
     levels, segments = _check_style(args.style, args.levels, args.segments)
     what = f"region {region} ({region_nodes(lat, region):,} nodes)"
@@ -185,7 +186,8 @@ def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
         raise PleError(f"{tris:,.3g} triangles ({args.style}) of {what} make a binary STL of about "
                        f"{human(tris * 50)}, more than the {human(free)} free in {out_dir}; "
                        "choose a smaller --region or fewer --levels")
-    return int(max(1, min(1 << 14, limit // per_group)))
+    boxes = stream_workers(args.workers) + 1  # boxes alive at once: one per worker and the one being written
+    return int(max(1, min(1 << 14, limit // (per_group * boxes))))
 
 
 def stream_workers(n: int | None) -> int:

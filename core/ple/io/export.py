@@ -39,8 +39,8 @@ from ..meshing.weld import (
     collapse_short_edges,
     edge_manifold,
     grid_spacing,
-    snap_faces,
     snap_triangles,
+    snapped_slices,
     weld,
 )
 from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, mesh_triangles, require
@@ -51,6 +51,7 @@ from .threemf import NS_BALLS, NS_BEAM, NS_CORE, package_bytes, write_3mf  # noq
 
 STL_RECORD = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
 STL_MAX_TRIANGLES = 2**32 - 1
+ENCODE_SLICE = 1 << 20  # faces encoded at a time (a box's float32 triangles and normals never all at once)
 
 
 def stl_records(triangles: np.ndarray, faces: np.ndarray | None = None) -> np.ndarray:
@@ -114,8 +115,16 @@ def stl_chunk(chunk, grid: float | None = None) -> np.ndarray:
     """The binary STL records of one chunk: triangles (k, 3, 3) or a pair (vertices (V, 3), faces
     (k, 3)), snapped to the float32 ``grid`` (``ple.meshing.weld``) when given, triangles whose
     corners then coincide dropped."""
-    if isinstance(chunk, tuple):
-        return stl_records(snap_faces(chunk[0], chunk[1], grid))
+    if isinstance(chunk, np.ndarray) and chunk.dtype == STL_RECORD:  # encoded already (``iter_triangles(encode=)``)
+        return chunk
+    if isinstance(chunk, tuple):  # in slices of faces: the float32 triangles and normals stay small
+        f = np.asarray(chunk[1]).reshape(-1, 3)
+        out = np.empty(len(f), STL_RECORD)
+        n = 0
+        for tri in snapped_slices(chunk[0], f, grid, ENCODE_SLICE):
+            out[n:n + len(tri)] = stl_records(tri)
+            n += len(tri)
+        return out[:n]
     tri = np.asarray(chunk, float).reshape(-1, 3, 3)
     return stl_records(snap_triangles(tri, grid) if grid is not None else tri)
 
@@ -351,10 +360,12 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
     if style != "balls-beams":
         check_float32_range(np.array(lat.bounds(r)), smallest_radius(lat, r), fmt)
     if fmt == "stl" and style != "balls-beams":
-        checked, chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet, workers)
+        grid = output_grid(lat, r)
+        checked, chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet, workers,
+                                         encode=lambda chunk: stl_chunk(chunk, grid))
         info["unclean"] = checked
-        if chunks is not None:
-            return write_stl(path, chunks, header=stl_header(unit), grid=output_grid(lat, r), workers=workers)
+        if chunks is not None:  # each box encoded by the thread that assembled it
+            return write_stl(path, chunks, header=stl_header(unit))
         if max_memory is not None and info["unclean"] is not None:  # the unions are computed in memory
             lv, sg = _check_style(style, levels, segments)
             tris = mesh_triangles(lat, r, style, lv, sg)

@@ -35,6 +35,7 @@ import trimesh
 
 from ..algebra.vectors import perpendicular_frames, unit_rows
 from ..errors import PleError
+from ..model.budget import hub_triangles, mean_degree
 from ..model.lattice import Lattice, Region
 from .hubs import hub_templates
 from .preview import balls_beams_mesh
@@ -47,6 +48,7 @@ from .weld import COLLAPSE_GRIDS, grid_spacing
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
 MAX_LEVELS = 6
 MAX_CHECK_GROUPS = 500_000  # streamed regions up to this size are checked for unclean hubs first
+BOX_TRIANGLES = 1 << 22  # triangles of a streamed box, at most (about: the estimate is from above)
 TEMPLATE_CHUNK = 768  # hub shapes per template task (fixed: the output must not depend on the workers)
 
 
@@ -551,15 +553,19 @@ def build_with_unions(tess: _Tessellator, ev, nodes) -> tuple[np.ndarray, np.nda
 
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
                    segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None, _tess=None,
-                   workers: int = 1):
+                   workers: int = 1, encode=None):
     """Stream the region's mesh box by box (bounded memory) as pairs (vertices (V, 3), faces
     (k, 3)); hubs next to a box boundary are repeated in both boxes (their vertices, not faces).
-    ``workers`` threads assemble boxes at once; the stream is the same for any number."""
+    ``workers`` threads assemble boxes at once; the stream is the same for any number. With
+    ``encode``, each box is yielded as ``encode((vertices, faces))``, computed by the same thread
+    right after the box (e.g. a file's records: the box's arrays are freed at once, and at most
+    workers + 1 boxes are alive)."""
     levels, segments = _check_style(style, levels, segments)
     r = lat.region(region)
     if style == "balls-beams" or clip_bodies(lat):  # a preview; or one mesh cut at a body's surface
         mesh = tessellate(lat, r, style, levels, segments, fillet=fillet)
-        yield np.asarray(mesh.vertices), np.asarray(mesh.faces)
+        chunk = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+        yield chunk if encode is None else encode(chunk)
         return
     if lat.group_map is not None:  # groups not similar (Möbius, warps): the general per-hub path
         lat = lat.explicit(r)
@@ -567,14 +573,22 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
     workers = max(1, int(workers))
     tess = _tess if _tess is not None else _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style),
                                                         workers=workers)
+    # a box of at most about BOX_TRIANGLES triangles (estimated from above): workers + 1 of them are alive
+    per_group = len(lat.nodes) * hub_triangles(mean_degree(lat), style, levels, segments)
+    max_groups = int(max(1, min(max_groups, BOX_TRIANGLES // max(per_group, 1))))
     try:
-        yield from _stream_boxes(tess, list(lat.iter_slabs(max_groups=max_groups, region=r)), workers)
+        yield from _stream_boxes(tess, list(lat.iter_slabs(max_groups=max_groups, region=r)), workers, encode)
     finally:
         tess.close_pool()
 
 
-def _stream_boxes(tess: _Tessellator, boxes: list, workers: int):
-    """``iter_triangles``' boxes: prepared in order by one thread, assembled by ``workers``."""
+def _stream_boxes(tess: _Tessellator, boxes: list, workers: int, encode=None):
+    """``iter_triangles``' boxes: prepared in order by one thread, assembled (and encoded) by ``workers``."""
+
+    def build(ready):
+        chunk = tess.assemble(ready.result())
+        return chunk if encode is None else encode(chunk)
+
     # boxes are prepared (hub templates) in order by one thread and assembled by ``workers``
     # threads (numpy releases the GIL in its large array operations), the next ones while the
     # caller writes this one: at most workers + 1 boxes are held at a time, and the output does
@@ -583,7 +597,7 @@ def _stream_boxes(tess: _Tessellator, boxes: list, workers: int):
         pending: deque = deque()
         for box in boxes:
             ready = prep.submit(tess.prepare, box)
-            pending.append(pool.submit(lambda ready=ready: tess.assemble(ready.result())))
+            pending.append(pool.submit(build, ready))
             if len(pending) > workers:
                 yield pending.popleft().result()
         while pending:
@@ -650,7 +664,7 @@ def smallest_radius(lat: Lattice, region=None) -> float:
 
 def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
                    segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None,
-                   workers: int = 1):
+                   workers: int = 1, encode=None):
     """The streamed mesh of a region (``iter_triangles``) if it has no unclean hubs: (report,
     chunks). Regions up to MAX_CHECK_GROUPS groups are checked first (``ple.meshing.unclean``;
     the check's hub templates are reused by the stream); report is None for larger regions
@@ -667,4 +681,5 @@ def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: in
     if report is not None and len(report.nodes):
         tess.close_pool()
         return report, None
-    return report, iter_triangles(lat, r, style, levels, segments, max_groups, _tess=tess, workers=workers)
+    return report, iter_triangles(lat, r, style, levels, segments, max_groups, _tess=tess, workers=workers,
+                                  encode=encode)

@@ -38,21 +38,31 @@ def snap_faces(vertices: np.ndarray, faces: np.ndarray, g: float | None) -> np.n
     """Triangles (k, 3, 3) float32 of ``vertices[faces]`` snapped to the grid ``g`` (``snap``), without
     those whose corners then coincide: ``snap_triangles`` of ``vertices[faces]``, bit for bit, with the
     rounding done once per vertex rather than once per corner. ``g`` None: no snap (float32 only)."""
+    parts = list(snapped_slices(vertices, faces, g, max(1, len(np.asarray(faces).reshape(-1, 3)))))
+    return parts[0] if len(parts) == 1 else np.concatenate(parts) if parts else np.zeros((0, 3, 3), np.float32)
+
+
+def snapped_slices(vertices: np.ndarray, faces: np.ndarray, g: float | None, size: int):
+    """``snap_faces`` of ``faces`` in slices of ``size`` faces (float32 triangles, a slice at a
+    time): the vertices are snapped and hashed once."""
     v = np.asarray(vertices, float).reshape(-1, 3)
     v32 = (snap(v, g) if g is not None else v).astype(np.float32)
-    faces = np.asarray(faces, np.int64).reshape(-1, 3)
-    tri = v32[faces]
-    if g is None:
-        return tri
-    # corners of one face on one grid point have equal hashes: only those faces are compared exactly
-    bits = v32.view(np.uint32).astype(np.uint64)
-    h = (bits[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (bits[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F)) ^ bits[:, 2]
-    hf = h[faces]
-    maybe = np.flatnonzero((hf[:, 0] == hf[:, 1]) | (hf[:, 1] == hf[:, 2]) | (hf[:, 2] == hf[:, 0]))
-    if not len(maybe):
-        return tri
-    drop = maybe[~_distinct_corners(tri[maybe])]
-    return np.delete(tri, drop, axis=0) if len(drop) else tri
+    faces = np.asarray(faces).reshape(-1, 3)
+    h = None
+    if g is not None:  # corners of one face on one grid point have equal hashes: only those faces are compared
+        bits = v32.view(np.uint32).astype(np.uint64)
+        h = (bits[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (bits[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F)) ^ bits[:, 2]
+    for lo in range(0, len(faces), size):
+        fs = faces[lo:lo + size]
+        tri = v32[fs]
+        if h is not None:
+            hf = h[fs]
+            maybe = np.flatnonzero((hf[:, 0] == hf[:, 1]) | (hf[:, 1] == hf[:, 2]) | (hf[:, 2] == hf[:, 0]))
+            if len(maybe):
+                drop = maybe[~_distinct_corners(tri[maybe])]
+                if len(drop):
+                    tri = np.delete(tri, drop, axis=0)
+        yield tri
 
 
 def _distinct_corners(tri: np.ndarray) -> np.ndarray:
