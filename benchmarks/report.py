@@ -162,7 +162,7 @@ def plot_curved(d) -> Path | None:
     ax.axhline(2.0, color="#c33", lw=1, ls="--", label="issue 14's target, 2 M/s")
     ax.set_xticks(range(len(labels)), labels, fontsize=8)
     ax.set_ylabel("million triangles / s to binary STL")
-    ax.set_title("Curved lattices mesh as fast as regular ones")
+    ax.set_title("Regular, curved and warped lattices to binary STL (2 cores)")
     ax.legend(frameon=False, fontsize=7, ncol=3)
     fig.tight_layout()
     out = DOCS / "img" / "curved_throughput.png"
