@@ -191,22 +191,48 @@ def _start_big_write(tmp_path: Path, out: str):
     raise AssertionError(f"the write did not start: {proc.communicate()}")
 
 
+def _children(pid: int) -> set[int]:
+    """Processes whose parent is ``pid`` (``/proc``)."""
+    out = set()
+    for d in Path("/proc").iterdir():
+        try:
+            if d.name.isdigit() and int((d / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                out.add(int(d.name))
+        except (OSError, ValueError, IndexError):
+            pass
+    return out
+
+
+def _gone(pids: set[int], seconds: float = 10.0) -> bool:
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        if not any(Path(f"/proc/{p}").exists() and "Z" not in (Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1]
+                   .split()[0]) for p in pids):
+            return True
+        time.sleep(0.05)
+    return False
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
 def test_signal_during_a_write_leaves_nothing(tmp_path, sig):
     (tmp_path / "big.stl").write_text("previous")
     proc = _start_big_write(tmp_path, "big.stl")
+    helpers = _children(proc.pid)  # the hub-template processes of --workers (default: the cores)
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 128 + sig, err
     assert "interrupted" in err and "Traceback" not in err and "Exception ignored" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["big.stl"]
     assert (tmp_path / "big.stl").read_text() == "previous"
+    assert _gone(helpers)  # no orphan left behind
 
 
 def test_sigkill_leftovers_are_removed_by_the_next_run(tmp_path):
     proc = _start_big_write(tmp_path, "big.stl")
+    helpers = _children(proc.pid)
     proc.kill()
-    proc.communicate()
+    proc.communicate(timeout=120)  # no template process keeps the command's output open
+    assert _gone(helpers)
     assert any(TMP_TAG in p.name for p in tmp_path.iterdir())  # what SIGKILL leaves behind
     assert run("mesh", "cubic", "--param", "n=2", "--out", tmp_path / "small.stl") == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["small.stl"]

@@ -23,9 +23,11 @@ U^-i V^-j W^dk V^(j+dj) U^(i+di) — independent of k — so hubs are computed o
 
 from __future__ import annotations
 
+import ctypes
 import math
 import multiprocessing
 import os
+import signal
 import weakref
 from collections import deque
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
@@ -55,6 +57,25 @@ TEMPLATE_CHUNK = 768  # hub shapes per template task (fixed: the output must not
 def _hub_templates_task(args):
     """``hub_templates`` in a template process (``_Tessellator.pool``)."""
     return hub_templates(*args)
+
+
+def _template_process_init() -> None:
+    """A template process dies with the process that forked it (a SIGTERM, a SIGKILL or a crash of
+    the command leaves no orphan behind), holds none of its output streams (a caller reading the
+    command's stdout to its end is not kept waiting), and leaves signals to its parent."""
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG = 1 (Linux)
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() == 1:  # the parent is gone already
+        os._exit(0)
+    devnull = os.open(os.devnull, os.O_RDWR)
+    for fd in (0, 1, 2):
+        os.dup2(devnull, fd)
+    os.close(devnull)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
 
 
 def zipper(angles_a: np.ndarray, angles_b: np.ndarray) -> np.ndarray:
@@ -128,7 +149,8 @@ class _Tessellator:
         # work that threads cannot share); forked here, before any thread of the stream starts
         self.pool = None
         if workers > 1 and fillet is None and hasattr(os, "fork"):
-            self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"))
+            self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
+                                            initializer=_template_process_init)
             list(self.pool.map(int, range(workers)))  # start them now
             weakref.finalize(self, self.pool.shutdown, wait=False)
 
