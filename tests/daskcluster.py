@@ -59,15 +59,17 @@ def in_flight(client) -> dict:
 
 def kill_when(proc, ready, timeout: float = 300) -> float:
     """SIGKILL ``proc`` as soon as ``ready()`` holds (polled every 50 ms; the test fails after
-    ``timeout`` seconds); returns the moment of the kill (``time.time()``, as file times)."""
+    ``timeout`` seconds); returns the moment the process is known dead (``time.time()``, as file
+    times, taken after it is reaped: a file it finished in the instant before the signal landed
+    is older than that)."""
     deadline = time.monotonic() + timeout
     while not ready():
         if time.monotonic() > deadline:
             raise AssertionError(f"the job never reached the moment to kill a worker ({timeout} s)")
         time.sleep(0.05)
-    when = time.time()
     proc.send_signal(signal.SIGKILL)
-    return when
+    proc.wait(timeout=60)
+    return time.time()
 
 
 def on_terminal(argv: list[str], env: dict, cwd: Path, timeout: float = 300) -> tuple[int, str, str]:
