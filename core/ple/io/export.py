@@ -360,9 +360,9 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
     if style != "balls-beams":
         check_float32_range(np.array(lat.bounds(r)), smallest_radius(lat, r), fmt)
     if fmt == "stl" and style != "balls-beams":
-        grid = output_grid(lat, r)
+        grid = output_grid(lat, r)  # one pass over the region's bounds serves the snap and the templates
         checked, chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet, workers,
-                                         encode=lambda chunk: stl_chunk(chunk, grid))
+                                         encode=lambda chunk: stl_chunk(chunk, grid), grid=grid)
         info["unclean"] = checked
         if chunks is not None:  # each box encoded by the thread that assembled it
             return write_stl(path, chunks, header=stl_header(unit))

@@ -686,7 +686,7 @@ def smallest_radius(lat: Lattice, region=None) -> float:
 
 def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
                    segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None,
-                   workers: int = 1, encode=None):
+                   workers: int = 1, encode=None, grid: float | None = None):
     """The streamed mesh of a region (``iter_triangles``) if it has no unclean hubs: (report,
     chunks). Regions up to MAX_CHECK_GROUPS groups are checked first (``ple.meshing.unclean``;
     the check's hub templates are reused by the stream); report is None for larger regions
@@ -698,7 +698,8 @@ def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: in
     r = lat.region(region)
     if clip_bodies(lat):  # cut at a body's surface: one Boolean of the whole mesh, in memory
         return None, None
-    tess = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style), workers=max(1, int(workers)))
+    tess = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style), grid=grid,
+                        workers=max(1, int(workers)))  # grid: the region's output_grid when the caller has it
     report = tess.find_unclean()[0] if r.groups <= MAX_CHECK_GROUPS else None
     if report is not None and len(report.nodes):
         tess.close_pool()
