@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from ple.algebra.elements import ball_ball_interfere, ball_beam_interfere, beam_distance, enclosing_ball
@@ -90,3 +91,25 @@ def test_enclosing_ball_contains_the_beam():
         ct = (1 - T)[:, None] * a + T[:, None] * b
         rt = (1 - T) * ra + T * rb
         assert np.all(np.linalg.norm(ct - c, axis=1) + rt <= r + 1e-9)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_segment_distance_matches_dense_sampling_with_points_in_either_place(seed):
+    """Segment–segment distance, either segment possibly a point (a hub centre), vs the minimum
+    over dense samples of both segments; and symmetric in the two segments."""
+    from ple.algebra.elements import segment_distance
+
+    rng = np.random.default_rng(seed)
+    k = 200
+    p1, q1, p2, q2 = (rng.normal(size=(k, 3)) for _ in range(4))
+    q1[: k // 4] = p1[: k // 4]  # first a point
+    q2[k // 4: k // 2] = p2[k // 4: k // 2]  # second a point
+    q1[k // 2: k // 2 + 10], q2[k // 2: k // 2 + 10] = p1[k // 2: k // 2 + 10], p2[k // 2: k // 2 + 10]  # both
+    s = np.linspace(0, 1, 401)
+    a = p1[:, None] + s[None, :, None] * (q1 - p1)[:, None]
+    b = p2[:, None] + s[None, :, None] * (q2 - p2)[:, None]
+    brute = np.linalg.norm(a[:, :, None] - b[:, None, :], axis=3).min(axis=(1, 2))
+    step = (np.linalg.norm(q1 - p1, axis=1) + np.linalg.norm(q2 - p2, axis=1)) / 400
+    d = segment_distance(p1, q1, p2, q2)
+    assert np.all(d <= brute + 1e-12) and np.all(brute - d <= step + 1e-12)
+    assert np.allclose(d, segment_distance(p2, q2, p1, q1), atol=1e-12)

@@ -14,6 +14,7 @@ from ple.meshing.tessellate import tessellate
 from ple.meshing.unclean import find_unclean
 from ple.model.lattice import Lattice
 from ple.program.sources import load_lattice
+from ple.queries.overlaps import unclean_pairs
 
 manifold3d = pytest.importorskip("manifold3d")
 
@@ -53,7 +54,10 @@ def test_random_unclean_lattice_meshes_its_union(seed):
     lat = random_unclean_lattice(seed)
     mesh = tessellate(lat, None, "refined", 2)
     rep = mesh.metadata["ple_unclean"]
-    assert len(rep.nodes) > 0 and rep.pairs > 0
+    # seed 1 has overlapping balls and beams (``queries.overlaps``, exact): their meshes meet; seed
+    # 2's elements are apart, but neighbouring junctions had to shrink
+    assert len(rep.nodes) > 0 and (rep.pairs > 0) == (unclean_pairs(lat)["unclean_pairs"] > 0)
+    assert rep.pairs > 0 or rep.shrunk_hubs > 0
     assert "united with manifold3d" in rep.line()
     assert_union_mesh(mesh, lat)
 
@@ -129,3 +133,88 @@ def test_detection_equals_all_pairs_of_capsules(seed):
                 pairs += 1
                 bad |= ends[i] | ends[j]
     assert rep.pairs == pairs > 0 and set(rep.nodes.tolist()) == bad
+
+
+def steady_lattice(seed: int) -> Lattice:
+    """Like ``random_unclean_lattice``, with 12 layers along W (a rotation or a shrinking scaling)."""
+    from ple.algebra.similarity import Rotation
+
+    lat = random_unclean_lattice(seed)
+    w = Rotation(0.5, Vec(0, 0, 1), Pt(0.5, 0.5, 0)) if seed % 2 else Scaling(0.93, Pt(0.3, 0.3, -2.0))
+    lat.set_w(12, w)
+    return lat
+
+
+def _spheres(tess):
+    ev = tess.lat.evaluate(tess.region)
+    idx = np.asarray(ev.node_index, np.int64)
+    tids, _, _, _ = tess.instances(idx)
+    rp = np.array([t.geometry.r_plus for t, _ in tess.tpl_list])[tids] * tess.lat.group_factors(*idx[:, :3].T)
+    return ev, idx, rp
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_steady_check_equals_the_search_of_every_element(seed):
+    """Anchored layers and their copies along W (``steady``) find exactly the unclean hubs and the
+    pairs of the search over every element; with the meshes' hulls, at least its hubs."""
+    from ple.meshing.tessellate import _Tessellator
+
+    lat = steady_lattice(seed)
+    tess = _Tessellator(lat, lat.region(), "cnt", 0, 16)
+    ev, idx, rp = _spheres(tess)
+    steady = tess._steady_layers(idx)
+    assert steady is not None and steady[1:3] == (1, 11)
+    whole = find_unclean(ev.center, ev.radius, ev.beam_nodes, rp)
+    layered = find_unclean(ev.center, ev.radius, ev.beam_nodes, rp, steady=steady)
+    assert whole.pairs > 100 and layered.pairs == whole.pairs
+    assert np.array_equal(layered.nodes, whole.nodes)
+    report, _ = tess.find_unclean()  # steady, with the hulls
+    plain = _Tessellator(lat, lat.region(), "cnt", 0, 16)
+    plain._steady_layers = lambda idx: None
+    alone, _ = plain.find_unclean()
+    assert set(alone.nodes.tolist()) <= set(report.nodes.tolist())
+
+
+def _hull_distance(a, b):
+    """Distance between the convex hulls of two small point sets: a quadratic program over convex
+    weights (scipy SLSQP), independent of ``separated``."""
+    from scipy.optimize import minimize
+
+    na = len(a)
+
+    def gap(w):
+        return np.sum((w[:na] @ a - w[na:] @ b) ** 2)
+
+    cons = [{"type": "eq", "fun": lambda w: w[:na].sum() - 1}, {"type": "eq", "fun": lambda w: w[na:].sum() - 1}]
+    w0 = np.concatenate([np.full(na, 1 / na), np.full(len(b), 1 / len(b))])
+    res = minimize(gap, w0, method="SLSQP", bounds=[(0, 1)] * len(w0), constraints=cons,
+                   options={"ftol": 1e-14, "maxiter": 500})
+    return float(np.sqrt(max(res.fun, 0.0)))
+
+
+def test_separated_is_a_proof_and_finds_clear_gaps():
+    from ple.meshing.unclean import separated
+
+    rng = np.random.default_rng(4)
+    k = 150
+    a = rng.normal(size=(k, 12, 3)) * rng.uniform(0.2, 1.5, (k, 1, 3))
+    b = rng.normal(size=(k, 10, 3)) * rng.uniform(0.2, 1.5, (k, 1, 3)) + rng.normal(size=(k, 1, 3)) * 2.5
+    margin = 0.05
+    got = separated(a, b, margin)
+    dist = np.array([_hull_distance(a[i], b[i]) for i in range(k)])
+    assert 20 < got.sum() < k - 20  # both cases occur
+    assert np.all(dist[got] > margin - 1e-6)  # a proof: hulls claimed apart are apart
+    assert np.all(got[dist > 3 * margin])  # and clear gaps are found
+    assert not separated(a, a + 1e-3, 0.0).any()  # overlapping hulls never are
+
+
+def test_false_alarms_of_the_spheres_leave_the_fast_mesh():
+    """The warped preset at n = 12: its short, thick bent-end beams made the junction spheres
+    overlap non-neighbours; the elements are apart (``queries.overlaps``, exact), the meshes'
+    hulls too, and the fast mesh has no self-intersection (exact test) and is closed."""
+    lat = load_lattice("warped", {"n": 12})
+    assert unclean_pairs(lat)["unclean_pairs"] == 0
+    mesh = tessellate(lat, None, "cnt")
+    assert len(mesh.metadata["ple_unclean"].nodes) == 0
+    assert mesh.is_watertight and mesh.is_winding_consistent
+    assert len(self_intersections(mesh.vertices, mesh.faces)) == 0

@@ -135,6 +135,7 @@ def segment_distance(p1, q1, p2, q2) -> np.ndarray:
     low, high = t < 0, t > 1
     t = np.clip(t, 0, 1)
     s = np.where(low, np.clip(-c / sa, 0, 1), np.where(high, np.clip((b - c) / sa, 0, 1), s))
+    s = np.where(e > 0, s, np.clip(-c / sa, 0, 1))  # the second segment a point: its nearest point on the first
     s = np.where(a > 0, s, 0.0)
     diff = p1 + s[..., None] * d1 - (p2 + t[..., None] * d2)
     return np.sqrt(np.sum(diff * diff, axis=-1))

@@ -124,8 +124,8 @@ def run(args) -> int:
     # design-rule check runs only when it did not (balls-beams, regions too large to check)
     report = info.get("unclean")
     if report is not None and report.pairs:
-        print(f"warning: the lattice is not clean ({report.pairs:,} element pairs overlap elements they share "
-              "no ball with, within the junctions' spheres): ple check lists the pairs", file=sys.stderr)
+        print(f"warning: the lattice is not clean ({report.pairs:,} pairs of elements that share no ball have "
+              "overlapping mesh hulls): ple check lists the pairs", file=sys.stderr)
     elif report is None and is_clean(lat, region) is False:
         print("warning: the lattice is not clean (elements overlap elements they share no ball with): ple check "
               "lists the pairs", file=sys.stderr)

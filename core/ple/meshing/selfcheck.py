@@ -24,6 +24,7 @@ from ..algebra.vectors import cross
 
 ERRBOUND = (7.0 + 56.0 * 2.0**-53) * 2.0**-53  # Shewchuk's o3derrboundA
 MAX_CELL_PAIRS = 1 << 22
+GRID_CELL = 0.5  # grid cell over the median slice size (slices: 2 median face extents long)
 
 
 def orient3d(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -97,15 +98,18 @@ def _pieces(tri: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return face, pts.min(axis=1), pts.max(axis=1)
 
 
-def candidate_pairs(tri: np.ndarray) -> np.ndarray:
+def candidate_pairs(tri: np.ndarray, fresh: np.ndarray | None = None) -> np.ndarray:
     """Pairs (P, 2) of face ids (i < j) whose slices' boxes (``_pieces``) overlap: every pair of
-    faces that meets, found with a uniform grid over the slices."""
+    faces that meets, found with a uniform grid over the slices. With ``fresh`` (F,) bool, only
+    pairs with a fresh face (cells holding none are skipped)."""
     n = len(tri)
     if n < 2:
         return np.zeros((0, 2), np.int64)
     ext = (tri.max(axis=1) - tri.min(axis=1)).max(axis=1)
     h = max(float(np.median(ext)) * 2.0, 1e-12)
     face, lo, hi = _pieces(tri, h)
+    # cells of half the median slice: clusters of small faces (a hub) beside long ones stay sparse
+    h = max(float(np.median(np.max(hi - lo, axis=1))) * GRID_CELL, 1e-12)
     origin = lo.min(axis=0)
     clo = np.floor((lo - origin) / h).astype(np.int64)
     chi = np.floor((hi - origin) / h).astype(np.int64)
@@ -121,6 +125,13 @@ def candidate_pairs(tri: np.ndarray) -> np.ndarray:
     cell = (cx * dims[1] + cy) * dims[2] + cz
     order = np.argsort(cell, kind="stable")
     cell, ids = cell[order], ids[order]
+    if fresh is not None:  # only the cells where a fresh face lies
+        starts = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]])
+        has = np.maximum.reduceat(np.asarray(fresh, bool)[face[ids]], starts)
+        keep = np.repeat(has, np.diff(np.r_[starts, len(cell)]))
+        cell, ids = cell[keep], ids[keep]
+        if not len(cell):
+            return np.zeros((0, 2), np.int64)
     starts = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]])
     sizes = np.diff(np.r_[starts, len(cell)])
     cell_of = np.repeat(np.arange(len(starts)), sizes)
@@ -137,6 +148,8 @@ def candidate_pairs(tri: np.ndarray) -> np.ndarray:
         a, b2 = ids[first], ids[second]
         fa, fb = face[a], face[b2]
         ok = (fa != fb) & np.all((lo[a] <= hi[b2]) & (lo[b2] <= hi[a]), axis=1)
+        if fresh is not None:
+            ok &= fresh[fa] | fresh[fb]
         out.append(np.stack([np.minimum(fa, fb)[ok], np.maximum(fa, fb)[ok]], axis=1))
     if not out:
         return np.zeros((0, 2), np.int64)
@@ -204,13 +217,14 @@ def _coplanar_overlap(t1: np.ndarray, t2: np.ndarray, normal: np.ndarray) -> np.
     return hit
 
 
-def self_intersections(vertices, faces) -> np.ndarray:
+def self_intersections(vertices, faces, fresh=None) -> np.ndarray:
     """Pairs (P, 2) of faces that intersect other than in their shared vertices or edge.
-    Faces with a repeated vertex are ignored (they have no interior)."""
+    Faces with a repeated vertex are ignored (they have no interior). ``fresh`` (F,) bool: only
+    pairs with at least one fresh face (the others are known apart)."""
     v = np.asarray(vertices, float).reshape(-1, 3)
     f = np.asarray(faces, np.int64).reshape(-1, 3)
     tri = v[f]
-    pairs = candidate_pairs(tri)
+    pairs = candidate_pairs(tri, None if fresh is None else np.asarray(fresh, bool).reshape(-1))
     if not len(pairs):
         return pairs
     fa, fb = f[pairs[:, 0]], f[pairs[:, 1]]

@@ -31,6 +31,7 @@ import signal
 import weakref
 from collections import deque
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from functools import partial
 
 import numpy as np
 import trimesh
@@ -44,11 +45,12 @@ from .preview import balls_beams_mesh
 from .skin import clip_bodies, clip_to_bodies
 from .styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS
 from .styles import style as style_named
-from .unclean import find_unclean, unite
+from .unclean import SEPARATION_GRIDS, find_unclean, unite
 from .weld import COLLAPSE_GRIDS, grid_spacing
 
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
 MAX_LEVELS = 6
+STEADY_MIN_LAYERS = 6  # the unclean check looks up anchors and border layers only from this many inner layers on
 MAX_CHECK_GROUPS = 500_000  # streamed regions up to this size are checked for unclean hubs first
 BOX_TRIANGLES = 1 << 22  # triangles of a streamed box, at most (about: the estimate is from above)
 TEMPLATE_CHUNK = 768  # hub shapes per template task (fixed: the output must not depend on the workers)
@@ -144,6 +146,7 @@ class _Tessellator:
                             for k in (region.k0, max(region.k1 - 1, region.k0))])
         fmin = float(np.min(lat.group_factors(corners[:, 0], corners[:, 1], corners[:, 2])))
         self.min_edge = COLLAPSE_GRIDS * self.grid / fmin
+        self.hulls: dict = {}  # template id -> ids of its vertices on their convex hull
         self.excluded = None  # sorted linear keys of nodes meshed elsewhere (``ple.meshing.unclean``)
         # hub templates of a box are built by ``workers`` processes (the CHoCC per topology is Python
         # work that threads cannot share); forked here, before any thread of the stream starts
@@ -179,12 +182,74 @@ class _Tessellator:
         idx = np.asarray(ev.node_index, np.int64)
         if len(idx) == 0:
             return find_unclean(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 2)), np.zeros(0)), ev
-        tids, _, _, _ = self.instances(idx)
-        by_id = {v[0]: v[1] for v in self.templates.values()}
-        rp_t = np.array([by_id[t].geometry.r_plus for t in range(len(by_id))])
-        clean_t = np.array([bool(by_id[t].geometry.clean) for t in range(len(by_id))])
+        tids, m, _, _ = self.instances(idx)
+        rp_t = np.array([t.geometry.r_plus for t, _ in self.tpl_list])
+        clean_t = np.array([bool(t.geometry.clean) for t, _ in self.tpl_list])
         f = self.lat.group_factors(idx[:, 0], idx[:, 1], idx[:, 2])
-        return find_unclean(ev.center, ev.radius, ev.beam_nodes, rp_t[tids] * f, ~clean_t[tids]), ev
+        points = partial(self._element_points, idx, tids, m, np.asarray(ev.beam_nodes, np.int64),
+                         np.asarray(ev.beam_index, np.int64)[:, 3])
+        # hulls more than the largest rounding of two vertices apart (the grid, then twice the grid
+        # for files in other units) stay apart in every file
+        return find_unclean(ev.center, ev.radius, ev.beam_nodes, rp_t[tids] * f, ~clean_t[tids], points,
+                            SEPARATION_GRIDS * self.grid, self._steady_layers(idx)), ev
+
+    def _steady_layers(self, idx: np.ndarray):
+        """``find_unclean``'s ``steady`` (node_index, a, b, shrink) when the region's layers along W
+        are similar copies: no filter, no graded radii, no group map (W is the last similarity
+        applied, so one similarity maps every group of layer k onto layer k + 1, §6.1.4); hubs
+        within the beams' reach along k of the lattice's ends have other beams (other templates).
+        None when there are too few inner layers to gain from it."""
+        lat, r = self.lat, self.region
+        if lat.filter is not None or lat.radius_field is not None or lat.group_map is not None or not len(idx):
+            return None
+        reach = max([abs(b.dk) for b in lat.beams], default=0)
+        a, b = max(r.k0, reach), min(r.k1, lat.counts[2] - reach)
+        if b - a < STEADY_MIN_LAYERS:
+            return None
+        f = lat.group_factors(np.full(b - a, r.i0), np.full(b - a, r.j0), np.arange(a, b))
+        return idx, a, b, float(np.min(f) / f[0])
+
+    def _hull_ids(self, t: int) -> np.ndarray:
+        """Vertex ids of template t on the convex hull of its vertices (all of them if qhull cannot
+        say: a flat hub)."""
+        if t not in self.hulls:
+            from scipy.spatial import ConvexHull, QhullError  # noqa: PLC0415 - optional package
+
+            v = self.tpl_list[t][0].vertices
+            try:
+                self.hulls[t] = np.asarray(ConvexHull(v).vertices, np.int64)
+            except (QhullError, ValueError):
+                self.hulls[t] = np.arange(len(v))
+        return self.hulls[t]
+
+    def _element_points(self, idx, tids, m, beam_nodes, pattern, elements) -> np.ndarray:
+        """Vertices (K, P, 3) whose convex hulls hold the meshes of ``elements`` (rows of the
+        region's nodes, then N + rows of its beams; ``find_unclean``'s numbering): a hub's
+        template hull vertices, a beam's two contact rings, placed by their hubs' similarities.
+        Rows shorter than P repeat their last point (the hull is unchanged)."""
+        n = len(idx)
+        elements = np.asarray(elements, np.int64)
+        sets: list = [None] * len(elements)  # (hub rows, template vertex ids) per element
+        for k, e in enumerate(elements.tolist()):
+            if e < n:
+                sets[k] = ((e, self._hull_ids(int(tids[e]))),)
+            else:
+                x, y = beam_nodes[e - n]
+                p = int(pattern[e - n])
+                ends = []
+                for h, sign in ((x, 1), (y, -1)):
+                    tpl, slot_of = self.tpl_list[int(tids[h])]
+                    ends.append((h, np.asarray(tpl.rings[slot_of[self.slots[int(idx[h, 3])].index((p, sign))]])))
+                sets[k] = tuple(ends)
+        size = max(sum(len(v) for _, v in s) for s in sets)
+        out = np.empty((len(elements), size, 3))
+        for k, s in enumerate(sets):
+            at = 0
+            for h, ids in s:
+                out[k, at:at + len(ids)] = self.tpl_list[int(tids[h])][0].vertices[ids] @ m[h, :3, :3].T + m[h, :3, 3]
+                at += len(ids)
+            out[k, at:] = out[k, at - 1]
+        return out
 
     # ----- hubs -----------------------------------------------------------------------
     def _neighbors(self, idx: np.ndarray, n: int):

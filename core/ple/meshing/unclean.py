@@ -11,6 +11,14 @@ but its two junctions. Tested conservatively, per element:
 - unclean: a hub and a hub that are not neighbours, a hub and a beam not incident to it, or two
   beams without a common ball whose volumes overlap; or a hub whose ACHoCC had to shrink its
   contact disks (``HubGeometry.clean`` is False: neighbouring junctions would cross).
+- then, when the caller knows the meshes (``points``: the tessellator's placed hub templates and
+  beam rings), each pair the spheres flag is tested on the convex hulls of the vertices of the
+  two elements' meshes (a hub's junction, a beam's strip between its two contact rings; every
+  face lies in the hull of its element's vertices): a plane separating the hulls by more than
+  ``margin`` (found by Frank–Wolfe on their Minkowski difference, ``separated``) proves that the
+  two meshes cannot meet, even after rounding to the output grid. The spheres S⁺ are loose where
+  beams are short and r⁺ large (bent, tapered rows: the warped preset at n = 70 has 6,539
+  flagged pairs, all separated; ``ple check`` finds it clean); pairs not proven apart stay unclean.
 
 The unclean hubs U are left out of the fast mesh (whose beams towards them end in capped
 contact disks, as at a region's border); the union of the fast mesh with U's balls and the
@@ -33,6 +41,7 @@ from .weld import COLLAPSE_GRIDS, edge_manifold, snap, weld
 
 TRIM = 0.5  # beams are tested from half their contact distance on (the rest is inside S⁺ of their hub)
 SPHERE_SEGMENTS = 32
+BALL_TURNS = np.array([0.6180339887498949, 0.41421356237309515, 0.7320508075688772])  # golden ratio, √2, √3
 
 
 @dataclass
@@ -50,13 +59,21 @@ class UncleanReport:
                 f"united with manifold3d")
 
 
-def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None) -> UncleanReport:
+def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, margin: float = 0.0,
+                 steady=None) -> UncleanReport:
     """Unclean hubs of a region from its balls (center (N, 3), radius (N,)), beams (M, 2 rows),
     each hub's inflated radius r_plus (N,) (world units) and ``shrunk`` (N,) hubs whose ACHoCC
-    was not clean."""
-    from scipy.sparse import coo_matrix  # noqa: PLC0415 - optional package
-    from scipy.sparse.csgraph import connected_components  # noqa: PLC0415
+    was not clean. ``points(elements)``: for element ids (K,) (hubs 0..N-1, then beams N..N+M-1)
+    the vertices (K, P, 3) whose convex hulls hold their meshes; pairs whose hulls lie more than
+    ``margin`` apart are clean (``separated``).
 
+    ``steady`` = (node_index (N, 4), a, b, shrink) for a region whose layers k in [a, b) are
+    similar copies of each other (a steady lattice along W, §6.1.4: a similarity maps layer k onto
+    k + 1, hub templates and all, away from the k borders): only the elements touching a layer
+    outside [a, b) and those whose lowest layer is a (the anchors) are looked up against all the
+    others; each anchored pair with both elements inside [a, b) stands for its copies shifted up
+    by 1, 2, … layers while they stay inside. ``shrink``: the smallest scale of a layer in
+    [a, b) relative to layer a (the margin of the anchored hulls is divided by it)."""
     c = np.asarray(center, float).reshape(-1, 3)
     rad = np.asarray(radius, float).reshape(-1)
     rp = np.maximum(np.asarray(r_plus, float).reshape(-1), rad)
@@ -77,23 +94,115 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None) -> UncleanRepo
     kinds = np.concatenate([np.zeros(n, np.int64), np.ones(m, np.int64)])
     lo = np.minimum(seg0, seg1) - rr[:, None]
     hi = np.maximum(seg0, seg1) + rr[:, None]
-    pairs = 0
+    anchored = None
+    if steady is not None:
+        node_index, ka, kb, shrink = steady
+        layer = np.asarray(node_index, np.int64)[:, 2][ends]
+        kmin, kmax = layer.min(axis=1), layer.max(axis=1)
+        inside = (kmin >= ka) & (kmax < kb)
+        anchored = inside & (kmin == ka)
+        query = ~inside | anchored
+        candidates = _query_pairs(ends, kinds, lo, hi, bn, query)
+    else:
+        candidates = non_incident_pairs(ends, kinds, lo, hi, bn)
     # the one candidate search of non-incident elements (``queries.overlaps``), tested here with
     # the junctions' spheres S⁺: elements that share a ball, and hubs joined by a beam, are the
     # junctions' business
-    for i, j in non_incident_pairs(ends, kinds, lo, hi, bn):
+    hits = []
+    for i, j in candidates:
         hit = segment_distance(seg0[i], seg1[i], seg0[j], seg1[j]) < rr[i] + rr[j]
-        pairs += int(hit.sum())
-        bad[ends[i[hit]].reshape(-1)] = True
-        bad[ends[j[hit]].reshape(-1)] = True
+        if points is not None and hit.any():  # the spheres are loose: test the meshes' hulls
+            at = np.flatnonzero(hit)
+            copies = np.zeros(len(at), bool) if anchored is None else inside[i[at]] & inside[j[at]]
+            for lo_ in range(0, len(at), SEPARATION_CHUNK):
+                part = at[lo_:lo_ + SEPARATION_CHUNK]
+                # an anchored pair stands for its copies too, the smallest of which is shrink times its size
+                far = np.where(copies[lo_:lo_ + SEPARATION_CHUNK], margin / (shrink if anchored is not None else 1.0),
+                               margin)
+                hit[part[separated(points(i[part]), points(j[part]), far)]] = False
+        hits.append(np.sort(np.stack([i[hit], j[hit]], axis=1), axis=1))
+    hits = np.unique(np.concatenate(hits), axis=0) if hits else np.zeros((0, 2), np.int64)
+    pairs = len(hits)
+    bad[ends[hits].reshape(-1)] = True
+    if anchored is not None and len(hits):
+        rep = hits[inside[hits[:, 0]] & inside[hits[:, 1]]]  # anchored: copies up to layer kb - 1
+        if len(rep):
+            pairs += _mark_copies(bad, ends[rep], kmax[rep].max(axis=1), kb, node_index)
     nodes = np.flatnonzero(bad)
     comps = 0
     if len(nodes):
+        from scipy.sparse import coo_matrix  # noqa: PLC0415 - optional package
+        from scipy.sparse.csgraph import connected_components  # noqa: PLC0415
+
         sel = bad[bn[:, 0]] & bad[bn[:, 1]]
         g = coo_matrix((np.ones(int(sel.sum())), (bn[sel, 0], bn[sel, 1])), shape=(n, n))
         _, lab = connected_components(g, directed=False)
         comps = len(np.unique(lab[nodes]))
     return UncleanReport(nodes, pairs, shrunk_count, comps)
+
+
+def _query_pairs(ends, kinds, lo, hi, bn, query):
+    """Non-incident candidate pairs (blocks of element ids) with at least one element in
+    ``query`` (E,) bool: the query elements among themselves, then against all the others."""
+    q, rest = np.flatnonzero(query), np.flatnonzero(~query)
+    for i, j in non_incident_pairs(ends[q], kinds[q], lo[q], hi[q], bn):
+        yield q[i], q[j]
+    order = np.concatenate([rest, q])
+    for i, j in non_incident_pairs(ends[order], kinds[order], lo[order], hi[order], bn, split=len(rest)):
+        yield order[i], order[j]
+
+
+def _mark_copies(bad, ends, top, kb: int, node_index) -> int:
+    """Flag the nodes of the copies of element pairs (P, 2, 2 node rows) shifted up by 1, 2, …
+    layers while their highest layer ``top`` (P,) stays below kb; returns the number of copies."""
+    idx = np.asarray(node_index, np.int64)
+    dims = idx.max(axis=0) + 1
+    dims[2] = max(int(dims[2]), kb) + 1
+    key = ((idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]) * dims[3] + idx[:, 3]
+    order = np.argsort(key)
+    shifts = np.maximum(kb - 1 - np.asarray(top, np.int64), 0)
+    rows = np.repeat(ends.reshape(len(ends), -1), shifts, axis=0)  # (copies, 4) node rows
+    s = 1 + np.arange(len(rows)) - np.repeat(np.cumsum(shifts) - shifts, shifts)
+    k = key[rows] + s[:, None] * dims[3]
+    at = np.minimum(np.searchsorted(key[order], k), len(key) - 1)
+    found = key[order][at] == k
+    bad[order[at][found]] = True
+    return int(shifts.sum())
+
+
+SEPARATION_GRIDS = 8  # hulls this many output grid steps apart stay apart after two roundings of each vertex
+SEPARATION_STEPS = 64  # Frank–Wolfe steps before a pair is left unclean (warped n = 70: at most 4 needed)
+SEPARATION_CHUNK = 4096  # pairs whose vertex sets are held at once
+
+
+def separated(a, b, margin) -> np.ndarray:
+    """Which pairs of point sets a (K, P, 3), b (K, Q, 3) have convex hulls lying more than
+    ``margin`` apart: a direction x with min(b·x) - max(a·x) > margin |x| is sought by
+    Frank–Wolfe steps towards the point of conv(b - a) nearest the origin (support points of the
+    Minkowski difference, exact line search). True is a proof (the plane normal to x separates
+    them); False means none was found in SEPARATION_STEPS steps, or the hulls meet."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    k = len(a)
+    margin = np.broadcast_to(np.asarray(margin, float), (k,))
+    out = np.zeros(k, bool)
+    x = b.mean(axis=1) - a.mean(axis=1)
+    live = np.arange(k)
+    for _ in range(SEPARATION_STEPS):
+        if not len(live):
+            break
+        xa = x[live]
+        pa = np.einsum("kpi,ki->kp", a[live], xa)
+        pb = np.einsum("kpi,ki->kp", b[live], xa)
+        norm = np.linalg.norm(xa, axis=1)
+        ok = pb.min(axis=1) - pa.max(axis=1) > margin[live] * norm
+        out[live[ok]] = True
+        s = b[live, np.argmin(pb, axis=1)] - a[live, np.argmax(pa, axis=1)]  # support of b - a along -x
+        dx = xa - s
+        den = np.einsum("ki,ki->k", dx, dx)
+        g = np.clip(np.einsum("ki,ki->k", xa, dx) / np.where(den > 0, den, 1.0), 0.0, 1.0)
+        x[live] = xa - g[:, None] * dx
+        live = live[~ok & (den > 0) & (norm > 0)]
+    return out
 
 
 def _unit_sphere(manifold3d):
@@ -118,11 +227,35 @@ def unite(mesh_vertices, mesh_faces, center, radius, beam_nodes, nodes, grid: fl
     c = np.asarray(center, float)
     rad = np.asarray(radius, float)
     unit = _unit_sphere(manifold3d)
+    base = None
+    if len(mesh_faces):
+        base = manifold3d.Manifold(manifold3d.Mesh64(
+            vert_properties=np.ascontiguousarray(mesh_vertices, np.float64),
+            tri_verts=np.ascontiguousarray(mesh_faces, np.uint64)))
+        if base.status() != manifold3d.Error.NoError:
+            raise PleError(f"the clean part of the mesh is not a manifold ({base.status()})")
+    # the polygonal balls as they are, then each turned its own way (a low-discrepancy sequence of
+    # angles): identical balls give the cone-beams of a symmetric lattice coplanar faces and ridges
+    # at one height (crossing diagonals of equal radius touch there), which the Boolean can leave
+    # overlapping; turned balls meet transversally, but make more small faces
+    for turns in (None, BALL_TURNS):
+        try:
+            return _unite_once(manifold3d, unit, base, mesh_vertices, mesh_faces, c, rad, beam_nodes, nodes, grid,
+                               turns)
+        except PleError:
+            if turns is not None:
+                raise
+    raise AssertionError("unreachable")
+
+
+def _unite_once(manifold3d, unit, base, mesh_vertices, mesh_faces, c, rad, beam_nodes, nodes, grid, turns):
+    """``unite`` with the balls turned by ``turns`` (None: not turned)."""
     ball = {}
 
     def ball_of(x):
         if x not in ball:
-            ball[x] = unit.scale([rad[x]] * 3).translate(list(c[x]))
+            b = unit if turns is None else unit.rotate(list(np.modf(x * turns)[0] * 360.0))
+            ball[x] = b.scale([rad[x]] * 3).translate(list(c[x]))
         return ball[x]
 
     parts = [ball_of(int(x)) for x in nodes]
@@ -138,22 +271,17 @@ def unite(mesh_vertices, mesh_faces, center, radius, beam_nodes, nodes, grid: fl
     involved = np.unique(np.concatenate([np.asarray(nodes, np.int64), bn[mark[bn[:, 0]] | mark[bn[:, 1]]].ravel()]))
     length = np.linalg.norm(c[bn[:, 0]] - c[bn[:, 1]], axis=1)[mark[bn[:, 0]] | mark[bn[:, 1]]]
     reach = float(np.max(rad[involved])) + (float(length.max()) / 2 if len(length) else 0.0)
-    if len(mesh_faces):
-        base = manifold3d.Manifold(manifold3d.Mesh64(
-            vert_properties=np.ascontiguousarray(mesh_vertices, np.float64),
-            tri_verts=np.ascontiguousarray(mesh_faces, np.uint64)))
-        if base.status() != manifold3d.Error.NoError:
-            raise PleError(f"the clean part of the mesh is not a manifold ({base.status()})")
+    if base is not None:
         local = base + local
     out = local.to_mesh64()
     v, f = np.asarray(out.vert_properties[:, :3], float), np.asarray(out.tri_verts, np.int64)
-    return on_grid(v, f, grid, c[involved], reach)
+    return on_grid(v, f, grid, c[involved], reach, (mesh_vertices, mesh_faces) if base is not None else None)
 
 
 MAX_REPAIR_ROUNDS = 12
 
 
-def on_grid(vertices, faces, grid: float, centers, reach: float) -> tuple[np.ndarray, np.ndarray]:
+def on_grid(vertices, faces, grid: float, centers, reach: float, old=None) -> tuple[np.ndarray, np.ndarray]:
     """A closed, self-intersection-free mesh moved onto the float32 grid ``grid`` so that it stays
     so: its edges under ``COLLAPSE_GRIDS`` grid steps are collapsed in 64 bits (link condition),
     the vertices snapped and welded (``ple.meshing.weld.weld``); then, on the faces with a corner within
@@ -163,7 +291,10 @@ def on_grid(vertices, faces, grid: float, centers, reach: float) -> tuple[np.nda
     rounds the grid values again), the shortest edge of the thinner face of each pair is collapsed
     onto one of its grid vertices, and so is the shortest edge of every cap flatter than
     ``COLLAPSE_GRIDS`` grid steps. The exact check on the grid has the last word (PleError if it
-    finds any pair). Returns (vertices on the grid, faces)."""
+    finds any pair). ``old``: (vertices, faces) of the fast mesh the Boolean started from; its
+    faces that come out unchanged (same corners on the grid) are known apart from each other
+    (the clean hubs' fast path), so only pairs with a face the Boolean or a repair made are
+    tested. Returns (vertices on the grid, faces)."""
     v = np.asarray(vertices, float)
     f = np.asarray(faces, np.int64)
     for _ in range(MAX_REPAIR_ROUNDS):
@@ -178,10 +309,20 @@ def on_grid(vertices, faces, grid: float, centers, reach: float) -> tuple[np.nda
     tree = cKDTree(np.asarray(centers, float).reshape(-1, 3))
     d, _ = tree.query(v, distance_upper_bound=reach + COLLAPSE_GRIDS * grid)
     near = np.flatnonzero(np.isfinite(d)[f].any(axis=1))
+    kept = _old_faces(old, grid, tree, reach + COLLAPSE_GRIDS * grid)
+    tested = carry = None  # the faces of the last probe and its pairs (vertex id triples)
     for _ in range(MAX_REPAIR_ROUNDS):
+        fn = np.sort(f[near], axis=1)
+        # the first probe tests the faces the Boolean made; later ones only those the last
+        # round's collapses made (the rest were tested), plus the last pairs still standing
+        fresh = _fresh(v, f[near], kept) if tested is None else _match(fn, tested) < 0
         # a probe: the faces rounded once more, to twice the grid (a file in other units, glTF's
         # metres, rounds the grid values again): faces that fold there are too thin to keep
-        probe = near[self_intersections(snap(v, 2 * grid), f[near])]
+        probe = near[self_intersections(snap(v, 2 * grid), f[near], fresh)]
+        if carry is not None and len(carry):
+            at = _match(carry.reshape(-1, 3), fn).reshape(-1, 2)
+            probe = np.concatenate([probe, near[at[(at >= 0).all(axis=1)]]])
+        tested, carry = fn, np.sort(f[probe], axis=2)
         # and caps flatter than the grid, which any rounding may fold onto their neighbours
         t = v[f[near]]
         e = np.linalg.norm(t[:, [1, 2, 0]] - t, axis=2)
@@ -194,7 +335,7 @@ def on_grid(vertices, faces, grid: float, centers, reach: float) -> tuple[np.nda
             f, near = collapse_edges(v, f, edges, near)
         if len(f) == n:
             break  # nothing (more) can be collapsed (link condition, flips): the exact check decides
-    pairs = near[self_intersections(v, f[near])]
+    pairs = near[self_intersections(v, f[near], _fresh(v, f[near], kept))]
     if len(pairs):
         raise PleError(f"the union of the unclean hubs keeps {len(pairs)} self-intersecting face pairs "
                        "on the float32 grid")
@@ -204,6 +345,47 @@ def on_grid(vertices, faces, grid: float, centers, reach: float) -> tuple[np.nda
     remap = np.full(len(v), -1, np.int64)
     remap[used] = np.arange(len(used))
     return v[used], remap[f]
+
+
+def _old_faces(old, grid: float, tree, bound: float):
+    """The fast mesh's faces ``old`` (vertices, faces) near the united parts (a corner within
+    ``bound`` of a centre of ``tree``), corners snapped to the grid: (vertices, faces)."""
+    if old is None:
+        return None
+    ov = snap(np.asarray(old[0], float).reshape(-1, 3), grid)
+    of = np.asarray(old[1], np.int64).reshape(-1, 3)
+    d, _ = tree.query(ov, distance_upper_bound=bound)
+    return ov, of[np.isfinite(d)[of].any(axis=1)]
+
+
+def _fresh(v, faces, kept) -> np.ndarray | None:
+    """Which ``faces`` (vertex ids into v, on the grid) are not faces of ``kept`` (``_old_faces``):
+    compared exactly by their corners' grid coordinates. None without ``kept`` (all fresh)."""
+    if kept is None:
+        return None
+    ov, of = kept
+    if not len(of) or not len(faces):
+        return np.ones(len(faces), bool)
+    corners = np.concatenate([v[faces].reshape(-1, 3), ov[of].reshape(-1, 3)])
+    _, vid = np.unique(corners, axis=0, return_inverse=True)
+    vid = np.sort(vid.reshape(-1, 3), axis=1)
+    _, inv = np.unique(vid, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    present = np.zeros(int(inv.max()) + 1, bool)
+    present[inv[len(faces):]] = True
+    return ~present[inv[:len(faces)]]
+
+
+def _match(rows, table) -> np.ndarray:
+    """For each row of ``rows`` (K, 3) the index of an equal row of ``table`` (T, 3), or -1."""
+    rows, table = np.asarray(rows).reshape(-1, 3), np.asarray(table).reshape(-1, 3)
+    if not len(rows) or not len(table):
+        return np.full(len(rows), -1, np.int64)
+    _, inv = np.unique(np.concatenate([table, rows]), axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    where = np.full(int(inv.max()) + 1, -1, np.int64)
+    where[inv[:len(table)]] = np.arange(len(table))
+    return where[inv[len(table):]]
 
 
 def _thinner_edges(v, f, pairs) -> np.ndarray:
