@@ -115,13 +115,16 @@ def curved_section(d) -> list[str]:
            "child process of its own (peak memory is that run's VmHWM): the per-hub path "
            "(`_Tessellator(batched=False)`, one CHoCC per hub shape) as the baseline, the batched hub templates on "
            "1 and 2 workers, the STL writer alone on the same triangles (this machine's ceiling), and the "
-           "cleanliness check `ple mesh` runs first. The curved lattice: translation U, rotation V about z, swirl W, "
+           "cleanliness check `ple mesh` runs first; last, `ple mesh` end to end on 2 workers (check, then the "
+           "checked stream reusing its hub templates, or the exact unions). The curved lattice: "
+           "translation U, rotation V about z, swirl W, "
            "one ball, 4 beam-patterns (every (i, j) column its own hub shape); regular: the same beams on "
            "translations; warped: the `warped` preset."
            + (f" Load average at the start: {la:.2f}." if la is not None else ""), "",
            "![Triangles per second, per-hub vs batched vs the writer alone](img/curved_throughput.png)", "",
            "| lattice | style | triangles | per-hub | batched, 1 worker | batched, 2 workers | speed-up vs per-hub "
-           "| writer alone | peak memory | check (unclean hubs) |", "|---|---|---|---|---|---|---|---|---|---|"]
+           "| writer alone | peak memory | check (unclean hubs) | `ple mesh`, 2 workers |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
 
     def cell(r):
         return "–" if r is None else f"{r['seconds']:.2f} s, {r['triangles_per_s'] / 1e6:.2f} M/s"
@@ -129,14 +132,16 @@ def curved_section(d) -> list[str]:
     for row in d["rows"]:
         runs = {(r["path"], r["workers"]): r for r in row["runs"]}
         style = row["style"] + (f" L{row['levels']}" if row["style"] == "refined" else "")
+        whole = row.get("ple_mesh")
         peak = max(r["peak_rss_gb"] for r in row["runs"])
+        whole_cell = "–" if whole is None else f"{cell(whole)}, {whole['peak_rss_gb']:.2f} GB"
         chk = row["cleanliness_check"]
         sp = row.get("speedup_vs_per_hub")
         out.append(f"| {row['lattice']} {row['n']}³ | {style} | {row['runs'][-1]['triangles']:,} | "
                    f"{cell(runs.get(('per-hub', 1)))} | {cell(runs.get(('batched', 1)))} | "
                    f"{cell(runs.get(('batched', 2)))} | {'–' if sp is None else f'{sp:.1f}×'} | "
                    f"{cell(row['stl_writer_only'])} | {peak:.2f} GB | "
-                   f"{chk['check_s']:.1f} s ({chk['unclean_hubs']:,}) |")
+                   f"{chk['check_s']:.1f} s ({chk['unclean_hubs']:,}) | {whole_cell} |")
     return out + ["", "Raw JSON: `benchmarks/results/curved.json`.", ""]
 
 

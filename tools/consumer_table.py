@@ -20,8 +20,7 @@ from pathlib import Path
 import lib3mf
 import manifold3d
 import numpy as np
-import trimesh
-from ple.io.export import export_mesh
+from ple.io.export import export_mesh, read_back
 from ple.io.formats import FORMAT_NAMES
 from ple.meshing.selfcheck import count_self_intersections
 from ple.meshing.tessellate import tessellate
@@ -33,12 +32,6 @@ HEADER = ("| lattice, style | format | triangles | watertight & oriented | manif
           "| lib3mf (strict) |")
 CASES = [("cubic", (3, 3, 3), "refined", 2), ("bcc", (2, 2, 2), "refined", 2), ("octet", (2, 2, 2), "cnt", 0),
          ("becots_kagome", None, "refined", 2), ("fig6_3", None, "refined", 1), ("becots_annulus", None, "cnt", 0)]
-
-
-def read_back(path) -> trimesh.Trimesh:
-    mesh = trimesh.load(path, force="mesh", process=False)
-    uniq, inv = np.unique(np.asarray(mesh.vertices), axis=0, return_inverse=True)
-    return trimesh.Trimesh(uniq, inv.reshape(-1)[np.asarray(mesh.faces)], process=False)
 
 
 def lib3mf_strict(path) -> str:
@@ -66,7 +59,7 @@ def rows() -> list[str]:
             for fmt in FORMAT_NAMES:
                 path = Path(d) / f"{name}.{fmt}"
                 export_mesh(mesh, path)
-                back = read_back(path)
+                back = read_back(path, as_stored=True)
                 f = np.asarray(back.faces)
                 topo = edge_manifold(f)
                 ok = topo == {"bad_edges": 0, "oriented": True} and back.is_watertight

@@ -26,7 +26,7 @@ import time
 
 from ..algebra.similarity import Rotation, Swirl, Translation
 from ..errors import PleError
-from ..io.export import write_stl
+from ..io.export import write_mesh, write_stl
 from ..meshing.tessellate import _Tessellator, iter_triangles, output_grid
 from ..model.lattice import Lattice
 from ..program.sources import load_lattice
@@ -103,6 +103,18 @@ def _writer_only(lat: Lattice, style: str, levels: int, path: str) -> dict:
     return {"seconds": round(dt, 3), "triangles": n, "triangles_per_s": round(n / dt)}
 
 
+def _whole(lat: Lattice, style: str, levels: int, workers: int, path: str) -> dict:
+    """What ``ple mesh --out x.stl --workers W`` does, end to end: the cleanliness check (its hub
+    templates reused by the stream), then the checked stream or the exact unions, the file."""
+    info: dict = {}
+    t0 = time.perf_counter()
+    n = write_mesh(lat, path, style, levels=levels or None, workers=workers, info=info)
+    dt = time.perf_counter() - t0
+    rep = info.get("unclean")
+    return {"path": "ple mesh", "workers": workers, "seconds": round(dt, 3), "triangles": n,
+            "triangles_per_s": round(n / dt), "unclean_hubs": None if rep is None else int(len(rep.nodes))}
+
+
 def _check(lat: Lattice, style: str, levels: int) -> dict:
     t0 = time.perf_counter()
     report, _ = _Tessellator(lat, lat.region(), style, levels, 16).find_unclean()
@@ -110,7 +122,8 @@ def _check(lat: Lattice, style: str, levels: int) -> dict:
 
 
 def child_row(lattice: str, n: int, style: str, levels: int, kind: str, workers: int) -> dict:
-    """One measurement in this (child) process: ``kind`` is batched, per-hub, writer or check."""
+    """One measurement in this (child) process: ``kind`` is batched, per-hub, writer, check or whole
+    (``ple mesh`` end to end)."""
     lat = bench_lattice(lattice, n)
     with tempfile.TemporaryDirectory(prefix="ple-bench-curved-") as d:
         path = os.path.join(d, "out.stl")
@@ -118,6 +131,8 @@ def child_row(lattice: str, n: int, style: str, levels: int, kind: str, workers:
             row = _writer_only(lat, style, levels, path)
         elif kind == "check":
             row = _check(lat, style, levels)
+        elif kind == "whole":
+            row = _whole(lat, style, levels, workers, path)
         else:
             row = _stream(lat, style, levels, kind == "batched", workers, path)
     row["peak_rss_gb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6, 3)  # VmHWM, KB on Linux
@@ -147,7 +162,8 @@ def rows(n: int, warped_n: int, styles: list[str], levels: int, per_hub: bool = 
         runs += [_child(name, size, style, lv, "batched", w) for w in (1, 2)]
         row = {"lattice": name, "n": size, "groups": size**3, "style": style, "levels": lv, "runs": runs,
                "stl_writer_only": _child(name, size, style, lv, "writer", 1),
-               "cleanliness_check": _child(name, size, style, lv, "check", 1)}
+               "cleanliness_check": _child(name, size, style, lv, "check", 1),
+               "ple_mesh": _child(name, size, style, lv, "whole", 2)}
         best = min(r["seconds"] for r in runs if r["path"] == "batched")
         row["best_triangles_per_s"] = round(runs[-1]["triangles"] / best)
         if runs[0]["path"] == "per-hub":

@@ -15,9 +15,7 @@ from __future__ import annotations
 import io
 import json
 import struct
-from collections import deque
 from collections.abc import Iterable
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +27,7 @@ from ..meshing.tessellate import (
     _check_style,
     checked_stream,
     iter_triangles,
-    output_grid,
+    ordered_map,
     smallest_radius,
     tessellate,
     weld_chunks,
@@ -54,14 +52,15 @@ STL_MAX_TRIANGLES = 2**32 - 1
 ENCODE_SLICE = 1 << 20  # faces encoded at a time (a box's float32 triangles and normals never all at once)
 
 
-def stl_records(triangles: np.ndarray, faces: np.ndarray | None = None) -> np.ndarray:
+def stl_records(triangles: np.ndarray, faces: np.ndarray | None = None, out: np.ndarray | None = None) -> np.ndarray:
     """Binary STL records for triangles (k, 3, 3), or for ``vertices[faces]`` when ``faces``
-    (k, 3) is given: unit normals (zero for degenerate faces), computed in float32."""
+    (k, 3) is given: unit normals (zero for degenerate faces), computed in float32. ``out``: k
+    records to fill (a slice of a larger block) instead of new ones."""
     if faces is None:
         tri = np.asarray(triangles, np.float32).reshape(-1, 3, 3)
     else:
         tri = np.asarray(triangles, np.float32)[faces]
-    rec = np.empty(len(tri), STL_RECORD)
+    rec = np.empty(len(tri), STL_RECORD) if out is None else out
     rec["vertices"] = tri
     rec["attr"] = 0
     a = tri[:, 1] - tri[:, 0]
@@ -122,7 +121,7 @@ def stl_chunk(chunk, grid: float | None = None) -> np.ndarray:
         out = np.empty(len(f), STL_RECORD)
         n = 0
         for tri in snapped_slices(chunk[0], f, grid, ENCODE_SLICE):
-            out[n:n + len(tri)] = stl_records(tri)
+            stl_records(tri, out=out[n:n + len(tri)])
             n += len(tri)
         return out[:n]
     tri = np.asarray(chunk, float).reshape(-1, 3, 3)
@@ -143,23 +142,6 @@ def write_stl(path, chunks: Iterable, header: bytes = b"PLE binary STL", grid: f
             w.write_records(rec)
         w.close()
     return w.count
-
-
-def ordered_map(fn, items: Iterable, workers: int = 1):
-    """``map(fn, items)`` computed by ``workers`` threads, in order, with at most workers + 1 results
-    pending (bounded memory whatever the number of items)."""
-    workers = max(1, int(workers))
-    if workers == 1:
-        yield from map(fn, items)
-        return
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        pending: deque = deque()
-        for item in items:
-            pending.append(pool.submit(fn, item))
-            if len(pending) > workers:
-                yield pending.popleft().result()
-        while pending:
-            yield pending.popleft().result()
 
 
 def prepare(vertices, faces, fmt: str, unit: str = DEFAULT_UNIT, grid: float | None = None):
@@ -287,15 +269,16 @@ def mesh_bytes(mesh: trimesh.Trimesh, fmt: str, unit: str = DEFAULT_UNIT, grid: 
     return encode_mesh(v, f, fmt, unit)
 
 
-def read_back(path, unit: str = DEFAULT_UNIT) -> trimesh.Trimesh:
+def read_back(path, unit: str = DEFAULT_UNIT, as_stored: bool = False) -> trimesh.Trimesh:
     """A written mesh file as a consumer reads it: equal coordinates merged into one vertex, in
-    PLE's axes and ``unit`` again (``ple.io.formats.from_file_axes``); vertices no face uses
-    (a beam-lattice 3MF also lists the ball centres) are dropped."""
+    PLE's axes and ``unit`` again (``ple.io.formats.from_file_axes``; ``as_stored``: the file's
+    own coordinates, as a consumer checks them); vertices no face uses (a beam-lattice 3MF also
+    lists the ball centres) are dropped."""
     fmt = mesh_format(path)
     m = trimesh.load(path, force="mesh", process=False)
     uniq, inv = np.unique(np.asarray(m.vertices, float), axis=0, return_inverse=True)
     f = inv.reshape(-1)[np.asarray(m.faces)]
-    out = trimesh.Trimesh(from_file_axes(uniq, fmt, unit), f, process=False)
+    out = trimesh.Trimesh(uniq if as_stored else from_file_axes(uniq, fmt, unit), f, process=False)
     out.remove_unreferenced_vertices()
     return out
 
@@ -357,10 +340,11 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
     r = lat.region(region)
     info = {} if info is None else info
     checked = None  # the stream's report, reused by the in-memory mesh (the check runs once)
-    if style != "balls-beams":
-        check_float32_range(np.array(lat.bounds(r)), smallest_radius(lat, r), fmt)
+    bounds = np.array(lat.bounds(r)) if style != "balls-beams" else None  # one pass: the range check and the grid
+    if bounds is not None:
+        check_float32_range(bounds, smallest_radius(lat, r), fmt)
     if fmt == "stl" and style != "balls-beams":
-        grid = output_grid(lat, r)  # one pass over the region's bounds serves the snap and the templates
+        grid = grid_spacing(*bounds)  # ``output_grid``: the snap and the templates share it
         checked, chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet, workers,
                                          encode=lambda chunk: stl_chunk(chunk, grid), grid=grid)
         info["unclean"] = checked

@@ -680,11 +680,22 @@ def _stream_boxes(tess: _Tessellator, boxes: list, workers: int, encode=None):
     # threads (numpy releases the GIL in its large array operations), the next ones while the
     # caller writes this one: at most workers + 1 boxes are held at a time, and the output does
     # not depend on the number of workers
-    with ThreadPoolExecutor(max_workers=1) as prep, ThreadPoolExecutor(max_workers=workers) as pool:
+    with ThreadPoolExecutor(max_workers=1) as prep:
+        yield from ordered_map(build, (prep.submit(tess.prepare, box) for box in boxes), workers, threads=True)
+
+
+def ordered_map(fn, items, workers: int = 1, threads: bool = False):
+    """``map(fn, items)`` computed by ``workers`` threads, in order, with at most workers + 1 results
+    pending (bounded memory whatever the number of items). One worker computes in the caller's
+    thread unless ``threads`` (then the next result is computed while the caller uses this one)."""
+    workers = max(1, int(workers))
+    if workers == 1 and not threads:
+        yield from map(fn, items)
+        return
+    with ThreadPoolExecutor(max_workers=workers) as pool:
         pending: deque = deque()
-        for box in boxes:
-            ready = prep.submit(tess.prepare, box)
-            pending.append(pool.submit(build, ready))
+        for item in items:
+            pending.append(pool.submit(fn, item))
             if len(pending) > workers:
                 yield pending.popleft().result()
         while pending:
