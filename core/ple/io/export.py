@@ -49,18 +49,26 @@ from .threemf import NS_BALLS, NS_BEAM, NS_CORE, package_bytes, write_3mf  # noq
 
 STL_RECORD = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
 STL_MAX_TRIANGLES = 2**32 - 1
-ENCODE_SLICE = 1 << 20  # faces encoded at a time (a box's float32 triangles and normals never all at once)
+ENCODE_SLICE = 1 << 15  # faces encoded at a time: the float32 triangles and normals of a slice stay in cache
 
 
 def stl_records(triangles: np.ndarray, faces: np.ndarray | None = None, out: np.ndarray | None = None) -> np.ndarray:
     """Binary STL records for triangles (k, 3, 3), or for ``vertices[faces]`` when ``faces``
     (k, 3) is given: unit normals (zero for degenerate faces), computed in float32. ``out``: k
-    records to fill (a slice of a larger block) instead of new ones."""
-    if faces is None:
-        tri = np.asarray(triangles, np.float32).reshape(-1, 3, 3)
-    else:
-        tri = np.asarray(triangles, np.float32)[faces]
-    rec = np.empty(len(tri), STL_RECORD) if out is None else out
+    records to fill (a slice of a larger block) instead of new ones. Encoded ``ENCODE_SLICE``
+    faces at a time (the same values: every record is computed on its own)."""
+    src = np.asarray(triangles, np.float32)
+    src = src.reshape(-1, 3, 3) if faces is None else src.reshape(-1, 3)
+    k = len(src) if faces is None else len(faces)
+    rec = np.empty(k, STL_RECORD) if out is None else out
+    for lo in range(0, k, ENCODE_SLICE):
+        tri = src[lo:lo + ENCODE_SLICE] if faces is None else src[faces[lo:lo + ENCODE_SLICE]]
+        _encode(tri, rec[lo:lo + ENCODE_SLICE])
+    return rec
+
+
+def _encode(tri: np.ndarray, rec: np.ndarray) -> None:
+    """Fill records ``rec`` (k,) from float32 triangles (k, 3, 3)."""
     rec["vertices"] = tri
     rec["attr"] = 0
     a = tri[:, 1] - tri[:, 0]
@@ -73,7 +81,6 @@ def stl_records(triangles: np.ndarray, faces: np.ndarray | None = None, out: np.
     ln[ln == 0] = 1
     n /= ln[:, None]
     rec["normal"] = n
-    return rec
 
 
 class StlWriter:
