@@ -114,7 +114,8 @@ def curved_section(d) -> list[str]:
            "Regular, curved and warped lattices streamed to binary STL (float32 snap included), each run in a "
            "child process of its own (peak memory is that run's VmHWM): the per-hub path "
            "(`_Tessellator(batched=False)`, one CHoCC per hub shape) as the baseline, the batched hub templates on "
-           "1 and 2 workers, the STL writer alone on the same triangles (this machine's ceiling), and the "
+           "1 and 2 workers, the STL writer alone on the same triangles (this machine's ceiling; in brackets, "
+           "writing the file's bytes alone from memory: the disk's floor), and the "
            "cleanliness check `ple mesh` runs first; last, `ple mesh` end to end on 2 workers (check, then the "
            "checked stream reusing its hub templates, or the exact unions). The curved lattice: "
            "translation U, rotation V about z, swirl W, "
@@ -135,12 +136,14 @@ def curved_section(d) -> list[str]:
         whole = row.get("ple_mesh")
         peak = max(r["peak_rss_gb"] for r in row["runs"])
         whole_cell = "–" if whole is None else f"{cell(whole)}, {whole['peak_rss_gb']:.2f} GB"
+        alone = row["stl_writer_only"].get("bytes_alone_s")
+        disk = "" if alone is None else f" ({alone:.2f} s for {row['stl_writer_only']['bytes'] / 1e9:.2f} GB)"
         chk = row["cleanliness_check"]
         sp = row.get("speedup_vs_per_hub")
         out.append(f"| {row['lattice']} {row['n']}³ | {style} | {row['runs'][-1]['triangles']:,} | "
                    f"{cell(runs.get(('per-hub', 1)))} | {cell(runs.get(('batched', 1)))} | "
                    f"{cell(runs.get(('batched', 2)))} | {'–' if sp is None else f'{sp:.1f}×'} | "
-                   f"{cell(row['stl_writer_only'])} | {peak:.2f} GB | "
+                   f"{cell(row['stl_writer_only'])}{disk} | {peak:.2f} GB | "
                    f"{chk['check_s']:.1f} s ({chk['unclean_hubs']:,}) | {whole_cell} |")
     return out + ["", "Raw JSON: `benchmarks/results/curved.json`.", ""]
 
