@@ -44,20 +44,16 @@ def snap_faces(vertices: np.ndarray, faces: np.ndarray, g: float | None) -> np.n
 
 def snapped_slices(vertices: np.ndarray, faces: np.ndarray, g: float | None, size: int):
     """``snap_faces`` of ``faces`` in slices of ``size`` faces (float32 triangles, a slice at a
-    time): the vertices are snapped and hashed once."""
+    time): the vertices are snapped once."""
     v = np.asarray(vertices, float).reshape(-1, 3)
     v32 = (snap(v, g) if g is not None else v).astype(np.float32)
     faces = np.asarray(faces).reshape(-1, 3)
-    h = None
-    if g is not None:  # corners of one face on one grid point have equal hashes: only those faces are compared
-        bits = v32.view(np.uint32).astype(np.uint64)
-        h = (bits[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (bits[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F)) ^ bits[:, 2]
+    cell = np.dtype((np.void, 12))
     for lo in range(0, len(faces), size):
-        fs = faces[lo:lo + size]
-        tri = v32[fs]
-        if h is not None:
-            hf = h[fs]
-            maybe = np.flatnonzero((hf[:, 0] == hf[:, 1]) | (hf[:, 1] == hf[:, 2]) | (hf[:, 2] == hf[:, 0]))
+        tri = v32[faces[lo:lo + size]]
+        if g is not None:  # corners equal as floats have equal bits but the sign: only those faces are compared
+            c = (tri.view(np.uint32) & np.uint32(0x7FFFFFFF)).view(cell).reshape(-1, 3)
+            maybe = np.flatnonzero((c[:, 0] == c[:, 1]) | (c[:, 1] == c[:, 2]) | (c[:, 2] == c[:, 0]))
             if len(maybe):
                 drop = maybe[~_distinct_corners(tri[maybe])]
                 if len(drop):
