@@ -14,9 +14,11 @@ GOLD = (np.sqrt(5) - 1) / 2
 def group_matrix(mats, g) -> np.ndarray:
     """G · W^k · V^j · U^i by numpy matrix powers (negative powers through the inverse)."""
     u, v, w, place = mats
+    # keyed by the matrices' bytes: an id() would be reused by a later pattern's fresh arrays
+    tag = b"".join(np.ascontiguousarray(m, dtype=float).tobytes() for m in mats)
     out = []
     for i, j, k in g:
-        key = (id(u), int(i), int(j), int(k))
+        key = (tag, int(i), int(j), int(k))
         if key not in _MATS:
             _MATS[key] = (place @ np.linalg.matrix_power(w, int(k)) @ np.linalg.matrix_power(v, int(j))
                           @ np.linalg.matrix_power(u, int(i)))
