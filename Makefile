@@ -3,7 +3,7 @@ PYTHON ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-SYSLIBS := libegl1 libegl-mesa0 libgl1-mesa-dri libxi6 libxxf86vm1 libxfixes3 libxrender1 libxkbcommon0 libsm6
+SYSLIBS := libegl1 libegl-mesa0 libgl1-mesa-dri libxi6 libxxf86vm1 libxfixes3 libxrender1 libxkbcommon0 libsm6 gcc
 PIP_FLAGS := --disable-pip-version-check -q
 
 CONSUMER_DEBS := admesh prusa-slicer
@@ -13,7 +13,7 @@ GLTF_VALIDATOR := $(VENV)/node/node_modules/gltf-validator
 
 setup: $(STAMP)
 
-# system libraries that the bpy wheel and headless EGL rendering load
+# system libraries that the bpy wheel and headless EGL rendering load, and gcc for the optional STL encoder
 syslibs:
 	@missing=""; for p in $(SYSLIBS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
 	if [ -n "$$missing" ]; then \
@@ -36,7 +36,7 @@ consumers:
 	@test -d $(GLTF_VALIDATOR) || { command -v npm >/dev/null && npm install -s --prefix $(VENV)/node gltf-validator; } \
 	  || echo "warning: could not install gltf-validator with npm (its tests will skip)"
 
-$(STAMP): pyproject.toml | syslibs consumers
+$(STAMP): pyproject.toml setup.py core/ple/io/_stlcodec.c | syslibs consumers
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) is required (bpy 5.0.1 needs Python 3.11)"; exit 2; }
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install $(PIP_FLAGS) --upgrade pip

@@ -35,13 +35,12 @@ import numpy as np
 from ..clg.grid import iter_slices, layer_grid
 from ..errors import PleError
 from ..filters.ir import filter_from_dict
-from ..io.export import mesh_bytes, stl_header, stl_records
+from ..io.export import mesh_bytes, stl_chunk, stl_header
 from ..io.files import atomic_path
 from ..io.formats import format_named
 from ..io.slices import slice_meta, write_slices
 from ..meshing.styles import style as style_named
 from ..meshing.tessellate import checked_stream, output_grid, tessellate, tessellation_box
-from ..meshing.weld import snap_faces
 from ..model.lattice import Evaluation, Lattice, Region
 from ..program.runner import run_program
 from ..program.sources import load_lattice, resolve_source
@@ -292,7 +291,7 @@ def _mesh_part(settings: dict, part: Part) -> tuple[bytes, dict]:
     verts, faces = tessellation_box(lat, settings["region"], part.params["box"], settings["style"],
                                     settings["levels"], grid=settings["grid"])
     # the whole region's float32 grid, as the streamed STL (``write_mesh``): the parts close up
-    rec = stl_records(snap_faces(verts, faces, settings["grid"]))
+    rec = stl_chunk((verts, faces), settings["grid"])
     return STL_HEADER + np.uint32(len(rec)).tobytes() + rec.tobytes(), {"triangles": int(len(rec))}
 
 
