@@ -16,6 +16,7 @@ import io
 import json
 import struct
 import sys
+import threading
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -137,20 +138,44 @@ def stl_header(unit: str = DEFAULT_UNIT, what: str = "binary STL") -> bytes:
     return f"PLE {what}, unit {unit}, Z up".encode()[:80].ljust(80, b" ")
 
 
-def stl_chunk(chunk, grid: float | None = None) -> np.ndarray:
+class RecordPool:
+    """Record buffers handed from written boxes to the next ones (thread-safe). A streamed file
+    is written box by box; fresh buffers would cost every box its page faults again (on this
+    machine first touches of a box's records took longer than encoding them). At most as many
+    buffers as boxes in flight, each as large as the largest box so far."""
+
+    def __init__(self):
+        self._free: list = []
+        self._lock = threading.Lock()
+
+    def take(self, k: int) -> np.ndarray:
+        with self._lock:
+            buf = self._free.pop() if self._free else None
+        return buf if buf is not None and len(buf) >= k else np.empty(k, STL_RECORD)
+
+    def give(self, rec: np.ndarray) -> None:
+        """Return the buffer under records ``rec`` (as ``stl_chunk`` made them from ``take``)."""
+        buf = rec if rec.base is None else rec.base
+        if isinstance(buf, np.ndarray) and buf.dtype == STL_RECORD and buf.ndim == 1:
+            with self._lock:
+                self._free.append(buf)
+
+
+def stl_chunk(chunk, grid: float | None = None, pool: RecordPool | None = None) -> np.ndarray:
     """The binary STL records of one chunk: triangles (k, 3, 3) or a pair (vertices (V, 3), faces
     (k, 3)), snapped to the float32 ``grid`` (``ple.meshing.weld``) when given, triangles whose
-    corners then coincide dropped."""
+    corners then coincide dropped. ``pool``: where the records' buffer comes from (give it back
+    once written)."""
     if isinstance(chunk, np.ndarray) and chunk.dtype == STL_RECORD:  # encoded already (``iter_triangles(encode=)``)
         return chunk
     if isinstance(chunk, tuple) and _codec is not None:  # compiled: snap, drop and encode in one pass
         v = np.ascontiguousarray(chunk[0], np.float64).reshape(-1, 3)
         f = _index_array(chunk[1])
-        out = np.empty(len(f), STL_RECORD)
+        out = np.empty(len(f), STL_RECORD) if pool is None else pool.take(len(f))
         return out[:_codec.encode(v, f, 0.0 if grid is None else float(grid), out)]
     if isinstance(chunk, tuple):  # in slices of faces: the float32 triangles and normals stay small
         f = np.asarray(chunk[1]).reshape(-1, 3)
-        out = np.empty(len(f), STL_RECORD)
+        out = np.empty(len(f), STL_RECORD) if pool is None else pool.take(len(f))
         n = 0
         for tri in snapped_slices(chunk[0], f, grid, ENCODE_SLICE):
             stl_records(tri, out=out[n:n + len(tri)])
@@ -161,17 +186,20 @@ def stl_chunk(chunk, grid: float | None = None) -> np.ndarray:
 
 
 def write_stl(path, chunks: Iterable, header: bytes = b"PLE binary STL", grid: float | None = None,
-              workers: int = 1) -> int:
+              workers: int = 1, pool: RecordPool | None = None) -> int:
     """Write chunks to binary STL atomically; a chunk is triangles (k, 3, 3) or a pair
-    (vertices (V, 3), faces (k, 3)). With ``grid`` every vertex is snapped to that float32 grid
-    (``ple.meshing.weld``; the same grid for every chunk) and triangles whose corners then
-    coincide are dropped. ``workers`` threads encode chunks at once (numpy releases the GIL),
-    at most workers + 1 held; the file does not depend on their number. Returns the number of
-    triangles."""
+    (vertices (V, 3), faces (k, 3)), or records already (``stl_chunk``). With ``grid`` every
+    vertex is snapped to that float32 grid (``ple.meshing.weld``; the same grid for every
+    chunk) and triangles whose corners then coincide are dropped. ``workers`` threads encode
+    chunks at once (numpy releases the GIL), at most workers + 1 held; the file does not depend
+    on their number. Record buffers are reused from written chunks (``pool``: the one records
+    given as chunks were taken from). Returns the number of triangles."""
+    pool = RecordPool() if pool is None else pool
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         w = StlWriter(fh, header)
-        for rec in ordered_map(lambda chunk: stl_chunk(chunk, grid), chunks, workers):
+        for rec in ordered_map(lambda chunk: stl_chunk(chunk, grid, pool), chunks, workers):
             w.write_records(rec)
+            pool.give(rec)
         w.close()
     return w.count
 
@@ -377,11 +405,12 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
         check_float32_range(bounds, smallest_radius(lat, r), fmt)
     if fmt == "stl" and style != "balls-beams":
         grid = grid_spacing(*bounds)  # ``output_grid``: the snap and the templates share it
+        pool = RecordPool()
         checked, chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet, workers,
-                                         encode=lambda chunk: stl_chunk(chunk, grid), grid=grid)
+                                         encode=lambda chunk: stl_chunk(chunk, grid, pool), grid=grid)
         info["unclean"] = checked
         if chunks is not None:  # each box encoded by the thread that assembled it
-            return write_stl(path, chunks, header=stl_header(unit))
+            return write_stl(path, chunks, header=stl_header(unit), pool=pool)
         if max_memory is not None and info["unclean"] is not None:  # the unions are computed in memory
             lv, sg = _check_style(style, levels, segments)
             tris = mesh_triangles(lat, r, style, lv, sg)

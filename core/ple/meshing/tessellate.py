@@ -54,6 +54,7 @@ STEADY_MIN_LAYERS = 6  # the unclean check looks up anchors and border layers on
 MAX_CHECK_GROUPS = 500_000  # streamed regions up to this size are checked for unclean hubs first
 BOX_TRIANGLES = 1 << 22  # triangles of a streamed box, at most (about: the estimate is from above)
 TEMPLATE_CHUNK = 768  # hub shapes per template task (fixed: the output must not depend on the workers)
+TEMPLATE_ROUND = 4  # streamed boxes whose new hub shapes are built together (fixed, as TEMPLATE_CHUNK)
 
 
 def _hub_templates_task(args):
@@ -370,6 +371,16 @@ class _Tessellator:
         the region), with capped disks where a beam leaves the region."""
         return self.assemble(self.prepare(box))
 
+    def prefetch(self, boxes: list) -> None:
+        """Build the hub templates of the own nodes of ``boxes`` at once (a round of the stream):
+        a batch of one CHoCC topology then spans several boxes, so its representative, built
+        per hub, and its fixed costs are paid once per round rather than once per box."""
+        nn = len(self.lat.nodes)
+        own = np.concatenate([box.node_index(nn) for box in boxes]).astype(np.int64)
+        own = own[self.lat.keeps(own) & ~self.is_excluded(own)]
+        if len(own):
+            self.instances(own)
+
     def prepare(self, box: Region):
         """The first half of ``build``: the box's nodes (its own and the ghosts at the far ends
         of its beams) and their hub templates (built here if new). Boxes must be prepared in
@@ -676,12 +687,17 @@ def _stream_boxes(tess: _Tessellator, boxes: list, workers: int, encode=None):
         chunk = tess.assemble(ready.result())
         return chunk if encode is None else encode(chunk)
 
+    def prepare(b):
+        if len(boxes) > 1 and b % TEMPLATE_ROUND == 0:  # rounds fixed by the box list: the same for any workers
+            tess.prefetch(boxes[b:b + TEMPLATE_ROUND])
+        return tess.prepare(boxes[b])
+
     # boxes are prepared (hub templates) in order by one thread and assembled by ``workers``
     # threads (numpy releases the GIL in its large array operations), the next ones while the
     # caller writes this one: at most workers + 1 boxes are held at a time, and the output does
     # not depend on the number of workers
     with ThreadPoolExecutor(max_workers=1) as prep:
-        yield from ordered_map(build, (prep.submit(tess.prepare, box) for box in boxes), workers, threads=True)
+        yield from ordered_map(build, (prep.submit(prepare, b) for b in range(len(boxes))), workers, threads=True)
 
 
 def ordered_map(fn, items, workers: int = 1, threads: bool = False):
