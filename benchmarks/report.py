@@ -120,7 +120,10 @@ def curved_section(d) -> list[str]:
            "checked stream reusing its hub templates, or the exact unions). The curved lattice: "
            "translation U, rotation V about z, swirl W, "
            "one ball, 4 beam-patterns (every (i, j) column its own hub shape); regular: the same beams on "
-           "translations; warped: the `warped` preset."
+           "translations; warped: the `warped` preset. Each batched cell is the fastest of "
+           f"{d.get('repeat', 1)} runs (every run's seconds are in the JSON: page faults and the file's page cache "
+           "vary by seconds on this VM); the per-hub baseline is one run. In brackets under 2 workers: CPU "
+           "seconds, user + system (template processes included)."
            + (f" Load average at the start: {la:.2f}." if la is not None else ""), "",
            "![Triangles per second, per-hub vs batched vs the writer alone](img/curved_throughput.png)", "",
            "| lattice | style | triangles | per-hub | batched, 1 worker | batched, 2 workers | speed-up vs per-hub "
@@ -129,6 +132,9 @@ def curved_section(d) -> list[str]:
 
     def cell(r):
         return "–" if r is None else f"{r['seconds']:.2f} s, {r['triangles_per_s'] / 1e6:.2f} M/s"
+
+    def cpu(r):
+        return "" if r is None or "cpu_user_s" not in r else f" (CPU {r['cpu_user_s']:.1f} + {r['cpu_sys_s']:.1f} s)"
 
     for row in d["rows"]:
         runs = {(r["path"], r["workers"]): r for r in row["runs"]}
@@ -142,7 +148,8 @@ def curved_section(d) -> list[str]:
         sp = row.get("speedup_vs_per_hub")
         out.append(f"| {row['lattice']} {row['n']}³ | {style} | {row['runs'][-1]['triangles']:,} | "
                    f"{cell(runs.get(('per-hub', 1)))} | {cell(runs.get(('batched', 1)))} | "
-                   f"{cell(runs.get(('batched', 2)))} | {'–' if sp is None else f'{sp:.1f}×'} | "
+                   f"{cell(runs.get(('batched', 2)))}{cpu(runs.get(('batched', 2)))} | "
+                   f"{'–' if sp is None else f'{sp:.1f}×'} | "
                    f"{cell(row['stl_writer_only'])}{disk} | {peak:.2f} GB | "
                    f"{chk['check_s']:.1f} s ({chk['unclean_hubs']:,}) | {whole_cell} |")
     return out + ["", "Raw JSON: `benchmarks/results/curved.json`.", ""]
@@ -155,6 +162,9 @@ def plot_curved(d) -> Path | None:
     if not d or not d.get("rows"):
         return None
     labels, series = [], {"per-hub": [], "batched, 1 worker": [], "batched, 2 workers": [], "writer alone": []}
+    def cpu(r):
+        return "" if r is None or "cpu_user_s" not in r else f" (CPU {r['cpu_user_s']:.1f} + {r['cpu_sys_s']:.1f} s)"
+
     for row in d["rows"]:
         runs = {(r["path"], r["workers"]): r for r in row["runs"]}
         labels.append(f"{row['lattice']} {row['n']}³\n{row['style']}")
