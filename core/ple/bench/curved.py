@@ -11,8 +11,9 @@ Each row streams the whole lattice to a binary STL in a child process of its own
 memory, VmHWM, is its own): ``iter_triangles`` + ``write_stl`` with the float32 snap — the path
 ``ple mesh`` takes once the cleanliness check has passed (the check is timed separately:
 ``check_s`` and the unclean hubs it finds; a lattice with unclean hubs needs unions, see
-``ple bench mesh``'s clean_vs_unclean). ``stl_writer_only`` writes the same triangles again from
-memory (the ceiling on this machine)."""
+``ple bench mesh``'s clean_vs_unclean). ``stl_writer_only`` times the writer alone on the same
+boxes, one at a time on one thread, the tessellation between them not timed (the ceiling on
+this machine)."""
 
 from __future__ import annotations
 
@@ -28,7 +29,7 @@ import numpy as np
 
 from ..algebra.similarity import Rotation, Swirl, Translation
 from ..errors import PleError
-from ..io.export import RecordPool, stl_chunk, write_mesh, write_stl
+from ..io.export import RecordPool, StlWriter, stl_chunk, stl_header, write_mesh, write_stl
 from ..meshing.tessellate import _Tessellator, iter_triangles, output_grid
 from ..model.lattice import Lattice
 from ..program.sources import load_lattice
@@ -87,26 +88,47 @@ def bench_lattice(name: str, n: int) -> Lattice:
     raise PleError(f"unknown bench lattice {name!r}")
 
 
-def _stream(lat: Lattice, style: str, levels: int, batched: bool, workers: int, path: str) -> dict:
+def _stream(lat: Lattice, style: str, levels: int, batched: bool, workers: int, path: str | None) -> dict:
     """The checked stream of ``ple mesh``: each box encoded by the thread that assembled it, into
-    record buffers handed on from written boxes."""
+    record buffers handed on from written boxes. ``path`` None: the records are counted, not
+    written (the computation without the file system)."""
     r = lat.region()
     t0 = time.perf_counter()
     tess = _Tessellator(lat, r, style, levels, 16, batched=batched, workers=workers)
     grid, pool = output_grid(lat, r), RecordPool()
     chunks = iter_triangles(lat, r, style, levels, _tess=tess, workers=workers,
                             encode=lambda chunk: stl_chunk(chunk, grid, pool))
-    n = write_stl(path, chunks, pool=pool)
+    if path is None:
+        n = 0
+        for rec in chunks:
+            n += len(rec)
+            pool.give(rec)
+    else:
+        n = write_stl(path, chunks, pool=pool)
     dt = time.perf_counter() - t0
-    return {"path": "batched" if batched else "per-hub", "workers": workers, "seconds": round(dt, 3),
+    kind = ("batched" if batched else "per-hub") + ("" if path else ", no file")
+    return {"path": kind, "workers": workers, "seconds": round(dt, 3),
             "triangles": n, "triangles_per_s": round(n / dt), "hub_templates": len(tess.templates)}
 
 
 def _writer_only(lat: Lattice, style: str, levels: int, path: str) -> dict:
-    chunks = list(iter_triangles(lat, None, style, levels))
-    t0 = time.perf_counter()
-    n = write_stl(path, chunks, grid=output_grid(lat))
-    dt = time.perf_counter() - t0
+    """The STL writer alone (one thread): snap, encode and write each box as it comes, the
+    tessellation between boxes not timed. Boxes one at a time, as in the stream (holding them
+    all first would time the page faults of a whole mesh in memory, not the writer)."""
+    grid, pool, dt, n = output_grid(lat), RecordPool(), 0.0, 0
+    with open(path, "wb") as fh:
+        w = StlWriter(fh, stl_header())
+        for chunk in iter_triangles(lat, None, style, levels):
+            t0 = time.perf_counter()
+            rec = stl_chunk(chunk, grid, pool)
+            w.write_records(rec)
+            pool.give(rec)
+            n += len(rec)
+            dt += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        w.close()
+        fh.flush()
+        dt += time.perf_counter() - t0
     size = os.path.getsize(path)
     os.remove(path)
     return {"seconds": round(dt, 3), "triangles": n, "triangles_per_s": round(n / dt),
@@ -145,8 +167,8 @@ def _check(lat: Lattice, style: str, levels: int) -> dict:
 
 
 def child_row(lattice: str, n: int, style: str, levels: int, kind: str, workers: int) -> dict:
-    """One measurement in this (child) process: ``kind`` is batched, per-hub, writer, check or whole
-    (``ple mesh`` end to end)."""
+    """One measurement in this (child) process: ``kind`` is batched, per-hub, writer, check, whole
+    (``ple mesh`` end to end) or no-file (batched, the records counted instead of written)."""
     lat = bench_lattice(lattice, n)
     with tempfile.TemporaryDirectory(prefix="ple-bench-curved-") as d:
         path = os.path.join(d, "out.stl")
@@ -156,6 +178,8 @@ def child_row(lattice: str, n: int, style: str, levels: int, kind: str, workers:
             row = _check(lat, style, levels)
         elif kind == "whole":
             row = _whole(lat, style, levels, workers, path)
+        elif kind == "no-file":
+            row = _stream(lat, style, levels, True, workers, None)
         else:
             row = _stream(lat, style, levels, kind == "batched", workers, path)
     me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -196,6 +220,7 @@ def rows(n: int, warped_n: int, styles: list[str], levels: int, per_hub: bool = 
         lv = levels if style == "refined" else 0
         runs = [_child(name, size, style, lv, "per-hub", 1)] if per_hub and name == "curved" else []
         runs += [_fastest((name, size, style, lv, "batched", w), repeat) for w in (1, 2)]
+        runs.append(_fastest((name, size, style, lv, "no-file", 2), repeat))
         row = {"lattice": name, "n": size, "groups": size**3, "style": style, "levels": lv, "runs": runs,
                "stl_writer_only": _child(name, size, style, lv, "writer", 1),
                "cleanliness_check": _child(name, size, style, lv, "check", 1),

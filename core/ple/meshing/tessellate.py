@@ -426,7 +426,7 @@ class _Tessellator:
             block += m[inst, None, :3, 3]
             mine = inst[inst < n_own]
             if len(mine):
-                faces.append((tpl.faces[None].astype(index) + offsets[mine][:, None, None]).reshape(-1, 3))
+                faces.append((tpl.faces, offsets[mine], None, None))
         # caps where a beam leaves the region
         for sel, nb, exists, inside in info.values():
             own_sel = sel < n_own
@@ -436,10 +436,9 @@ class _Tessellator:
                     inst = cut[tids[cut] == t]
                     tpl, slot_of = tpl_list[t]
                     cap = tpl.caps[slot_of[s]]
-                    faces.append((cap[None].astype(index) + offsets[inst][:, None, None]).reshape(-1, 3))
+                    faces.append((cap, offsets[inst], None, None))
         faces += self._beams(idx, n_own, tids, m, minv, offsets, tpl_list)
-        faces = np.concatenate(faces, dtype=index, casting="same_kind") if faces else np.zeros((0, 3), np.int64)
-        return verts, faces
+        return verts, _fill_faces(faces, index)
 
     def _beams(self, idx, n_own, tids, m, minv, offsets, tpl_list) -> list:
         """Strips of the beams leaving the box's hubs; one zipper per (pattern, hub templates,
@@ -479,8 +478,7 @@ class _Tessellator:
             for u in range(len(first)):
                 sel = order[bounds[u]:bounds[u + 1]]
                 which, local = self.strips[keys[u]]
-                base = np.where(which[None] == 0, offsets[src[sel]][:, None, None], offsets[dst[sel]][:, None, None])
-                out.append((base + local[None]).reshape(-1, 3))
+                out.append((local, offsets[src[sel]], offsets[dst[sel]], which == 0))
         return out
 
     def _add_strips(self, keys, rings, a0s, b0s, tids, rel, tpl_list, beam) -> None:
@@ -504,6 +502,26 @@ class _Tessellator:
                 local = np.where(which[k] == 0, ring_a[np.where(which[k] == 0, li[k], 0)],
                                  ring_b[np.where(which[k] == 1, li[k], 0)])
                 self.strips[keys[u]] = (which[k], local.astype(np.int32))  # template vertex ids
+
+
+def _fill_faces(pieces: list, index) -> np.ndarray:
+    """The box's faces (F, 3) from pieces (local faces (f, 3), offsets a (n,), offsets b (n,) or
+    None, corners on a (f, 3) or None): n copies of the local faces plus, per corner, offset a
+    (or b where it is not on a), written straight into one array (no per-piece copies to join)."""
+    total = sum(len(f) * len(a) for f, a, _, _ in pieces)
+    out = np.empty((total, 3), index)
+    lo = 0
+    for f, a, b, on_a in pieces:
+        hi = lo + len(f) * len(a)
+        dst = out[lo:hi].reshape(len(a), len(f), 3)
+        if b is None:
+            np.add(f[None], a[:, None, None], out=dst, casting="unsafe")
+        else:
+            dst[...] = b[:, None, None]
+            np.copyto(dst, a[:, None, None], where=on_a[None])
+            dst += f[None].astype(index, copy=False)
+        lo = hi
+    return out
 
 
 def _unwrap_ring(theta: np.ndarray) -> np.ndarray:
