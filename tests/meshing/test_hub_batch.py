@@ -285,3 +285,21 @@ def test_unsure_coordinates_are_those_near_a_snap_boundary():
     flip = hubs._snapped(v + hubs.SNAP_GUARD) != hubs._snapped(v - hubs.SNAP_GUARD)
     assert np.array_equal(hubs._unsure(v), np.abs(off) < hubs.SNAP_GUARD)
     assert flip[~hubs._unsure(v)].sum() == 0 and not hubs._unsure(w).any()
+
+
+@pytest.mark.parametrize("style", ["cnt", "refined"])
+def test_template_rounds_do_not_change_the_file(tmp_path, monkeypatch, style):
+    """New hub shapes built once per round of boxes (TEMPLATE_ROUND) or box by box: the same
+    STL bytes, on 1 and 2 workers."""
+    from ple.io.export import write_mesh
+
+    path = tmp_path / "curved.py"
+    path.write_text(CURVED)
+    lat = load_lattice(str(path), params={"n": 6})
+    outs = []
+    for rounds, workers in ((1, 1), (4, 1), (3, 2)):
+        monkeypatch.setattr(tessellate, "TEMPLATE_ROUND", rounds)
+        out = tmp_path / f"r{rounds}.stl"
+        write_mesh(lat, out, style=style, levels=1 if style == "refined" else None, max_groups=24, workers=workers)
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1] == outs[2]
