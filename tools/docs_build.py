@@ -28,11 +28,12 @@ THUMB_MAX_GROUPS = 64_000  # a thumbnail of a larger lattice shows a corner regi
 
 
 def api_modules() -> list[str]:
-    """Every module of the library layers, layer by layer (``algebra.similarity``, …)."""
+    """Every public module of the library layers, layer by layer (``algebra.similarity``, …)."""
     names = []
     for layer in API_LAYERS:
         pkg = importlib.import_module(f"ple.{layer}")
-        names += [f"{layer}.{m.name}" for m in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda m: m.name)]
+        names += [f"{layer}.{m.name}" for m in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda m: m.name)
+                  if not m.name.startswith("_")]  # private (the compiled STL encoder exists only where built)
     return names
 
 
