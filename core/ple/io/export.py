@@ -45,7 +45,7 @@ from ..meshing.weld import (
 )
 from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, mesh_triangles, require
 from ..model.lattice import Lattice
-from .files import atomic_path, atomic_write_text, check_output_dir, write_marker
+from .files import WriteBehind, atomic_path, atomic_write_text, check_output_dir, write_marker
 from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, from_file_axes, mesh_format, to_file_axes, unit_name
 from .threemf import NS_BALLS, NS_BEAM, NS_CORE, package_bytes, write_3mf  # noqa: F401 - NS_* re-exported
 
@@ -115,6 +115,7 @@ class StlWriter:
         self.count = 0
         fh.write(header[:80].ljust(80, b" "))
         fh.write(struct.pack("<I", 0))
+        self.behind = WriteBehind(fh)  # page cache of about two windows, whatever the file's size
 
     def write(self, triangles: np.ndarray, faces: np.ndarray | None = None) -> None:
         """Append triangles (k, 3, 3), or ``vertices[faces]`` for vertices (V, 3), faces (k, 3)."""
@@ -126,6 +127,7 @@ class StlWriter:
         if self.count > STL_MAX_TRIANGLES:
             raise PleError(f"binary STL holds at most {STL_MAX_TRIANGLES} triangles; use a smaller --region")
         self.fh.write(memoryview(rec).cast("B"))
+        self.behind.wrote()
 
     def close(self) -> None:
         self.fh.seek(80)
