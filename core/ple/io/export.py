@@ -67,11 +67,7 @@ def stl_records(triangles: np.ndarray, faces: np.ndarray | None = None, out: np.
     records to fill (a slice of a larger block) instead of new ones. Encoded ``ENCODE_SLICE``
     faces at a time (the same values: every record is computed on its own)."""
     if faces is not None and _codec is not None:  # compiled, no snap: the same records
-        v = np.ascontiguousarray(triangles, np.float64).reshape(-1, 3)
-        f = _index_array(faces)
-        rec = np.empty(len(f), STL_RECORD) if out is None else out
-        _codec.encode(v, f, 0.0, rec)
-        return rec
+        return _compiled(triangles, faces, None, lambda k: np.empty(k, STL_RECORD) if out is None else out)
     src = np.asarray(triangles, np.float32)
     src = src.reshape(-1, 3, 3) if faces is None else src.reshape(-1, 3)
     k = len(src) if faces is None else len(faces)
@@ -82,10 +78,14 @@ def stl_records(triangles: np.ndarray, faces: np.ndarray | None = None, out: np.
     return rec
 
 
-def _index_array(faces) -> np.ndarray:
-    """Faces (k, 3) as the compiled encoder reads them: contiguous int32 or int64."""
+def _compiled(vertices, faces, grid: float | None, records) -> np.ndarray:
+    """The records of ``vertices[faces]`` by the compiled encoder (snapped to ``grid`` when
+    given, faces with coinciding corners then dropped), written into ``records(k)``."""
+    v = np.ascontiguousarray(vertices, np.float64).reshape(-1, 3)
     f = np.asarray(faces).reshape(-1, 3)
-    return np.ascontiguousarray(f, f.dtype if f.dtype in (np.int32, np.int64) else np.int64)
+    f = np.ascontiguousarray(f, f.dtype if f.dtype in (np.int32, np.int64) else np.int64)  # as the encoder reads
+    out = records(len(f))
+    return out[:_codec.encode(v, f, 0.0 if grid is None else float(grid), out)]
 
 
 def _encode(tri: np.ndarray, rec: np.ndarray) -> None:
@@ -170,14 +170,12 @@ def stl_chunk(chunk, grid: float | None = None, pool: RecordPool | None = None) 
     once written)."""
     if isinstance(chunk, np.ndarray) and chunk.dtype == STL_RECORD:  # encoded already (``iter_triangles(encode=)``)
         return chunk
+    records = (lambda k: np.empty(k, STL_RECORD)) if pool is None else pool.take
     if isinstance(chunk, tuple) and _codec is not None:  # compiled: snap, drop and encode in one pass
-        v = np.ascontiguousarray(chunk[0], np.float64).reshape(-1, 3)
-        f = _index_array(chunk[1])
-        out = np.empty(len(f), STL_RECORD) if pool is None else pool.take(len(f))
-        return out[:_codec.encode(v, f, 0.0 if grid is None else float(grid), out)]
+        return _compiled(chunk[0], chunk[1], grid, records)
     if isinstance(chunk, tuple):  # in slices of faces: the float32 triangles and normals stay small
         f = np.asarray(chunk[1]).reshape(-1, 3)
-        out = np.empty(len(f), STL_RECORD) if pool is None else pool.take(len(f))
+        out = records(len(f))
         n = 0
         for tri in snapped_slices(chunk[0], f, grid, ENCODE_SLICE):
             stl_records(tri, out=out[n:n + len(tri)])

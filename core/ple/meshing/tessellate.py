@@ -375,11 +375,14 @@ class _Tessellator:
         """Build the hub templates of the own nodes of ``boxes`` at once (a round of the stream):
         a batch of one CHoCC topology then spans several boxes, so its representative, built
         per hub, and its fixed costs are paid once per round rather than once per box."""
-        nn = len(self.lat.nodes)
-        own = np.concatenate([box.node_index(nn) for box in boxes]).astype(np.int64)
-        own = own[self.lat.keeps(own) & ~self.is_excluded(own)]
+        own = np.concatenate([self._own_nodes(box) for box in boxes]).astype(np.int64)
         if len(own):
             self.instances(own)
+
+    def _own_nodes(self, box: Region) -> np.ndarray:
+        """The nodes (N, 4) of ``box`` that are meshed: kept by the filters, not excluded."""
+        own = box.node_index(len(self.lat.nodes))
+        return own[self.lat.keeps(own) & ~self.is_excluded(own)]
 
     def prepare(self, box: Region):
         """The first half of ``build``: the box's nodes (its own and the ghosts at the far ends
@@ -387,9 +390,7 @@ class _Tessellator:
         order, one at a time: template ids (and so the output) then do not depend on how many
         boxes are assembled at once."""
         lat = self.lat
-        nn = len(lat.nodes)
-        own = box.node_index(nn)
-        own = own[self.lat.keeps(own) & ~self.is_excluded(own)]
+        own = self._own_nodes(box)
         # ghosts: the far ends of beams leaving the box but not the region
         ghosts = []
         for b in lat.beams:
