@@ -44,6 +44,30 @@ def test_compiled_equals_numpy(grid, index):
     assert got.tobytes() == want.tobytes()
 
 
+@pytest.mark.parametrize("grid", [None, 2.0**-20])
+def test_pooled_buffers_hold_the_float32_vertices(grid):
+    """From a pool, the records' buffer also holds the encoder's float32 vertices after the
+    faces' records (any byte alignment of that tail): the same records, and a reused buffer
+    with stale bytes changes nothing."""
+    rng = np.random.default_rng(11)
+    v, f = hostile_mesh(rng, 900, 3001)
+    want = numpy_records((v, f), grid)
+    pool = export.RecordPool()
+    for _ in range(3):  # a fresh buffer, then the same one reused
+        got = export.stl_chunk((v, f), grid, pool)
+        assert got.tobytes() == want.tobytes()
+        assert got.base is not None and len(got.base) >= len(f) + (12 * len(v)) // 50
+        pool.give(got)
+    raw = np.full(50 * len(f) + 12 * len(v) + 64, 255, np.uint8)
+    for shift in range(4):  # the vertices' tail at every address modulo 4 (views, not copies)
+        out = raw[shift:shift + 50 * len(f) + 12 * len(v) + 3]
+        n = export._codec.encode(v, f, 0.0 if grid is None else grid, out)
+        assert out[:50 * n].tobytes() == want.tobytes()
+    small = np.zeros(50 * len(f) + 12 * len(v) - 1, np.uint8)  # no room: allocated inside, same records
+    n = export._codec.encode(v, f, 0.0 if grid is None else grid, small)
+    assert small[:50 * n].tobytes() == want.tobytes()
+
+
 def test_records_against_float64():
     """Corners are the float32 of the snapped vertices, faces with two equal snapped corners are
     gone, normals are the unit cross products (float64 reference, float32 tolerance)."""

@@ -253,12 +253,80 @@ def test_patch_collapse_equals_whole_surface_collapse(tol):
         local = surface.collapse(verts, short, tol)
         if local is None:  # not local: left to the per-hub path
             continue
-        f1, r1, _ = local
+        f1, r1, _, _ = local
         assert _canonical_faces(f0) == _canonical_faces(f1)
         assert all(np.array_equal(a, b) for a, b in zip(r0, r1))
         several += collapse_short_edges(verts, faces, rings, tol, rounds=1)[2] < n0
         told += 1
     assert several > 0 and told >= 8  # some hubs took more than one pass; most were told
+
+
+def test_a_followed_trace_collapses_the_same():
+    """``follows_trace``: a mesh whose passes would find the short edges of another's trace in
+    the same order collapses to the same faces and rings (checked by collapsing it); one whose
+    short edges come in another order does not follow it."""
+    from ple.meshing.weld import collapse_short_edges, follows_trace
+
+    c, r, nb, nr = _hub_shapes(6, 5)
+    rng = np.random.default_rng(2)
+    tol, followed, refused = 0.008, 0, 0
+    for h in range(6):
+        got: list = []
+        hubs.hub_template(c[h], r[h], nb[h], nr[h], "refined", 2, 16, _surface=got)
+        faces, rings, _ = got
+        unit = (nb[h] - c[h]) / np.linalg.norm(nb[h] - c[h], axis=1)[:, None]
+        exact = hubs._hub_surface(hubs.hub_geometry(r[h], unit, nr[h], np.linalg.norm(nb[h] - c[h], axis=1)),
+                                  "refined", 2, 16)[0]
+        verts = hubs._snapped(exact)  # as the batch collapses: equal lengths stay equal
+        trace: list = []
+        fa, ra, na = collapse_short_edges(verts, faces, rings, tol, trace=trace)
+        if not na:
+            continue
+        for scale in (1e-9, 1e-6, 1e-4, 3e-3):  # from round-off to moves that reorder or add short edges
+            for _ in range(4):
+                moved = hubs._snapped(exact + rng.normal(0, scale, verts.shape))
+                fb, rb, _ = collapse_short_edges(moved, faces, rings, tol)
+                if follows_trace(moved, trace, tol):
+                    followed += 1
+                    assert np.array_equal(fa, fb)
+                    assert all(np.array_equal(x, y) for x, y in zip(ra, rb))
+                else:
+                    refused += 1
+        e, short = trace[0]
+        if len(short) > 1:  # the first two short edges swapped: the passes are not the trace's
+            swapped = [(e, short[[1, 0, *range(2, len(short))]])] + trace[1:]
+            assert not follows_trace(verts, swapped, tol)
+    assert followed >= 10 and refused >= 5
+    assert not follows_trace(verts, [], tol)  # an empty trace tells nothing
+
+
+def test_batched_collapses_reuse_traces(monkeypatch):
+    """Hubs of a batch whose short edges come in the same order take a traced collapse instead
+    of their own (fewer patch collapses than hubs with collapses), with the per-hub triangles:
+    shapes in 3 places each (the same hub in its own frame, as along a column) and a small twist
+    of each (a neighbouring column)."""
+    c, r, nb, nr = _hub_shapes(12, 11)
+    rng = np.random.default_rng(4)
+    twist = np.array([[1, -1e-7, 0], [1e-7, 1, 0], [0, 0, 1]])
+    copies = [(c + off, nb + off[None]) for off in rng.normal(0, 5, (3, 3))]
+    copies.append((c, c[:, None] + (nb - c[:, None]) @ twist.T))
+    args = (np.concatenate([x for x, _ in copies]), np.tile(r, 4), np.concatenate([y for _, y in copies]),
+            np.tile(nr, (4, 1)))
+    calls = []
+    patch = hubs._Surface.collapse
+
+    def counted(self, *a, **k):
+        calls.append(1)
+        return patch(self, *a, **k)
+
+    monkeypatch.setattr(hubs._Surface, "collapse", counted)
+    ref, alone = _compare_templates(args, "refined", 2, 1e-3, monkeypatch)
+    monkeypatch.setattr(hubs._Surface, "collapse", counted)
+    calls.clear()
+    out, _ = hubs.hub_templates(*args, "refined", 2, 16, min_edge=1e-3)
+    plain, _ = hubs.hub_templates(*args, "refined", 2, 16, batched=False)
+    collapsed = sum(len(a.faces) < len(b.faces) for a, b in zip(ref, plain))
+    assert collapsed > 10 and len(calls) <= collapsed // 2  # each shape collapsed once for its 3 copies, at most
 
 
 @pytest.mark.parametrize("min_edge", [6.6e-5, 1e-3])

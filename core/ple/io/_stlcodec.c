@@ -22,9 +22,64 @@ static int get_buffer(PyObject *obj, Py_buffer *view, int writable, const char *
     return 0;
 }
 
+/* Records of the faces f[0 .. 3 nf) (int32 or int64 corners) over the float32 vertices v32, into
+ * out; with snap, faces two of whose corners are equal as floats are not kept. Branch-free: each
+ * record is written at the next free slot, which advances only if the face is kept (corners often
+ * share one coordinate, so short-circuit tests would be mispredicted). Returns the records kept. */
+#define FACE_LOOP(NAME, INT)                                                                            \
+    static Py_ssize_t NAME(const float *v32, const INT *f, Py_ssize_t nf, int snap, unsigned char *out) { \
+        Py_ssize_t n = 0;                                                                               \
+        for (Py_ssize_t t = 0; t < nf; t++) {                                                           \
+            const float *p0 = v32 + 3 * (Py_ssize_t)f[3 * t];                                           \
+            const float *p1 = v32 + 3 * (Py_ssize_t)f[3 * t + 1];                                       \
+            const float *p2 = v32 + 3 * (Py_ssize_t)f[3 * t + 2];                                       \
+            float a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];                           \
+            float b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];                           \
+            float n0 = a1 * b2 - a2 * b1;                                                               \
+            float n1 = a2 * b0 - a0 * b2;                                                               \
+            float n2 = a0 * b1 - a1 * b0;                                                               \
+            float s = n0 * n0;                                                                          \
+            s = s + n1 * n1;                                                                            \
+            s = s + n2 * n2;                                                                            \
+            float ln = sqrtf(s);                                                                        \
+            ln = ln == 0 ? 1 : ln;                                                                      \
+            float nrm[3] = {n0 / ln, n1 / ln, n2 / ln};                                                 \
+            unsigned char *r = out + RECORD * n; /* straight to the record: no copy through a stack */  \
+            memcpy(r, nrm, 12);                                                                         \
+            memcpy(r + 12, p0, 12);                                                                     \
+            memcpy(r + 24, p1, 12);                                                                     \
+            memcpy(r + 36, p2, 12);                                                                     \
+            r[48] = 0;                                                                                  \
+            r[49] = 0;                                                                                  \
+            int e01 = (p0[0] == p1[0]) & (p0[1] == p1[1]) & (p0[2] == p1[2]);                           \
+            int e12 = (p1[0] == p2[0]) & (p1[1] == p2[1]) & (p1[2] == p2[2]);                           \
+            int e20 = (p2[0] == p0[0]) & (p2[1] == p0[1]) & (p2[2] == p0[2]);                           \
+            n += 1 - (snap & (e01 | e12 | e20));                                                        \
+        }                                                                                               \
+        return n;                                                                                       \
+    }
+FACE_LOOP(faces32, int32_t)
+FACE_LOOP(faces64, int64_t)
+
+/* The index of the first of the m corners f outside [0, nv), or -1 (a branch-free scan first). */
+#define CORNER_CHECK(NAME, INT)                                         \
+    static Py_ssize_t NAME(const INT *f, Py_ssize_t m, Py_ssize_t nv) { \
+        int bad = 0;                                                    \
+        for (Py_ssize_t i = 0; i < m; i++)                              \
+            bad |= (f[i] < 0) | ((int64_t)f[i] >= (int64_t)nv);         \
+        for (Py_ssize_t i = 0; bad && i < m; i++)                       \
+            if (f[i] < 0 || (int64_t)f[i] >= (int64_t)nv)               \
+                return i;                                               \
+        return -1;                                                      \
+    }
+CORNER_CHECK(check32, int32_t)
+CORNER_CHECK(check64, int64_t)
+
 /* encode(vertices float64 (V, 3), faces int32 or int64 (k, 3), grid (<= 0: no snap), out bytes (k * 50))
  * -> records written. With a grid, each vertex is rounded to it (rint(x / g) * g, as np.round)
- * and faces two of whose corners are then equal as floats are dropped. */
+ * and faces two of whose corners are then equal as floats are dropped. The float32 vertices are
+ * kept in out beyond its k records when it has room (12 V + 3 bytes: a caller's reused buffer,
+ * no fresh pages to fault in on every call), else in memory allocated here. */
 static PyObject *encode(PyObject *self, PyObject *args) {
     PyObject *vo, *fo, *oo;
     double g;
@@ -63,15 +118,17 @@ static PyObject *encode(PyObject *self, PyObject *args) {
     const double *v = (const double *)vb.buf;
     const int64_t *f64 = (const int64_t *)fb.buf;
     const int32_t *f32 = (const int32_t *)fb.buf;
-#define CORNER(i) (wide ? f64[i] : (int64_t)f32[i])
-    for (Py_ssize_t i = 0; i < 3 * nf; i++) {
-        int64_t c = CORNER(i);
-        if (c < 0 || c >= nv) {
-            PyErr_Format(PyExc_IndexError, "face corner %lld out of range for %zd vertices", (long long)c, nv);
-            goto done;
-        }
+    Py_ssize_t bad = wide ? check64(f64, 3 * nf, nv) : check32(f32, 3 * nf, nv);
+    if (bad >= 0) {
+        PyErr_Format(PyExc_IndexError, "face corner %lld out of range for %zd vertices",
+                     wide ? (long long)f64[bad] : (long long)f32[bad], nv);
+        goto done;
     }
-    float *v32 = (float *)malloc((size_t)(3 * nv + 1) * sizeof(float));
+    size_t tail = (size_t)ob.len - (size_t)nf * RECORD;
+    size_t skip = (4 - ((uintptr_t)ob.buf + (size_t)nf * RECORD) % 4) % 4;
+    int own = tail < skip + (size_t)(3 * nv) * sizeof(float);
+    float *v32 = own ? (float *)malloc((size_t)(3 * nv + 1) * sizeof(float))
+                     : (float *)((unsigned char *)ob.buf + (size_t)nf * RECORD + skip);
     if (v32 == NULL) {
         PyErr_NoMemory();
         goto done;
@@ -81,41 +138,10 @@ static PyObject *encode(PyObject *self, PyObject *args) {
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t i = 0; i < 3 * nv; i++)
         v32[i] = (float)(g > 0 ? rint(v[i] / g) * g : v[i]);
-    for (Py_ssize_t t = 0; t < nf; t++) {
-        const float *p0 = v32 + 3 * CORNER(3 * t), *p1 = v32 + 3 * CORNER(3 * t + 1), *p2 = v32 + 3 * CORNER(3 * t + 2);
-        if (g > 0) {
-            int e01 = p0[0] == p1[0] && p0[1] == p1[1] && p0[2] == p1[2];
-            int e12 = p1[0] == p2[0] && p1[1] == p2[1] && p1[2] == p2[2];
-            int e20 = p2[0] == p0[0] && p2[1] == p0[1] && p2[2] == p0[2];
-            if (e01 || e12 || e20)
-                continue;
-        }
-        float a0 = p1[0] - p0[0], a1 = p1[1] - p0[1], a2 = p1[2] - p0[2];
-        float b0 = p2[0] - p0[0], b1 = p2[1] - p0[1], b2 = p2[2] - p0[2];
-        float rec[12];
-        float n0 = a1 * b2 - a2 * b1;
-        float n1 = a2 * b0 - a0 * b2;
-        float n2 = a0 * b1 - a1 * b0;
-        float s = n0 * n0;
-        s = s + n1 * n1;
-        s = s + n2 * n2;
-        float ln = sqrtf(s);
-        if (ln == 0)
-            ln = 1;
-        rec[0] = n0 / ln;
-        rec[1] = n1 / ln;
-        rec[2] = n2 / ln;
-        memcpy(rec + 3, p0, 12);
-        memcpy(rec + 6, p1, 12);
-        memcpy(rec + 9, p2, 12);
-        unsigned char *r = out + RECORD * n;
-        memcpy(r, rec, 48);
-        r[48] = 0;
-        r[49] = 0;
-        n++;
-    }
+    n = wide ? faces64(v32, f64, nf, g > 0, out) : faces32(v32, f32, nf, g > 0, out);
     Py_END_ALLOW_THREADS
-    free(v32);
+    if (own)
+        free(v32);
     result = PyLong_FromSsize_t(n);
 done:
     PyBuffer_Release(&vb);

@@ -78,13 +78,16 @@ def stl_records(triangles: np.ndarray, faces: np.ndarray | None = None, out: np.
     return rec
 
 
-def _compiled(vertices, faces, grid: float | None, records) -> np.ndarray:
+def _compiled(vertices, faces, grid: float | None, records, scratch: bool = False) -> np.ndarray:
     """The records of ``vertices[faces]`` by the compiled encoder (snapped to ``grid`` when
-    given, faces with coinciding corners then dropped), written into ``records(k)``."""
+    given, faces with coinciding corners then dropped), written into ``records(k)``; with
+    ``scratch``, into ``records(k + m)``, whose m records after the k faces' hold the encoder's
+    float32 vertices (pooled buffers: reused with them, no fresh pages for every box)."""
     v = np.ascontiguousarray(vertices, np.float64).reshape(-1, 3)
     f = np.asarray(faces).reshape(-1, 3)
     f = np.ascontiguousarray(f, f.dtype if f.dtype in (np.int32, np.int64) else np.int64)  # as the encoder reads
-    out = records(len(f))
+    k = len(f)
+    out = records(k + (-(-(12 * len(v) + 3) // STL_RECORD.itemsize) if scratch else 0))
     return out[:_codec.encode(v, f, 0.0 if grid is None else float(grid), out)]
 
 
@@ -172,7 +175,7 @@ def stl_chunk(chunk, grid: float | None = None, pool: RecordPool | None = None) 
         return chunk
     records = (lambda k: np.empty(k, STL_RECORD)) if pool is None else pool.take
     if isinstance(chunk, tuple) and _codec is not None:  # compiled: snap, drop and encode in one pass
-        return _compiled(chunk[0], chunk[1], grid, records)
+        return _compiled(chunk[0], chunk[1], grid, records, scratch=pool is not None)
     if isinstance(chunk, tuple):  # in slices of faces: the float32 triangles and normals stay small
         f = np.asarray(chunk[1]).reshape(-1, 3)
         out = records(len(f))

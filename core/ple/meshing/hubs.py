@@ -52,7 +52,7 @@ from .chocc import (
     tie_broken,
 )
 from .fillet import filleted
-from .weld import collapse_short_edges
+from .weld import collapse_short_edges, follows_trace
 
 BATCH_VERTICES = 1 << 21  # vertices of one batch's largest array level (bounds the batch's memory)
 SNAP = 2.0**-24  # grid (hub units) of the positions whose lengths decide short-edge collapses
@@ -555,8 +555,8 @@ class _Surface:
         reads or changes as long as every vertex of a changed face, and every edge still short,
         has all its faces in the patch (then the passes take the same short edges in the same
         order). The patch grows by a ring of faces until that holds. Returns (faces: the
-        untouched faces in order, then the patch's; rings; the patch's vertex ids), or None
-        where the patch would not stay local."""
+        untouched faces in order, then the patch's; rings; the patch's vertex ids; the trace of
+        its collapse, ``collapse_short_edges``), or None where the patch would not stay local."""
         mark = np.zeros(self.nv, bool)
         mark[self.edges[short].ravel()] = True
         mark[self.faces[mark[self.faces].any(axis=1)].ravel()] = True  # a collapse's new edges reach one ring out
@@ -564,14 +564,15 @@ class _Surface:
             patch = mark[self.faces].any(axis=1)
             sub = self.faces[patch]
             inner = np.bincount(sub.ravel(), minlength=self.nv) == self.degree
-            f1, r1, _ = collapse_short_edges(verts, sub, self.rings, tol)
+            trace: list = []
+            f1, r1, _ = collapse_short_edges(verts, sub, self.rings, tol, trace=trace)
             gone = np.zeros(self.nv, bool)
             gone[sub.ravel()] = True
             gone[f1.ravel()] = False
             e1 = _edges(f1)
             left = e1[np.linalg.norm(verts[e1[:, 0]] - verts[e1[:, 1]], axis=1) < tol]
             if inner[sub[gone[sub].any(axis=1)]].all() and inner[left].all():
-                return np.concatenate([self.faces[~patch], f1]), r1, np.unique(sub)
+                return np.concatenate([self.faces[~patch], f1]), r1, np.unique(sub), trace
             mark[sub.ravel()] = True
         return None
 
@@ -597,7 +598,8 @@ def _collapsed(verts: np.ndarray, surface: _Surface, tol: float) -> list:
     (built alone): a coordinate that decides a length near ``tol`` or in a collapse's patch
     may snap otherwise on the per-hub path (``_unsure``). Hubs without short edges share the
     surface; each other hub is collapsed on the patch around its short edges
-    (``_Surface.collapse``)."""
+    (``_Surface.collapse``), or takes the collapse of an earlier hub whose passes it follows
+    (``follows_trace``: the same short edges in the same order, so the same patch and faces)."""
     out: list = [(surface.faces, surface.rings)] * len(verts)
     if tol <= 0:
         return out
@@ -607,7 +609,17 @@ def _collapsed(verts: np.ndarray, surface: _Surface, tol: float) -> list:
     d = np.linalg.norm(snapped[:, e[:, 0]] - snapped[:, e[:, 1]], axis=-1)
     short = d < tol
     edge_unsure = (np.abs(d - tol) < 4 * SNAP) & (unsure[:, e[:, 0]] | unsure[:, e[:, 1]])
+    done: dict = {}  # the order of a hub's short edges -> collapses (with their traces) of hubs with it
     for k in np.flatnonzero(short.any(axis=1) | edge_unsure.any(axis=1)):
-        local = surface.collapse(snapped[k], short[k], tol) if not edge_unsure[k].any() else None
+        if edge_unsure[k].any():
+            out[k] = None
+            continue
+        s = np.flatnonzero(short[k])
+        seen = done.setdefault(s[np.argsort(d[k, s], kind="stable")].tobytes(), [])
+        local = next((c for c in seen if follows_trace(snapped[k], c[3], tol)), None)
+        if local is None:
+            local = surface.collapse(snapped[k], short[k], tol)
+            if local is not None:
+                seen.append(local)
         out[k] = None if local is None or unsure[k, local[2]].any() else local[:2]
     return out

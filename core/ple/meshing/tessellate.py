@@ -372,12 +372,12 @@ class _Tessellator:
         return self.assemble(self.prepare(box))
 
     def prefetch(self, boxes: list) -> None:
-        """Build the hub templates of the own nodes of ``boxes`` at once (a round of the stream):
+        """Build the hub templates of the nodes of ``boxes`` (own and ghosts) at once (a round of the stream):
         a batch of one CHoCC topology then spans several boxes, so its representative, built
         per hub, and its fixed costs are paid once per round rather than once per box."""
-        own = np.concatenate([self._own_nodes(box) for box in boxes]).astype(np.int64)
-        if len(own):
-            self.instances(own)
+        nodes = np.unique(np.concatenate([self._box_nodes(box)[0] for box in boxes]), axis=0)
+        if len(nodes):  # with the ghosts: the next box's first hubs are not built alone, in its own round
+            self.instances(nodes)
 
     def _own_nodes(self, box: Region) -> np.ndarray:
         """The nodes (N, 4) of ``box`` that are meshed: kept by the filters, not excluded."""
@@ -389,6 +389,12 @@ class _Tessellator:
         of its beams) and their hub templates (built here if new). Boxes must be prepared in
         order, one at a time: template ids (and so the output) then do not depend on how many
         boxes are assembled at once."""
+        idx, n_own = self._box_nodes(box)
+        return (idx, n_own) + self.instances(idx)
+
+    def _box_nodes(self, box: Region) -> tuple[np.ndarray, int]:
+        """The nodes (N, 4) a box's mesh places: its own meshed nodes, then the ghosts at the far
+        ends of its beams (in the region, outside the box). Returns (nodes, number of own)."""
         lat = self.lat
         own = self._own_nodes(box)
         # ghosts: the far ends of beams leaving the box but not the region
@@ -400,9 +406,7 @@ class _Tessellator:
             ok[ok] = self.lat.keeps(dst[ok])
             ghosts.append(dst[ok])
         ghosts = np.unique(np.concatenate(ghosts), axis=0) if ghosts else np.zeros((0, 4), np.int64)
-        idx = np.concatenate([own, ghosts]).astype(np.int64)
-        n_own = len(own)
-        return (idx, n_own) + self.instances(idx)
+        return np.concatenate([own, ghosts]).astype(np.int64), len(own)
 
     def assemble(self, prepared) -> tuple[np.ndarray, np.ndarray]:
         """The second half of ``build``: vertices and faces of a prepared box (``prepare``). Reads

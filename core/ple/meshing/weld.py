@@ -138,7 +138,8 @@ COLLAPSE_GRIDS = 4  # template edges shorter than this many grid spacings (in th
 
 
 def collapse_short_edges(vertices: np.ndarray, faces: np.ndarray, rings: list, tol: float,
-                         keep: np.ndarray | None = None, rounds: int | None = None) -> tuple[np.ndarray, list, int]:
+                         keep: np.ndarray | None = None, rounds: int | None = None,
+                         trace: list | None = None) -> tuple[np.ndarray, list, int]:
     """Collapse the edges of a closed patch shorter than ``tol`` (shortest first), each only if
     it passes the link condition (the two vertices share exactly the two opposite vertices of
     the edge's faces), so the result stays an oriented 2-manifold with boundary rings.
@@ -147,7 +148,11 @@ def collapse_short_edges(vertices: np.ndarray, faces: np.ndarray, rings: list, t
     vertex shorter). A vertex on a ring, or marked in ``keep``, survives a collapse with a
     vertex that is not. Vertex ids and positions are unchanged (removed vertices become
     unreferenced). ``rounds``: stop after this many passes over the short edges (default: until
-    none is left or none can be collapsed). Returns (faces, rings, number of collapses)."""
+    none is left or none can be collapsed). ``trace``: a list to which each pass appends (its
+    edges (E, 2), the indices of its short edges in the order they were tried): every decision
+    is combinatorial given those, so a mesh with the same faces whose passes find the same short
+    edges in the same order collapses the same way (``follows_trace``). Returns (faces, rings,
+    number of collapses)."""
     faces = np.asarray(faces, np.int64).reshape(-1, 3)
     v = np.asarray(vertices, float)
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
@@ -182,11 +187,14 @@ def collapse_short_edges(vertices: np.ndarray, faces: np.ndarray, rings: list, t
         e = np.unique(np.sort(e, axis=1), axis=0)
         d = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
         short = np.flatnonzero(d < tol)
+        short = short[np.argsort(d[short], kind="stable")]
+        if trace is not None:
+            trace.append((e, short))
         if not len(short):
             break
         progress = 0
-        for x, y in e[short[np.argsort(d[short], kind="stable")]].tolist():
-            if alias[x] != x or alias[y] != y or float(np.linalg.norm(v[x] - v[y])) >= tol:
+        for x, y in e[short].tolist():  # positions never change: each is still shorter than tol
+            if alias[x] != x or alias[y] != y:
                 continue
             shared = vf[x] & vf[y]
             if not (len(shared) == 2 or (len(shared) == 1 and (min(x, y), max(x, y)) in ring_edges)):
@@ -231,4 +239,17 @@ def collapse_short_edges(vertices: np.ndarray, faces: np.ndarray, rings: list, t
             r = r[:-1]
         new_rings.append(r)
     return out, new_rings, done
+
+
+def follows_trace(vertices: np.ndarray, trace: list, tol: float) -> bool:
+    """Whether ``collapse_short_edges`` of the same faces at ``vertices`` would take the passes
+    of ``trace`` (another mesh's, from its ``trace``): the same short edges, in the same order,
+    in every pass. Then it makes the same collapses and returns the same faces and rings."""
+    v = np.asarray(vertices, float)
+    for e, short in trace:
+        d = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
+        mine = np.flatnonzero(d < tol)
+        if len(mine) != len(short) or not np.array_equal(mine[np.argsort(d[mine], kind="stable")], short):
+            return False
+    return bool(trace)
 
