@@ -28,6 +28,7 @@ import math
 import multiprocessing
 import os
 import signal
+import threading
 import weakref
 from collections import deque
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
@@ -55,6 +56,39 @@ MAX_CHECK_GROUPS = 500_000  # streamed regions up to this size are checked for u
 BOX_TRIANGLES = 1 << 22  # triangles of a streamed box, at most (about: the estimate is from above)
 TEMPLATE_CHUNK = 768  # hub shapes per template task (fixed: the output must not depend on the workers)
 TEMPLATE_ROUND = 4  # streamed boxes whose new hub shapes are built together (fixed, as TEMPLATE_CHUNK)
+
+
+class ArrayPool:
+    """Memory of streamed boxes handed from encoded boxes to the next ones (thread-safe): a
+    box's vertices and faces are fresh arrays of some 100 MB, and first touches of fresh pages
+    cost as much as assembling them (seconds of system time over a large stream here). At most
+    as many buffers as arrays alive at once, each as large as the largest asked for so far."""
+
+    def __init__(self):
+        self._free: list = []
+        self._lock = threading.Lock()
+
+    def take(self, shape: tuple, dtype) -> np.ndarray:
+        """An uninitialised array (a view of a reused buffer when one is large enough)."""
+        dtype = np.dtype(dtype)
+        size = int(np.prod(shape)) * dtype.itemsize
+        with self._lock:  # the smallest that fits, else the largest (replaced by a larger one)
+            order = sorted(range(len(self._free)), key=lambda i: len(self._free[i]))
+            fit = next((i for i in order if len(self._free[i]) >= size), order[-1] if order else None)
+            buf = self._free.pop(fit) if fit is not None else None
+        if buf is None or len(buf) < size:  # too small: dropped, a larger one takes its place
+            buf = np.empty(max(size, 1), np.uint8)
+        return buf[:size].view(dtype).reshape(shape)
+
+    def give(self, *arrays) -> None:
+        """Hand back arrays from ``take`` (others are ignored) once nothing reads them."""
+        for a in arrays:
+            buf = a.base if isinstance(a, np.ndarray) else None
+            while isinstance(buf, np.ndarray) and buf.base is not None:
+                buf = buf.base
+            if isinstance(buf, np.ndarray) and buf.dtype == np.uint8 and buf.ndim == 1:
+                with self._lock:
+                    self._free.append(buf)
 
 
 def _hub_templates_task(args):
@@ -408,9 +442,10 @@ class _Tessellator:
         ghosts = np.unique(np.concatenate(ghosts), axis=0) if ghosts else np.zeros((0, 4), np.int64)
         return np.concatenate([own, ghosts]).astype(np.int64), len(own)
 
-    def assemble(self, prepared) -> tuple[np.ndarray, np.ndarray]:
+    def assemble(self, prepared, pool: ArrayPool | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The second half of ``build``: vertices and faces of a prepared box (``prepare``). Reads
-        the template cache only (and fills the strip cache), so boxes may be assembled at once."""
+        the template cache only (and fills the strip cache), so boxes may be assembled at once.
+        ``pool``: where the two arrays' memory comes from (give them back once read)."""
         idx, n_own, tids, m, minv, info = prepared
         tpl_list = self.tpl_list
         order = np.argsort(tids, kind="stable")
@@ -419,7 +454,7 @@ class _Tessellator:
         starts = np.concatenate([[0], np.cumsum(np.repeat(sizes, np.diff(np.append(first, len(order)))))])
         offsets = np.zeros(len(idx), np.int64)
         offsets[order] = starts[:-1]
-        verts = np.empty((int(starts[-1]), 3))
+        verts = np.empty((int(starts[-1]), 3)) if pool is None else pool.take((int(starts[-1]), 3), float)
         index = np.int32 if len(verts) < 2**31 else np.int64  # half the memory traffic of the largest array
         offsets = offsets.astype(index)
         faces = []
@@ -443,7 +478,7 @@ class _Tessellator:
                     cap = tpl.caps[slot_of[s]]
                     faces.append((cap, offsets[inst], None, None))
         faces += self._beams(idx, n_own, tids, m, minv, offsets, tpl_list)
-        return verts, _fill_faces(faces, index)
+        return verts, _fill_faces(faces, index, pool)
 
     def _beams(self, idx, n_own, tids, m, minv, offsets, tpl_list) -> list:
         """Strips of the beams leaving the box's hubs; one zipper per (pattern, hub templates,
@@ -509,12 +544,13 @@ class _Tessellator:
                 self.strips[keys[u]] = (which[k], local.astype(np.int32))  # template vertex ids
 
 
-def _fill_faces(pieces: list, index) -> np.ndarray:
+def _fill_faces(pieces: list, index, pool: ArrayPool | None = None) -> np.ndarray:
     """The box's faces (F, 3) from pieces (local faces (f, 3), offsets a (n,), offsets b (n,) or
     None, corners on a (f, 3) or None): n copies of the local faces plus, per corner, offset a
-    (or b where it is not on a), written straight into one array (no per-piece copies to join)."""
+    (or b where it is not on a), written straight into one array (no per-piece copies to join),
+    taken from ``pool`` if given."""
     total = sum(len(f) * len(a) for f, a, _, _ in pieces)
-    out = np.empty((total, 3), index)
+    out = np.empty((total, 3), index) if pool is None else pool.take((total, 3), index)
     lo = 0
     for f, a, b, on_a in pieces:
         hi = lo + len(f) * len(a)
@@ -706,9 +742,15 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
 def _stream_boxes(tess: _Tessellator, boxes: list, workers: int, encode=None):
     """``iter_triangles``' boxes: prepared in order by one thread, assembled (and encoded) by ``workers``."""
 
+    arrays = ArrayPool()
+
     def build(ready):
-        chunk = tess.assemble(ready.result())
-        return chunk if encode is None else encode(chunk)
+        if encode is None:  # the caller keeps the arrays
+            return tess.assemble(ready.result())
+        chunk = tess.assemble(ready.result(), arrays)
+        out = encode(chunk)
+        arrays.give(*chunk)  # read by now: the next box reuses their memory
+        return out
 
     def prepare(b):
         if len(boxes) > 1 and b % TEMPLATE_ROUND == 0:  # rounds fixed by the box list: the same for any workers

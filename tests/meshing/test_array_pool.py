@@ -1,0 +1,46 @@
+"""``ArrayPool``: the memory of streamed boxes reused from encoded boxes to the next ones, and a
+stream through it writes what a stream of fresh arrays writes."""
+
+import numpy as np
+from ple.bench.curved import curved_lattice
+from ple.io.export import RecordPool, stl_chunk
+from ple.meshing.tessellate import ArrayPool, iter_triangles, output_grid
+
+
+def test_buffers_are_reused_by_size():
+    pool = ArrayPool()
+    a = pool.take((1000, 3), float)
+    b = pool.take((500, 3), np.int32)
+    assert a.shape == (1000, 3) and a.dtype == float and b.shape == (500, 3) and b.dtype == np.int32
+    a[:] = 1.0
+    b[:] = 7
+    base_a = a.base
+    while base_a.base is not None:
+        base_a = base_a.base
+    pool.give(a, b, np.zeros(3))  # arrays not from the pool are ignored
+    c = pool.take((400, 3), np.int32)  # the smaller buffer fits: taken, not the larger
+    assert np.shares_memory(c, b) and not np.shares_memory(c, a)
+    d = pool.take((999, 3), float)
+    assert np.shares_memory(d, a)
+    e = pool.take((2000, 3), float)  # none left: a fresh one
+    assert not np.shares_memory(e, a) and not np.shares_memory(e, b)
+    pool.give(c, d, e)
+    big = pool.take((5000, 3), float)  # larger than any: the largest is dropped for a new one
+    assert big.shape == (5000, 3) and not any(np.shares_memory(big, x) for x in (c, d, e))
+    assert base_a.dtype == np.uint8
+
+
+def test_pooled_stream_writes_the_same_records():
+    """Streamed boxes encoded as they come (pooled arrays, 1 and 2 workers) give the records of
+    boxes assembled into fresh arrays and encoded afterwards."""
+    lat = curved_lattice(7)
+    grid = output_grid(lat)
+    fresh = b"".join(stl_chunk(c, grid).tobytes() for c in iter_triangles(lat, None, "refined", 1, max_groups=30))
+    for workers in (1, 2):
+        records = RecordPool()
+        got = []
+        for rec in iter_triangles(lat, None, "refined", 1, max_groups=30, workers=workers,
+                                  encode=lambda c, pool=records: stl_chunk(c, grid, pool)):
+            got.append(rec.tobytes())
+            records.give(rec)
+        assert len(got) > 3 and b"".join(got) == fresh
