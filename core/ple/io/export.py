@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import io
 import json
+import os
+import stat
 import struct
 import sys
 import threading
@@ -45,7 +47,7 @@ from ..meshing.weld import (
 )
 from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, mesh_triangles, require
 from ..model.lattice import Lattice
-from .files import WriteBehind, atomic_path, atomic_write_text, check_output_dir, write_marker
+from .files import DirectWriter, WriteBehind, atomic_path, atomic_write_text, check_output_dir, write_marker
 from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, from_file_axes, mesh_format, to_file_axes, unit_name
 from .threemf import NS_BALLS, NS_BEAM, NS_CORE, package_bytes, write_3mf  # noqa: F401 - NS_* re-exported
 
@@ -113,12 +115,16 @@ class StlWriter:
     Use as a context manager around ``ple.io.files.atomic_path`` output: memory stays bounded
     by the largest chunk, whatever the total."""
 
-    def __init__(self, fh, header: bytes = b"PLE binary STL"):
+    def __init__(self, fh, header: bytes = b"PLE binary STL", direct: bool = True):
         self.fh = fh
         self.count = 0
-        fh.write(header[:80].ljust(80, b" "))
-        fh.write(struct.pack("<I", 0))
-        self.behind = WriteBehind(fh)  # page cache of about two windows, whatever the file's size
+        self.direct = _direct_writer(fh) if direct else None  # a new regular file: past the page cache
+        head = header[:80].ljust(80, b" ") + struct.pack("<I", 0)
+        if self.direct is not None:
+            self.direct.write(head)
+        else:
+            fh.write(head)
+        self.behind = WriteBehind(fh)  # else a page cache of about two windows, whatever the file's size
 
     def write(self, triangles: np.ndarray, faces: np.ndarray | None = None) -> None:
         """Append triangles (k, 3, 3), or ``vertices[faces]`` for vertices (V, 3), faces (k, 3)."""
@@ -129,13 +135,43 @@ class StlWriter:
         self.count += len(rec)
         if self.count > STL_MAX_TRIANGLES:
             raise PleError(f"binary STL holds at most {STL_MAX_TRIANGLES} triangles; use a smaller --region")
+        if self.direct is not None:
+            self.direct.write(memoryview(rec).cast("B"))
+            return
         self.fh.write(memoryview(rec).cast("B"))
         self.behind.wrote()
 
     def close(self) -> None:
+        if self.direct is not None:
+            direct, self.direct = self.direct, None
+            size = direct.close()
+            self.fh.seek(80)
+            self.fh.write(struct.pack("<I", self.count))
+            self.fh.seek(size)
+            return
         self.fh.seek(80)
         self.fh.write(struct.pack("<I", self.count))
         self.fh.seek(0, 2)
+
+    def abort(self) -> None:
+        """Stop without finishing the file (its writer thread, if any, ends)."""
+        if self.direct is not None:
+            self.direct.abort()
+            self.direct = None
+
+
+def _direct_writer(fh) -> DirectWriter | None:
+    """A ``DirectWriter`` appending to ``fh`` when it is an empty regular file opened by path,
+    with nothing written yet and O_DIRECT allowed there; else None (buffered writes)."""
+    try:
+        if fh.tell() != 0 or not isinstance(fh.name, (str, bytes)):
+            return None
+        st = os.fstat(fh.fileno())
+        if not stat.S_ISREG(st.st_mode) or st.st_size or not os.path.samestat(st, os.stat(fh.name)):
+            return None
+        return DirectWriter(fh.name)
+    except (OSError, AttributeError, ValueError, io.UnsupportedOperation):
+        return None
 
 
 def stl_header(unit: str = DEFAULT_UNIT, what: str = "binary STL") -> bytes:
@@ -200,10 +236,13 @@ def write_stl(path, chunks: Iterable, header: bytes = b"PLE binary STL", grid: f
     pool = RecordPool() if pool is None else pool
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         w = StlWriter(fh, header)
-        for rec in ordered_map(lambda chunk: stl_chunk(chunk, grid, pool), chunks, workers):
-            w.write_records(rec)
-            pool.give(rec)
-        w.close()
+        try:
+            for rec in ordered_map(lambda chunk: stl_chunk(chunk, grid, pool), chunks, workers):
+                w.write_records(rec)
+                pool.give(rec)
+            w.close()
+        finally:
+            w.abort()  # after an error: its writer thread ends (the temporary is removed)
     return w.count
 
 
