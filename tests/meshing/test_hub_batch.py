@@ -371,3 +371,42 @@ def test_template_rounds_do_not_change_the_file(tmp_path, monkeypatch, style):
         write_mesh(lat, out, style=style, levels=1 if style == "refined" else None, max_groups=24, workers=workers)
         outs.append(out.read_bytes())
     assert outs[0] == outs[1] == outs[2]
+
+
+@pytest.mark.parametrize("style, levels", [("cnt", 0), ("refined", 2)])
+def test_representatives_carry_to_the_next_call(style, levels, monkeypatch):
+    """A second ``hub_templates`` call with the first call's representatives (``reps``, as the
+    next round of boxes gets them) batches its hubs on those topologies: fewer per-hub builds
+    than without them, and the per-hub triangles either way."""
+    c, r, nb, nr = _hub_shapes(60, 3)
+    first, second = slice(0, 30), slice(30, 60)
+    reps: list = []
+    hubs.hub_templates(c[first], r[first], nb[first], nr[first], style, levels, 16, min_edge=1e-3, reps=reps)
+    assert 0 < len(reps) <= hubs.REPS_KEPT and all(isinstance(x, hubs.Rep) for x in reps)
+    calls = []
+    single = hubs.hub_template
+
+    def counted(*a, **k):
+        calls.append(1)
+        return single(*a, **k)
+
+    monkeypatch.setattr(hubs, "hub_template", counted)
+    args = (c[second], r[second], nb[second], nr[second], style, levels, 16)
+    carried = list(reps)
+    out, _ = hubs.hub_templates(*args, min_edge=1e-3, reps=carried)
+    with_reps = len(calls)
+    calls.clear()
+    hubs.hub_templates(*args, min_edge=1e-3)
+    without = len(calls)
+    monkeypatch.undo()
+    assert with_reps < without
+    assert carried and all(isinstance(x, hubs.Rep) for x in carried)
+    ref, _ = hubs.hub_templates(*args, min_edge=1e-3, batched=False)
+    for a, b in zip(ref, out):
+        assert a.geometry.clean == b.geometry.clean
+        fa, fb = np.concatenate([a.faces, *a.caps]), np.concatenate([b.faces, *b.caps])
+        assert len(fa) == len(fb)
+        assert np.abs(_triangles(a.vertices, fa) - _triangles(b.vertices, fb)).max() < 1e-9
+    fewer = list(reps)  # representatives of another beam count are not tried
+    other, _ = hubs.hub_templates(c[:5], r[:5], nb[:5, :4], nr[:5, :4], style, levels, 16, reps=fewer)
+    assert len(other) == 5 and all(x.neighbor_centers.shape == (4, 3) for x in fewer)

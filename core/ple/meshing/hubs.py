@@ -55,6 +55,7 @@ from .fillet import filleted
 from .weld import collapse_short_edges, follows_trace
 
 BATCH_VERTICES = 1 << 21  # vertices of one batch's largest array level (bounds the batch's memory)
+REPS_KEPT = 8  # representatives a beam set keeps from one ``hub_templates`` call to the next
 SNAP = 2.0**-24  # grid (hub units) of the positions whose lengths decide short-edge collapses
 SNAP_GUARD = 1e-11  # round-off between the batch's and the per-hub path's vertices (hub units), with margin
 
@@ -442,27 +443,45 @@ class _Batch:
 
 def hub_templates(centers, radii, neighbor_centers, neighbor_radii, style: str, levels: int, segments: int,
                   hint=None, min_edge: float = 0.0, fillet: float | None = None,
-                  batched: bool = True) -> tuple[list, object]:
+                  batched: bool = True, reps: list | None = None) -> tuple[list, object]:
     """Templates of H hubs with S beams each: balls (centers (H, 3), radii (H,)) with beams to
     the balls (neighbor_centers (H, S, 3), neighbor_radii (H, S)).
     Equal to ``hub_template`` hub by hub (up to round-off), computed in batches of one CHoCC
     topology (``batched``; False: one by one, the reference path). ``hint``: base triangles of a
-    similar hub. Returns (templates, the last hint)."""
+    similar hub. ``reps``: representatives of earlier calls with these beams (``Rep``), tried
+    first as the batches' topologies (each hub is validated against one as against a new one);
+    the list is replaced by this call's, the most recent first (at most REPS_KEPT). Returns
+    (templates, the last hint)."""
     radii = np.asarray(radii, float).reshape(-1)
     centers = np.asarray(centers, float).reshape(len(radii), 3)
     nbc = np.asarray(neighbor_centers, float).reshape(len(radii), -1, 3)
     nbr = np.asarray(neighbor_radii, float).reshape(len(radii), -1)
     h_count, s_count = nbc.shape[:2]
-    out: list = [None] * h_count
+    known = [r for r in (reps or []) if r.neighbor_centers.shape == (s_count, 3)] if batched and not fillet else []
+    if known:  # the earlier representatives as rows after the hubs: each leads a batch as a new one would
+        centers = np.concatenate([centers, [r.center for r in known]])
+        radii = np.concatenate([radii, [r.radius for r in known]])
+        nbc = np.concatenate([nbc, [r.neighbor_centers for r in known]])
+        nbr = np.concatenate([nbr, [r.neighbor_radii for r in known]])
+    out: list = [None] * len(radii)
     vec = nbc - centers[:, None]
     lengths = np.linalg.norm(vec, axis=-1)
-    alone = np.ones(h_count, bool)
+    alone = np.ones(len(radii), bool)
     if batched and s_count >= 3 and not fillet:
         ok = np.all(lengths > 0, axis=1)
         dirs = vec / np.where(ok[:, None], lengths, 1.0)[..., None]
         geo = _geometries(radii, dirs, nbr, np.where(ok[:, None], lengths, 1.0))
         alone = ~(ok & geo.ok)
-    todo = np.ones(h_count, bool)
+    todo = np.arange(len(radii)) < h_count
+    used: list = []
+    for k, rep in enumerate(known):  # earlier topologies first: no per-hub build for them
+        rest = np.flatnonzero(todo & ~alone & (geo.clean == rep.geometry.clean))
+        if len(rest) and not alone[h_count + k]:
+            hint = _batch_round(out, h_count + k, rep.geometry, rep.surface, rest, todo, centers, radii, nbc, dirs,
+                                nbr, lengths, geo, style, levels, segments, min_edge, hint)
+            if any(out[g] is not None for g in rest):
+                used.append(rep)
+    made: list = []
     for h in range(h_count):
         if not todo[h]:
             continue
@@ -474,14 +493,39 @@ def hub_templates(centers, radii, neighbor_centers, neighbor_radii, style: str, 
         hint = hub.base_triangles
         if alone[h] or hub.chocc.n != s_count:
             continue  # no batch: this hub is special (point circles of the off-centre fix)
+        made.append(Rep(centers[h], radii[h], nbc[h], nbr[h], surface, hub))
         rest = np.flatnonzero(todo & ~alone & (geo.clean == hub.clean))
         if len(rest):
-            ties = _batch_templates(out, hub, surface, np.concatenate([[h], rest]), centers, radii, dirs, nbr,
-                                    lengths, geo, style, levels, segments, min_edge)
-            for g in ties:  # this topology, but collapses the batch cannot tell: alone, no new batch
-                out[g] = hub_template(centers[g], radii[g], nbc[g], nbr[g], style, levels, segments, hint, min_edge)
-            todo[rest] = [out[g] is None for g in rest]
-    return out, hint
+            hint = _batch_round(out, h, hub, surface, rest, todo, centers, radii, nbc, dirs, nbr, lengths, geo,
+                                style, levels, segments, min_edge, hint)
+    if reps is not None:
+        reps[:] = (made[::-1] + used)[:REPS_KEPT]
+    return out[:h_count], hint
+
+
+@dataclass
+class Rep:
+    """A representative hub of ``hub_templates``: its input row, its surface before collapses
+    (faces, rings, CNT mesh) and its geometry (the CHoCC topology its batch shares)."""
+    center: np.ndarray
+    radius: float
+    neighbor_centers: np.ndarray
+    neighbor_radii: np.ndarray
+    surface: list
+    geometry: HubGeometry
+
+
+def _batch_round(out, lead, hub, surface, rest, todo, centers, radii, nbc, dirs, nbr, lengths, geo, style, levels,
+                 segments, min_edge, hint):
+    """The hubs ``rest`` that share the topology of the representative row ``lead`` (``hub``, its
+    ``surface``): batched, or built alone where the batch cannot tell their collapses; ``todo``
+    keeps the others. Returns the hint."""
+    ties = _batch_templates(out, hub, surface, np.concatenate([[lead], rest]), centers, radii, dirs, nbr,
+                            lengths, geo, style, levels, segments, min_edge)
+    for g in ties:  # this topology, but collapses the batch cannot tell: alone, no new batch
+        out[g] = hub_template(centers[g], radii[g], nbc[g], nbr[g], style, levels, segments, hint, min_edge)
+    todo[rest] = [out[g] is None for g in rest]
+    return hint
 
 
 def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths, geo, style, levels, segments,

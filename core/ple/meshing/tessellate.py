@@ -92,8 +92,12 @@ class ArrayPool:
 
 
 def _hub_templates_task(args):
-    """``hub_templates`` in a template process (``_Tessellator.pool``)."""
-    return hub_templates(*args)
+    """``hub_templates`` of args (the last: the beam set's representatives so far), in a template
+    process (``_Tessellator.pool``) or not. Returns (templates, hint, representatives)."""
+    *args, reps = args
+    reps = list(reps)
+    tpls, hint = hub_templates(*args, reps=reps)
+    return tpls, hint, reps
 
 
 def _template_process_init() -> None:
@@ -172,6 +176,7 @@ class _Tessellator:
         self.tpl_list: list = []  # (template, slot map) by template id; only appended to
         self.strips: dict = {}
         self.hints: dict = {}
+        self.reps: dict = {}  # beam set -> representatives of its last template task (``hubs.Rep``)
         self.scale = lat.template_radii * KEY_QUANTUM
         # float32-safe output: edges shorter than a few float32 grid steps of the region's size
         # are collapsed in the hub templates (template units: divided by the smallest group scale)
@@ -385,15 +390,16 @@ class _Tessellator:
                 tasks.append((hint_key, keys))
                 args.append((lat.template_centers[list(nodes)], np.array(own), local[..., :3], local[..., 3],
                              self.style, self.levels, self.segments, self.hints.get(hint_key), self.min_edge,
-                             self.fillet, self.batched))
+                             self.fillet, self.batched, self.reps.get(hint_key, ())))
         if self.pool is not None and len(args) > 1:
             results = list(self.pool.map(_hub_templates_task, args))
         else:
-            results = [hub_templates(*a) for a in args]
+            results = [_hub_templates_task(a) for a in args]
         built = {}
-        for (hint_key, keys), (tpls, hint) in zip(tasks, results):
+        for (hint_key, keys), (tpls, hint, reps) in zip(tasks, results):
             built.update(zip(keys, tpls))
             self.hints[hint_key] = hint
+            self.reps[hint_key] = reps  # the topologies the next round of these beams tries first
         for key, (_, _, local) in new.items():
             have = ~np.isnan(local[:, 3])
             self.templates[key] = (len(self.templates), built[key], np.where(have, np.cumsum(have) - 1, -1))
