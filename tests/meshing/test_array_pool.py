@@ -44,3 +44,28 @@ def test_pooled_stream_writes_the_same_records():
             got.append(rec.tobytes())
             records.give(rec)
         assert len(got) > 3 and b"".join(got) == fresh
+
+
+def test_preparation_runs_a_bounded_way_ahead():
+    """``_ahead``: futures in order, each submitted ``lookahead`` items before it is handed on;
+    what is not handed on when the consumer stops is cancelled."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from ple.meshing.tessellate import _ahead
+
+    started = []
+
+    def work(b):
+        started.append(b)
+        return b * b
+
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        gen = _ahead(pool, work, 20, 3)
+        first = next(gen)
+        assert first.result() == 0
+        got = [first.result()] + [next(gen).result() for _ in range(4)]
+        assert got == [0, 1, 4, 9, 16]
+        gen.close()  # the consumer stops: the rest is not prepared
+    assert len(started) <= 5 + 3 + 1 and started == sorted(started)
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        assert [f.result() for f in _ahead(pool, work, 7, 2)] == [b * b for b in range(7)]

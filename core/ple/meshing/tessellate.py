@@ -766,9 +766,27 @@ def _stream_boxes(tess: _Tessellator, boxes: list, workers: int, encode=None):
     # boxes are prepared (hub templates) in order by one thread and assembled by ``workers``
     # threads (numpy releases the GIL in its large array operations), the next ones while the
     # caller writes this one: at most workers + 1 boxes are held at a time, and the output does
-    # not depend on the number of workers
+    # not depend on the number of workers. Preparation runs a round ahead of assembly (prepared
+    # boxes are small), so the next round's templates are built while this round is assembled
     with ThreadPoolExecutor(max_workers=1) as prep:
-        yield from ordered_map(build, (prep.submit(prepare, b) for b in range(len(boxes))), workers, threads=True)
+        yield from ordered_map(build, _ahead(prep, prepare, len(boxes), workers + 1 + TEMPLATE_ROUND), workers,
+                               threads=True)
+
+
+def _ahead(pool, fn, n: int, lookahead: int):
+    """Futures of fn(0), …, fn(n - 1) on ``pool``, each submitted ``lookahead`` items before it is
+    yielded (the executor runs them in order when it has one thread)."""
+    pending: deque = deque()
+    try:
+        for b in range(n):
+            pending.append(pool.submit(fn, b))
+            if len(pending) > lookahead:
+                yield pending.popleft()
+        while pending:
+            yield pending.popleft()
+    finally:
+        for f in pending:  # the consumer stopped early: nothing more is prepared
+            f.cancel()
 
 
 def ordered_map(fn, items, workers: int = 1, threads: bool = False):
