@@ -43,11 +43,13 @@ from .chocc import (
     Chocc,
     ChoccMesh,
     apollonius_planes,
+    circle_points,
     cnt_segments,
     cone_apex,
     contact_points,
     corridor_ends,
     corridor_mesh,
+    generator_ends,
     sampled_segments,
     tie_broken,
 )
@@ -414,13 +416,34 @@ class _Batch:
         self.ends = tuple(e[keep] for e in self.ends)
 
     def corridor_ends(self, cor: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Both ends (H, k, 3) of the generators at arc parameters s (k,) of corridors cor (k,)."""
+        """Both ends (H, k, 3) of the generators at arc parameters s (k,) of corridors cor (k,):
+        ``chocc.corridor_ends``, which samples the larger circle of each and maps the samples to
+        the other through the cone's apex. Where every hub of the batch has the same larger
+        circle on a corridor (the usual case), only that side is computed (the same operations,
+        so the same values)."""
         a, b = self.cors[cor, 0], self.cors[cor, 1]
         e1, e2 = self.frames
-        return corridor_ends(self.normals[:, a], self.normals[:, b], self.alphas[:, a], self.alphas[:, b],
-                             (e1[:, a], e2[:, a]), (e1[:, b], e2[:, b]), self.th_a0[:, cor], self.da[:, cor],
-                             self.th_b0[:, cor], self.db[:, cor], s[None],
-                             (self.apexes[0][:, cor], self.apexes[1][:, cor]))
+        na, nb, aa, ab = self.normals[:, a], self.normals[:, b], self.alphas[:, a], self.alphas[:, b]
+        big = aa >= ab
+        on_a, on_b = big.all(axis=0), ~big.any(axis=0)
+        if not (on_a | on_b).all():  # a corridor whose larger circle differs between hubs: both sides
+            return corridor_ends(na, nb, aa, ab, (e1[:, a], e2[:, a]), (e1[:, b], e2[:, b]), self.th_a0[:, cor],
+                                 self.da[:, cor], self.th_b0[:, cor], self.db[:, cor], s[None],
+                                 (self.apexes[0][:, cor], self.apexes[1][:, cor]))
+        pa, pb = np.empty(na.shape), np.empty(nb.shape)
+        for side, cols in ((0, np.flatnonzero(on_a)), (1, np.flatnonzero(on_b))):
+            if not len(cols):
+                continue
+            c, sc = cor[cols], s[cols][None]
+            if side == 0:  # sweep a, map to b (as ``chocc.corridor_ends`` where a is the larger)
+                p = circle_points(na[:, cols], aa[:, cols], e1[:, a[cols]], e2[:, a[cols]],
+                                  self.th_a0[:, c] - sc * self.da[:, c])
+                pa[:, cols], pb[:, cols] = p, generator_ends(p, self.apexes[0][:, c], nb[:, cols], ab[:, cols])
+            else:
+                p = circle_points(nb[:, cols], ab[:, cols], e1[:, b[cols]], e2[:, b[cols]],
+                                  self.th_b0[:, c] + sc * self.db[:, c])
+                pa[:, cols], pb[:, cols] = generator_ends(p, self.apexes[1][:, c], na[:, cols], aa[:, cols]), p
+        return pa, pb
 
     def corridor_point(self, cor, s, t) -> np.ndarray:
         pa, pb = self.corridor_ends(cor, s)
