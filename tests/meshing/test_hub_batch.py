@@ -410,3 +410,31 @@ def test_representatives_carry_to_the_next_call(style, levels, monkeypatch):
     fewer = list(reps)  # representatives of another beam count are not tried
     other, _ = hubs.hub_templates(c[:5], r[:5], nb[:5, :4], nr[:5, :4], style, levels, 16, reps=fewer)
     assert len(other) == 5 and all(x.neighbor_centers.shape == (4, 3) for x in fewer)
+
+
+def test_one_sided_corridor_samples_equal_both_sided(monkeypatch):
+    """``_Batch.corridor_ends`` (only the larger circle of each corridor sampled) gives exactly
+    the points of ``chocc.corridor_ends`` (both sides sampled, one kept) on every call of a run
+    (a corridor whose larger circle differs between hubs takes ``chocc.corridor_ends`` itself)."""
+    from ple.meshing.chocc import corridor_ends
+
+    one_sided = hubs._Batch.corridor_ends
+    calls = []
+
+    def checked(self, cor, s):
+        got = one_sided(self, cor, s)
+        a, b = self.cors[cor, 0], self.cors[cor, 1]
+        e1, e2 = self.frames
+        want = corridor_ends(self.normals[:, a], self.normals[:, b], self.alphas[:, a], self.alphas[:, b],
+                             (e1[:, a], e2[:, a]), (e1[:, b], e2[:, b]), self.th_a0[:, cor], self.da[:, cor],
+                             self.th_b0[:, cor], self.db[:, cor], s[None],
+                             (self.apexes[0][:, cor], self.apexes[1][:, cor]))
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+        calls.append(len(cor))
+        return got
+
+    monkeypatch.setattr(hubs._Batch, "corridor_ends", checked)
+    args = _hub_shapes(40, 11)
+    for style, levels in (("cnt", 0), ("refined", 2)):
+        hubs.hub_templates(*args, style, levels, 16, min_edge=1e-3)
+    assert len(calls) >= 4 and sum(calls) > 500
