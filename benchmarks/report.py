@@ -115,8 +115,9 @@ def curved_section(d) -> list[str]:
            "child process of its own (peak memory is that run's VmHWM): the per-hub path "
            "(`_Tessellator(batched=False)`, one CHoCC per hub shape) as the baseline, the batched hub templates on "
            "1 and 2 workers, the STL writer alone on the same triangles (this machine's ceiling; in brackets, "
-           "writing the file's bytes alone from memory: the disk's floor), and the "
-           "cleanliness check `ple mesh` runs first; last, `ple mesh` end to end on 2 workers (check, then the "
+           "writing the file's bytes alone from memory the way the writer writes, past the page cache here: "
+           "the disk's floor), and the cleanliness check `ple mesh` runs first; last, `ple mesh` end to end on "
+           "2 workers (check, then the "
            "checked stream reusing its hub templates, or the exact unions). The curved lattice: "
            "translation U, rotation V about z, swirl W, "
            "one ball, 4 beam-patterns (every (i, j) column its own hub shape); regular: the same beams on "
@@ -213,6 +214,8 @@ def _kept_sections(path: Path, generated: set[str]) -> list[str]:
             keep = line not in generated
         if keep:
             out.append(line)
+    while out and not out[-1].strip():  # the blank lines at the end are added once, not once per run
+        out.pop()
     return out + ([""] if out else [])
 
 

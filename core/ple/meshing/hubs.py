@@ -500,8 +500,8 @@ def hub_templates(centers, radii, neighbor_centers, neighbor_radii, style: str, 
     for k, rep in enumerate(known):  # earlier topologies first: no per-hub build for them
         rest = np.flatnonzero(todo & ~alone & (geo.clean == rep.geometry.clean))
         if len(rest) and not alone[h_count + k]:
-            hint = _batch_round(out, h_count + k, rep.geometry, rep.surface, rest, todo, centers, radii, nbc, dirs,
-                                nbr, lengths, geo, style, levels, segments, min_edge, hint)
+            _batch_round(out, h_count + k, rep.geometry, rep.surface, rest, todo, centers, radii, nbc, dirs, nbr,
+                         lengths, geo, style, levels, segments, min_edge, hint)
             if any(out[g] is not None for g in rest):
                 used.append(rep)
     made: list = []
@@ -519,8 +519,8 @@ def hub_templates(centers, radii, neighbor_centers, neighbor_radii, style: str, 
         made.append(Rep(centers[h], radii[h], nbc[h], nbr[h], surface, hub))
         rest = np.flatnonzero(todo & ~alone & (geo.clean == hub.clean))
         if len(rest):
-            hint = _batch_round(out, h, hub, surface, rest, todo, centers, radii, nbc, dirs, nbr, lengths, geo,
-                                style, levels, segments, min_edge, hint)
+            _batch_round(out, h, hub, surface, rest, todo, centers, radii, nbc, dirs, nbr, lengths, geo, style,
+                         levels, segments, min_edge, hint)
     if reps is not None:
         reps[:] = (made[::-1] + used)[:REPS_KEPT]
     return out[:h_count], hint
@@ -539,16 +539,15 @@ class Rep:
 
 
 def _batch_round(out, lead, hub, surface, rest, todo, centers, radii, nbc, dirs, nbr, lengths, geo, style, levels,
-                 segments, min_edge, hint):
+                 segments, min_edge, hint) -> None:
     """The hubs ``rest`` that share the topology of the representative row ``lead`` (``hub``, its
-    ``surface``): batched, or built alone where the batch cannot tell their collapses; ``todo``
-    keeps the others. Returns the hint."""
+    ``surface``): batched, or built alone (from ``hint``) where the batch cannot tell their
+    collapses; ``todo`` keeps the others."""
     ties = _batch_templates(out, hub, surface, np.concatenate([[lead], rest]), centers, radii, dirs, nbr,
                             lengths, geo, style, levels, segments, min_edge)
     for g in ties:  # this topology, but collapses the batch cannot tell: alone, no new batch
         out[g] = hub_template(centers[g], radii[g], nbc[g], nbr[g], style, levels, segments, hint, min_edge)
     todo[rest] = [out[g] is None for g in rest]
-    return hint
 
 
 def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths, geo, style, levels, segments,
