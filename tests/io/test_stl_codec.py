@@ -56,7 +56,7 @@ def test_pooled_buffers_hold_the_float32_vertices(grid):
     for _ in range(3):  # a fresh buffer, then the same one reused
         got = export.stl_chunk((v, f), grid, pool)
         assert got.tobytes() == want.tobytes()
-        assert got.base is not None and len(got.base) >= len(f) + (12 * len(v)) // 50
+        assert got.base is not None and got.base.nbytes >= 50 * len(f) + 12 * len(v)
         pool.give(got)
     raw = np.full(50 * len(f) + 12 * len(v) + 64, 255, np.uint8)
     for shift in range(4):  # the vertices' tail at every address modulo 4 (views, not copies)

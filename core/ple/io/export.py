@@ -18,7 +18,6 @@ import os
 import stat
 import struct
 import sys
-import threading
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -28,6 +27,7 @@ import trimesh
 from ..errors import PleError
 from ..meshing.connectors import constant_radius_connectors
 from ..meshing.tessellate import (
+    ArrayPool,
     _check_style,
     checked_stream,
     iter_triangles,
@@ -142,13 +142,9 @@ class StlWriter:
         self.behind.wrote()
 
     def close(self) -> None:
-        if self.direct is not None:
+        if self.direct is not None:  # its bytes are on disk once it is closed; the count goes through fh
             direct, self.direct = self.direct, None
-            size = direct.close()
-            self.fh.seek(80)
-            self.fh.write(struct.pack("<I", self.count))
-            self.fh.seek(size)
-            return
+            direct.close()
         self.fh.seek(80)
         self.fh.write(struct.pack("<I", self.count))
         self.fh.seek(0, 2)
@@ -179,27 +175,16 @@ def stl_header(unit: str = DEFAULT_UNIT, what: str = "binary STL") -> bytes:
     return f"PLE {what}, unit {unit}, Z up".encode()[:80].ljust(80, b" ")
 
 
-class RecordPool:
+class RecordPool(ArrayPool):
     """Record buffers handed from written boxes to the next ones (thread-safe). A streamed file
     is written box by box; fresh buffers would cost every box its page faults again (on this
     machine first touches of a box's records took longer than encoding them). At most as many
-    buffers as boxes in flight, each as large as the largest box so far."""
-
-    def __init__(self):
-        self._free: list = []
-        self._lock = threading.Lock()
+    buffers as boxes in flight, each as large as the largest box so far. ``give`` takes records
+    (or a slice of them) back once written."""
 
     def take(self, k: int) -> np.ndarray:
-        with self._lock:
-            buf = self._free.pop() if self._free else None
-        return buf if buf is not None and len(buf) >= k else np.empty(k, STL_RECORD)
-
-    def give(self, rec: np.ndarray) -> None:
-        """Return the buffer under records ``rec`` (as ``stl_chunk`` made them from ``take``)."""
-        buf = rec if rec.base is None else rec.base
-        if isinstance(buf, np.ndarray) and buf.dtype == STL_RECORD and buf.ndim == 1:
-            with self._lock:
-                self._free.append(buf)
+        """k uninitialised records."""
+        return super().take((k,), STL_RECORD)
 
 
 def stl_chunk(chunk, grid: float | None = None, pool: RecordPool | None = None) -> np.ndarray:

@@ -174,15 +174,11 @@ class DirectWriter:
         try:
             if self.error is not None:
                 raise self.error
-            self._pwrite_tail(tail)
+            self.direct = False  # the writer thread has ended: a part block goes through the plain descriptor
+            self._pwrite(memoryview(tail), self.offset)
         finally:
             self._close_fds()
         return self.offset + len(tail)
-
-    def _pwrite_tail(self, tail) -> None:
-        done = 0
-        while done < len(tail):
-            done += os.pwrite(self._plain(), memoryview(tail)[done:], self.offset + done)
 
     def abort(self) -> None:
         """Stop the writer thread and close (after an error elsewhere: the file is left as it is)."""

@@ -54,7 +54,7 @@ from .chocc import (
     tie_broken,
 )
 from .fillet import filleted
-from .weld import collapse_short_edges, follows_trace
+from .weld import collapse_short_edges, follows_trace, ordered_short
 
 BATCH_VERTICES = 1 << 21  # vertices of one batch's largest array level (bounds the batch's memory)
 REPS_KEPT = 8  # representatives a beam set keeps from one ``hub_templates`` call to the next
@@ -680,8 +680,7 @@ def _collapsed(verts: np.ndarray, surface: _Surface, tol: float) -> list:
         if edge_unsure[k].any():
             out[k] = None
             continue
-        s = np.flatnonzero(short[k])
-        seen = done.setdefault(s[np.argsort(d[k, s], kind="stable")].tobytes(), [])
+        seen = done.setdefault(ordered_short(d[k], tol).tobytes(), [])
         local = next((c for c in seen if follows_trace(snapped[k], c[3], tol)), None)
         if local is None:
             local = surface.collapse(snapped[k], short[k], tol)

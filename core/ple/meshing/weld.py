@@ -146,8 +146,8 @@ def edge_manifold(faces: np.ndarray) -> dict:
     faces = np.asarray(faces, np.int64).reshape(-1, 3)
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     if len(e) and (e.min() < 0 or e.max() >= 3037000499):  # keys a * n + b would overflow int64
-        _, cnt = np.unique(np.sort(e, axis=1), axis=0, return_counts=True)
-        n_directed = len(np.unique(e, axis=0))
+        cnt = unique_rows(np.sort(e, axis=1))[2]
+        n_directed = len(unique_rows(e)[0])
     else:  # one int64 key per edge: a 1-D sort, not a sort of rows (several times faster)
         n = int(e.max()) + 1 if len(e) else 1
         _, cnt = np.unique(np.minimum(e[:, 0], e[:, 1]) * n + np.maximum(e[:, 0], e[:, 1]), return_counts=True)
@@ -208,8 +208,7 @@ def collapse_short_edges(vertices: np.ndarray, faces: np.ndarray, rings: list, t
         e = np.concatenate([cur[:, [0, 1]], cur[:, [1, 2]], cur[:, [2, 0]]])
         e = np.unique(np.sort(e, axis=1), axis=0)
         d = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
-        short = np.flatnonzero(d < tol)
-        short = short[np.argsort(d[short], kind="stable")]
+        short = ordered_short(d, tol)
         if trace is not None:
             trace.append((e, short))
         if not len(short):
@@ -269,9 +268,14 @@ def follows_trace(vertices: np.ndarray, trace: list, tol: float) -> bool:
     in every pass. Then it makes the same collapses and returns the same faces and rings."""
     v = np.asarray(vertices, float)
     for e, short in trace:
-        d = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
-        mine = np.flatnonzero(d < tol)
-        if len(mine) != len(short) or not np.array_equal(mine[np.argsort(d[mine], kind="stable")], short):
+        if not np.array_equal(ordered_short(np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1), tol), short):
             return False
     return bool(trace)
+
+
+def ordered_short(lengths: np.ndarray, tol: float) -> np.ndarray:
+    """Indices of the edges shorter than ``tol``, shortest first (ties in index order): the order
+    ``collapse_short_edges`` tries them in."""
+    short = np.flatnonzero(lengths < tol)
+    return short[np.argsort(lengths[short], kind="stable")]
 
