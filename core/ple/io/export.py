@@ -124,7 +124,8 @@ class StlWriter:
             self.direct.write(head)
         else:
             fh.write(head)
-        self.behind = WriteBehind(fh)  # else a page cache of about two windows, whatever the file's size
+        # else a page cache of about two windows, whatever the file's size
+        self.behind = WriteBehind(fh) if self.direct is None else None
 
     def write(self, triangles: np.ndarray, faces: np.ndarray | None = None) -> None:
         """Append triangles (k, 3, 3), or ``vertices[faces]`` for vertices (V, 3), faces (k, 3)."""
