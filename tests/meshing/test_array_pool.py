@@ -1,7 +1,11 @@
 """``ArrayPool``: the memory of streamed boxes reused from encoded boxes to the next ones, and a
 stream through it writes what a stream of fresh arrays writes."""
 
+import multiprocessing
+import sys
+
 import numpy as np
+import pytest
 from ple.bench.curved import curved_lattice
 from ple.io.export import RecordPool, stl_chunk
 from ple.meshing.tessellate import ArrayPool, iter_triangles, output_grid
@@ -28,6 +32,56 @@ def test_buffers_are_reused_by_size():
     big = pool.take((5000, 3), float)  # larger than any: the largest is dropped for a new one
     assert big.shape == (5000, 3) and not any(np.shares_memory(big, x) for x in (c, d, e))
     assert base_a.dtype == np.uint8
+
+
+def test_fresh_buffers_have_room_for_slightly_larger_boxes():
+    """A fresh buffer is POOL_HEADROOM larger than asked: the next box, a few per cent larger,
+    reuses it instead of mapping a fresh one; a box beyond the headroom does not."""
+    from ple.meshing.tessellate import POOL_HEADROOM
+
+    pool = ArrayPool()
+    a = pool.take((1000, 3), float)
+    pool.give(a)
+    b = pool.take((1000 + int(1000 * POOL_HEADROOM), 3), float)
+    assert np.shares_memory(a, b)
+    pool.give(b)
+    c = pool.take((1000 + int(1000 * POOL_HEADROOM) + 1, 3), float)
+    assert not np.shares_memory(a, c)
+
+
+def _faults_per_round(keep: bool, q) -> None:
+    import resource
+
+    from ple.meshing.tessellate import _keep_freed_memory
+
+    np.core.multiarray._set_madvise_hugepage(False)  # count 4 KiB pages
+    if keep:
+        _keep_freed_memory()
+    out = []
+    for _ in range(4):  # three 20 MB arrays alive at once, then freed: glibc trims them by default
+        f0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        arrays = [np.ones((20 << 20) // 8) for _ in range(3)]
+        del arrays
+        out.append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0)
+    q.put(out)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
+def test_template_processes_reuse_freed_memory():
+    """In a template process (``_keep_freed_memory``), arrays freed by one round are the next
+    round's memory: no fresh pages after the first round, where glibc's defaults map and
+    touch a large part of them again."""
+    ctx = multiprocessing.get_context("fork")
+    got = {}
+    for keep in (False, True):
+        q = ctx.Queue()
+        p = ctx.Process(target=_faults_per_round, args=(keep, q))
+        p.start()
+        got[keep] = q.get(timeout=60)
+        p.join()
+    pages = 3 * (20 << 20) // 4096
+    assert all(f > pages // 2 for f in got[False][1:]), got  # the default: fresh pages every round
+    assert got[True][0] > pages // 2 and max(got[True][1:]) < pages // 50, got
 
 
 def test_pooled_stream_writes_the_same_records():
