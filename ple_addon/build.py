@@ -19,7 +19,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 NOT_SHIPPED = {"build.py", "batch.py"}  # repository tools, not part of the add-on
-IGNORE_NAMES = ("__pycache__", "*.pyc", "*.so", "*.c")  # the zip is pure Python: numpy encodes STL there
+IGNORE_NAMES = ("__pycache__", "*.pyc", "*.so", "*.c")  # pure Python: numpy encodes STL, assembles boxes
 IGNORE = shutil.ignore_patterns(*IGNORE_NAMES)
 NOT_VENDORED = ("cli", "bench")  # the core's doors for the command line: the extension needs only the library layers
 WHEELS = ["trimesh>=4.0"]  # pure-Python packages the core needs beyond Blender's own numpy

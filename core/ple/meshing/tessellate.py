@@ -41,6 +41,7 @@ from ..algebra.vectors import perpendicular_frames, unit_rows
 from ..errors import PleError
 from ..model.budget import hub_triangles, mean_degree
 from ..model.lattice import Lattice, Region
+from .assembly import Pieces, TemplateTable, fill, hub_faces, place
 from .hubs import hub_templates
 from .preview import balls_beams_mesh
 from .skin import clip_bodies, clip_to_bodies
@@ -194,6 +195,7 @@ class _Tessellator:
                       + [(p, -1) for p, b in enumerate(lat.beams) if b.n2 == n] for n in range(nn)]
         self.templates: dict = {}
         self.tpl_list: list = []  # (template, slot map) by template id; only appended to
+        self.table = TemplateTable()  # their vertices and faces, for box assembly
         self.strips: dict = {}
         self.hints: dict = {}
         self.reps: dict = {}  # beam set -> representatives of its last template task (``hubs.Rep``)
@@ -424,6 +426,7 @@ class _Tessellator:
             have = ~np.isnan(local[:, 3])
             self.templates[key] = (len(self.templates), built[key], np.where(have, np.cumsum(have) - 1, -1))
             self.tpl_list.append(self.templates[key][1:])
+        self.table.add(built[key] for key in new)  # in template-id order
 
     # ----- assembly ---------------------------------------------------------------------
     def build(self, box: Region) -> tuple[np.ndarray, np.ndarray]:
@@ -471,51 +474,48 @@ class _Tessellator:
     def assemble(self, prepared, pool: ArrayPool | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The second half of ``build``: vertices and faces of a prepared box (``prepare``). Reads
         the template cache only (and fills the strip cache), so boxes may be assembled at once.
-        ``pool``: where the two arrays' memory comes from (give them back once read)."""
+        ``pool``: where the two arrays' memory comes from (give them back once read).
+
+        Vertices: each hub's template, placed by its similarity, hub after hub (``assembly.place``);
+        faces: the own hubs' template faces, then the caps where a beam leaves the region, then the
+        beams' strips (``assembly.fill``)."""
         idx, n_own, tids, m, minv, info = prepared
-        tpl_list = self.tpl_list
-        order = np.argsort(tids, kind="stable")
-        ut, first = np.unique(tids[order], return_index=True)
-        sizes = np.array([len(tpl_list[t][0].vertices) for t in ut], np.int64)
-        starts = np.concatenate([[0], np.cumsum(np.repeat(sizes, np.diff(np.append(first, len(order)))))])
-        offsets = np.zeros(len(idx), np.int64)
-        offsets[order] = starts[:-1]
+        table = self.table.snapshot()  # holds every template of a prepared box
+        rows = table[2]
+        starts = np.zeros(len(idx) + 1, np.int64)
+        np.cumsum(rows[tids, 2], out=starts[1:])
+        offsets = starts[:-1]
         verts = np.empty((int(starts[-1]), 3)) if pool is None else pool.take((int(starts[-1]), 3), float)
         index = np.int32 if len(verts) < 2**31 else np.int64  # half the memory traffic of the largest array
-        offsets = offsets.astype(index)
-        faces = []
-        for t, lo, hi in zip(ut, first, np.append(first[1:], len(order))):
-            inst = order[lo:hi]
-            tpl = tpl_list[t][0]
-            block = verts[starts[lo]:starts[hi]].reshape(len(inst), -1, 3)  # template t's block is contiguous
-            np.matmul(tpl.vertices, m[inst, :3, :3].transpose(0, 2, 1), out=block)
-            block += m[inst, None, :3, 3]
-            mine = inst[inst < n_own]
-            if len(mine):
-                faces.append((tpl.faces, offsets[mine], None, None))
+        place(table, tids, offsets, m, verts)
+        pieces = Pieces()
         # caps where a beam leaves the region
+        tpl_list = self.tpl_list
         for sel, nb, exists, inside in info.values():
             own_sel = sel < n_own
             for s in range(nb.shape[1]):
                 cut = sel[own_sel & exists[:, s] & ~inside[:, s]]
                 for t in np.unique(tids[cut]):
-                    inst = cut[tids[cut] == t]
                     tpl, slot_of = tpl_list[t]
-                    cap = tpl.caps[slot_of[s]]
-                    faces.append((cap, offsets[inst], None, None))
-        faces += self._beams(idx, n_own, tids, m, minv, offsets, tpl_list)
-        return verts, _fill_faces(faces, index, pool)
+                    pieces.add(tpl.caps[slot_of[s]], offsets[cut[tids[cut] == t]])
+        self._beams(idx, n_own, tids, m, minv, offsets, tpl_list, pieces)
+        total = int(rows[tids[:n_own], 4].sum()) + pieces.count()
+        faces = np.empty((total, 3), index) if pool is None else pool.take((total, 3), index)
+        pos = hub_faces(faces, table, tids[:n_own], offsets[:n_own])
+        local, sides, pf0, pfn, a, b, pa0, pan = pieces.packed()
+        fill(faces, pos, local, None, sides, pf0, pfn, a, b, pa0, pan)
+        return verts, faces
 
-    def _beams(self, idx, n_own, tids, m, minv, offsets, tpl_list) -> list:
-        """Strips of the beams leaving the box's hubs; one zipper per (pattern, hub templates,
-        relative similarity of the two frames) — the latter depends on (i, j) only."""
+    def _beams(self, idx, n_own, tids, m, minv, offsets, tpl_list, pieces: Pieces) -> None:
+        """Strips of the beams leaving the box's hubs, added to ``pieces``; one zipper per
+        (pattern, hub templates, relative similarity of the two frames) — the latter depends on
+        (i, j) only."""
         lat = self.lat
         nu, nv, nw = lat.counts
         nn = len(lat.nodes)
         lin = ((idx[:, 0] * nv + idx[:, 1]) * nw + idx[:, 2]) * nn + idx[:, 3]
         srt = np.argsort(lin)
         n_tpl = int(tids.max()) + 1 if len(tids) else 1
-        out = []
         for p, b in enumerate(lat.beams):
             src = np.flatnonzero(idx[:n_own, 3] == b.n1)
             dst_idx = np.concatenate([idx[src, :3] + [b.di, b.dj, b.dk], np.full((len(src), 1), b.n2)], axis=1)
@@ -541,11 +541,10 @@ class _Tessellator:
             rings = [(tpl_list[tids[a0]][0].rings[tpl_list[tids[a0]][1][slot_a]],
                       tpl_list[tids[b0]][0].rings[tpl_list[tids[b0]][1][slot_b]]) for a0, b0 in zip(a0s, b0s)]
             self._add_strips(keys, rings, a0s, b0s, tids, rel, tpl_list, b)
+            a_off, b_off = offsets[src[order]], offsets[dst[order]]
             for u in range(len(first)):
-                sel = order[bounds[u]:bounds[u + 1]]
                 which, local = self.strips[keys[u]]
-                out.append((local, offsets[src[sel]], offsets[dst[sel]], which == 0))
-        return out
+                pieces.add(local, a_off[bounds[u]:bounds[u + 1]], b_off[bounds[u]:bounds[u + 1]], which)
 
     def _add_strips(self, keys, rings, a0s, b0s, tids, rel, tpl_list, beam) -> None:
         """Cache the strips (ring 0|1 per corner, template vertex id) of the beams ``keys`` not
@@ -563,32 +562,13 @@ class _Tessellator:
             pb = np.stack([tpl_list[tids[b0s[u]]][0].vertices[rings[u][1]] for u in us])
             f = _strips(pa, pb, rel[us], ca, cb)
             which, li = f[..., 1], f[..., 0]
+            ring_a, ring_b = np.stack([rings[u][0] for u in us]), np.stack([rings[u][1] for u in us])
+            k = np.arange(len(us))[:, None, None]
+            local = np.where(which == 0, ring_a[k, np.where(which == 0, li, 0)],
+                             ring_b[k, np.where(which == 1, li, 0)]).astype(np.int32)  # template vertex ids
+            sides = which.astype(np.uint8)  # 1: the corner is on hub B's ring
             for k, u in enumerate(us):
-                ring_a, ring_b = rings[u]
-                local = np.where(which[k] == 0, ring_a[np.where(which[k] == 0, li[k], 0)],
-                                 ring_b[np.where(which[k] == 1, li[k], 0)])
-                self.strips[keys[u]] = (which[k], local.astype(np.int32))  # template vertex ids
-
-
-def _fill_faces(pieces: list, index, pool: ArrayPool | None = None) -> np.ndarray:
-    """The box's faces (F, 3) from pieces (local faces (f, 3), offsets a (n,), offsets b (n,) or
-    None, corners on a (f, 3) or None): n copies of the local faces plus, per corner, offset a
-    (or b where it is not on a), written straight into one array (no per-piece copies to join),
-    taken from ``pool`` if given."""
-    total = sum(len(f) * len(a) for f, a, _, _ in pieces)
-    out = np.empty((total, 3), index) if pool is None else pool.take((total, 3), index)
-    lo = 0
-    for f, a, b, on_a in pieces:
-        hi = lo + len(f) * len(a)
-        dst = out[lo:hi].reshape(len(a), len(f), 3)
-        if b is None:
-            np.add(f[None], a[:, None, None], out=dst, casting="unsafe")
-        else:
-            dst[...] = b[:, None, None]
-            np.copyto(dst, a[:, None, None], where=on_a[None])
-            dst += f[None].astype(index, copy=False)
-        lo = hi
-    return out
+                self.strips[keys[u]] = (sides[k], local[k])
 
 
 def _unwrap_ring(theta: np.ndarray) -> np.ndarray:
