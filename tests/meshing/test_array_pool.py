@@ -2,6 +2,7 @@
 stream through it writes what a stream of fresh arrays writes."""
 
 import multiprocessing
+import os
 import sys
 
 import numpy as np
@@ -123,3 +124,36 @@ def test_preparation_runs_a_bounded_way_ahead():
     assert len(started) <= 5 + 3 + 1 and started == sorted(started)
     with ThreadPoolExecutor(max_workers=1) as pool:
         assert [f.result() for f in _ahead(pool, work, 7, 2)] == [b * b for b in range(7)]
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/smaps"), reason="Linux's /proc/self/smaps")
+def test_fresh_buffers_are_mapped_in_small_pages():
+    """A large fresh pooled buffer is its own mapping advised against huge pages (the kernel's
+    VmFlags ``nh``), writable, reused through ``give`` like any other, and unmapped once unused."""
+    from ple.meshing.tessellate import POOL_MAP_MIN
+
+    pool = ArrayPool()
+    a = pool.take((POOL_MAP_MIN,), np.float64)
+    a[:] = 2.5
+    addr = a.__array_interface__["data"][0]
+
+    def flags_at(address):
+        lo = None
+        for line in open("/proc/self/smaps"):
+            head = line.split()
+            if "-" in head[0] and ":" not in head[0]:
+                s, e = (int(x, 16) for x in head[0].split("-"))
+                lo = s <= address < e
+            elif lo and line.startswith("VmFlags:"):
+                return line.split()[1:]
+        return None
+
+    assert "nh" in flags_at(addr)
+    pool.give(a)
+    b = pool.take((POOL_MAP_MIN // 2,), np.float64)  # the same buffer again
+    assert b.__array_interface__["data"][0] == addr and (b == 2.5).all()
+    small = pool.take((10,), np.float64)  # small buffers: plain numpy memory
+    assert small.base is not None
+    del a, b
+    pool._free.clear()
+    assert flags_at(addr) is None or "nh" not in flags_at(addr)  # unmapped
