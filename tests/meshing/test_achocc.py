@@ -67,3 +67,34 @@ def test_hub_signed_distance_is_the_union_of_its_beams(rng, n):
     exits = u * t[:, None]
     d = np.min([beam_distance(exits, np.zeros(3), radius, dirs[k] * lengths[k], other[k]) for k in range(n)], axis=0)
     assert np.allclose(d, 0.0, atol=1e-9)
+
+
+def test_batched_exit_distances_are_each_hubs_dense_maximum(rng):
+    """``exit_distances`` evaluates the closed forms only for rays inside a beam's cap: the
+    same values, bit for bit, as every (ray, beam) pair evaluated and the largest taken, for
+    hubs with narrowing, widening and parallel beams; and each exit lies on the union."""
+    from ple.meshing.achocc import beam_profile, exit_distances
+
+    hubs = [_hub(rng, 5) for _ in range(6)]
+    radius = np.array([h[0] for h in hubs]) * rng.uniform(0.8, 1.2, 6)
+    dirs = np.stack([h[1] for h in hubs])
+    other = np.stack([h[2] for h in hubs]) * rng.uniform(0.5, 1.5, (6, 5))
+    lengths = np.stack([h[3] for h in hubs])
+    u = unit_rows(rng.normal(size=(6 * 400, 3))).reshape(6, 400, 3)
+    got = exit_distances(u, radius, dirs, other, lengths)
+    r = radius[:, None, None]
+    sphi, cphi = beam_profile(radius[:, None], other, lengths)
+    sphi, cphi, ln, ro = sphi[:, None], cphi[:, None], lengths[:, None], other[:, None]
+    cu = np.clip(np.einsum("hvi,hsi->hvs", u, dirs), -1, 1)  # every pair (H, V, S)
+    den = sphi * cu + cphi * np.sqrt(1 - cu**2)
+    t_cone = np.where(den > 0, r / np.where(den > 0, den, 1.0), np.inf)
+    t_ball = ln * cu + np.sqrt(np.maximum(ln**2 * cu**2 - ln**2 + ro**2, 0))
+    t_k = np.where(cu <= sphi, r, np.where(t_cone * cu <= ln + ro * sphi, t_cone, t_ball))
+    assert np.array_equal(got, np.maximum(r[..., 0], t_k.max(axis=-1)))
+    for h in range(6):
+        exits = u[h] * got[h][:, None]
+        d = np.min([beam_distance(exits, np.zeros(3), radius[h], dirs[h, k] * lengths[h, k], other[h, k])
+                    for k in range(5)], axis=0)
+        assert np.allclose(d, 0.0, atol=1e-9)
+    assert np.array_equal(exit_distances(u, radius, dirs[:, :0], other[:, :0], lengths[:, :0]),
+                          np.broadcast_to(radius[:, None], (6, 400)))
