@@ -15,7 +15,9 @@ compiled = pytest.mark.skipif(assembly._compiled is None, reason="the compiled a
 
 def _templates(rng, n):
     sizes = rng.integers(1, 40, n), rng.integers(0, 50, n)
-    return [HubTemplate(rng.normal(size=(nv, 3)), rng.integers(0, 30, (nf, 3)), [], [], None) for nv, nf in zip(*sizes)]
+    geometry = assembly.TemplateGeometry(1.0, True)
+    return [HubTemplate(rng.normal(size=(nv, 3)), rng.integers(0, 30, (nf, 3)), [], [], geometry)
+            for nv, nf in zip(*sizes)]
 
 
 def _similarities(rng, n):
@@ -39,6 +41,35 @@ def _table(rng):
         assert np.array_equal(t.vertices, v) and np.array_equal(t.faces, f) and t.faces.dtype == np.int32
         assert any(np.shares_memory(t.vertices, c) for c in table.snapshot()[0])
     return table, tpls
+
+
+def test_packed_templates_come_back_equal_and_shared_arrays_once():
+    """A template process's ``Packed`` batch, pickled and unpacked into a table: the same
+    vertices, faces, rings, caps, r⁺ and clean flags; arrays shared between templates (one
+    collapse) are sent once and are one array again; the templates view the table's chunk."""
+    import pickle
+
+    rng = np.random.default_rng(4)
+    shared_faces = rng.integers(0, 9, (40, 3))
+    ring = np.arange(5)
+    cap = np.stack([np.full(5, 9), ring[::-1], np.roll(ring[::-1], -1)], axis=1)
+    tpls = [HubTemplate(rng.normal(size=(10, 3)), shared_faces if k % 2 else rng.integers(0, 9, (7, 3)),
+                        [ring, np.arange(5, 9)], [cap, cap[:3]], assembly.TemplateGeometry(0.1 * k, k != 3))
+            for k in range(6)]
+    packed = assembly.Packed(tpls)
+    assert len(packed.faces) == 40 + 3 * 7  # the shared faces once
+    table = assembly.TemplateTable()
+    got = table.unpack(pickle.loads(pickle.dumps(packed)))
+    table.add(got)
+    for a, b in zip(tpls, got):
+        assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
+        assert all(np.array_equal(x, y) for x, y in zip(a.rings, b.rings))
+        assert all(np.array_equal(x, y) for x, y in zip(a.caps, b.caps))
+        assert (a.geometry.r_plus, a.geometry.clean) == (b.geometry.r_plus, b.geometry.clean)
+        assert np.shares_memory(b.vertices, table.snapshot()[0][0]) and b.faces.dtype == np.int32
+    assert got[1].faces is got[3].faces and got[1].rings[0] is got[2].rings[0]
+    rows = table.snapshot()[2]
+    assert rows[1, 3] == rows[3, 3] and rows[0, 3] != rows[2, 3]
 
 
 @compiled

@@ -11,8 +11,11 @@ same values by the same IEEE operations in the same order (tested against each o
 from __future__ import annotations
 
 import threading
+from dataclasses import dataclass
 
 import numpy as np
+
+from .hubs import HubTemplate
 
 try:  # the compiled assembly (setup.py, optional): the numpy forms' values, without a Python loop per hub
     from . import _assemble as _compiled
@@ -20,12 +23,79 @@ except ImportError:  # not built (no C compiler): numpy assembles
     _compiled = None
 
 
+@dataclass
+class TemplateGeometry:
+    """What the stream reads of a template's ``HubGeometry``: r⁺ and the ACHoCC's clean flag."""
+
+    r_plus: float
+    clean: bool
+
+
+class Packed:
+    """Hub templates as a template process sends them back: their vertices (float64) and faces
+    (int32) in one array each, rings and caps in one array each, every faces, ring and cap
+    array shared between templates (hubs of one collapse) sent once, and of each geometry
+    what the stream reads (``TemplateGeometry``). Pickling 4,800 curved-lattice templates one
+    by one took 0.6 s, and their arrays were copied once more into the template table."""
+
+    def __init__(self, templates: list):
+        self.n = len(templates)
+        self.vertices = np.concatenate([t.vertices for t in templates]).reshape(-1, 3).astype(float, copy=False)
+        self.nv = np.array([len(t.vertices) for t in templates], np.int64)
+        self.faces, self.face_lens, self.face_ids = _pack_arrays([[t.faces] for t in templates], 3)
+        self.rings, self.ring_lens, self.ring_ids = _pack_arrays([t.rings for t in templates], 1)
+        self.caps, self.cap_lens, self.cap_ids = _pack_arrays([t.caps for t in templates], 3)
+        self.geometry = [(float(t.geometry.r_plus), bool(t.geometry.clean)) for t in templates]
+
+    def templates(self, chunk: int) -> list:
+        """The templates, their arrays views of this object's, each with its table row (``chunk``:
+        the table's chunk of these arrays)."""
+        vstart = np.cumsum(self.nv) - self.nv
+        faces, fstart = _unpack_arrays(self.faces, self.face_lens)
+        rings, _ = _unpack_arrays(self.rings, self.ring_lens)
+        caps, _ = _unpack_arrays(self.caps, self.cap_lens)
+        out = []
+        for k in range(self.n):
+            f = self.face_ids[k][0]
+            row = (chunk, int(vstart[k]), int(self.nv[k]), int(fstart[f]), int(self.face_lens[f]))
+            out.append(HubTemplate(self.vertices[row[1]:row[1] + row[2]], faces[f],
+                                   [rings[i] for i in self.ring_ids[k]], [caps[i] for i in self.cap_ids[k]],
+                                   TemplateGeometry(*self.geometry[k]), row))
+        return out
+
+
+def _pack_arrays(lists: list, width: int):
+    """Per template a list of integer arrays (rows of ``width``) -> (all distinct arrays, by
+    identity, concatenated as int32, their row counts, per template the indices of its arrays)."""
+    seen: dict = {}
+    arrays: list = []
+    ids = []
+    for lst in lists:
+        mine = []
+        for a in lst:
+            if id(a) not in seen:
+                seen[id(a)] = len(arrays)
+                arrays.append(a)
+            mine.append(seen[id(a)])
+        ids.append(mine)
+    lens = np.array([len(a) for a in arrays], np.int64)
+    flat = np.concatenate([np.asarray(a).reshape(-1, width) for a in arrays]) if arrays else np.zeros((0, width))
+    return flat.astype(np.int32).reshape(-1) if width == 1 else flat.astype(np.int32), lens, ids
+
+
+def _unpack_arrays(flat: np.ndarray, lens: np.ndarray):
+    """Views of ``_pack_arrays``' distinct arrays, and their first rows."""
+    start = np.cumsum(lens) - lens
+    return [flat[a:a + n] for a, n in zip(start.tolist(), lens.tolist())], start
+
+
 class TemplateTable:
-    """The vertices (float64) and faces (int32) of every hub template of a tessellator, in chunks:
-    ``add`` appends a batch of templates as one chunk of vertices and one of faces and makes the
-    templates' ``vertices`` and ``faces`` views of them (no second copy, no regrowth). Readers
-    take ``snapshot()`` — the chunks and the rows of each template id so far — and keep reading
-    it while later templates are appended (chunks are never written again)."""
+    """The vertices (float64) and faces (int32) of every hub template of a tessellator, in chunks
+    never written again: each ``Packed`` batch from a template process is a chunk as it came
+    (``unpack``: no copy), and ``add`` registers templates in template-id order (templates from
+    elsewhere are packed into a chunk of their own). Readers take ``snapshot()`` — the chunks
+    and the rows of each template id so far — and keep reading it while later templates are
+    added."""
 
     def __init__(self):
         self._lock = threading.Lock()
@@ -34,22 +104,23 @@ class TemplateTable:
         self._rows: list = []  # per template id: (chunk, vertex start, count, face start, count)
         self._snap = None
 
-    def add(self, templates) -> None:
-        """Append templates (``HubTemplate``), in template-id order, as one chunk."""
-        templates = list(templates)
-        if not templates:
-            return
-        nv = np.cumsum([0] + [len(t.vertices) for t in templates])
-        nf = np.cumsum([0] + [len(t.faces) for t in templates])
-        v = np.concatenate([t.vertices for t in templates]).reshape(-1, 3).astype(float, copy=False)
-        f = np.concatenate([t.faces for t in templates]).reshape(-1, 3).astype(np.int32)
+    def unpack(self, packed: Packed) -> list:
+        """The templates of ``packed``, whose arrays become a chunk of the table."""
         with self._lock:
-            c = len(self._v)
-            self._v.append(v)
-            self._f.append(f)
-            for k, t in enumerate(templates):
-                t.vertices, t.faces = v[nv[k]:nv[k + 1]], f[nf[k]:nf[k + 1]]
-                self._rows.append((c, nv[k], nv[k + 1] - nv[k], nf[k], nf[k + 1] - nf[k]))
+            chunk = len(self._v)
+            self._v.append(packed.vertices)
+            self._f.append(packed.faces)
+        return packed.templates(chunk)
+
+    def add(self, templates) -> None:
+        """Register templates, in template-id order."""
+        templates = list(templates)
+        loose = [t for t in templates if t.row is None]
+        if loose:  # not unpacked here (built in this process): packed now, as one chunk
+            for t, u in zip(loose, self.unpack(Packed(loose))):
+                t.vertices, t.faces, t.row = u.vertices, u.faces, u.row
+        with self._lock:
+            self._rows += [t.row for t in templates]
             self._snap = None
 
     def snapshot(self):
@@ -63,7 +134,6 @@ class TemplateTable:
 
     def __len__(self) -> int:
         return len(self._rows)
-
 
 def place(snapshot, tids: np.ndarray, offsets: np.ndarray, m: np.ndarray, out: np.ndarray) -> None:
     """Vertices of hubs into ``out`` (V, 3): hub i's template tids[i] mapped by m[i] (4×4) into

@@ -66,13 +66,15 @@ SNAP_GUARD = 1e-11  # round-off between the batch's and the per-hub path's verti
 class HubTemplate:
     """A hub mesh in the template frame: vertices (m, 3), outward faces (f, 3), per incident
     beam the ring of vertex ids on its contact circle (clockwise about the beam direction) and
-    the fan faces capping its disk (using one extra vertex, the disk centre)."""
+    the fan faces capping its disk (using one extra vertex, the disk centre). ``row``: where a
+    template table (``ple.meshing.assembly``) holds its arrays, once it does."""
 
     vertices: np.ndarray
     faces: np.ndarray
     rings: list
     caps: list
     geometry: HubGeometry
+    row: tuple | None = None
 
 
 def _segments(style: str, segments: int):

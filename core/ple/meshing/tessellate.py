@@ -42,7 +42,7 @@ from ..algebra.vectors import perpendicular_frames, unit_rows
 from ..errors import PleError
 from ..model.budget import hub_triangles, mean_degree
 from ..model.lattice import Lattice, Region
-from .assembly import Pieces, TemplateTable, fill, hub_faces, place
+from .assembly import Packed, Pieces, TemplateTable, fill, hub_faces, place
 from .hubs import hub_templates
 from .preview import balls_beams_mesh
 from .skin import clip_bodies, clip_to_bodies
@@ -116,11 +116,12 @@ def fresh_buffer(size: int) -> np.ndarray:
 
 def _hub_templates_task(args):
     """``hub_templates`` of args (the last: the beam set's representatives so far), in a template
-    process (``_Tessellator.pool``) or not. Returns (templates, hint, representatives)."""
+    process (``_Tessellator.pool``) or not. Returns (templates packed for the template table,
+    hint, representatives)."""
     *args, reps = args
     reps = list(reps)
     tpls, hint = hub_templates(*args, reps=reps)
-    return tpls, hint, reps
+    return Packed(tpls), hint, reps
 
 
 def _template_process_init() -> None:
@@ -437,8 +438,8 @@ class _Tessellator:
         else:
             results = [_hub_templates_task(a) for a in args]
         built = {}
-        for (hint_key, keys), (tpls, hint, reps) in zip(tasks, results):
-            built.update(zip(keys, tpls))
+        for (hint_key, keys), (packed, hint, reps) in zip(tasks, results):
+            built.update(zip(keys, self.table.unpack(packed)))
             self.hints[hint_key] = hint
             self.reps[hint_key] = reps  # the topologies the next round of these beams tries first
         for key, (_, _, local) in new.items():
