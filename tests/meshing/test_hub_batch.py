@@ -149,10 +149,10 @@ def test_stream_is_byte_identical_for_any_number_of_workers(tmp_path, monkeypatc
     tasks = []
 
     class Counted(ProcessPoolExecutor):
-        def map(self, fn, args):
-            args = list(args)
-            tasks.append(len(args))
-            return super().map(fn, args)
+        def submit(self, fn, *args, **kwargs):
+            if fn is tessellate._hub_templates_task:
+                tasks.append(len(args[0][1]))  # the task's hub shapes
+            return super().submit(fn, *args, **kwargs)
 
     monkeypatch.setattr(tessellate, "ProcessPoolExecutor", Counted)
     for workers in (1, 2):
@@ -160,7 +160,7 @@ def test_stream_is_byte_identical_for_any_number_of_workers(tmp_path, monkeypatc
         write_mesh(lat, out, style="refined", levels=1, workers=workers)
         outs.append(out.read_bytes())
     assert outs[2] == outs[3]
-    assert sum(k > 1 for k in tasks) >= 2  # the start-up map, then template tasks run in the processes
+    assert len(tasks) >= 2 and max(tasks) <= 5  # template tasks of at most 5 hubs ran in the processes
     for workers in (1, 2):
         assert main(["mesh", str(path), "--style", "chocc", "--workers", str(workers),
                      "--out", str(tmp_path / f"cli{workers}.stl")]) == 0
@@ -438,3 +438,17 @@ def test_one_sided_corridor_samples_equal_both_sided(monkeypatch):
     for style, levels in (("cnt", 0), ("refined", 2)):
         hubs.hub_templates(*args, style, levels, 16, min_edge=1e-3)
     assert len(calls) >= 4 and sum(calls) > 500
+
+
+def test_template_tasks_are_bounded_and_split_evenly():
+    """``_task_bounds``: a beam set's hubs in contiguous tasks of at most TEMPLATE_CHUNK, an even
+    number of near-equal ones from TEMPLATE_SPLIT hubs on."""
+    for n in [0, 1, 5, tessellate.TEMPLATE_SPLIT - 1, tessellate.TEMPLATE_SPLIT, 456, 767, 768, 769, 2000, 2400]:
+        b = tessellate._task_bounds(n)
+        assert [lo for lo, _ in b] == [0] * bool(b) + [hi for _, hi in b[:-1]] and (b[-1][1] if b else 0) == n
+        sizes = [hi - lo for lo, hi in b]
+        assert all(0 < x <= tessellate.TEMPLATE_CHUNK for x in sizes) and (not sizes or max(sizes) - min(sizes) <= 1)
+        if n >= tessellate.TEMPLATE_SPLIT:
+            assert len(b) % 2 == 0
+        elif n:
+            assert len(b) == 1

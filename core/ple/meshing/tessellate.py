@@ -59,6 +59,7 @@ BOX_TRIANGLES = 1 << 22  # triangles of a streamed box, at most (about: the esti
 TEMPLATE_CHUNK = 768  # hub shapes per template task (fixed: the output must not depend on the workers)
 POOL_MAP_MIN = 1 << 20  # pooled buffers from this size on are mapped in small pages (``fresh_buffer``)
 POOL_HEADROOM = 0.125  # a fresh pooled buffer's room beyond the size asked for (fraction)
+TEMPLATE_SPLIT = 128  # a beam set's new hub shapes from this many on are built in an even number of tasks
 TEMPLATE_ROUND = 4  # streamed boxes whose new hub shapes are built together (fixed, as TEMPLATE_CHUNK)
 
 
@@ -112,6 +113,18 @@ def fresh_buffer(size: int) -> np.ndarray:
     except OSError:  # not supported here: huge pages it is
         pass
     return np.frombuffer(mm, np.uint8)
+
+
+def _task_bounds(n: int) -> list:
+    """Template tasks of a beam set's n new hub shapes: at most TEMPLATE_CHUNK each and, from
+    TEMPLATE_SPLIT on, an even number of near-equal ones (a beam set's hubs on two processes
+    end together; three tasks of 456 hubs left one process alone with the last for a third of
+    each curved round). Fixed by n only: the output does not depend on the workers."""
+    k = -(-n // TEMPLATE_CHUNK)
+    if n >= TEMPLATE_SPLIT:
+        k += k % 2
+    cuts = [n * i // k for i in range(k + 1)] if k else [0]
+    return [(lo, hi) for lo, hi in zip(cuts[:-1], cuts[1:]) if hi > lo]
 
 
 def _hub_templates_task(args):
@@ -426,15 +439,17 @@ class _Tessellator:
         # the same tasks and results whatever the number of processes computing them
         tasks, args = [], []
         for hint_key, hubs in by_beams.items():  # the last hub with these beams: likely the same hull
-            for lo in range(0, len(hubs), TEMPLATE_CHUNK):
-                keys, nodes, own, local = zip(*hubs[lo:lo + TEMPLATE_CHUNK])
+            for lo, hi in _task_bounds(len(hubs)):
+                keys, nodes, own, local = zip(*hubs[lo:hi])
                 local = np.array(local).reshape(len(keys), -1, 4)
                 tasks.append((hint_key, keys))
                 args.append((lat.template_centers[list(nodes)], np.array(own), local[..., :3], local[..., 3],
                              self.style, self.levels, self.segments, self.hints.get(hint_key), self.min_edge,
                              self.fillet, self.batched, self.reps.get(hint_key, ())))
-        if self.pool is not None and len(args) > 1:
-            results = list(self.pool.map(_hub_templates_task, args))
+        if self.pool is not None and len(args) > 1:  # the largest first: no process is left with one at the end
+            order = sorted(range(len(args)), key=lambda i: -len(args[i][1]))
+            futures = dict(zip(order, [self.pool.submit(_hub_templates_task, args[i]) for i in order]))
+            results = [futures[i].result() for i in range(len(args))]
         else:
             results = [_hub_templates_task(a) for a in args]
         built = {}
