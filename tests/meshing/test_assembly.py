@@ -135,9 +135,17 @@ def test_hub_faces_read_every_chunk():
     tids = rng.integers(0, len(tpls), 50)
     offsets = rng.integers(0, 1000, 50)
     n = sum(len(tpls[t].faces) for t in tids)
+    want = np.concatenate([tpls[t].faces + o for t, o in zip(tids, offsets)]).reshape(-1, 3)
     out = np.empty((n, 3), np.int32)
     assert assembly.hub_faces(out, table.snapshot(), tids, offsets) == n
-    assert np.array_equal(out, np.concatenate([tpls[t].faces + o for t, o in zip(tids, offsets)]).reshape(-1, 3))
+    assert np.array_equal(out, want)
+    saved, assembly._compiled = assembly._compiled, None  # numpy: per template, the same faces
+    try:
+        out[:] = -1
+        assert assembly.hub_faces(out, table.snapshot(), tids, offsets) == n
+    finally:
+        assembly._compiled = saved
+    assert np.array_equal(out, want)
 
 
 @compiled

@@ -40,7 +40,8 @@ class Packed:
 
     def __init__(self, templates: list):
         self.n = len(templates)
-        self.vertices = np.concatenate([t.vertices for t in templates]).reshape(-1, 3).astype(float, copy=False)
+        self.vertices = np.concatenate([np.reshape(t.vertices, (-1, 3)) for t in templates] or [np.zeros((0, 3))])
+        self.vertices = self.vertices.astype(float, copy=False)
         self.nv = np.array([len(t.vertices) for t in templates], np.int64)
         self.faces, self.face_lens, self.face_ids = _pack_arrays([[t.faces] for t in templates], 3)
         self.rings, self.ring_lens, self.ring_ids = _pack_arrays([t.rings for t in templates], 1)
@@ -172,8 +173,23 @@ def hub_faces(out: np.ndarray, snapshot, tids: np.ndarray, offsets: np.ndarray) 
     written into ``out`` from face 0, hub after hub. Returns the faces written."""
     _, tf, rows = snapshot
     n = len(tids)
+    if _compiled is None:  # numpy: the hubs of one template at a time (a piece per hub is a Python loop per hub)
+        return _hub_faces_numpy(out, tf, rows, np.asarray(tids, np.int64), np.asarray(offsets, np.int64))
     return fill(out, 0, tf, rows[tids, 0], None, rows[tids, 3], rows[tids, 4], offsets,
                 None, np.arange(n, dtype=np.int64), np.ones(n, np.int64))
+
+
+def _hub_faces_numpy(out, tf, rows, tids, offsets) -> int:
+    nf = rows[tids, 4]
+    pos = np.cumsum(nf) - nf  # each hub's first face, hub after hub
+    order = np.argsort(tids, kind="stable")
+    ut, first = np.unique(tids[order], return_index=True)
+    for t, lo, hi in zip(ut, first, np.append(first[1:], len(order))):
+        inst = order[lo:hi]
+        c, fs, k = rows[t, 0], rows[t, 3], rows[t, 4]
+        f = tf[c][fs:fs + k].astype(out.dtype)
+        out[pos[inst][:, None] + np.arange(k)] = f[None] + offsets[inst].astype(out.dtype)[:, None, None]
+    return int(nf.sum())
 
 
 class Pieces:
