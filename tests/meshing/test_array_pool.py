@@ -1,7 +1,6 @@
 """``ArrayPool``: the memory of streamed boxes reused from encoded boxes to the next ones, and a
 stream through it writes what a stream of fresh arrays writes."""
 
-import multiprocessing
 import os
 import sys
 
@@ -50,36 +49,33 @@ def test_fresh_buffers_have_room_for_slightly_larger_boxes():
     assert not np.shares_memory(a, c)
 
 
-def _faults_per_round(keep: bool, q) -> None:
-    import resource
-
-    from ple.meshing.tessellate import _keep_freed_memory
-
-    np.core.multiarray._set_madvise_hugepage(False)  # count 4 KiB pages
-    if keep:
-        _keep_freed_memory()
-    out = []
-    for _ in range(4):  # three 20 MB arrays alive at once, then freed: glibc trims them by default
-        f0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-        arrays = [np.ones((20 << 20) // 8) for _ in range(3)]
-        del arrays
-        out.append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0)
-    q.put(out)
+FAULTS = """
+import json, resource, sys
+import numpy as np
+from ple.meshing.tessellate import _keep_freed_memory
+np.core.multiarray._set_madvise_hugepage(False)  # count 4 KiB pages
+if sys.argv[1] == "1":
+    _keep_freed_memory()
+out = []
+for _ in range(4):  # three 20 MB arrays alive at once, then freed: glibc trims them by default
+    f0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    arrays = [np.ones((20 << 20) // 8) for _ in range(3)]
+    del arrays
+    out.append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0)
+print(json.dumps(out))
+"""
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
 def test_template_processes_reuse_freed_memory():
     """In a template process (``_keep_freed_memory``), arrays freed by one round are the next
-    round's memory: no fresh pages after the first round, where glibc's defaults map and
-    touch a large part of them again."""
-    ctx = multiprocessing.get_context("fork")
-    got = {}
-    for keep in (False, True):
-        q = ctx.Queue()
-        p = ctx.Process(target=_faults_per_round, args=(keep, q))
-        p.start()
-        got[keep] = q.get(timeout=60)
-        p.join()
+    round's memory: no fresh pages after the first round, where glibc's defaults (a fresh
+    interpreter's) map and touch a large part of them again."""
+    import json
+    import subprocess
+
+    got = {keep: json.loads(subprocess.run([sys.executable, "-c", FAULTS, str(int(keep))], check=True,
+                                           capture_output=True, text=True).stdout) for keep in (False, True)}
     pages = 3 * (20 << 20) // 4096
     assert all(f > pages // 2 for f in got[False][1:]), got  # the default: fresh pages every round
     assert got[True][0] > pages // 2 and max(got[True][1:]) < pages // 50, got
