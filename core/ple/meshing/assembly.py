@@ -2,11 +2,12 @@
 each hub's similarity, and faces of repeated local pieces offset into the box's vertex array.
 
 A box holds thousands of hubs, and on curved lattices nearly every one has its own template, so
-assembly works on whole boxes, never per template: the templates' vertices and faces live in one
-``TemplateTable`` (two growing arrays), a box's vertices are placed hub after hub in one call
-(``place``), and its faces are written from a list of pieces in one call (``fill``). Both are
-compiled (``ple.meshing._assemble``, optional, the GIL released) with numpy forms computing the
-same values by the same IEEE operations in the same order (tested against each other)."""
+assembly works on whole boxes, never per template: the templates' vertices and faces live in a
+``TemplateTable`` (chunks as the template processes send them, ``Packed``), a box's vertices are
+placed hub after hub in one call (``place``), and its faces are written from a list of pieces in
+one call (``fill``). Both are compiled (``ple.meshing._assemble``, optional, the GIL released)
+with numpy forms computing the same values by the same IEEE operations in the same order
+(tested against each other)."""
 
 from __future__ import annotations
 
@@ -135,6 +136,7 @@ class TemplateTable:
 
     def __len__(self) -> int:
         return len(self._rows)
+
 
 def place(snapshot, tids: np.ndarray, offsets: np.ndarray, m: np.ndarray, out: np.ndarray) -> None:
     """Vertices of hubs into ``out`` (V, 3): hub i's template tids[i] mapped by m[i] (4×4) into
