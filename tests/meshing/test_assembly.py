@@ -32,15 +32,18 @@ def _similarities(rng, n):
 def _table(rng):
     table = assembly.TemplateTable()
     tpls = _templates(rng, 25)
-    before = [(t.vertices.copy(), t.faces.copy()) for t in tpls]
-    table.add(tpls[:10])
+    with pytest.raises(ValueError, match="not unpacked"):  # its arrays are in no chunk of the table
+        table.add(tpls[:1])
+    got = table.unpack(assembly.Packed(tpls[:10]))
+    table.add(got)
     early = table.snapshot()
-    table.add(tpls[10:])  # a second chunk: the earlier snapshot still reads the first
+    got += table.unpack(assembly.Packed(tpls[10:]))
+    table.add(got[10:])  # a second chunk: the earlier snapshot still reads the first
     assert len(early[2]) == 10 and len(early[0]) == 1 and len(table) == 25
-    for t, (v, f) in zip(tpls, before):  # views of the table, same values
-        assert np.array_equal(t.vertices, v) and np.array_equal(t.faces, f) and t.faces.dtype == np.int32
-        assert any(np.shares_memory(t.vertices, c) for c in table.snapshot()[0])
-    return table, tpls
+    for t, u in zip(tpls, got):  # views of the table, same values
+        assert np.array_equal(t.vertices, u.vertices) and np.array_equal(t.faces, u.faces)
+        assert u.faces.dtype == np.int32 and any(np.shares_memory(u.vertices, c) for c in table.snapshot()[0])
+    return table, got
 
 
 def test_packed_templates_come_back_equal_and_shared_arrays_once():

@@ -94,10 +94,9 @@ def _unpack_arrays(flat: np.ndarray, lens: np.ndarray):
 class TemplateTable:
     """The vertices (float64) and faces (int32) of every hub template of a tessellator, in chunks
     never written again: each ``Packed`` batch from a template process is a chunk as it came
-    (``unpack``: no copy), and ``add`` registers templates in template-id order (templates from
-    elsewhere are packed into a chunk of their own). Readers take ``snapshot()`` — the chunks
-    and the rows of each template id so far — and keep reading it while later templates are
-    added."""
+    (``unpack``: no copy), and ``add`` registers its templates in template-id order. Readers
+    take ``snapshot()`` — the chunks and the rows of each template id so far — and keep reading
+    it while later templates are added."""
 
     def __init__(self):
         self._lock = threading.Lock()
@@ -115,12 +114,10 @@ class TemplateTable:
         return packed.templates(chunk)
 
     def add(self, templates) -> None:
-        """Register templates, in template-id order."""
+        """Register templates from ``unpack``, in template-id order."""
         templates = list(templates)
-        loose = [t for t in templates if t.row is None]
-        if loose:  # not unpacked here (built in this process): packed now, as one chunk
-            for t, u in zip(loose, self.unpack(Packed(loose))):
-                t.vertices, t.faces, t.row = u.vertices, u.faces, u.row
+        if any(t.row is None for t in templates):
+            raise ValueError("a template not unpacked by a template table has no row in one")
         with self._lock:
             self._rows += [t.row for t in templates]
             self._snap = None
@@ -152,12 +149,17 @@ def place(snapshot, tids: np.ndarray, offsets: np.ndarray, m: np.ndarray, out: n
     _place_numpy(tv, rows, tids, offsets, m, out)
 
 
-def _place_numpy(tv, rows, tids, offsets, m, out) -> None:
-    """``place`` with numpy: hubs of one template at a time, the compiled form's operations."""
+def _by_template(tids: np.ndarray):
+    """(template id, its hubs in order) for each template of ``tids``, by increasing id."""
     order = np.argsort(tids, kind="stable")
     ut, first = np.unique(tids[order], return_index=True)
     for t, lo, hi in zip(ut, first, np.append(first[1:], len(order))):
-        inst = order[lo:hi]
+        yield t, order[lo:hi]
+
+
+def _place_numpy(tv, rows, tids, offsets, m, out) -> None:
+    """``place`` with numpy: hubs of one template at a time, the compiled form's operations."""
+    for t, inst in _by_template(tids):
         c, vs, n = rows[t, :3]
         x, y, z = (tv[c][vs:vs + n, k][None] for k in range(3))
         cols = offsets[inst][:, None] + np.arange(n)[None]
@@ -184,10 +186,7 @@ def hub_faces(out: np.ndarray, snapshot, tids: np.ndarray, offsets: np.ndarray) 
 def _hub_faces_numpy(out, tf, rows, tids, offsets) -> int:
     nf = rows[tids, 4]
     pos = np.cumsum(nf) - nf  # each hub's first face, hub after hub
-    order = np.argsort(tids, kind="stable")
-    ut, first = np.unique(tids[order], return_index=True)
-    for t, lo, hi in zip(ut, first, np.append(first[1:], len(order))):
-        inst = order[lo:hi]
+    for t, inst in _by_template(tids):
         c, fs, k = rows[t, 0], rows[t, 3], rows[t, 4]
         f = tf[c][fs:fs + k].astype(out.dtype)
         out[pos[inst][:, None] + np.arange(k)] = f[None] + offsets[inst].astype(out.dtype)[:, None, None]
