@@ -280,13 +280,14 @@ class _Tessellator:
         tids, m, _, _ = self.instances(idx)
         rp_t = np.array([t.geometry.r_plus for t, _ in self.tpl_list])
         clean_t = np.array([bool(t.geometry.clean) for t, _ in self.tpl_list])
+        pulled_t = np.array([bool(t.geometry.pulled) for t, _ in self.tpl_list])
         f = self.lat.group_factors(idx[:, 0], idx[:, 1], idx[:, 2])
         points = partial(self._element_points, idx, tids, m, np.asarray(ev.beam_nodes, np.int64),
                          np.asarray(ev.beam_index, np.int64)[:, 3])
         # hulls more than the largest rounding of two vertices apart (the grid, then twice the grid
         # for files in other units) stay apart in every file
         return find_unclean(ev.center, ev.radius, ev.beam_nodes, rp_t[tids] * f, ~clean_t[tids], points,
-                            SEPARATION_GRIDS * self.grid, self._steady_layers(idx)), ev
+                            SEPARATION_GRIDS * self.grid, self._steady_layers(idx), pulled_t[tids]), ev
 
     def _steady_layers(self, idx: np.ndarray):
         """``find_unclean``'s ``steady`` (node_index, a, b, shrink) when the region's layers along W

@@ -52,15 +52,17 @@ class UncleanReport:
     pairs: int
     shrunk_hubs: int
     components: int
+    close_junctions: int = 0  # neighbouring junctions with pulled-in circles not proven apart
 
     def line(self) -> str:
+        close = f", {self.close_junctions:,} close junction pairs" if self.close_junctions else ""
         return (f"unclean lattice: {len(self.nodes):,} hubs in {self.components:,} neighbourhoods "
-                f"({self.pairs:,} overlapping element pairs, {self.shrunk_hubs:,} shrunk junctions) "
+                f"({self.pairs:,} overlapping element pairs, {self.shrunk_hubs:,} shrunk junctions{close}) "
                 f"united with manifold3d")
 
 
 def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, margin: float = 0.0,
-                 steady=None) -> UncleanReport:
+                 steady=None, pulled=None) -> UncleanReport:
     """Unclean hubs of a region from its balls (center (N, 3), radius (N,)), beams (M, 2 rows),
     each hub's inflated radius r_plus (N,) (world units) and ``shrunk`` (N,) hubs whose ACHoCC
     was not clean. ``points(elements)``: for element ids (K,) (hubs 0..N-1, then beams N..N+M-1)
@@ -73,7 +75,12 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
     outside [a, b) and those whose lowest layer is a (the anchors) are looked up against all the
     others; each anchored pair with both elements inside [a, b) stands for its copies shifted up
     by 1, 2, … layers while they stay inside. ``shrink``: the smallest scale of a layer in
-    [a, b) relative to layer a (the margin of the anchored hulls is divided by it)."""
+    [a, b) relative to layer a (the margin of the anchored hulls is divided by it).
+
+    ``pulled`` (N,): hubs whose short beams pulled contact circles in from S⁺
+    (``achocc.pulled_circles``). Their S⁺ reaches past the disks, so the neighbour at the far
+    end of each of their beams is no longer kept apart by the ACHoCC: each such pair of
+    neighbouring junctions is tested on their hulls too (``points``; without it, unclean)."""
     c = np.asarray(center, float).reshape(-1, 3)
     rad = np.asarray(radius, float).reshape(-1)
     rp = np.maximum(np.asarray(r_plus, float).reshape(-1), rad)
@@ -128,6 +135,11 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
         rep = hits[inside[hits[:, 0]] & inside[hits[:, 1]]]  # anchored: copies up to layer kb - 1
         if len(rep):
             pairs += _mark_copies(bad, ends[rep], kmax[rep].max(axis=1), kb, node_index)
+    close = 0
+    if pulled is not None:
+        near = _pulled_neighbours(np.asarray(pulled, bool).reshape(-1), bn, points, margin)
+        bad[near.reshape(-1)] = True
+        close = len(near)
     nodes = np.flatnonzero(bad)
     comps = 0
     if len(nodes):
@@ -138,7 +150,21 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
         g = coo_matrix((np.ones(int(sel.sum())), (bn[sel, 0], bn[sel, 1])), shape=(n, n))
         _, lab = connected_components(g, directed=False)
         comps = len(np.unique(lab[nodes]))
-    return UncleanReport(nodes, pairs, shrunk_count, comps)
+    return UncleanReport(nodes, pairs, shrunk_count, comps, close)
+
+
+def _pulled_neighbours(pulled, bn, points, margin: float) -> np.ndarray:
+    """Pairs (P, 2) of neighbouring hubs (beams ``bn`` (M, 2) with a ``pulled`` end) whose
+    junction hulls are not proven apart (``separated``)."""
+    pairs = np.unique(np.sort(bn[pulled[bn[:, 0]] | pulled[bn[:, 1]]], axis=1), axis=0)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    if points is None or not len(pairs):
+        return pairs
+    apart = np.zeros(len(pairs), bool)
+    for lo in range(0, len(pairs), SEPARATION_CHUNK):
+        part = pairs[lo:lo + SEPARATION_CHUNK]
+        apart[lo:lo + len(part)] = separated(points(part[:, 0]), points(part[:, 1]), margin)
+    return pairs[~apart]
 
 
 def _query_pairs(ends, kinds, lo, hi, bn, query):
