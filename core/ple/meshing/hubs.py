@@ -271,8 +271,20 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
     axial = hub.disk_axial()
     rings = [rings[s] for s in range(hub.slots)]
     disk_centres = dirs * axial[:, None]
-    return HubTemplate(np.concatenate([verts, disk_centres]) + center, faces, rings,
-                       _caps(rings, len(verts)), hub)
+    caps = _caps(rings, len(verts))
+    if hub.pulled and not star_shaped(np.concatenate([verts, disk_centres]), faces, caps):
+        hub.clean = False  # folded: left to a local union (``ple.meshing.unions``)
+    return HubTemplate(np.concatenate([verts, disk_centres]) + center, faces, rings, caps, hub)
+
+
+def star_shaped(verts: np.ndarray, faces: np.ndarray, caps: list) -> bool:
+    """Whether a closed hub mesh (vertices (V, 3) relative to its centre, faces and cap fans)
+    has every face turned outward as seen from the centre: its faces' cones then cover each
+    direction once (the mesh encloses the centre: degree one), so no two faces meet. A junction
+    of pulled-in circles (``achocc.pulled_circles``) is kept only if it passes."""
+    f = np.concatenate([np.asarray(faces).reshape(-1, 3), *[np.asarray(c).reshape(-1, 3) for c in caps]])
+    t = verts[f]
+    return bool(np.all(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])) > 0))
 
 
 # ----- batches ----------------------------------------------------------------------------
@@ -617,6 +629,8 @@ def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths
                       batch.points[k], batch.cors, rep.chocc.twin, rep.chocc.rings, rep.chocc.ring_corridors)
             hub = HubGeometry(float(radii[g]), float(rp[k]), dirs[g], nbr[g], lengths[g], c, dirs.shape[1],
                               bool(geo.clean[g]), batch.alphas[k], batch.tris, rho[k] if geo.pulled[g] else None)
+            if hub.pulled and not star_shaped(np.concatenate([verts[k], disk[k]]), fk, caps[id(fk)]):
+                hub.clean = False  # folded: as ``hub_template``
             out[g] = HubTemplate(allv[k], fk, rk[:dirs.shape[1]], caps[id(fk)], hub)
     return ties
 
