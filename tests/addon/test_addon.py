@@ -1,16 +1,16 @@
 """The Blender extension, installed from the built zip into headless bpy 5.0.1.
 
-bpy state is global, so every case runs in its OWN fresh subprocess (``python
-tests/test_addon.py ZIP CASE``): it installs and enables the zip, runs ``case_<CASE>`` and
-prints ``CASE OK``; a crash of one case cannot lose the others. Truth comes from the core
-package installed in the environment (an independent copy of the vendored one).
+The cases run in the test run's one Blender worker (``conftest.py``, ``blender_worker.py``): the
+zip is installed once and every case starts from an empty scene, the add-on's default preferences
+and a forgotten session; a crash of one case costs only that case. Truth comes from the core
+package installed in the environment (an independent copy of the vendored one). The other add-on
+test modules share the helpers below (``bpy``, ``ple_ext`` and ``core`` are bound by the worker).
 """
 
 from __future__ import annotations
 
 import json
 import os
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -37,30 +37,17 @@ def lattice(thickness: Range(0.05, 0.3) = 0.1, n: Range(1, 9) = 3):
 
 
 # ----- pytest side ------------------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def zip_path(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("addon")
-    build = subprocess.run([sys.executable, "-m", "ple_addon.build", "--out", str(tmp)], cwd=ROOT,
-                           capture_output=True, text=True)
-    assert build.returncode == 0, build.stdout + build.stderr
-    path = Path(build.stdout.strip().splitlines()[-1])
-    assert path.name == "ple-0.1.0.zip" and path.is_file()
-    return path
-
-
 CASES = ["install", "lattice_add_sources", "region_matches_core", "frame_moves", "cumulative_frames",
          "param_slider", "counts", "template_ops", "snippet_round_trip", "ir_apply", "no_leaks", "errors",
          "untrusted", "undo", "filters", "tessellate", "export", "ui", "becots_corners"]
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_addon_case(zip_path, case, tmp_path):
-    res = subprocess.run([sys.executable, __file__, str(zip_path), case], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=600)
-    assert f"{case} OK" in res.stdout, res.stdout[-4000:] + res.stderr[-4000:]
+def test_addon_case(run_case, case):
+    run_case(__file__, case)
 
 
-# ----- bpy side (runs in the subprocess) ------------------------------------------------------------
+# ----- bpy side (runs in the Blender worker) --------------------------------------------------------
 bpy = ple_ext = core = None
 
 
@@ -590,32 +577,3 @@ def case_becots_corners():
     p[("corner", "B")].location = p[("corner", "A")].location  # coincident corners: refused, not stored
     update()
     assert "coincide" in rig.ple.status and rig.ple.edits == good, (rig.ple.status, good, rig.ple.edits)
-
-
-def main(zip_path: str, case: str) -> None:
-    install(zip_path)
-    globals()[f"case_{case}"]()
-    print(f"{case} OK")
-
-
-def install(zip_path: str) -> None:
-    """Install and enable the zip in a fresh headless bpy (this module's globals then hold bpy,
-    the extension and the environment's core; other add-on test files reuse it)."""
-    global bpy, ple_ext, core
-    os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp()
-    import bpy as _bpy
-    import ple as _core
-
-    bpy = _bpy
-    core = _core
-    for name in ("model.cage", "filters", "model.ir", "io.irfile", "meshing.preview", "program.snippets"):
-        __import__(f"ple.{name}")
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)
-    import importlib
-
-    ple_ext = importlib.import_module("bl_ext.user_default.ple")
-
-
-if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])

@@ -1,31 +1,25 @@
 """The add-on as a Blender user lives in it (issue 15), headless bpy 5.0.1 from the installed zip.
 
-Every case runs in its OWN fresh process (``python tests/addon/test_addon_live.py ZIP CASE``): it
-installs and enables the zip, runs ``case_<CASE>`` and prints ``CASE OK``; a crash or hang
-of one case cannot lose the others. Truth comes from the core package installed in the
-environment (an independent copy of the vendored one) and from numbers computed here.
+The cases run in the test run's one Blender worker (``conftest.py``): the zip installed once, every
+case from an empty scene; a crash or hang costs only its own case. ``region_budget`` measures this
+process's peak memory, so it runs in a fresh process of its own. Truth comes from the core package
+installed in the environment (an independent copy of the vendored one) and from numbers computed here.
 """
 
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
-import test_addon as base  # the shared installer and bpy-side helpers
 from test_addon import (  # noqa: F401 - bpy-side helpers the cases use
     new_rig,
     part,
     region_arrays,
     update,
-    zip_path,  # noqa: F401 - the fixture building the zip
 )
-
-ROOT = Path(__file__).resolve().parents[2]
 
 CASES = ["becots_redraw", "becots_apply_presets", "becots_named_return", "becots_round_trip",
          "cumulative_off_then_counts", "lil_follows_coarse", "absurd_counts", "region_budget",
@@ -33,16 +27,15 @@ CASES = ["becots_redraw", "becots_apply_presets", "becots_named_return", "becots
          "delete_root", "remove_operator", "cursor", "frame_precision", "apply_in_branch", "poll",
          "program_time_limit", "tessellate_budget", "bake", "materials_and_sizes", "render_colours",
          "program_file", "menu_keymap_prefs", "tessellate_steps", "live_errors_reported", "trust_per_file"]
+FRESH = {"region_budget"}  # peak memory of the process: only a fresh one measures this case alone
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_addon_live(zip_path, case, tmp_path):  # noqa: F811 - the imported fixture
-    res = subprocess.run([sys.executable, __file__, str(zip_path), case], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=600)
-    assert f"{case} OK" in res.stdout, (res.stdout[-4000:] + res.stderr[-4000:])
+def test_addon_live(run_case, case):
+    run_case(__file__, case, fresh=case in FRESH)
 
 
-# ----- bpy side (runs in the subprocess) ------------------------------------------------------------
+# ----- bpy side (runs in the Blender worker) --------------------------------------------------------
 bpy = ple_ext = core = None
 
 
@@ -754,27 +747,3 @@ def case_menu_keymap_prefs():
     prefs = bpy.context.preferences.addons["bl_ext.user_default.ple"].preferences
     assert prefs.memory_gb == 2.0 and prefs.max_triangles == 10_000_000 and prefs.program_seconds == 10.0
     assert prefs.job_seconds == 600.0
-
-
-def setup(path: str) -> None:
-    """Install and enable the zip in this (fresh) process (``test_addon.install``); sets ``bpy``,
-    ``ple_ext`` and ``core`` here too."""
-    global bpy, ple_ext, core
-    import importlib
-
-    base.install(path)
-    bpy, ple_ext, core = base.bpy, base.ple_ext, base.core
-    for name in ("algebra.precision", "algebra.similarity", "filters", "meshing.preview", "meshing.styles",
-                 "meshing.tessellate", "model.budget", "model.cage", "model.ir", "program.presets",
-                 "program.runtime", "program.snippets", "program.sources"):
-        importlib.import_module(f"ple.{name}")
-
-
-def main(path: str, case: str) -> None:
-    setup(path)
-    globals()[f"case_{case}"]()
-    print(f"{case} OK")
-
-
-if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])

@@ -3,32 +3,23 @@ zip: the control frames X, Y, Z are empties with a C handle each; dragging them 
 lattice. Node positions are compared with the core installed in the environment (an independent
 copy of the vendored one), the frames' points read off the empties with mathutils here.
 
-Each case runs in its own process through ``test_addon.main`` (install, enable, run the case)."""
+The cases run in the test run's one Blender worker (``conftest.py``)."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import test_addon as base  # noqa: E402  (the shared install-and-run helpers)
-from test_addon import zip_path  # noqa: E402,F401  (the built zip, a fixture)
+import test_addon as base  # the shared bpy-side helpers
 
 CASES = ["mobius_drag", "mobius_tmi_and_errors"]
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_addon_mobius(zip_path, case, tmp_path):  # noqa: F811
-    res = subprocess.run([sys.executable, __file__, str(zip_path), case], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=600)
-    assert f"{case} OK" in res.stdout, res.stdout[-4000:] + res.stderr[-4000:]
+def test_addon_mobius(run_case, case):
+    run_case(__file__, case)
 
 
-# ----- bpy side (runs in the subprocess) ------------------------------------------------------------
+# ----- bpy side (runs in the Blender worker) --------------------------------------------------------
 def positions(rig):
     me = base.ple_ext.mobius_frames.parts(rig)["region"].data
     co = np.zeros(len(me.vertices) * 3, np.float32)
@@ -127,9 +118,3 @@ def case_mobius_tmi_and_errors():
     except RuntimeError as exc:
         assert "not a Möbius lattice" in str(exc)
     assert len(bpy.data.objects) == n
-
-
-if __name__ == "__main__":
-    for name in CASES:
-        setattr(base, f"case_{name}", globals()[f"case_{name}"])
-    base.main(sys.argv[1], sys.argv[2])

@@ -1,35 +1,27 @@
 """The Body panel of the extension, installed from the built zip into headless bpy 5.0.1.
 
-Each case runs in its own process through ``test_addon``'s installer (``python
-tests/addon/test_body_panel.py ZIP CASE``). Truth is the core package of the environment (an
-independent copy of the vendored one) on the same mesh, built here with trimesh and placed by
-trimesh (the add-on reads it back from Blender with ``foreach_get`` and places it by the
-object's transform).
+The cases run in the test run's one Blender worker (``conftest.py``). Truth is the core package of
+the environment (an independent copy of the vendored one) on the same mesh, built here with trimesh
+and placed by trimesh (the add-on reads it back from Blender with ``foreach_get`` and places it by
+the object's transform).
 """
 
 from __future__ import annotations
 
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 import test_addon as base
-from test_addon import zip_path  # noqa: F401 - the module's fixture: the zip built once
 
 CASES = ["fill_modes", "grade_empties", "cleanup_skin_tessellate", "live_move", "bad_bodies", "ui"]
 TURN = (0.3, -0.2, 0.5)  # the body object's rotation (XYZ Euler)
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_body_panel(zip_path, case, tmp_path):  # noqa: F811 - the imported fixture
-    res = subprocess.run([sys.executable, __file__, str(zip_path), case], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=600)
-    assert f"{case} OK" in res.stdout, res.stdout[-4000:] + res.stderr[-4000:]
+def test_body_panel(run_case, case):
+    run_case(__file__, case)
 
 
-# ----- bpy side (runs in the subprocess) ------------------------------------------------------------
+# ----- bpy side (runs in the Blender worker) --------------------------------------------------------
 def part_mesh():
     import trimesh
 
@@ -201,9 +193,3 @@ def case_ui():
     assert {"body", "fill", "skin", "cleanup", "keep_skin", "grade", "grade_a", "grade_b", "factor_a",
             "ple.skin_solid"} <= set(seen)
     assert "UNDO" in base.bpy.types.PLE_OT_body_fill.bl_options
-
-
-if __name__ == "__main__":
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    base.__dict__.update({f"case_{c}": globals()[f"case_{c}"] for c in CASES})
-    base.main(sys.argv[1], sys.argv[2])

@@ -1,23 +1,19 @@
 """The CLG rig of the add-on (issue 16), installed from the built zip into headless bpy 5.0.1.
 
-Every case runs in its own fresh process (``python tests/addon/test_clg_rig.py ZIP CASE``), through
-``test_addon.install``. Truth comes from the core installed in the environment (an independent copy
-of the vendored one): Monte Carlo volumes over its PMC, its meshes and voxels of the edited pattern,
-and volumes and edge counts computed here from the Blender mesh data.
+The cases run in the test run's one Blender worker (``conftest.py``). Truth comes from the core
+installed in the environment (an independent copy of the vendored one): Monte Carlo volumes over its
+PMC, its meshes and voxels of the edited pattern, and volumes and edge counts computed here from the
+Blender mesh data.
 """
 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import test_addon as base  # noqa: E402
+import test_addon as base
 
 CASES = ["add_sources", "mesh_preview_volume", "corner_edit_follows", "frame_edit_steady", "voxel_and_slice_preview",
          "operators_write_files", "apply_to_clg_file", "duplicate_remove", "errors"]
@@ -38,23 +34,12 @@ def clg(hollow: Range(0.3, 0.8) = 0.5):
 '''
 
 
-@pytest.fixture(scope="module")
-def zip_path(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("clg_rig")
-    build = subprocess.run([sys.executable, "-m", "ple_addon.build", "--out", str(tmp)], cwd=base.ROOT,
-                           capture_output=True, text=True)
-    assert build.returncode == 0, build.stdout + build.stderr
-    return Path(build.stdout.strip().splitlines()[-1])
-
-
 @pytest.mark.parametrize("case", CASES)
-def test_clg_rig_case(zip_path, case, tmp_path):
-    res = subprocess.run([sys.executable, __file__, str(zip_path), case], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=600)
-    assert f"{case} OK" in res.stdout, res.stdout[-4000:] + res.stderr[-4000:]
+def test_clg_rig_case(run_case, case):
+    run_case(__file__, case)
 
 
-# ----- bpy side (runs in the subprocess) ------------------------------------------------------------
+# ----- bpy side (runs in the Blender worker) --------------------------------------------------------
 def new_clg(preset="plate", **kw):
     assert base.bpy.ops.ple.clg_add(source="PRESET", preset=preset, **kw) == {"FINISHED"}
     return base.bpy.context.active_object
@@ -345,13 +330,3 @@ def case_errors():
     # a plain lattice rig is not a CLG rig
     base.new_rig("cubic")
     base.fails(bpy.ops.ple.clg_preview, "select a PLE CLG object")
-
-
-def main(zip_path: str, case: str) -> None:
-    base.install(zip_path)
-    globals()[f"case_{case}"]()
-    print(f"{case} OK")
-
-
-if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])
