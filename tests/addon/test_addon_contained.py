@@ -137,7 +137,7 @@ def case_programs_still_run():
     fu = live.part(rig, "u")
     fu.location = (fu.location[0] + 0.2, fu.location[1], fu.location[2])
     live.update()
-    gui = live.ple_ext.rig.lattice_of(rig)
+    gui = live.ple_ext.rig.model.lattice_of(rig)
     assert bpy.ops.ple.program_apply() == {"FINISHED"} and rig.ple.edits == "[]"
     assert core.program.snippets.lattices_close(live.rerun(rig), gui, 1e-9)
     assert no_child_left()

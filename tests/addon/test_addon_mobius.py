@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import test_addon as base  # the shared bpy-side helpers
 
-CASES = ["mobius_drag", "mobius_tmi_and_errors"]
+CASES = ["mobius_drag", "mobius_tmi_and_errors", "mobius_frame_put_back"]
 
 
 @pytest.mark.parametrize("case", CASES)
@@ -21,7 +21,7 @@ def test_addon_mobius(run_case, case):
 
 # ----- bpy side (runs in the Blender worker) --------------------------------------------------------
 def positions(rig):
-    me = base.ple_ext.mobius_frames.parts(rig)["region"].data
+    me = base.ple_ext.features.mobius.parts(rig)["region"].data
     co = np.zeros(len(me.vertices) * 3, np.float32)
     me.attributes["position"].data.foreach_get("vector", co)
     ed = np.zeros(len(me.edges) * 2, np.int32)
@@ -47,7 +47,7 @@ def assert_drawn(rig, lat):
 
 
 def case_mobius_drag():
-    bpy, mf = base.bpy, base.ple_ext.mobius_frames
+    bpy, mf = base.bpy, base.ple_ext.features.mobius
     from ple.model.mobius import with_control_frames
     from ple.program.sources import load_lattice
 
@@ -87,7 +87,7 @@ def case_mobius_drag():
 
 
 def case_mobius_tmi_and_errors():
-    bpy, mf = base.bpy, base.ple_ext.mobius_frames
+    bpy, mf = base.bpy, base.ple_ext.features.mobius
     from ple.model.mobius import with_control_frames
     from ple.program.sources import load_lattice
 
@@ -118,3 +118,21 @@ def case_mobius_tmi_and_errors():
     except RuntimeError as exc:
         assert "not a Möbius lattice" in str(exc)
     assert len(bpy.data.objects) == n
+
+
+def case_mobius_frame_put_back():
+    """A handle moved onto its frame's origin shows the error; put back exactly where it was, the
+    error clears (the frames are then the ones last drawn)."""
+    bpy, mf = base.bpy, base.ple_ext.features.mobius
+    assert bpy.ops.ple.mobius_add(preset="mobius_slab") == {"FINISHED"}
+    rig = bpy.context.active_object
+    handle = mf.parts(rig)[("handle", "Y")]
+    was = tuple(handle.location)
+    before = positions(rig)[0]
+    handle.location = (0.0, 0.0, 0.0)
+    base.update()
+    assert "distinct" in rig["ple_status"], rig["ple_status"]
+    handle.location = was
+    base.update()
+    assert rig["ple_status"] == "", rig["ple_status"]
+    assert np.array_equal(positions(rig)[0], before)

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 import test_addon as base
 
-CASES = ["fill_modes", "grade_empties", "cleanup_skin_tessellate", "live_move", "bad_bodies", "ui"]
+CASES = ["fill_modes", "grade_empties", "cleanup_skin_tessellate", "live_move", "bad_bodies", "ui",
+         "skin_solid_no_coincident_vertices"]
 TURN = (0.3, -0.2, 0.5)  # the body object's rotation (XYZ Euler)
 
 
@@ -193,3 +194,25 @@ def case_ui():
     assert {"body", "fill", "skin", "cleanup", "keep_skin", "grade", "grade_a", "grade_b", "factor_a",
             "ple.skin_solid"} <= set(seen)
     assert "UNDO" in base.bpy.types.PLE_OT_body_fill.bl_options
+
+
+def case_skin_solid_no_coincident_vertices():
+    """Skin Solid's mesh has no two vertices at one position, so merging by position (an STL round
+    trip, a slicer) keeps it watertight."""
+    import trimesh
+
+    bpy = base.bpy
+    rig = base.new_rig("cubic", region=(10, 10, 10))
+    obj = body_object()
+    assert fill(rig, obj, fill="ANY", cleanup=True, skin=0.3) == {"FINISHED"}
+    assert bpy.ops.ple.skin_solid() == {"FINISHED"}
+    me = bpy.data.objects[f"{rig.name}.skin"].data
+    co = np.zeros(len(me.vertices) * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    tri = np.zeros(len(me.polygons) * 3, np.int32)
+    me.polygons.foreach_get("vertices", tri)
+    assert len(np.unique(co, axis=0)) == len(co), len(co) - len(np.unique(co, axis=0))
+    merged = trimesh.Trimesh(co, tri.reshape(-1, 3), process=False)
+    merged.merge_vertices()
+    assert merged.is_watertight and merged.is_winding_consistent

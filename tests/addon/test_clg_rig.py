@@ -137,7 +137,7 @@ def case_add_sources():
     assert shelled.ple_clg.active and shelled.ple.source_kind == "IR"
     # the panel draws (chunks, solid, buttons) without errors
     seen = []
-    panel = base.ple_ext.clg_rig.PLE_PT_clg
+    panel = base.ple_ext.features.clg.PLE_PT_clg
     assert panel.poll(bpy.context)
     panel.draw(type("P", (), {"layout": base.CheckedLayout(seen)})(), bpy.context)
     for name in ("ple.clg_preview", "ple.clg_voxelize", "ple.clg_slice", "ple.clg_export", "preview", "chunk"):
@@ -162,7 +162,7 @@ def case_corner_edit_follows():
     """Drag BeCOTS corner C: the preview is the core's mesh of the CLG on the moved slab."""
     rig = new_clg("plate", region=(2, 2, 1))
     clg = core_clg("plate")
-    p = base.ple_ext.rig.parts(rig)
+    p = base.ple_ext.rig.model.parts(rig)
     p[("corner", "C")].location = (4.6, 4.2, 1.5)
     base.update()
     assert rig.ple.status == "" and rig.ple_clg.status == "", (rig.ple.status, rig.ple_clg.status)
@@ -182,7 +182,7 @@ def case_frame_edit_steady():
     """Move the U frame of a steady CLG (shelled): the preview's volume follows the edited pattern."""
     rig = new_clg("shelled", region=(2, 2, 2))
     rig.ple_clg.segments = 48  # a thin shell: the difference of two meshes, within 1 % at 48 segments
-    p = base.ple_ext.rig.parts(rig)
+    p = base.ple_ext.rig.model.parts(rig)
     u = p["u"]
     m = base.matrix(u)
     m[:3, 3] += np.array([0.3, 0.0, 0.0])  # a longer step along U: longer beams
@@ -190,7 +190,7 @@ def case_frame_edit_steady():
     base.update()
     assert rig.ple.status == "" and rig.ple_clg.status == "", (rig.ple.status, rig.ple_clg.status)
     vendored = base.ple_ext.corelink.core("model.ir")
-    lat = cm("model.ir").lattice_from_dict(vendored.lattice_to_dict(base.ple_ext.rig.lattice_of(rig)))
+    lat = cm("model.ir").lattice_from_dict(vendored.lattice_to_dict(base.ple_ext.rig.model.lattice_of(rig)))
     clg = core_clg("shelled")
     assert not np.allclose(lat.U.matrix, clg.pattern.U.matrix)
     co, polys = preview_data(rig)
@@ -213,7 +213,7 @@ def case_voxel_and_slice_preview():
     clg = core_clg("shelled")
     region = clg.pattern.region("0:2,0:2,0:1")
     comp = cm("clg.query").compiled(clg, region)
-    shape = base.ple_ext.clg_rig.grid_shape(comp.lo, comp.hi, 24)
+    shape = base.ple_ext.features.clg.grid_shape(comp.lo, comp.hi, 24)
     assert max(shape) == 24
     # independent of the add-on's voxels: PMC at the voxel centres computed here
     axes = [comp.lo[a] + (np.arange(shape[a]) + 0.5) * (comp.hi[a] - comp.lo[a]) / shape[a] for a in range(3)]
@@ -265,12 +265,12 @@ def case_apply_to_clg_file():
     back from the text is the edited one (same preview); a clg() program is refused, text kept."""
     bpy = base.bpy
     rig = new_clg("plate", region=(2, 2, 1))
-    p = base.ple_ext.rig.parts(rig)
+    p = base.ple_ext.rig.model.parts(rig)
     p[("corner", "C")].location = (4.6, 4.2, 1.5)
     base.update()
     before = preview_data(rig)[0].copy()
     assert bpy.ops.ple.program_apply() == {"FINISHED"}
-    assert base.ple_ext.rig.edits_of(rig) == []
+    assert base.ple_ext.rig.model.edits_of(rig) == []
     data = json.loads(rig.ple.text.as_string())
     moved = [list(base.matrix(p[("corner", c)])[:3, 3]) for c in "ABCD"]
     assert np.allclose(data["pattern"]["becots"]["corners"], moved, atol=1e-6)
@@ -281,7 +281,7 @@ def case_apply_to_clg_file():
     path.write_text(PROGRAM)
     assert bpy.ops.ple.clg_add(source="FILE", filepath=str(path.resolve())) == {"FINISHED"}
     prog = bpy.context.active_object
-    u = base.ple_ext.rig.parts(prog)["u"]
+    u = base.ple_ext.rig.model.parts(prog)["u"]
     u.location = (u.location[0] + 0.2, u.location[1], u.location[2])
     base.update()
     base.fails(bpy.ops.ple.program_apply, "Copy Snippet")
