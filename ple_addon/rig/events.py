@@ -10,9 +10,8 @@ from bpy.app.handlers import persistent
 
 from ..corelink import PleError, cage, snippets
 from ..session import SESSION
-from . import hooks
+from . import hooks, sync
 from .model import add_edits, all_rigs, check_budget, dependents, edits_of, is_rig, lattice_of, region_of, rig_of
-from .sync import refresh, refuse, remove_orphans, resync
 
 
 def set_quietly(settings, **values) -> None:
@@ -29,11 +28,11 @@ def on_settings_changed(rig) -> None:
     if SESSION.busy or not is_rig(rig):
         return
     st = SESSION.state(rig.ple.uid)
-    err = refresh(rig)
+    err = sync.refresh(rig)
     if err and st.region and (tuple(rig.ple.region_min), tuple(rig.ple.region_max)) != st.region:
         set_quietly(rig.ple, region_min=st.region[0], region_max=st.region[1])
-        refresh(rig, force=True)
-        refuse(rig, err, report=False)  # refresh reported it already
+        sync.refresh(rig, force=True)
+        sync.refuse(rig, err, report=False)  # refresh reported it already
     refresh_dependents(rig)
 
 
@@ -83,9 +82,9 @@ def on_counts_changed(rig) -> None:
     except PleError as exc:
         asked = tuple(int(c) for c in rig.ple.counts)
         set_quietly(rig.ple, counts=old_counts)
-        refuse(rig, f"counts {asked} kept: {exc}")
+        sync.refuse(rig, f"counts {asked} kept: {exc}")
         return
-    refresh(rig)
+    sync.refresh(rig)
     refresh_dependents(rig)
 
 
@@ -95,10 +94,10 @@ def apply_filter(rig, settings: dict, prepared=None) -> str | None:
     returned. Rigs filtered by this one follow."""
     old = {k: tuple(v) if k == "stencil_shape" else v for k, v in ((k, getattr(rig.ple, k)) for k in settings)}
     set_quietly(rig.ple, **settings)
-    err = refresh(rig, force=True, prepared=prepared)
+    err = sync.refresh(rig, force=True, prepared=prepared)
     if err:
         set_quietly(rig.ple, **old)
-        refresh(rig, force=True)
+        sync.refresh(rig, force=True)
         return err
     refresh_dependents(rig)
     return None
@@ -106,7 +105,7 @@ def apply_filter(rig, settings: dict, prepared=None) -> str | None:
 
 def refresh_dependents(rig) -> None:
     for dep in dependents(rig):
-        refresh(dep)
+        sync.refresh(dep)
 
 
 # ----- handlers ------------------------------------------------------------------------------------
@@ -143,7 +142,7 @@ def check_removed(scene) -> None:
     """After objects left the scene: remove the parts of rigs whose lattice object is gone."""
     n = len(scene.objects)
     if n < SESSION.object_count:
-        remove_orphans()
+        sync.remove_orphans()
         n = len(scene.objects)
     SESSION.object_count = n
 
@@ -159,7 +158,7 @@ def on_depsgraph_update(scene, depsgraph):
     for name in dict.fromkeys(names):
         r = bpy.data.objects.get(name)
         if is_rig(r):
-            refresh(r)
+            sync.refresh(r)
     for fn in hooks.each("updates"):  # e.g. Möbius rigs whose control frames moved
         fn(scene)
 
@@ -169,7 +168,7 @@ def on_load(*_args):
     """Trust belongs to the file it was given in: opening another .blend (even a copy holding the
     same rig ids) trusts nothing; reopening the same file keeps it (Blender's own trust applies)."""
     SESSION.forget_trust_of_other_files(bpy.data.filepath)
-    resync()
+    sync.resync()
 
 
 @persistent
@@ -179,7 +178,7 @@ def on_save(*_args):
 
 @persistent
 def on_reset(*_args):
-    resync()
+    sync.resync()
 
 
 HANDLERS = (("depsgraph_update_post", on_depsgraph_update), ("undo_post", on_reset), ("redo_post", on_reset),
@@ -191,7 +190,7 @@ def resume() -> None:
     are live again, their parts' places the baseline. At Blender's start ``bpy.data`` is not yet
     readable; ``load_post`` does this then."""
     if isinstance(bpy.data, bpy.types.BlendData) and all_rigs():
-        resync()
+        sync.resync()
 
 
 def register() -> None:
