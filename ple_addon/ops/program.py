@@ -65,7 +65,9 @@ class PLE_OT_program_run(RigOperator, bpy.types.Operator):  # noqa: N801 - Blend
         model.trust(rig)
         st = model.state_of(rig)  # keep what was drawn: frame moves made before this still count
         st.program_key, st.topology = (), ()
-        return self.refreshed(rig)
+        done = self.refreshed(rig)
+        sliders(rig)
+        return done
 
 
 class PLE_OT_snippet_copy(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
@@ -183,6 +185,7 @@ class PLE_OT_program_reload(RigOperator, bpy.types.Operator):  # noqa: N801 - Bl
             rig.ple.text.from_string(old)
             sync.refresh(rig, force=True)
             raise PleError(f"{path}: {err} (the previous program is kept)")
+        sliders(rig)
         self.report({"INFO"}, f"reloaded {path}")
         return {"FINISHED"}
 
@@ -202,6 +205,14 @@ class PLE_OT_program_save(RigOperator, bpy.types.Operator):  # noqa: N801 - Blen
             raise PleError(f"{path}: cannot write ({exc.strerror})") from None
         self.report({"INFO"}, f"saved {path}")
         return {"FINISHED"}
+
+
+def sliders(rig) -> None:
+    """After the program ran (Run Program, Reload): a slider per input of the program as it now is
+    (the user's values kept, ranges and defaults the program's)."""
+    inputs = model.state_of(rig).inputs
+    if inputs is not None:
+        sync.set_params(rig, inputs)
 
 
 def linked_path(rig) -> Path:

@@ -183,14 +183,16 @@ def mesh_part(rig, role: str, material):
 
 
 def set_params(rig, inputs) -> None:
-    """Program inputs (``runtime.Param``) as custom properties with slider ranges (``Range(lo, hi)``)."""
+    """Program inputs (``runtime.Param``) as custom properties with slider ranges (``Range(lo, hi)``).
+    A slider the rig has keeps its value (the user's); its range and default follow the program, so
+    Blender's Reset to Default Value gives the program's default. A new input gets its default."""
     for prm in inputs:
         key = PARAM_PREFIX + prm.name
         if key not in rig:
             rig[key] = prm.default
         if isinstance(prm.default, (int, float)) and not isinstance(prm.default, bool):
             ui = rig.id_properties_ui(key)
-            opts = {"description": f"program input {prm.name} of lattice()"}
+            opts = {"description": f"program input {prm.name} of lattice()", "default": prm.default}
             if prm.range is not None:
                 kind = type(prm.default)  # an int input gets int limits
                 lo, hi = kind(prm.range.lo), kind(prm.range.hi)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import test_addon as base
 from test_addon import (  # noqa: F401 - bpy-side helpers the cases use
     new_rig,
     part,
@@ -27,7 +28,7 @@ CASES = ["becots_redraw", "becots_apply_presets", "becots_named_return", "becots
          "delete_root", "remove_operator", "cursor", "frame_precision", "apply_in_branch", "poll",
          "program_time_limit", "tessellate_budget", "bake", "materials_and_sizes", "render_colours",
          "program_file", "menu_keymap_prefs", "tessellate_steps", "live_errors_reported", "trust_per_file",
-         "refusal_stays_until_next_edit", "reenabled_addon_edits_live"]
+         "refusal_stays_until_next_edit", "reenabled_addon_edits_live", "reload_keeps_slider_values"]
 FRESH = {"region_budget"}
 ADDON = "bl_ext.user_default.ple"  # peak memory of the process: only a fresh one measures this case alone
 
@@ -803,3 +804,24 @@ def case_reenabled_addon_edits_live():
     x = np.sort(region_arrays(rig)[0][:, 0])
     assert np.isclose(x[-1], 1.8, atol=1e-5), x  # the drag moved the region (it used to stay at 1.4)
     assert ext.rig.model.edits_of(rig)[-1].similarity is not None
+
+
+def case_reload_keeps_slider_values():
+    """Reload after the program's inputs changed on disk: a slider keeps the user's value, its range
+    and default follow the program (Reset to Default gives the new default), a new input gets a slider."""
+    tmp = Path(tempfile.mkdtemp())
+    path = tmp / "prog.py"
+    path.write_text(base.PROGRAM)
+    assert bpy.ops.ple.lattice_add(source="FILE", filepath=str(path), region=(2, 2, 2)) == {"FINISHED"}
+    rig = bpy.context.active_object
+    rig["ple:thickness"] = 0.2  # the user's value
+    rig.update_tag()
+    update()
+    changed = base.PROGRAM.replace("thickness: Range(0.05, 0.3) = 0.1", "thickness: Range(0.05, 0.5) = 0.15")
+    changed = changed.replace("n: Range(1, 9) = 3", "n: Range(1, 9) = 3, m: Range(1, 5) = 2")
+    path.write_text(changed)
+    assert bpy.ops.ple.program_reload() == {"FINISHED"} and rig.ple.status == "", rig.ple.status
+    ui = rig.id_properties_ui("ple:thickness").as_dict()
+    assert rig["ple:thickness"] == 0.2 and ui["default"] == 0.15 and ui["max"] == 0.5, (rig["ple:thickness"], ui)
+    assert rig["ple:m"] == 2 and rig.id_properties_ui("ple:m").as_dict()["max"] == 5
+    assert np.allclose(region_arrays(rig)[1], 0.2)  # drawn with the user's value
