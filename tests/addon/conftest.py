@@ -39,11 +39,22 @@ def zip_path(tmp_path_factory) -> Path:
     return path
 
 
+_workers: list = []  # the session's Blender worker, stopped after the last add-on test
+
+
 @pytest.fixture(scope="session")
 def blender(zip_path):
     worker = Worker(zip_path)
+    _workers.append(worker)
     yield worker
     worker.stop()
+
+
+def pytest_runtest_teardown(item, nextitem):
+    """The Blender worker is not kept idle through the rest of the run (the core's tests)."""
+    if _workers and (nextitem is None or Path(str(nextitem.fspath)).parent != Path(__file__).parent):
+        for worker in _workers:
+            worker.stop()
 
 
 @pytest.fixture
