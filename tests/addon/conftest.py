@@ -10,9 +10,11 @@ import sys
 from pathlib import Path
 
 import pytest
-from blender_worker import Worker, run_fresh
 
-ROOT = Path(__file__).resolve().parents[2]
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+sys.path.insert(0, str(HERE))  # the case modules import each other by name (as the Blender worker does)
+from blender_worker import Worker, run_fresh  # noqa: E402
 
 
 def pytest_configure(config):
@@ -52,7 +54,7 @@ def blender(zip_path):
 
 def pytest_runtest_teardown(item, nextitem):
     """The Blender worker is not kept idle through the rest of the run (the core's tests)."""
-    if _workers and (nextitem is None or Path(str(nextitem.fspath)).parent != Path(__file__).parent):
+    if _workers and (nextitem is None or Path(str(nextitem.fspath)).parent != HERE):
         for worker in _workers:
             worker.stop()
 
