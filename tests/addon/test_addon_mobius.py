@@ -1,4 +1,4 @@
-"""Möbius lattices in the add-on (ple_addon/mobius_frames.py), headless bpy 5.0.1 from the installed
+"""Möbius lattices in the add-on (ple_addon/features/mobius.py), headless bpy 5.0.1 from the installed
 zip: the control frames X, Y, Z are empties with a C handle each; dragging them redraws the
 lattice. Node positions are compared with the core installed in the environment (an independent
 copy of the vendored one), the frames' points read off the empties with mathutils here.

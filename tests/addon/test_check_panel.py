@@ -1,4 +1,4 @@
-"""The add-on's Check panel (``ple_addon/check_panel.py``), installed from the built zip into headless
+"""The add-on's Check panel (``ple_addon/features/check.py``), installed from the built zip into headless
 bpy 5.0.1 through the helpers of ``test_addon`` (in the test run's one Blender worker). Truth: the core
 installed in the environment (an independent copy of the vendored one) run on the same program,
 and a brute-force test of all element pairs."""
