@@ -121,10 +121,6 @@ def applied_text(rig) -> str | None:
     return json.dumps(data, indent=1) + "\n"
 
 
-def is_clg_rig(obj) -> bool:
-    return model.is_rig(obj) and obj.ple_clg.active
-
-
 def clg_rig_of(context, name: str = ""):
     obj = bpy.data.objects.get(name) if name else context.active_object
     rig = model.rig_of(obj)
@@ -187,6 +183,10 @@ def on_drawn(rig, lat) -> None:
 
 
 # ----- operators --------------------------------------------------------------------------------------
+def _preset_items(self, context):
+    return [(n, n, f"CLG preset {n}") for n in clg_sources.clg_preset_names()]
+
+
 class PLE_OT_clg_add(SourceAdd, bpy.types.Operator):  # noqa: N801 - Blender naming
     """Add a PLE CLG rig from a CLG preset, a program defining clg() (.py), a ple-clg/1 file (.json)
     or a text block"""
@@ -200,8 +200,7 @@ class PLE_OT_clg_add(SourceAdd, bpy.types.Operator):  # noqa: N801 - Blender nam
         ("FILE", "File", "a CLG program .py or a data-only ple-clg/1 .json"),
         ("TEXT", "Text Block", "a text block of this file holding a CLG program or ple-clg/1 data")],
         default="PRESET")
-    preset: EnumProperty(name="Preset", items=lambda self, context: [
-        (n, n, f"CLG preset {n}") for n in clg_sources.clg_preset_names()])
+    preset: EnumProperty(name="Preset", items=_preset_items)
 
     what = ".py CLG program or .json ple-clg/1 file"
 
@@ -322,7 +321,8 @@ class PLE_PT_clg(RigPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
 
     @classmethod
     def poll(cls, context):
-        return is_clg_rig(model.rig_of(context.active_object))
+        rig = model.rig_of(context.active_object)
+        return rig is not None and rig.ple_clg.active
 
     def draw(self, context):
         rig = model.rig_of(context.active_object)
