@@ -2,18 +2,27 @@
 
 A closed mesh that intersects itself counts the overlapping parts twice (slicers, volumes).
 ``self_intersections`` finds every pair of faces that meet other than in their shared
-vertices or edge:
+vertices or edge. Faces without area (a repeated vertex, or three collinear corners, decided
+exactly) have no interior and take no part (``degenerate`` finds them).
 
-- broad phase: a uniform grid (cell size from the median box) over boxes of slices of the faces
-  (a long needle gets small boxes along its length), pairs of faces with overlapping slices;
-- narrow phase, vectorized: orientation predicates ``orient3d`` in float64 with a static
-  error bound (Shewchuk's filter); the few undecided signs are recomputed exactly with
-  integers (the floats' exact values), so every decision is exact.
+Two forms give the same pairs (tested): the compiled one (``ple.meshing._selfcheck``, optional,
+the GIL released) and numpy:
+
+- broad phase: compiled, a hashed uniform grid of ``CELL_MEDIANS`` median face extents, each face
+  in the cells of its box, a long face only in those of its slices across its longest axis, every
+  pair of faces tested once (in the first cell both lie in) and never stored; numpy, a uniform
+  grid (cell size from the median box) over boxes of slices of the faces, candidate pairs sorted
+  and deduplicated;
+- narrow phase: orientation predicates ``orient3d`` / ``orient2d`` in float64 with a static
+  error bound (Shewchuk's filter); the few undecided signs are recomputed exactly (compiled:
+  floating-point expansions; numpy: integers, the floats' exact values), so every decision is
+  exact.
 
 Pairs without a common vertex intersect (or touch) iff an edge of one meets the other
 (non-coplanar), or, coplanar, iff their 2D projections overlap. Pairs with one common vertex
 intersect iff the edge opposite that vertex in one meets the other. Pairs with a common edge
-intersect iff they are coplanar and on the same side of it (a fold).
+intersect iff they are coplanar and on the same side of it (a fold). Two faces on the same three
+vertices coincide.
 """
 
 from __future__ import annotations
@@ -22,6 +31,12 @@ import numpy as np
 
 from ..algebra.vectors import cross
 
+try:  # the compiled check (setup.py, optional): the numpy form's pairs, without candidate lists
+    from . import _selfcheck as _compiled
+except ImportError:  # not built (no C compiler): numpy checks
+    _compiled = None
+
+CELL_MEDIANS = 8.0  # the compiled grid's cell over the median face extent (measured best 8-16 on refined meshes)
 ERRBOUND = (7.0 + 56.0 * 2.0**-53) * 2.0**-53  # Shewchuk's o3derrboundA
 MAX_CELL_PAIRS = 1 << 22
 GRID_CELL = 0.5  # grid cell over the median slice size (slices: 2 median face extents long)
@@ -218,19 +233,58 @@ def _coplanar_overlap(t1: np.ndarray, t2: np.ndarray, normal: np.ndarray) -> np.
 
 
 def self_intersections(vertices, faces, fresh=None) -> np.ndarray:
-    """Pairs (P, 2) of faces that intersect other than in their shared vertices or edge.
-    Faces with a repeated vertex are ignored (they have no interior). ``fresh`` (F,) bool: only
-    pairs with at least one fresh face (the others are known apart)."""
+    """Pairs (P, 2) int64 of faces (i < j, sorted) that intersect other than in their shared
+    vertices or edge, for vertices (V, 3) and faces (F, 3) (vertex ids: faces share a vertex when
+    they share its id). Faces without area (``degenerate``) are ignored. ``fresh`` (F,)
+    bool: only pairs with at least one fresh face (the others are known apart)."""
+    v = np.ascontiguousarray(vertices, float).reshape(-1, 3)
+    f = np.ascontiguousarray(faces, np.int64).reshape(-1, 3)
+    fresh = None if fresh is None else np.ascontiguousarray(fresh, bool).reshape(-1)
+    if _compiled is None:
+        return _numpy_pairs(v, f, fresh)
+    if len(f) < 2:
+        return np.zeros((0, 2), np.int64)
+    raw, _ = _compiled.pairs(v, f, fresh, _cell(v, f))
+    pairs = np.frombuffer(raw, np.int64).reshape(-1, 2)
+    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+
+
+def _cell(v: np.ndarray, f: np.ndarray) -> float:
+    """The compiled grid's cell: ``CELL_MEDIANS`` median face extents (a sample of at most 10⁵ faces)."""
+    step = max(1, len(f) // 100_000)
+    t = v[f[::step]]
+    ext = (t.max(axis=1) - t.min(axis=1)).max(axis=1)
+    return max(float(np.median(ext)) * CELL_MEDIANS, float(np.abs(v).max(initial=0.0)) * 2.0**-40, 1e-300)
+
+
+def degenerate(vertices, faces) -> np.ndarray:
+    """(F,) bool: faces without area, a repeated vertex or three collinear corners (exact: every
+    projection of the face onto a coordinate plane has orientation 0)."""
     v = np.asarray(vertices, float).reshape(-1, 3)
     f = np.asarray(faces, np.int64).reshape(-1, 3)
+    out = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
+    k = np.flatnonzero(~out)
+    flat = np.ones(len(k), bool)
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        a, b, c = (v[f[k, m]][:, [i, j]] for m in range(3))
+        flat &= _orient2d(a, b, c) == 0
+    out[k[flat]] = True
+    return out
+
+
+def _numpy_pairs(v: np.ndarray, f: np.ndarray, fresh: np.ndarray | None) -> np.ndarray:
+    """``self_intersections`` by numpy (candidate pairs listed, then tested by kind)."""
+    keep = ~degenerate(v, f)
+    idx = np.flatnonzero(keep)
+    f = f[idx]
     tri = v[f]
-    pairs = candidate_pairs(tri, None if fresh is None else np.asarray(fresh, bool).reshape(-1))
+    pairs = candidate_pairs(tri, None if fresh is None else fresh[idx])
     if not len(pairs):
         return pairs
     fa, fb = f[pairs[:, 0]], f[pairs[:, 1]]
     shared = (fa[:, :, None] == fb[:, None, :])
     ns = shared.any(axis=2).sum(axis=1)
-    bad = np.zeros(len(pairs), bool)
+    bad = ns == 3  # the same three vertices: the faces coincide
     # no shared vertex
     sel = np.flatnonzero(ns == 0)
     if len(sel):
@@ -261,9 +315,7 @@ def self_intersections(vertices, faces, fresh=None) -> np.ndarray:
             sa = _orient2d(u[:, 1], u[:, 2], u[:, 0])
             sp = _orient2d(u[:, 1], u[:, 2], w[:, 0])
             bad[sel[c]] = sa * sp > 0
-    degenerate = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
-    bad &= ~(degenerate[pairs[:, 0]] | degenerate[pairs[:, 1]])
-    return pairs[bad]
+    return idx[pairs[bad]]
 
 
 def _rotate(t: np.ndarray, first: np.ndarray) -> np.ndarray:
@@ -295,6 +347,8 @@ def _disjoint_pairs(t1: np.ndarray, t2: np.ndarray) -> np.ndarray:
 
 
 def count_self_intersections(vertices, faces) -> dict:
-    """Intersecting face pairs and the number of faces involved."""
+    """Intersecting face pairs, the number of faces involved, and the faces without area (which
+    take no part)."""
     pairs = self_intersections(vertices, faces)
-    return {"self_intersecting_pairs": int(len(pairs)), "self_intersecting_faces": int(len(np.unique(pairs)))}
+    return {"self_intersecting_pairs": int(len(pairs)), "self_intersecting_faces": int(len(np.unique(pairs))),
+            "degenerate_faces": int(degenerate(vertices, faces).sum())}
