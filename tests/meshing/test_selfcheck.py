@@ -263,3 +263,58 @@ def test_clean_preset_meshes(name, params, style, levels):
     mesh = tessellate(load_lattice(name, params), style=style, levels=levels)
     got, numpy_pairs = both_forms(mesh.vertices, mesh.faces)
     assert len(got) == 0 and len(numpy_pairs) == 0
+
+
+# ----- the streamed check of a soup, block by block ---------------------------------------------------
+
+def _soup_of(mesh) -> np.ndarray:
+    return np.asarray(mesh.vertices)[np.asarray(mesh.faces)]
+
+
+@pytest.mark.parametrize("case", ["two spheres", "open", "flipped", "float32"])
+def test_blocks_give_the_one_block_report(case):
+    """Blocks of a few hundred triangles (a triangle in every block its box meets) count every
+    vertex, edge, face and pair once: the report equals the in-memory one and trimesh's."""
+    s = trimesh.creation.icosphere(3)
+    mesh = trimesh.util.concatenate([s, s.copy().apply_translation([0.5, 0.2, 0.1]),
+                                     s.copy().apply_translation([4.0, 0, 0])])
+    faces = np.asarray(mesh.faces).copy()
+    if case == "open":
+        faces = faces[1:]
+    if case == "flipped":
+        faces[7] = faces[7, ::-1]
+    v = np.asarray(mesh.vertices, np.float32 if case == "float32" else float).astype(float)
+    ref = trimesh.Trimesh(v, faces, process=False)
+    tri = v[faces].astype(np.float32) if case == "float32" else v[faces]
+    whole = selfcheck.check_triangles(lambda: iter([tri]))
+    for block in (300, 1000):
+        split = selfcheck.check_triangles(lambda: (tri[i:i + 500] for i in range(0, len(tri), 500)), block)
+        assert split["blocks"] > 1
+        assert {k: x for k, x in split.items() if k not in ("blocks", "volume")} == \
+               {k: x for k, x in whole.items() if k not in ("blocks", "volume")}
+        assert split["volume"] == pytest.approx(whole["volume"], rel=1e-12)
+    assert whole["watertight"] == ref.is_watertight
+    assert whole["winding_consistent"] == (ref.is_watertight and ref.is_winding_consistent)
+    assert whole["euler_characteristic"] == ref.euler_number
+    if ref.is_watertight and ref.is_winding_consistent:  # else the volume depends on the origin
+        assert whole["volume"] == pytest.approx(ref.volume, rel=1e-12)
+    assert whole["self_intersecting_pairs"] == len(self_intersections(v, faces)) > 0
+
+
+def test_weld_and_faces_without_area_both_forms():
+    rng = np.random.default_rng(3)
+    tri = rng.integers(-2, 3, size=(400, 3, 3)).astype(float)
+    tri[::7] *= -1.0  # −0 beside 0
+    vc, fc = selfcheck.weld(tri)
+    flat_c = degenerate(vc, fc)
+    saved, selfcheck._compiled = selfcheck._compiled, None
+    try:
+        vn, fn = selfcheck.weld(tri)
+        flat_n = degenerate(vn, fn)
+    finally:
+        selfcheck._compiled = saved
+    assert np.array_equal(vc[fc], tri + 0.0) and np.array_equal(vn[fn], tri + 0.0)
+    assert len(vc) == len(vn) == len(np.unique(tri.reshape(-1, 3) + 0.0, axis=0))
+    assert np.array_equal(flat_c, flat_n)
+    area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    assert np.array_equal(flat_n, area == 0)

@@ -814,9 +814,100 @@ static PyObject *signs3(PyObject *self, PyObject *args) {
     return res;
 }
 
+/* weld(points float64 (N, 3)) -> (inverse int64 (N,), first int64 (U,)): points with equal
+ * coordinates (−0 equal to 0) get one id, ids numbered by first occurrence (a hash table) */
+static PyObject *weld(PyObject *self, PyObject *args) {
+    PyObject *o;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "O", &o))
+        return NULL;
+    Py_buffer b;
+    if (take(o, &b, 'd', 3, "points") < 0)
+        return NULL;
+    Py_ssize_t n = b.len / 24;
+    const double *p = b.buf;
+    PyObject *inv = PyBytes_FromStringAndSize(NULL, n * 8), *first = NULL, *res = NULL;
+    uint64_t cap = 16;
+    while (cap < 2 * (uint64_t)n)
+        cap <<= 1;
+    int64_t *table = malloc(cap * sizeof(int64_t)), *firsts = malloc((n + 1) * sizeof(int64_t));
+    Py_ssize_t u = 0;
+    if (!inv || !table || !firsts) {
+        PyErr_NoMemory();
+        goto out;
+    }
+    int64_t *iv = (int64_t *)PyBytes_AS_STRING(inv);
+    Py_BEGIN_ALLOW_THREADS
+    memset(table, 0xff, cap * sizeof(int64_t));
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double x = p[3 * i] + 0.0, y = p[3 * i + 1] + 0.0, z = p[3 * i + 2] + 0.0; /* −0 + 0 = +0 */
+        uint64_t k[3];
+        memcpy(&k[0], &x, 8), memcpy(&k[1], &y, 8), memcpy(&k[2], &z, 8);
+        uint64_t h = cell_hash((int64_t)k[0], (int64_t)k[1], (int64_t)k[2]) & (cap - 1);
+        for (;; h = (h + 1) & (cap - 1)) {
+            int64_t j = table[h];
+            if (j < 0) {
+                table[h] = u;
+                firsts[u] = i;
+                iv[i] = u++;
+                break;
+            }
+            const double *q = p + 3 * firsts[j];
+            if (q[0] == x && q[1] == y && q[2] == z) {
+                iv[i] = j;
+                break;
+            }
+        }
+    }
+    Py_END_ALLOW_THREADS
+    first = PyBytes_FromStringAndSize((const char *)firsts, u * 8);
+    if (first)
+        res = PyTuple_Pack(2, inv, first);
+out:
+    Py_XDECREF(inv);
+    Py_XDECREF(first);
+    free(table);
+    free(firsts);
+    PyBuffer_Release(&b);
+    return res;
+}
+
+/* flat(vertices float64 (V, 3), faces int64 (F, 3)) -> bytes of F bools: faces without area */
+static PyObject *flat(PyObject *self, PyObject *args) {
+    PyObject *ov, *of;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OO", &ov, &of))
+        return NULL;
+    Py_buffer bv, bf;
+    if (take(ov, &bv, 'd', 3, "vertices") < 0)
+        return NULL;
+    if (take(of, &bf, 'q', 3, "faces") < 0) {
+        PyBuffer_Release(&bv);
+        return NULL;
+    }
+    Py_ssize_t nv = bv.len / 24, nf = bf.len / 24;
+    const int64_t *f = bf.buf;
+    PyObject *res = NULL;
+    int bad = 0;
+    for (Py_ssize_t i = 0; i < 3 * nf && !bad; i++)
+        bad = f[i] < 0 || f[i] >= nv;
+    if (bad)
+        PyErr_SetString(PyExc_ValueError, "flat: a face index out of range");
+    else if ((res = PyBytes_FromStringAndSize(NULL, nf))) {
+        uint8_t *out = (uint8_t *)PyBytes_AS_STRING(res);
+        for (Py_ssize_t i = 0; i < nf; i++)
+            out[i] = !has_area(bv.buf, f + 3 * i);
+    }
+    PyBuffer_Release(&bv);
+    PyBuffer_Release(&bf);
+    return res;
+}
+
 static PyMethodDef methods[] = {
     {"pairs", pairs, METH_VARARGS,
      "pairs(vertices, faces, fresh, cell) -> (bytes of int64 (i, j): the intersecting face pairs, exact predicates)."},
+    {"weld", weld, METH_VARARGS, "weld(points) -> (bytes of int64 ids, bytes of int64 first rows): equal points merged."},
+    {"flat", flat, METH_VARARGS, "flat(vertices, faces) -> bytes of bools: faces without area (exact)."},
     {"orient3d_exact", signs3, METH_VARARGS,
      "orient3d_exact(a, b, c, d) -> bytes of int8: exact signs by expansions (no filter)."},
     {NULL, NULL, 0, NULL},

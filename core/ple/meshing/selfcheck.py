@@ -27,6 +27,9 @@ vertices coincide.
 
 from __future__ import annotations
 
+import os
+import tempfile
+
 import numpy as np
 
 from ..algebra.vectors import cross
@@ -260,8 +263,10 @@ def _cell(v: np.ndarray, f: np.ndarray) -> float:
 def degenerate(vertices, faces) -> np.ndarray:
     """(F,) bool: faces without area, a repeated vertex or three collinear corners (exact: every
     projection of the face onto a coordinate plane has orientation 0)."""
-    v = np.asarray(vertices, float).reshape(-1, 3)
-    f = np.asarray(faces, np.int64).reshape(-1, 3)
+    v = np.ascontiguousarray(vertices, float).reshape(-1, 3)
+    f = np.ascontiguousarray(faces, np.int64).reshape(-1, 3)
+    if _compiled is not None:
+        return np.frombuffer(_compiled.flat(v, f), bool).copy()
     out = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
     k = np.flatnonzero(~out)
     flat = np.ones(len(k), bool)
@@ -352,3 +357,168 @@ def count_self_intersections(vertices, faces) -> dict:
     pairs = self_intersections(vertices, faces)
     return {"self_intersecting_pairs": int(len(pairs)), "self_intersecting_faces": int(len(np.unique(pairs))),
             "degenerate_faces": int(degenerate(vertices, faces).sum())}
+
+
+BLOCK_TRIANGLES = 1 << 20  # triangles per block of ``check_triangles`` (about 0.3 GB while checked)
+
+
+def check_triangles(read, block: int = BLOCK_TRIANGLES, spill_dir=None) -> dict:
+    """Watertightness, winding, Euler characteristic, exact self-intersections and volume of a
+    triangle soup read in chunks, as a consumer sees it (corners with equal coordinates are one
+    vertex), with memory bounded by ``block`` triangles whatever the soup's size.
+
+    ``read()`` returns a new iterator over chunks of triangles (k, 3, 3) (float32 or float64); it
+    is called twice (bounds, then the blocks). Soups of at most ``block`` triangles are checked in
+    memory. Larger ones are cut into blocks of a uniform grid over their box: a triangle goes to
+    every block its box meets (spilled to one file per block in ``spill_dir``, default a temporary
+    directory), and each block is welded and checked alone. What spans blocks is counted once, by
+    an owner that sees all of it: a vertex by its block; an edge by the block of its
+    lexicographically smaller end (every face on the edge has that end in its box); a face by the
+    block of its box's low corner; a pair of faces by the block of the low corner of their boxes'
+    intersection (which lies in both boxes).
+
+    Returns {"triangles", "watertight" (every edge on exactly two faces), "winding_consistent"
+    (and they run it in opposite directions), "euler_characteristic" (V − E + F), "volume"
+    (signed, from the divergence theorem), "self_intersecting_pairs", "self_intersecting_faces",
+    "degenerate_faces" (``degenerate``), "blocks"}."""
+    count, lo, hi = 0, np.full(3, np.inf), np.full(3, -np.inf)
+    chunks, single = [], True  # single: every chunk float32 (an STL's), spilled as such
+    for t in read():
+        t = np.asarray(t).reshape(-1, 3, 3)
+        single &= t.dtype == np.float32
+        if len(t):
+            lo, hi = np.minimum(lo, t.min(axis=(0, 1))), np.maximum(hi, t.max(axis=(0, 1)))
+        if count + len(t) <= block:
+            chunks.append(np.asarray(t, float))
+        count += len(t)
+    acc = _Tally()
+    if count <= block:  # one block: in memory
+        tri = np.concatenate(chunks) if chunks else np.zeros((0, 3, 3))
+        acc.add(tri, np.arange(len(tri)), None)
+        return acc.report(count, 1)
+    del chunks
+    grid = _BlockGrid(lo, hi, count, block)
+    with tempfile.TemporaryDirectory(dir=spill_dir) as d:
+        files: dict = {}
+        try:
+            first = 0
+            record = np.dtype([("index", "<i8"), ("corners", "<f4" if single else "<f8", (3, 3))])
+            for t in read():
+                t = np.asarray(t).reshape(-1, 3, 3)
+                rec = np.empty(len(t), record)
+                rec["index"], rec["corners"] = np.arange(first, first + len(t)), t
+                first += len(t)
+                b0, b1 = grid.cells(t.min(axis=1)), grid.cells(t.max(axis=1))
+                for key, rows in grid.spread(b0, b1):
+                    if key not in files:
+                        files[key] = open(os.path.join(d, f"{key}.bin"), "wb")  # noqa: SIM115 - closed below
+                    rec[rows].tofile(files[key])
+        finally:
+            for fh in files.values():
+                fh.close()
+        for key in sorted(files):
+            rec = np.fromfile(os.path.join(d, f"{key}.bin"), record)
+            os.remove(os.path.join(d, f"{key}.bin"))
+            acc.add(rec["corners"].astype(float), rec["index"], (grid, key))
+    return acc.report(count, len(files))
+
+
+class _BlockGrid:
+    """Blocks of a uniform grid over the box [lo, hi], about ``count / block`` of them (cubes, at
+    least one per axis); cell indices floor((x − lo) / size), clipped to the grid."""
+
+    def __init__(self, lo, hi, count: int, block: int):
+        ext = np.maximum(hi - lo, 0.0)
+        n = max(2.0, 2.0 * count / block)  # a triangle may go to a few blocks: aim at half-full ones
+        span = ext[ext > 0]
+        size = float(np.prod(span) / n) ** (1.0 / len(span)) if len(span) else 1.0
+        self.lo, self.size = lo, size
+        self.dims = np.maximum(1, np.ceil(ext / size).astype(np.int64))
+
+    def cells(self, x: np.ndarray) -> np.ndarray:
+        return np.clip(np.floor((x - self.lo) / self.size).astype(np.int64), 0, self.dims - 1)
+
+    def key(self, c: np.ndarray) -> np.ndarray:
+        return (c[..., 0] * self.dims[1] + c[..., 1]) * self.dims[2] + c[..., 2]
+
+    def spread(self, b0: np.ndarray, b1: np.ndarray):
+        """(block key, rows) for every block of the cell ranges [b0, b1] (k, 3) of the rows."""
+        span = b1 - b0 + 1
+        n = span.prod(axis=1)
+        rows = np.repeat(np.arange(len(b0)), n)
+        k = np.arange(len(rows)) - np.repeat(np.cumsum(n) - n, n)
+        sy, sz = span[rows, 1], span[rows, 2]
+        c = b0[rows] + np.stack([k // (sy * sz), (k // sz) % sy, k % sz], axis=1)
+        keys = self.key(c)
+        order = np.argsort(keys, kind="stable")
+        keys, rows = keys[order], rows[order]
+        starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
+        for s, e in zip(starts, np.r_[starts[1:], len(keys)]):
+            yield int(keys[s]), rows[s:e]
+
+
+def weld(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) and faces (k, 3) of triangles (k, 3, 3): corners with equal coordinates
+    are one vertex (−0 equal to 0), as consumers of STL merge them."""
+    t = np.ascontiguousarray(triangles, float).reshape(-1, 3)
+    if _compiled is not None:
+        inv, first = (np.frombuffer(x, np.int64) for x in _compiled.weld(t))
+        return t[first] + 0.0, inv.reshape(-1, 3)
+    v, inv = np.unique(t + 0.0, axis=0, return_inverse=True)
+    return v, inv.reshape(-1, 3)
+
+
+def _lexicographic_less(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(N,) bool: row p < row q in (x, y, z) order."""
+    x, y = p[:, 0] == q[:, 0], p[:, 1] == q[:, 1]
+    return (p[:, 0] < q[:, 0]) | (x & (p[:, 1] < q[:, 1])) | (x & y & (p[:, 2] < q[:, 2]))
+
+
+class _Tally:
+    """Counts of ``check_triangles`` summed over blocks."""
+
+    def __init__(self):
+        self.v = self.e = self.f = self.bad_edges = self.misoriented = self.degenerate = 0
+        self.volume = 0.0
+        self.pairs: list = []
+
+    def add(self, tri: np.ndarray, index: np.ndarray, block) -> None:
+        """One block: triangles (k, 3, 3), their indices in the soup, (grid, key) (None: all)."""
+        if not len(tri):
+            return
+        v, f = weld(tri)
+
+        def mine(points):
+            return np.ones(len(points), bool) if block is None else block[0].key(block[0].cells(points)) == block[1]
+
+        own_f = mine(tri.min(axis=1))
+        self.f += int(own_f.sum())
+        self.v += int(mine(v).sum())
+        a, b, c = (tri[own_f, i] for i in range(3))
+        self.volume += float(np.einsum("ij,ij->", a, cross(b, c))) / 6.0
+        self.degenerate += int(degenerate(v, f)[own_f].sum())
+        d = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])  # directed edges
+        p, q = v[d[:, 0]], v[d[:, 1]]
+        forward = _lexicographic_less(p, q)  # runs from its smaller end (in coordinates, as in every block)
+        keep = mine(np.where(forward[:, None], p, q))
+        d, forward = d[keep], forward[keep]
+        und = np.sort(d, axis=1)
+        _, inv, n = np.unique(und[:, 0] * len(v) + und[:, 1], return_inverse=True, return_counts=True)
+        fwd = np.bincount(inv.reshape(-1), forward, len(n))
+        self.e += len(n)
+        self.bad_edges += int((n != 2).sum())
+        self.misoriented += int(((n == 2) & (fwd != 1)).sum())
+        pairs = self_intersections(v, f)
+        if block is not None and len(pairs):
+            grid = block[0]
+            corner = np.maximum(grid.cells(tri[pairs[:, 0]].min(axis=1)), grid.cells(tri[pairs[:, 1]].min(axis=1)))
+            pairs = pairs[grid.key(corner) == block[1]]
+        self.pairs.append(np.sort(index[pairs], axis=1))
+
+    def report(self, count: int, blocks: int) -> dict:
+        pairs = np.concatenate(self.pairs) if self.pairs else np.zeros((0, 2), np.int64)
+        return {"triangles": int(count), "watertight": self.bad_edges == 0,
+                "winding_consistent": self.bad_edges == 0 and self.misoriented == 0,
+                "euler_characteristic": int(self.v - self.e + self.f), "volume": self.volume,
+                "self_intersecting_pairs": int(len(pairs)), "self_intersecting_faces": int(len(np.unique(pairs))),
+                "degenerate_faces": int(self.degenerate), "blocks": int(blocks)}
