@@ -26,7 +26,7 @@
 #define O3_BOUND ((7.0 + 56.0 * EPS) * EPS)
 #define O2_BOUND (4.0 * EPS)
 #define EXP_MAX 256 /* components of an orient3d determinant: at most 192 */
-#define MAX_ENTRIES 64 /* grid entries per face, at most */
+#define MAX_ENTRIES 3 /* grid entries per face, at most (the cell doubles until so): measured best 2-3 */
 #define BOXED 8        /* faces whose box has at most BOXED cells lie in all of them */
 
 /* ---- exact arithmetic on expansions (sums of nonoverlapping doubles, increasing magnitude) ---- */
@@ -518,8 +518,9 @@ static int find_pairs(const double *v, const int64_t *f0, Py_ssize_t nf0, const 
             big = fmax(big, fmax(fabs(l), fabs(u)));
         }
     }
-    /* cells of at least 2^-29 of the coordinates (cell indices fit 31 bits), and at most
-     * MAX_ENTRIES cells per face */
+    /* cells of at least 2^-29 of the coordinates (cell indices fit 31 bits), doubled until the faces
+     * lie in at most MAX_ENTRIES cells each on average (fine cells: few faces per cell, but faces in
+     * many cells; coarse: the reverse) */
     g.h = fmax(cell, big * 0x1p-29);
     for (Py_ssize_t i = 0; i < nf; i++) { /* Morton order of the boxes' low cells */
         const int64_t *t = f0 + 3 * orig[i];

@@ -8,8 +8,9 @@ exactly) have no interior and take no part (``degenerate`` finds them).
 Two forms give the same pairs (tested): the compiled one (``ple.meshing._selfcheck``, optional,
 the GIL released) and numpy:
 
-- broad phase: compiled, a hashed uniform grid of ``CELL_MEDIANS`` median face extents, each face
-  in the cells of its box, a long face only in those of its slices across its longest axis, every
+- broad phase: compiled, a hashed uniform grid (cells grown from ``CELL_MEDIANS`` median face
+  widths until a face lies in 3 cells on average), each face in the cells of its box, a long face
+  only in those of its slices across its longest axis, every
   pair of faces tested once (in the first cell both lie in) and never stored; numpy, a uniform
   grid (cell size from the median box) over boxes of slices of the faces, candidate pairs sorted
   and deduplicated;
@@ -39,7 +40,7 @@ try:  # the compiled check (setup.py, optional): the numpy form's pairs, without
 except ImportError:  # not built (no C compiler): numpy checks
     _compiled = None
 
-CELL_MEDIANS = 8.0  # the compiled grid's cell over the median face extent (measured best 8-16 on refined meshes)
+CELL_MEDIANS = 2.0  # the compiled grid's first cell over the median middle extent of the faces' boxes
 ERRBOUND = (7.0 + 56.0 * 2.0**-53) * 2.0**-53  # Shewchuk's o3derrboundA
 MAX_CELL_PAIRS = 1 << 22
 GRID_CELL = 0.5  # grid cell over the median slice size (slices: 2 median face extents long)
@@ -253,10 +254,12 @@ def self_intersections(vertices, faces, fresh=None) -> np.ndarray:
 
 
 def _cell(v: np.ndarray, f: np.ndarray) -> float:
-    """The compiled grid's cell: ``CELL_MEDIANS`` median face extents (a sample of at most 10⁵ faces)."""
+    """The compiled grid's first cell (it grows until the faces lie in few cells each):
+    ``CELL_MEDIANS`` median middle extents of the faces' boxes (the width of a needle, the size of
+    a compact face), from a sample of at most 10⁵ faces."""
     step = max(1, len(f) // 100_000)
     t = v[f[::step]]
-    ext = (t.max(axis=1) - t.min(axis=1)).max(axis=1)
+    ext = np.sort(t.max(axis=1) - t.min(axis=1), axis=1)[:, 1]
     return max(float(np.median(ext)) * CELL_MEDIANS, float(np.abs(v).max(initial=0.0)) * 2.0**-40, 1e-300)
 
 
