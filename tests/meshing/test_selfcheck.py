@@ -249,6 +249,8 @@ def test_overlapping_spheres_both_forms():
     got, numpy_pairs = both_forms(both.vertices, both.faces)
     assert len(got) > 0 and np.array_equal(got, numpy_pairs)
     assert np.all((got[:, 0] < len(s.faces)) & (got[:, 1] >= len(s.faces)))  # only across spheres
+    for workers in (1, 3):
+        assert np.array_equal(self_intersections(both.vertices, both.faces, workers=workers), got)
     apart = trimesh.util.concatenate([s, s.copy().apply_translation([2.0, 0, 0])])  # touching at a point
     got, numpy_pairs = both_forms(apart.vertices, apart.faces)
     assert np.array_equal(got, numpy_pairs)

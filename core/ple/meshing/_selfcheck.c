@@ -18,6 +18,7 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -27,7 +28,7 @@
 #define O2_BOUND (4.0 * EPS)
 #define EXP_MAX 256 /* components of an orient3d determinant: at most 192 */
 #define MAX_ENTRIES 3 /* grid entries per face, at most (the cell doubles until so): measured best 2-3 */
-#define BOXED 8        /* faces whose box has at most BOXED cells lie in all of them */
+#define MAX_WORKERS 64
 
 /* ---- exact arithmetic on expansions (sums of nonoverlapping doubles, increasing magnitude) ---- */
 
@@ -365,7 +366,7 @@ typedef struct {
     int64_t *off;         /* first slab row of each face in rng */
     int64_t *rng;         /* (slabs, 4) */
     int64_t *cells;       /* cells per face */
-    uint8_t *boxed;       /* the face lies in every cell of its box (at most BOXED cells) */
+    uint8_t *boxed;       /* the face lies in every cell of its box (at most 3 cells along each axis) */
 } Grid;
 
 typedef struct { /* a face of a bucket, copied beside the others */
@@ -475,19 +476,112 @@ static int has_area(const double *v, const int64_t *t) {
     return 0;
 }
 
+/* one worker's buckets [h0, h1): every pair of faces tested once (see find_pairs) */
+typedef struct {
+    const Grid *g;
+    const double *v;
+    const int64_t *f, *orig;
+    const uint8_t *fresh; /* NULL: every face fresh */
+    const int32_t *entries;
+    const int64_t *start;
+    uint64_t nb, h0, h1;
+    Out out;
+    long long exact;
+    int status;
+} Sweep;
+
+static void *sweep(void *arg) {
+    Sweep *job = arg;
+    const Grid *gp = job->g;
+    const double *v = job->v;
+    const int64_t *f = job->f, *orig = job->orig, *start = job->start;
+    const int32_t *entries = job->entries;
+    const uint8_t *fresh0 = job->fresh;
+    uint64_t nb = job->nb;
+    Out *out = &job->out;
+    Local *local = NULL;
+    int64_t cap = 0;
+    exact_calls = 0;
+    for (uint64_t h = job->h0; h < job->h1; h++) {
+        const int32_t *e = entries + start[h];
+        int64_t k = start[h + 1] - start[h];
+        if (k < 2)
+            continue;
+        if (fresh0) {
+            int any = 0;
+            for (int64_t i = 0; i < k && !any; i++)
+                any = fresh0[e[i]];
+            if (!any)
+                continue;
+        }
+        if (k > cap) {
+            free(local);
+            cap = 2 * k;
+            if (!(local = malloc(cap * sizeof(Local))))
+                goto done;
+        }
+        for (int64_t i = 0; i < k; i++) { /* the bucket's faces side by side */
+            Local *l = local + i;
+            int32_t a = e[i];
+            memcpy(l->lo, gp->lo + 3 * a, 3 * sizeof(double));
+            memcpy(l->hi, gp->hi + 3 * a, 3 * sizeof(double));
+            l->face = a;
+            l->fresh = fresh0 ? fresh0[a] : 1;
+            l->kind = gp->cells[a] == 1 ? 0 : gp->boxed[a] ? 1 : 2;
+            for (int q = 0; q < 3; q++)
+                l->clo[q] = gp->clo[3 * a + q];
+        }
+        qsort(local, k, sizeof(Local), by_low_x); /* sweep along x */
+        for (int64_t i = 0; i < k; i++) {
+            const Local *A = local + i;
+            for (int64_t j = i + 1; j < k && local[j].lo[0] <= A->hi[0]; j++) {
+                const Local *B = local + j;
+                if (A->lo[1] > B->hi[1] || B->lo[1] > A->hi[1] ||
+                    A->lo[2] > B->hi[2] || B->lo[2] > A->hi[2] || !(A->fresh | B->fresh))
+                    continue;
+                /* each pair once: a face in one cell is in one bucket; two boxed faces meet first in
+                 * the corner of their boxes' intersection; else the bucket of the first cell both
+                 * lie in, in the slab order of the face with fewer cells (the lower one on a tie) */
+                if (A->kind && B->kind) {
+                    int64_t c[3], a = A->face, b = B->face;
+                    if (A->kind == 1 && B->kind == 1) {
+                        for (int q = 0; q < 3; q++)
+                            c[q] = A->clo[q] > B->clo[q] ? A->clo[q] : B->clo[q];
+                    } else {
+                        int64_t scan = gp->cells[b] < gp->cells[a] || (gp->cells[b] == gp->cells[a] && b < a) ? b : a;
+                        if (!first_common(gp, scan, scan == a ? b : a, c))
+                            continue;
+                    }
+                    if ((cell_hash(c[0], c[1], c[2]) & (nb - 1)) != h)
+                        continue;
+                }
+                int32_t a = A->face, b = B->face;
+                int first = orig[a] < orig[b];
+                if (pair_hit(v, f + 3 * (first ? a : b), f + 3 * (first ? b : a)) &&
+                    push(out, first ? orig[a] : orig[b], first ? orig[b] : orig[a]) < 0)
+                    goto done;
+            }
+        }
+    }
+    job->status = 0;
+done:
+    job->exact = exact_calls;
+    free(local);
+    return NULL;
+}
+
 /* The intersecting pairs (i < j) of the faces f (F, 3) of the vertices v (V, 3), only pairs with
  * a fresh face when ``fresh``; faces without area (``has_area``) are left out. The faces are
  * renumbered in Morton order of their boxes' cells (neighbours near in memory). -1: out of memory. */
 static int find_pairs(const double *v, const int64_t *f0, Py_ssize_t nf0, const uint8_t *fresh0, double cell,
-                      Out *out) {
+                      int workers, Out *out) {
     exact_calls = 0;
     Grid g = {v, NULL, {INFINITY, INFINITY, INFINITY}, cell, 0.0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL};
     int64_t *orig = malloc((nf0 + 1) * sizeof(int64_t)), *f = NULL;
     uint64_t *keys = NULL;
     uint8_t *fresh = NULL;
     int32_t *last = NULL, *entries = NULL;
-    int64_t *start = NULL, cap = 0;
-    Local *local = NULL;
+    int64_t *start = NULL;
     int status = -1;
     Py_ssize_t nf = 0;
     if (!orig)
@@ -575,7 +669,7 @@ static int find_pairs(const double *v, const int64_t *f0, Py_ssize_t nf0, const 
             g.cells[i] = 0;
             g.boxed[i] = 1;
             for (int k = 0; k < 3; k++)
-                g.boxed[i] &= g.chi[3 * i + k] - g.clo[3 * i + k] < 2;
+                g.boxed[i] &= g.chi[3 * i + k] - g.clo[3 * i + k] < 3;
             for (int64_t s = g.clo[3 * i + d]; s <= g.chi[3 * i + d]; s++, r += 4) {
                 if (g.boxed[i]) { /* the box */
                     r[0] = g.clo[3 * i + (d + 1) % 3], r[1] = g.chi[3 * i + (d + 1) % 3];
@@ -636,67 +730,42 @@ static int find_pairs(const double *v, const int64_t *f0, Py_ssize_t nf0, const 
     }
     free(last);
     last = NULL;
-    for (uint64_t h = 0; h < nb; h++) {
-        const int32_t *e = entries + start[h];
-        int64_t k = start[h + 1] - start[h];
-        if (k < 2)
-            continue;
-        if (fresh0) {
-            int any = 0;
-            for (int64_t i = 0; i < k && !any; i++)
-                any = fresh[e[i]];
-            if (!any)
-                continue;
-        }
-        if (k > cap) {
-            free(local);
-            cap = 2 * k;
-            if (!(local = malloc(cap * sizeof(Local))))
-                goto done;
-        }
-        for (int64_t i = 0; i < k; i++) { /* the bucket's faces side by side */
-            Local *l = local + i;
-            int32_t a = e[i];
-            memcpy(l->lo, g.lo + 3 * a, 3 * sizeof(double));
-            memcpy(l->hi, g.hi + 3 * a, 3 * sizeof(double));
-            l->face = a;
-            l->fresh = fresh[a];
-            l->kind = g.cells[a] == 1 ? 0 : g.boxed[a] ? 1 : 2;
-            for (int q = 0; q < 3; q++)
-                l->clo[q] = g.clo[3 * a + q];
-        }
-        qsort(local, k, sizeof(Local), by_low_x); /* sweep along x */
-        for (int64_t i = 0; i < k; i++) {
-            const Local *A = local + i;
-            for (int64_t j = i + 1; j < k && local[j].lo[0] <= A->hi[0]; j++) {
-                const Local *B = local + j;
-                if (A->lo[1] > B->hi[1] || B->lo[1] > A->hi[1] ||
-                    A->lo[2] > B->hi[2] || B->lo[2] > A->hi[2] || !(A->fresh | B->fresh))
-                    continue;
-                /* each pair once: a face in one cell is in one bucket; two boxed faces meet first in
-                 * the corner of their boxes' intersection; else the bucket of the first cell both
-                 * lie in, in the slab order of the face with fewer cells (the lower one on a tie) */
-                if (A->kind && B->kind) {
-                    int64_t c[3], a = A->face, b = B->face;
-                    if (A->kind == 1 && B->kind == 1) {
-                        for (int q = 0; q < 3; q++)
-                            c[q] = A->clo[q] > B->clo[q] ? A->clo[q] : B->clo[q];
-                    } else {
-                        int64_t scan = g.cells[b] < g.cells[a] || (g.cells[b] == g.cells[a] && b < a) ? b : a;
-                        if (!first_common(&g, scan, scan == a ? b : a, c))
-                            continue;
-                    }
-                    if ((cell_hash(c[0], c[1], c[2]) & (nb - 1)) != h)
-                        continue;
-                }
-                int32_t a = A->face, b = B->face;
-                int first = orig[a] < orig[b];
-                if (pair_hit(v, f + 3 * (first ? a : b), f + 3 * (first ? b : a)) &&
-                    push(out, first ? orig[a] : orig[b], first ? orig[b] : orig[a]) < 0)
-                    goto done;
-            }
-        }
+    if (workers < 1)
+        workers = 1;
+    if (workers > MAX_WORKERS)
+        workers = MAX_WORKERS;
+    Sweep jobs[MAX_WORKERS];
+    pthread_t threads[MAX_WORKERS];
+    int started[MAX_WORKERS] = {0};
+    uint64_t h0 = 0;
+    for (int t = 0; t < workers; t++) { /* bucket ranges of about equal entries */
+        uint64_t h1 = h0;
+        int64_t goal = start[nb] * (t + 1) / workers;
+        while (h1 < nb && (t == workers - 1 || start[h1] < goal))
+            h1++;
+        jobs[t] = (Sweep){&g, v, f, orig, fresh0 ? fresh : NULL, entries, start, nb, h0, h1, {NULL, 0, 0}, 0, -1};
+        h0 = h1;
     }
+    long long exact = exact_calls; /* faces without area; sweep counts anew in this thread */
+    for (int t = 1; t < workers; t++)
+        started[t] = pthread_create(&threads[t], NULL, sweep, &jobs[t]) == 0;
+    sweep(&jobs[0]);
+    for (int t = 1; t < workers; t++)
+        if (!started[t])
+            sweep(&jobs[t]); /* no thread: here */
+        else
+            pthread_join(threads[t], NULL);
+    int ok = 1;
+    for (int t = 0; t < workers; t++) {
+        exact += jobs[t].exact;
+        ok &= jobs[t].status == 0;
+        for (Py_ssize_t i = 0; ok && i < jobs[t].out.n; i += 2)
+            ok = push(out, jobs[t].out.data[i], jobs[t].out.data[i + 1]) == 0;
+        free(jobs[t].out.data);
+    }
+    exact_calls = exact;
+    if (!ok)
+        goto done;
     status = 0;
 done:
     free(orig);
@@ -712,7 +781,6 @@ done:
     free(g.rng);
     free(g.cells);
     free(g.boxed);
-    free(local);
     free(last);
     free(start);
     free(entries);
@@ -736,13 +804,15 @@ static int take(PyObject *o, Py_buffer *b, char kind, Py_ssize_t per, const char
     return 0;
 }
 
-/* pairs(vertices float64 (V, 3), faces int64 (F, 3), fresh bool (F,) or None, cell) -> (bytes of
- * int64 pairs (i < j) in no particular order, number of predicates decided by the exact form) */
+/* pairs(vertices float64 (V, 3), faces int64 (F, 3), fresh bool (F,) or None, cell, workers=1) ->
+ * (bytes of int64 pairs (i < j) in no particular order, number of predicates decided by the exact
+ * form); ``workers`` threads test the buckets (the same pairs for any number) */
 static PyObject *pairs(PyObject *self, PyObject *args) {
     PyObject *ov, *of, *ofr;
     double cell;
+    int workers = 1;
     (void)self;
-    if (!PyArg_ParseTuple(args, "OOOd", &ov, &of, &ofr, &cell))
+    if (!PyArg_ParseTuple(args, "OOOd|i", &ov, &of, &ofr, &cell, &workers))
         return NULL;
     Py_buffer bv, bf, bfr;
     if (take(ov, &bv, 'd', 3, "vertices") < 0)
@@ -770,7 +840,7 @@ static PyObject *pairs(PyObject *self, PyObject *args) {
         int status;
         long long exact;
         Py_BEGIN_ALLOW_THREADS
-        status = find_pairs(bv.buf, f, nf, has_fresh ? bfr.buf : NULL, cell, &out);
+        status = find_pairs(bv.buf, f, nf, has_fresh ? bfr.buf : NULL, cell, workers, &out);
         exact = exact_calls;
         Py_END_ALLOW_THREADS
         if (status < 0)
@@ -906,7 +976,8 @@ static PyObject *flat(PyObject *self, PyObject *args) {
 
 static PyMethodDef methods[] = {
     {"pairs", pairs, METH_VARARGS,
-     "pairs(vertices, faces, fresh, cell) -> (bytes of int64 (i, j): the intersecting face pairs, exact predicates)."},
+     "pairs(vertices, faces, fresh, cell, workers=1) -> (bytes of int64 (i, j): the intersecting face pairs, exact "
+     "predicates)."},
     {"weld", weld, METH_VARARGS, "weld(points) -> (bytes of int64 ids, bytes of int64 first rows): equal points merged."},
     {"flat", flat, METH_VARARGS, "flat(vertices, faces) -> bytes of bools: faces without area (exact)."},
     {"orient3d_exact", signs3, METH_VARARGS,

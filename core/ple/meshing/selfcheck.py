@@ -10,7 +10,7 @@ the GIL released) and numpy:
 
 - broad phase: compiled, a hashed uniform grid (cells grown from ``CELL_MEDIANS`` median face
   widths until a face lies in 3 cells on average), each face in the cells of its box, a long face
-  only in those of its slices across its longest axis, every
+  only in those of its slices across its longest axis, buckets shared among threads, every
   pair of faces tested once (in the first cell both lie in) and never stored; numpy, a uniform
   grid (cell size from the median box) over boxes of slices of the faces, candidate pairs sorted
   and deduplicated;
@@ -236,11 +236,13 @@ def _coplanar_overlap(t1: np.ndarray, t2: np.ndarray, normal: np.ndarray) -> np.
     return hit
 
 
-def self_intersections(vertices, faces, fresh=None) -> np.ndarray:
+def self_intersections(vertices, faces, fresh=None, *, workers: int | None = None) -> np.ndarray:
     """Pairs (P, 2) int64 of faces (i < j, sorted) that intersect other than in their shared
     vertices or edge, for vertices (V, 3) and faces (F, 3) (vertex ids: faces share a vertex when
     they share its id). Faces without area (``degenerate``) are ignored. ``fresh`` (F,)
-    bool: only pairs with at least one fresh face (the others are known apart)."""
+    bool: only pairs with at least one fresh face (the others are known apart). ``workers``:
+    threads of the compiled form (default: the cores, one per 10⁵ faces; the same pairs for any
+    number)."""
     v = np.ascontiguousarray(vertices, float).reshape(-1, 3)
     f = np.ascontiguousarray(faces, np.int64).reshape(-1, 3)
     fresh = None if fresh is None else np.ascontiguousarray(fresh, bool).reshape(-1)
@@ -248,7 +250,9 @@ def self_intersections(vertices, faces, fresh=None) -> np.ndarray:
         return _numpy_pairs(v, f, fresh)
     if len(f) < 2:
         return np.zeros((0, 2), np.int64)
-    raw, _ = _compiled.pairs(v, f, fresh, _cell(v, f))
+    if workers is None:
+        workers = min(os.cpu_count() or 1, 1 + len(f) // 100_000)
+    raw, _ = _compiled.pairs(v, f, fresh, _cell(v, f), max(1, int(workers)))
     pairs = np.frombuffer(raw, np.int64).reshape(-1, 2)
     return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
 
