@@ -11,6 +11,7 @@ from itertools import combinations
 import numpy as np
 import pytest
 import trimesh
+from ple.errors import PleError
 from ple.meshing import selfcheck
 from ple.meshing.selfcheck import degenerate, orient3d, self_intersections
 from ple.meshing.tessellate import tessellate
@@ -214,6 +215,13 @@ def test_shared_vertex(name, others, bad):
     assert len(reference_pairs(v, f)) == bad
     got, numpy_pairs = both_forms(v, f)
     assert len(got) == bad and len(numpy_pairs) == bad, name
+
+
+def test_a_non_finite_corner_is_refused():
+    v = np.array(Z + [(1.0, 1, np.nan), (9.0, 9, 9)])
+    with pytest.raises(PleError, match="non-finite"):
+        self_intersections(v, np.array([[0, 1, 2], [1, 3, 4]]))
+    assert len(self_intersections(v, np.array([[0, 1, 2], [0, 1, 4]]))) == 0  # the NaN vertex unused
 
 
 def test_coincident_faces_and_faces_without_area():

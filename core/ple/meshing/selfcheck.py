@@ -34,6 +34,7 @@ import tempfile
 import numpy as np
 
 from ..algebra.vectors import cross
+from ..errors import PleError
 
 try:  # the compiled check (setup.py, optional): the numpy form's pairs, without candidate lists
     from . import _selfcheck as _compiled
@@ -246,6 +247,9 @@ def self_intersections(vertices, faces, fresh=None, *, workers: int | None = Non
     v = np.ascontiguousarray(vertices, float).reshape(-1, 3)
     f = np.ascontiguousarray(faces, np.int64).reshape(-1, 3)
     fresh = None if fresh is None else np.ascontiguousarray(fresh, bool).reshape(-1)
+    finite = np.isfinite(v).all(axis=1)
+    if not finite.all() and not finite[f].all():
+        raise PleError("self-intersections: a face has a non-finite vertex coordinate")
     if _compiled is None:
         return _numpy_pairs(v, f, fresh)
     if len(f) < 2:
