@@ -264,6 +264,20 @@ def test_overlapping_spheres_both_forms():
     assert np.array_equal(got, numpy_pairs)
 
 
+@compiled
+def test_a_huge_face_among_small_ones():
+    """One face 10⁶ times the others' size (sliced into cells, the grid coarsened until the faces
+    fill few cells): it meets exactly the small faces whose z range holds its plane. (The numpy
+    form would slice it into 10⁸ boxes.)"""
+    s = trimesh.creation.icosphere(4)
+    n = len(s.vertices)
+    v = np.vstack([s.vertices, [[-1e6, -1e6, 0.3], [1e6, -1e6, 0.3], [0.0, 1e6, 0.3]]])
+    f = np.vstack([s.faces, [[n, n + 1, n + 2]]])
+    z = np.asarray(s.vertices)[s.faces][:, :, 2]
+    want = {(int(i), len(s.faces)) for i in np.flatnonzero((z.min(axis=1) <= 0.3) & (z.max(axis=1) >= 0.3))}
+    assert as_set(self_intersections(v, f)) == want and len(want) > 0
+
+
 @pytest.mark.parametrize("name,params,style,levels", [
     ("octet", ["n=1"], "refined", 3),
     ("cubic", ["n=2"], "cnt", None),

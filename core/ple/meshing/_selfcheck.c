@@ -641,7 +641,7 @@ static int find_pairs(const double *v, const int64_t *f0, Py_ssize_t nf0, const 
     g.f = f;
     free(keys);
     keys = NULL;
-    int64_t slabs, total;
+    int64_t slabs, total, limit = MAX_ENTRIES * (int64_t)nf + 1024;
     for (;;) {
         g.slack = 1e-6 * g.h; /* far above the rounding of the slabs' clipping, of order 1e-16 (h + big) */
         slabs = 0;
@@ -657,6 +657,10 @@ static int find_pairs(const double *v, const int64_t *f0, Py_ssize_t nf0, const 
             }
             g.off[i] = slabs;
             slabs += g.chi[3 * i + g.axis[i]] - g.clo[3 * i + g.axis[i]] + 1;
+        }
+        if (slabs > limit) { /* every slab holds a cell at least */
+            g.h *= 2.0;
+            continue;
         }
         free(g.rng);
         g.rng = malloc((slabs + 1) * 4 * sizeof(int64_t));
@@ -678,12 +682,14 @@ static int find_pairs(const double *v, const int64_t *f0, Py_ssize_t nf0, const 
                     slab_ranges(&g, i, s, r);
                 }
                 g.cells[i] += (r[1] - r[0] + 1) * (r[3] - r[2] + 1);
+                if (total + g.cells[i] > limit)
+                    break;
             }
             total += g.cells[i];
-            if (total > MAX_ENTRIES * (int64_t)nf + 1024)
+            if (total > limit)
                 break;
         }
-        if (total <= MAX_ENTRIES * (int64_t)nf + 1024)
+        if (total <= limit)
             break;
         g.h *= 2.0;
     }
