@@ -342,3 +342,20 @@ def test_weld_and_faces_without_area_both_forms():
     assert np.array_equal(flat_c, flat_n)
     area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     assert np.array_equal(flat_n, area == 0)
+
+
+def test_a_streamed_mesh_checked_box_by_box():
+    """``iter_triangles``' boxes (hub vertices repeated on box borders, bit-identical) fed to
+    ``check_triangles`` without a file: the report of the whole mesh."""
+    from ple.meshing.tessellate import iter_triangles  # noqa: PLC0415
+
+    lat = load_lattice("cubic", ["n=6"])
+    boxes = list(iter_triangles(lat, style="cnt", max_groups=36))
+    assert len(boxes) > 1
+    streamed = selfcheck.check_triangles(lambda: (v[f] for v, f in boxes), block=2000)
+    mesh = tessellate(lat, style="cnt")
+    whole = selfcheck.check_triangles(lambda: iter([np.asarray(mesh.vertices)[np.asarray(mesh.faces)]]))
+    assert streamed["blocks"] > 1 and streamed["watertight"] and streamed["winding_consistent"]
+    assert {k: x for k, x in streamed.items() if k not in ("blocks", "volume")} == \
+           {k: x for k, x in whole.items() if k not in ("blocks", "volume")}
+    assert streamed["volume"] == pytest.approx(mesh.volume, rel=1e-9)
