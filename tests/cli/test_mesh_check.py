@@ -12,6 +12,7 @@ import trimesh
 from ple.cli.main import main
 from ple.cli.mesh import file_triangles
 from ple.io.export import export_mesh, read_back
+from ple.io.spill import SpillFiles
 from ple.meshing.selfcheck import check_triangles, self_intersections
 
 
@@ -43,6 +44,8 @@ def test_an_stl_is_read_in_chunks(tmp_path):
     assert len(chunks) > 1 and all(c.dtype == np.float32 for c in chunks)
     back = read_back(path)
     assert np.array_equal(np.concatenate(chunks), np.asarray(back.vertices)[np.asarray(back.faces)])
-    rep = check_triangles(lambda: file_triangles(path, chunk=1000), block=2000)
-    assert rep["blocks"] > 1
+    with SpillFiles(tmp_path) as blocks:
+        rep = check_triangles(lambda: file_triangles(path, chunk=1000), block=2000, store=blocks)
+        assert rep["blocks"] > 1 and not list(tmp_path.glob("ple-spill-*/*"))  # every block read back
+    assert not list(tmp_path.glob("ple-spill-*"))
     assert rep["self_intersecting_pairs"] == len(self_intersections(back.vertices, back.faces)) > 0

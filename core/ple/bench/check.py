@@ -22,7 +22,10 @@ import time
 import numpy as np
 
 from ..algebra.similarity import Translation
+from ..io.export import export_mesh, read_back
+from ..meshing.tessellate import tessellate
 from ..model.lattice import Lattice
+from ..program.sources import load_lattice
 from ..queries.overlaps import KINDS, pair_gaps, unclean_pairs
 
 
@@ -90,10 +93,6 @@ def _meshes():
     """(name, what, vertices, faces): the README's octet (refined, 337 k triangles, the file
     ``ple mesh --check`` reads back) and a union result (an unclean lattice of crossing face
     diagonals, meshed with manifold3d unions and moved onto the float32 grid)."""
-    from ..io.export import export_mesh, read_back  # noqa: PLC0415 - only this bench
-    from ..meshing.tessellate import tessellate  # noqa: PLC0415
-    from ..program.sources import load_lattice  # noqa: PLC0415
-
     with tempfile.TemporaryDirectory() as d:
         export_mesh(tessellate(load_lattice("octet", ["n=2"]), style="refined"), os.path.join(d, "o.stl"))
         octet = read_back(os.path.join(d, "o.stl"))

@@ -18,6 +18,7 @@ from ..errors import PleError
 from ..filters.body import body_of
 from ..io.export import STL_RECORD, export_mesh, read_back, write_beam_lattice_3mf, write_mesh
 from ..io.formats import DEFAULT_UNIT, UNITS, mesh_format
+from ..io.spill import SpillFiles
 from ..measure.check import is_clean, solid_volume
 from ..meshing.selfcheck import BLOCK_TRIANGLES, check_triangles
 from ..meshing.skin import skin
@@ -217,7 +218,8 @@ def check_report(lat, region, path, unit: str = DEFAULT_UNIT, unclean: bool = Fa
     the volume ``ple info`` reports (``ple.measure.check.solid_volume``: the union of balls and
     cone-beams of a clean lattice), else, for an ``unclean`` lattice whose overlaps it would count
     twice, or one too varied to measure, a Monte Carlo estimate of the union in the region."""
-    c = check_triangles(lambda: file_triangles(path, unit))
+    with SpillFiles(Path(path).resolve().parent) as blocks:  # beside the file: as much room as it took
+        c = check_triangles(lambda: file_triangles(path, unit), store=blocks)
     rep = {k: c[k] for k in ("triangles", "watertight", "winding_consistent", "euler_characteristic",
                              "self_intersecting_pairs", "self_intersecting_faces", "degenerate_faces")}
     rep["mesh_volume"] = float(c["volume"])

@@ -29,7 +29,6 @@ vertices coincide.
 from __future__ import annotations
 
 import os
-import tempfile
 
 import numpy as np
 
@@ -373,7 +372,7 @@ def count_self_intersections(vertices, faces) -> dict:
 BLOCK_TRIANGLES = 1 << 20  # triangles per block of ``check_triangles`` (about 0.3 GB while checked)
 
 
-def check_triangles(read, block: int = BLOCK_TRIANGLES, spill_dir=None) -> dict:
+def check_triangles(read, block: int = BLOCK_TRIANGLES, store=None) -> dict:
     """Watertightness, winding, Euler characteristic, exact self-intersections and volume of a
     triangle soup read in chunks, as a consumer sees it (corners with equal coordinates are one
     vertex), with memory bounded by ``block`` triangles whatever the soup's size.
@@ -381,19 +380,21 @@ def check_triangles(read, block: int = BLOCK_TRIANGLES, spill_dir=None) -> dict:
     ``read()`` returns a new iterator over chunks of triangles (k, 3, 3) (float32 or float64); it
     is called twice (bounds, then the blocks). Soups of at most ``block`` triangles are checked in
     memory. Larger ones are cut into blocks of a uniform grid over their box: a triangle goes to
-    every block its box meets (spilled to one file per block in ``spill_dir``, default a temporary
-    directory), and each block is welded and checked alone. What spans blocks is counted once, by
-    an owner that sees all of it: a vertex by its block; an edge by the block of its
-    lexicographically smaller end (every face on the edge has that end in its box); a face by the
-    block of its box's low corner; a pair of faces by the block of the low corner of their boxes'
-    intersection (which lies in both boxes).
+    every block its box meets, its record kept by ``store`` until the block is checked
+    (``put(key, records)``, ``take(key)``, ``keys()``; default ``MemoryBlocks``, in memory;
+    ``ple.io.spill.SpillFiles`` keeps them on disk, so only one block is in memory), and each
+    block is welded and checked alone. What spans blocks is counted once, by an owner that sees
+    all of it: a vertex by its block; an edge by the block of its lexicographically smaller end
+    (every face on the edge has that end in its box); a face by the block of its box's low
+    corner; a pair of faces by the block of the low corner of their boxes' intersection (which
+    lies in both boxes).
 
     Returns {"triangles", "watertight" (every edge on exactly two faces), "winding_consistent"
     (and they run it in opposite directions), "euler_characteristic" (V − E + F), "volume"
     (signed, from the divergence theorem), "self_intersecting_pairs", "self_intersecting_faces",
     "degenerate_faces" (``degenerate``), "blocks"}."""
     count, lo, hi = 0, np.full(3, np.inf), np.full(3, -np.inf)
-    chunks, single = [], True  # single: every chunk float32 (an STL's), spilled as such
+    chunks, single = [], True  # single: every chunk float32 (an STL's), kept as such
     for t in read():
         t = np.asarray(t).reshape(-1, 3, 3)
         single &= t.dtype == np.float32
@@ -408,30 +409,38 @@ def check_triangles(read, block: int = BLOCK_TRIANGLES, spill_dir=None) -> dict:
         acc.add(tri, np.arange(len(tri)), None)
         return acc.report(count, 1)
     del chunks
+    store = MemoryBlocks() if store is None else store
     grid = _BlockGrid(lo, hi, count, block)
-    with tempfile.TemporaryDirectory(dir=spill_dir) as d:
-        files: dict = {}
-        try:
-            first = 0
-            record = np.dtype([("index", "<i8"), ("corners", "<f4" if single else "<f8", (3, 3))])
-            for t in read():
-                t = np.asarray(t).reshape(-1, 3, 3)
-                rec = np.empty(len(t), record)
-                rec["index"], rec["corners"] = np.arange(first, first + len(t)), t
-                first += len(t)
-                b0, b1 = grid.cells(t.min(axis=1)), grid.cells(t.max(axis=1))
-                for key, rows in grid.spread(b0, b1):
-                    if key not in files:
-                        files[key] = open(os.path.join(d, f"{key}.bin"), "wb")  # noqa: SIM115 - closed below
-                    rec[rows].tofile(files[key])
-        finally:
-            for fh in files.values():
-                fh.close()
-        for key in sorted(files):
-            rec = np.fromfile(os.path.join(d, f"{key}.bin"), record)
-            os.remove(os.path.join(d, f"{key}.bin"))
-            acc.add(rec["corners"].astype(float), rec["index"], (grid, key))
-    return acc.report(count, len(files))
+    record = np.dtype([("index", "<i8"), ("corners", "<f4" if single else "<f8", (3, 3))])
+    first = 0
+    for t in read():
+        t = np.asarray(t).reshape(-1, 3, 3)
+        rec = np.empty(len(t), record)
+        rec["index"], rec["corners"] = np.arange(first, first + len(t)), t
+        first += len(t)
+        for key, rows in grid.spread(grid.cells(t.min(axis=1)), grid.cells(t.max(axis=1))):
+            store.put(key, rec[rows])
+    keys = store.keys()
+    for key in keys:
+        rec = store.take(key)
+        acc.add(rec["corners"].astype(float), rec["index"], (grid, key))
+    return acc.report(count, len(keys))
+
+
+class MemoryBlocks:
+    """``check_triangles``' blocks kept in memory (the records of all blocks at once)."""
+
+    def __init__(self):
+        self._parts: dict = {}
+
+    def put(self, key: int, records: np.ndarray) -> None:
+        self._parts.setdefault(key, []).append(np.array(records))
+
+    def keys(self) -> list[int]:
+        return sorted(self._parts)
+
+    def take(self, key: int) -> np.ndarray:
+        return np.concatenate(self._parts.pop(key))
 
 
 class _BlockGrid:
