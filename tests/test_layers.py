@@ -23,7 +23,8 @@ OUTSIDE = ("tools", "ple_addon")  # repository tools and the Blender add-on
 OPTIONAL = {"scipy", "manifold3d", "PIL", "lib3mf", "bpy", "mathutils", "addon_utils", "dask", "distributed", "fsspec",
             "resource"}  # resource: POSIX only (the runner falls back where it is missing)
 QUERY_DISPATCHER = "ple.queries.biq"
-COMPILED = {"ple.io._stlcodec", "ple.meshing._assemble"}  # optional C extensions (setup.py), imported in a try
+# optional C extensions (setup.py), imported in a try
+COMPILED = {"ple.io._stlcodec", "ple.meshing._assemble", "ple.meshing._selfcheck"}
 DOOR_NAMES = re.compile(r"\bple\.(cli|bench)\b|\bple_addon\b|\btools\.\w")  # also in strings (subprocess)
 WRITES = {"write_text", "write_bytes", "savez", "savez_compressed", "save", "tofile", "export", "dump"}
 
