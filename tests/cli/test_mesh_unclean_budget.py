@@ -1,6 +1,6 @@
-"""A streamed STL whose cleanliness check finds unclean hubs falls back to exact unions made in
-memory: that fallback is estimated before it starts and refused (exit 2, one line, no file, the
-user's file untouched) when it exceeds --max-memory."""
+"""A streamed STL whose cleanliness check finds unclean hubs streams local unions of them, one at
+a time: the largest is estimated before the stream starts and refused (exit 2, one line, no file,
+the user's file untouched) when it exceeds --max-memory."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ def lattice(n: Range(2, 40) = 6):
 """
 
 
-def test_unions_in_memory_are_estimated_before_they_start(tmp_path, capsys):
+def test_local_unions_are_estimated_before_they_start(tmp_path, capsys):
     src = tmp_path / "crossing.py"
     src.write_text(CROSSING)
     lat = load_lattice(str(src), {"n": 6})
@@ -36,7 +36,7 @@ def test_unions_in_memory_are_estimated_before_they_start(tmp_path, capsys):
     code = main(["mesh", str(src), "--param", "n=6", "--style", "cnt", "--max-memory", "1M", "--out", str(out)])
     err = capsys.readouterr().err
     assert code == 2
-    assert f"{len(report.nodes):,} unclean hubs need exact unions" in err and "--max-memory" in err
+    assert "local unions of unclean hubs" in err and "--max-memory" in err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
     assert out.read_bytes() == b"users file"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["crossing.py", "w.stl"]

@@ -28,7 +28,6 @@ from ..errors import PleError
 from ..meshing.connectors import constant_radius_connectors
 from ..meshing.tessellate import (
     ArrayPool,
-    _check_style,
     checked_stream,
     iter_triangles,
     ordered_map,
@@ -45,7 +44,7 @@ from ..meshing.weld import (
     snapped_slices,
     weld,
 )
-from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, mesh_triangles, require
+from ..model.budget import evaluation_bytes, require
 from ..model.lattice import Lattice
 from .files import DirectWriter, WriteBehind, atomic_path, atomic_write_text, check_output_dir, write_marker
 from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, from_file_axes, mesh_format, to_file_axes, unit_name
@@ -420,8 +419,9 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
     through ``export_mesh``. Coordinates are in ``unit`` (see there).
 
     Regions up to ``MAX_CHECK_GROUPS`` groups are checked for unclean hubs first
-    (``ple.meshing.tessellate.checked_stream``); an unclean one is meshed in memory with its
-    unions, refused (PleError, no file) if its estimate exceeds ``max_memory`` bytes.
+    (``ple.meshing.tessellate.checked_stream``); an unclean one streams its clean boxes, then its
+    local unions one at a time, refused (PleError, no file) if the largest union's estimate
+    exceeds ``max_memory`` bytes.
     ``info["unclean"]`` gets the report (None when not checked)."""
     unit_name(unit)
     fmt = mesh_format(path)
@@ -437,15 +437,12 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
         checked, chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet, workers,
                                          encode=lambda chunk: stl_chunk(chunk, grid, pool), grid=grid)
         info["unclean"] = checked
-        if chunks is not None:  # each box encoded by the thread that assembled it
+        if checked is not None and checked.clusters and max_memory is not None:  # one local union at a time
+            require(checked.union_bytes + evaluation_bytes(lat, r),
+                    f"the largest of {checked.clusters:,} local unions of unclean hubs, with the region's "
+                    f"evaluation, of region {r}", max_memory, "choose a smaller --region")
+        if chunks is not None:  # each box encoded by the thread that assembled it; then the unions
             return write_stl(path, chunks, header=stl_header(unit), pool=pool)
-        if max_memory is not None and info["unclean"] is not None:  # the unions are computed in memory
-            lv, sg = _check_style(style, levels, segments)
-            tris = mesh_triangles(lat, r, style, lv, sg)
-            require(tris * MESH_TRIANGLE_BYTES + evaluation_bytes(lat, r),
-                    f"{len(info['unclean'].nodes):,} unclean hubs need exact unions, made in memory: "
-                    f"{tris:,.3g} triangles ({style}) of region {r}", max_memory,
-                    "choose a smaller --region or fewer --levels")
     elif fmt == "stl":
         return write_stl(path, iter_triangles(lat, r, style, levels, segments, max_groups, workers=workers),
                          header=stl_header(unit), workers=workers)

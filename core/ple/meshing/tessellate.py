@@ -24,6 +24,7 @@ U^-i V^-j W^dk V^(j+dj) U^(i+di) — independent of k — so hubs are computed o
 from __future__ import annotations
 
 import ctypes
+import itertools
 import math
 import mmap
 import multiprocessing
@@ -49,7 +50,7 @@ from .skin import clip_bodies, clip_to_bodies
 from .styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS
 from .styles import style as style_named
 from .unclean import SEPARATION_GRIDS, find_unclean
-from .unions import clusters, unite_cluster
+from .unions import clusters, piece_estimate, unite_cluster
 from .weld import COLLAPSE_GRIDS, grid_spacing, weld
 
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
@@ -770,6 +771,8 @@ def leave_to_unions(tess: _Tessellator, ev, report) -> list:
     bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
     pattern = np.asarray(ev.beam_index, np.int64)[:, 3]
     tess.exclude(idx[hubs], np.concatenate([idx[bn[beams, 0], :3], pattern[beams, None]], axis=1))
+    report.clusters = len(cl)
+    report.union_bytes = max([piece_estimate(c)[1] for c in cl], default=0)
     return cl
 
 
@@ -965,11 +968,11 @@ def smallest_radius(lat: Lattice, region=None) -> float:
 def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
                    segments: int | None = None, max_groups: int = 1 << 14, fillet: float | None = None,
                    workers: int = 1, encode=None, grid: float | None = None):
-    """The streamed mesh of a region (``iter_triangles``) if it has no unclean hubs: (report,
-    chunks). Regions up to MAX_CHECK_GROUPS groups are checked first (``ple.meshing.unclean``;
-    the check's hub templates are reused by the stream); report is None for larger regions
-    (not checked). chunks is None when the region has unclean hubs: it must be meshed in memory
-    with its unions (``tessellate``)."""
+    """The streamed mesh of a region: (report, chunks). Regions up to MAX_CHECK_GROUPS groups are
+    checked first (``ple.meshing.unclean``; the check's hub templates are reused by the stream);
+    report is None for larger regions (not checked). A region with unclean hubs streams its
+    boxes without its clusters, then each cluster's local union (``ple.meshing.unions``), which
+    meet the boxes exactly along contact rings: memory is bounded by a box and a cluster."""
     levels, segments = _check_style(style, levels, segments)
     if style == "balls-beams":
         raise PleError("a checked stream needs a closed style (refined, cnt or chocc)")
@@ -978,9 +981,10 @@ def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: in
         return None, None
     tess = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style), grid=grid,
                         workers=max(1, int(workers)))  # grid: the region's output_grid when the caller has it
-    report = tess.find_unclean()[0] if r.groups <= MAX_CHECK_GROUPS else None
-    if report is not None and len(report.nodes):
-        tess.close_pool()
-        return report, None
-    return report, iter_triangles(lat, r, style, levels, segments, max_groups, _tess=tess, workers=workers,
-                                  encode=encode)
+    report, ev = tess.find_unclean() if r.groups <= MAX_CHECK_GROUPS else (None, None)
+    boxes = iter_triangles(lat, r, style, levels, segments, max_groups, _tess=tess, workers=workers, encode=encode)
+    if report is None or not len(report.nodes):
+        return report, boxes
+    cl = leave_to_unions(tess, ev, report)  # before the first box: the boxes leave the clusters' rings open
+    pieces = union_pieces(tess, ev, cl)
+    return report, itertools.chain(boxes, pieces if encode is None else map(encode, pieces))

@@ -55,12 +55,15 @@ class UncleanReport:
     close_junctions: int = 0  # neighbouring junctions with pulled-in circles not proven apart
     element_pairs: np.ndarray | None = None  # (P, 2) element ids (hubs 0..N-1, beams N + row) found overlapping
     shrunk: np.ndarray | None = None  # (N,) hubs whose ACHoCC shrank its caps
+    clusters: int = 0  # local unions (``ple.meshing.unions``), once the stream has split them
+    union_bytes: int = 0  # the largest cluster's union, estimated from above (peak bytes)
 
     def line(self) -> str:
         close = f", {self.close_junctions:,} close junction pairs" if self.close_junctions else ""
+        local = f" in {self.clusters:,} local unions" if self.clusters else ""
         return (f"unclean lattice: {len(self.nodes):,} hubs in {self.components:,} neighbourhoods "
                 f"({self.pairs:,} overlapping element pairs, {self.shrunk_hubs:,} shrunk junctions{close}) "
-                f"united with manifold3d")
+                f"united with manifold3d{local}")
 
 
 def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, margin: float = 0.0,

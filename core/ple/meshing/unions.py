@@ -79,11 +79,11 @@ def excluded(report, beam_nodes) -> tuple[np.ndarray, np.ndarray]:
     return np.sort(hubs), np.sort(beams)
 
 
-def piece_estimate(cluster: Cluster, ring_sizes: np.ndarray) -> tuple[int, int]:
+def piece_estimate(cluster: Cluster) -> tuple[int, int]:
     """(input triangles, peak bytes) of a cluster's union, from above: a polygonal ball per hub,
-    a hull per beam of at most its two ends' vertices."""
+    a hull per beam of at most two balls' vertices (a contact ring has fewer than a ball)."""
     ball = 2 * SPHERE_SEGMENTS * (SPHERE_SEGMENTS // 2)
-    tris = len(cluster.hubs) * ball + int(np.sum(2 * np.asarray(ring_sizes, np.int64)))
+    tris = (len(cluster.hubs) + 2 * len(cluster.beams)) * ball
     return tris, tris * UNION_TRIANGLE_BYTES
 
 

@@ -1,0 +1,76 @@
+"""Local unions of unclean lattices (``ple.meshing.unions``): clusters found from the overlap
+graph, each united alone and joined to the boxes of the fast path along contact rings; the
+streamed file is the in-memory mesh, closed and free of self-intersections."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from ple.algebra.similarity import Rotation, Translation
+from ple.algebra.vectors import Pt, Vec
+from ple.cli.mesh import monte_carlo_volume
+from ple.io.export import read_back, write_mesh
+from ple.meshing.selfcheck import self_intersections
+from ple.meshing.tessellate import _Tessellator, tessellate
+from ple.meshing.unions import clusters
+from ple.model.lattice import Lattice
+
+pytest.importorskip("manifold3d")
+
+
+def crossing(n: int, curved: bool, radius: float = 0.1) -> Lattice:
+    """Crossing diagonals (1, 1, 0) and (-1, 1, 0) on a cubic lattice (curved: V a rotation)."""
+    lat = Lattice()
+    a = lat.add_node(Pt(0, 0, 0), radius)
+    for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (-1, 1, 0)]:
+        lat.add_beam(a, a, *off)
+    lat.set_u(n, Translation(Vec(1, 0, 0)))
+    lat.set_v(n, Rotation(0.02, Vec(0, 0, 1), Pt(-45, 0, 0)) if curved else Translation(Vec(0, 1, 0)))
+    lat.set_w(n, Translation(Vec(0, 0, 1)))
+    return lat
+
+
+def test_crossing_diagonals_are_pairs_of_beams():
+    """Each cell of each xy layer holds one crossing of two diagonals ((n - 1)² n of them): a
+    cluster of those two beams, no hub (their junctions are clean)."""
+    n = 3
+    lat = crossing(n, curved=False)
+    tess = _Tessellator(lat, lat.region(), "cnt", 0, 16)
+    report, ev = tess.find_unclean()
+    cl = clusters(report, ev.beam_nodes)
+    assert len(cl) == (n - 1) ** 2 * n
+    pattern = np.asarray(ev.beam_index)[:, 3]
+    for c in cl:
+        assert len(c.hubs) == 0 and len(c.beams) == 2
+        assert sorted(pattern[c.beams].tolist()) == [3, 4]  # one of each diagonal
+
+
+@pytest.mark.parametrize("curved", [False, True])
+def test_streamed_file_is_the_closed_union(curved, tmp_path):
+    """The streamed STL (small boxes, 1 and 2 workers) holds the in-memory mesh's triangles; it
+    is closed, consistently oriented, free of self-intersections, and its volume is the union's
+    (Monte Carlo of balls and cone-beams)."""
+    lat = crossing(3, curved)
+    mesh = tessellate(lat, None, "refined", 3)
+    assert mesh.metadata["ple_unclean"].clusters == 12
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    assert mesh.is_watertight and mesh.is_winding_consistent and len(self_intersections(v, f)) == 0
+    est, err = monte_carlo_volume(lat, lat.region(), samples=400_000, seed=5)
+    assert abs(mesh.volume / est - 1) < 0.01 + 4 * err / est
+    want = _triangles(v, f)
+    for workers in (1, 2):
+        out = tmp_path / f"m{workers}.stl"
+        info = {}
+        write_mesh(lat, out, style="refined", levels=3, max_groups=4, workers=workers, info=info)
+        assert info["unclean"].clusters == 12
+        back = read_back(out)
+        assert back.is_watertight and back.is_winding_consistent
+        assert np.array_equal(_triangles(np.asarray(back.vertices), np.asarray(back.faces)), want)
+
+
+def _triangles(v, f) -> np.ndarray:
+    """Triangles as float32 corner rows, each from its smallest corner, sorted."""
+    t = np.asarray(v, np.float32).astype(float)[np.asarray(f)]
+    first = np.lexsort(t.transpose(2, 0, 1)[::-1], axis=1)[:, 0]
+    t = np.take_along_axis(t, ((first[:, None] + np.arange(3)) % 3)[:, :, None].repeat(3, 2), 1).reshape(len(t), 9)
+    return t[np.lexsort(t.T[::-1])]
