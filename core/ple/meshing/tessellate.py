@@ -786,32 +786,37 @@ def build_with_unions(tess: _Tessellator, ev, report) -> tuple[np.ndarray, np.nd
     return v, f
 
 
-def union_pieces(tess: _Tessellator, ev, cl: list):
+def union_pieces(tess: _Tessellator, ev, cl: list, chunk: int = 512):
     """The meshes (vertices, faces) of the clusters ``cl`` (``leave_to_unions``), one by one: each
     open along the contact rings it shares with the fast path, whose vertices it takes from the
-    hub templates placed as the boxes place them (``assembly.place``)."""
+    hub templates placed as the boxes place them (``assembly.place``), ``chunk`` clusters' rings
+    at a time."""
     idx = np.asarray(ev.node_index, np.int64)
     bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
     pattern = np.asarray(ev.beam_index, np.int64)[:, 3]
-    for c in cl:
-        own = np.zeros(len(idx), bool)
-        own[c.hubs] = True
-        ends = [(int(j), e) for j in c.beams.tolist() for e in (0, 1) if not own[bn[j, e]]]
-        rings = {}
+    own = np.zeros(len(idx), bool)
+    for lo in range(0, len(cl), chunk):
+        part = cl[lo:lo + chunk]
+        ends = []
+        for k, c in enumerate(part):
+            own[c.hubs] = True
+            ends += [(k, int(j), e) for j in c.beams.tolist() for e in (0, 1) if not own[bn[j, e]]]
+            own[c.hubs] = False
+        rings: list = [{} for _ in part]
         if ends:
-            rows = np.array([bn[j, e] for j, e in ends], np.int64)
+            rows = np.array([bn[j, e] for _, j, e in ends], np.int64)
             tids, m, _, _ = tess.instances(idx[rows])
             table = tess.table.snapshot()
             counts = table[2][tids, 2]
             offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
             verts = np.empty((int(counts.sum()), 3))
             place(table, tids, offsets, m, verts)
-            for k, (j, e) in enumerate(ends):
-                tpl, slot_of = tess.tpl_list[int(tids[k])]
-                p = int(pattern[j])
-                slot = tess.slots[int(idx[bn[j, e], 3])].index((p, 1 if e == 0 else -1))
-                rings[(j, e)] = verts[offsets[k] + np.asarray(tpl.rings[slot_of[slot]], np.int64)]
-        yield unite_cluster(c, ev.center, ev.radius, bn, rings, tess.grid)
+            for q, (k, j, e) in enumerate(ends):
+                tpl, slot_of = tess.tpl_list[int(tids[q])]
+                slot = tess.slots[int(idx[bn[j, e], 3])].index((int(pattern[j]), 1 if e == 0 else -1))
+                rings[k][(j, e)] = verts[offsets[q] + np.asarray(tpl.rings[slot_of[slot]], np.int64)]
+        for c, rg in zip(part, rings):
+            yield unite_cluster(c, ev.center, ev.radius, bn, rg, tess.grid)
 
 
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,

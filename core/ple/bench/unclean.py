@@ -1,0 +1,187 @@
+"""Unclean lattices to binary STL, each beside one manifold3d batch union of the same elements.
+
+``ple mesh``'s own path, beside one manifold3d batch union of the same balls and cone-beams.
+
+Cases (what users print: thick, dense, curved):
+
+- ``fig6_3``: thesis Fig. 6.3 with its defaults (refined, 4 levels); its short beams pull
+  contact circles in from S⁺ (``achocc.pulled_circles``);
+- ``curved``: a curved n³ lattice, one ball of radius 0.12, beams (1,0,0), (0,1,0), (0,0,1),
+  (1,1,0), V a rotation about a far axis, W a swirl that makes W-beams about 0.42 long: every
+  hub's S⁺ passes the far end of its W beams;
+- ``crossing``: crossing diagonals (1,1,0) and (-1,1,0) on curved rows, n³ (8 and 30): every
+  pair of diagonals crosses, each crossing is a local union (``ple.meshing.unions``);
+- ``tenth``: a cubic n³ lattice (10⁶ beams at n = 70) with a tenth of its hubs, chosen at random,
+  treated as unclean (balls and cone-beams united locally, the rest on the fast path).
+
+Each case runs in a fresh process (wall and CPU seconds, peak resident memory, triangles, the
+estimate our budget checks); the baseline is one ``Manifold.batch_boolean`` of every ball
+(``SPHERE_SEGMENTS`` segments) and every cone-beam (``batch_hull`` of its two balls), in a fresh
+process too, stopped after ``--union-timeout`` seconds (reported as a lower bound).
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+CHILD = r"""
+import json, os, resource, sys, time
+import numpy as np
+from ple.bench.unclean import case_lattice
+name, n, style, levels, out = sys.argv[1], int(sys.argv[2]), sys.argv[3], int(sys.argv[4]), sys.argv[5]
+lat = case_lattice(name, n)
+t0, c0 = time.perf_counter(), time.process_time()
+if name == "tenth":
+    from ple.bench.unclean import write_tenth
+    tris, report, estimate = write_tenth(lat, out, style, levels)
+else:
+    from ple.io.export import write_mesh
+    from ple.model.budget import evaluation_bytes
+    info = {}
+    tris = write_mesh(lat, out, style=style, levels=levels, info=info)
+    report = info["unclean"]
+    estimate = (report.union_bytes if report is not None else 0) + evaluation_bytes(lat, lat.region())
+wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+ru = resource.getrusage(resource.RUSAGE_SELF)
+print(json.dumps({"triangles": int(tris), "seconds": wall, "cpu_seconds": cpu + resource.getrusage(
+    resource.RUSAGE_CHILDREN).ru_utime, "peak_rss_gb": ru.ru_maxrss / 1e6, "estimate_gb": estimate / 1e9,
+    "groups": lat.groups, "beams": lat.beam_count(), "unclean": None if report is None else report.line()}))
+"""
+
+UNION = r"""
+import json, resource, sys, time
+import numpy as np
+import manifold3d
+from ple.bench.unclean import case_lattice
+from ple.meshing.unclean import SPHERE_SEGMENTS
+lat = case_lattice(sys.argv[1], int(sys.argv[2]))
+t0, c0 = time.perf_counter(), time.process_time()
+ev = lat.evaluate(lat.region())
+unit = manifold3d.Manifold.sphere(1.0, SPHERE_SEGMENTS)
+balls = [unit.scale([r] * 3).translate(list(c)) for c, r in zip(ev.center, ev.radius)]
+parts = balls + [manifold3d.Manifold.batch_hull([balls[a], balls[b]]) for a, b in ev.beam_nodes]
+u = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add)
+tris = u.num_tri()
+print(json.dumps({"triangles": int(tris), "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - c0,
+                  "peak_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6}))
+"""
+
+CASES = [("fig6_3", 0, "refined", 4), ("curved", 40, "cnt", 0), ("curved", 40, "refined", 2),
+         ("crossing", 8, "cnt", 0), ("crossing", 8, "refined", 4), ("crossing", 30, "cnt", 0),
+         ("tenth", 70, "cnt", 0)]
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--cases", default="all",
+                   help="comma-separated case names (fig6_3, curved, crossing, tenth) or all (default)")
+    p.add_argument("--union-timeout", type=float, default=600.0,
+                   help="seconds after which the manifold3d baseline is stopped (default 600)")
+    p.add_argument("--scale", type=float, default=100.0,
+                   help="every case's n in percent of its size (default 100: the issue's sizes)")
+
+
+def case_lattice(name: str, n: int):
+    """The lattice of a case (module docstring)."""
+    from ..algebra.similarity import Rotation, Swirl, Translation
+    from ..algebra.vectors import Pt, Vec
+    from ..model.lattice import Lattice
+    from ..program.sources import load_lattice
+
+    if name == "fig6_3":
+        return load_lattice("fig6_3")
+    lat = Lattice()
+    if name == "curved":
+        a = lat.add_node(Pt(0, 0, 0), 0.12)
+        for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0)]:
+            lat.add_beam(a, a, *off)
+        lat.set_u(n, Translation(Vec(1, 0, 0)))
+        lat.set_v(n, Rotation(0.02, Vec(0, 0, 1), Pt(-45, 0, 0)))
+        lat.set_w(n, Swirl(0.0025, Vec(0, 1, 0), Pt(160, 0, 0), 0.999))
+    elif name == "crossing":
+        a = lat.add_node(Pt(0, 0, 0), 0.1)
+        for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (-1, 1, 0)]:
+            lat.add_beam(a, a, *off)
+        lat.set_u(n, Translation(Vec(1, 0, 0)))
+        lat.set_v(n, Rotation(0.02, Vec(0, 0, 1), Pt(-45, 0, 0)))
+        lat.set_w(n, Translation(Vec(0, 0, 1)))
+    elif name == "tenth":
+        a = lat.add_node(Pt(0, 0, 0), 0.1)
+        for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1)]:
+            lat.add_beam(a, a, *off)
+        for s, v in (("u", Vec(1, 0, 0)), ("v", Vec(0, 1, 0)), ("w", Vec(0, 0, 1))):
+            getattr(lat, f"set_{s}")(n, Translation(v))
+    else:
+        raise ValueError(name)
+    return lat
+
+
+def write_tenth(lat, out, style: str, levels: int, fraction: float = 0.1, seed: int = 0):
+    """The ``tenth`` case: a random tenth of the hubs unclean (as if their junctions had shrunk),
+    streamed to binary STL as ``ple mesh`` streams an unclean region. Returns (triangles, report,
+    estimated peak bytes)."""
+    import numpy as np
+
+    from ..io.export import RecordPool, stl_chunk, stl_header, write_stl
+    from ..meshing.tessellate import _check_style, _Tessellator, iter_triangles, leave_to_unions, union_pieces
+    from ..meshing.unclean import UncleanReport
+    from ..meshing.weld import grid_spacing
+    from ..model.budget import evaluation_bytes
+
+    r = lat.region()
+    lv, sg = _check_style(style, levels, None)
+    grid = grid_spacing(*lat.bounds(r))
+    tess = _Tessellator(lat, r, style, lv, sg, grid=grid)
+    ev = lat.evaluate(r)
+    rng = np.random.default_rng(seed)
+    nodes = np.sort(rng.choice(len(ev.center), int(round(fraction * len(ev.center))), replace=False))
+    shrunk = np.zeros(len(ev.center), bool)
+    shrunk[nodes] = True
+    report = UncleanReport(nodes, 0, len(nodes), 0, 0, np.zeros((0, 2), np.int64), shrunk)
+    cl = leave_to_unions(tess, ev, report)
+    pool = RecordPool()
+    encode = lambda chunk: stl_chunk(chunk, grid, pool)  # noqa: E731
+    chunks = [iter_triangles(lat, r, style, lv, sg, _tess=tess, encode=encode), map(encode, union_pieces(tess, ev, cl))]
+    tris = write_stl(out, itertools.chain(*chunks), header=stl_header("mm"), pool=pool)
+    return tris, report, report.union_bytes + evaluation_bytes(lat, r)
+
+
+def _run(code: str, args: list, timeout: float | None = None) -> dict:
+    try:
+        proc = subprocess.run([sys.executable, "-c", code, *map(str, args)], capture_output=True, text=True,
+                              timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return {"timeout": timeout}
+    if proc.returncode:
+        return {"error": (proc.stderr.strip().splitlines() or [f"exit {proc.returncode}"])[-1]}
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def run(args) -> dict:
+    wanted = None if args.cases == "all" else set(args.cases.split(","))
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="ple-bench-unclean-") as d:
+        for name, n, style, levels in CASES:
+            if wanted is not None and name not in wanted:
+                continue
+            n = max(2, int(round(n * args.scale / 100))) if n else 0
+            ours = _run(CHILD, [name, n, style, levels, os.path.join(d, "o.stl")])
+            row = {"case": name, "n": n, "style": style, "levels": levels, "ours": ours}
+            if "seconds" in ours:
+                ours["triangles_per_s"] = ours["triangles"] / max(ours["seconds"], 1e-9)
+                ours["peak_over_estimate"] = ours["peak_rss_gb"] / max(ours["estimate_gb"], 1e-9)
+            base = _run(UNION, [name, n], args.union_timeout)
+            row["manifold3d_union"] = base
+            if "seconds" in ours:
+                t = base.get("cpu_seconds", base.get("timeout"))
+                if t is not None:
+                    row["cpu_speedup"] = t / max(ours["cpu_seconds"], 1e-9)
+                    row["speedup_is_lower_bound"] = "timeout" in base
+            rows.append(row)
+            print(json.dumps(row), file=sys.stderr, flush=True)
+    return {"benchmark": "unclean", "machine": f"{os.cpu_count()} cores", "union_timeout_s": args.union_timeout,
+            "rows": rows}
