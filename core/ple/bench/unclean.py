@@ -35,17 +35,20 @@ import numpy as np
 from ple.bench.unclean import case_lattice
 name, n, style, levels, out = sys.argv[1], int(sys.argv[2]), sys.argv[3], int(sys.argv[4]), sys.argv[5]
 lat = case_lattice(name, n)
+import ple.meshing.tessellate, ple.io.export, manifold3d  # the process's own baseline, before any work
+base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1e3
 t0, c0 = time.perf_counter(), time.process_time()
 if name == "tenth":
     from ple.bench.unclean import write_tenth
     tris, report, estimate = write_tenth(lat, out, style, levels)
 else:
     from ple.io.export import write_mesh
-    from ple.model.budget import evaluation_bytes
+    from ple.bench.unclean import stream_estimate
     info = {}
     tris = write_mesh(lat, out, style=style, levels=levels, info=info)
     report = info["unclean"]
-    estimate = (report.union_bytes if report is not None else 0) + evaluation_bytes(lat, lat.region())
+    estimate = stream_estimate(lat, style, levels, report)
+estimate += base
 wall, cpu = time.perf_counter() - t0, time.process_time() - c0
 ru = resource.getrusage(resource.RUSAGE_SELF)
 print(json.dumps({"triangles": int(tris), "seconds": wall, "cpu_seconds": cpu + resource.getrusage(
@@ -130,7 +133,6 @@ def write_tenth(lat, out, style: str, levels: int, fraction: float = 0.1, seed: 
     from ..meshing.tessellate import _check_style, _Tessellator, iter_triangles, leave_to_unions, union_pieces
     from ..meshing.unclean import UncleanReport
     from ..meshing.weld import grid_spacing
-    from ..model.budget import evaluation_bytes
 
     r = lat.region()
     lv, sg = _check_style(style, levels, None)
@@ -147,7 +149,20 @@ def write_tenth(lat, out, style: str, levels: int, fraction: float = 0.1, seed: 
     encode = lambda chunk: stl_chunk(chunk, grid, pool)  # noqa: E731
     chunks = [iter_triangles(lat, r, style, lv, sg, _tess=tess, encode=encode), map(encode, union_pieces(tess, ev, cl))]
     tris = write_stl(out, itertools.chain(*chunks), header=stl_header("mm"), pool=pool)
-    return tris, report, report.union_bytes + evaluation_bytes(lat, r)
+    return tris, report, stream_estimate(lat, style, levels, report)
+
+
+def stream_estimate(lat, style: str, levels: int, report) -> float:
+    """Peak bytes of streaming a region to STL beyond the process's own: its evaluation (the
+    cleanliness check holds it), the boxes alive at once (two, each at most BOX_TRIANGLES) and the
+    largest local union (``unions.piece_estimate``)."""
+    from ..meshing.tessellate import BOX_TRIANGLES, _check_style
+    from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, mesh_triangles
+
+    r = lat.region()
+    lv, sg = _check_style(style, levels, None)
+    box = min(mesh_triangles(lat, r, style, lv, sg), BOX_TRIANGLES) * MESH_TRIANGLE_BYTES
+    return evaluation_bytes(lat, r) + 2 * box + (report.union_bytes if report is not None else 0)
 
 
 def _run(code: str, args: list, timeout: float | None = None) -> dict:
