@@ -50,7 +50,7 @@ from .skin import clip_bodies, clip_to_bodies
 from .styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS
 from .styles import style as style_named
 from .unclean import SEPARATION_GRIDS, find_unclean
-from .unions import clusters, piece_estimate, unite_cluster
+from .unions import clusters, piece_estimate, unite_stoppable
 from .weld import COLLAPSE_GRIDS, grid_spacing, weld
 
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
@@ -816,7 +816,7 @@ def union_pieces(tess: _Tessellator, ev, cl: list, chunk: int = 512):
                 slot = tess.slots[int(idx[bn[j, e], 3])].index((int(pattern[j]), 1 if e == 0 else -1))
                 rings[k][(j, e)] = verts[offsets[q] + np.asarray(tpl.rings[slot_of[slot]], np.int64)]
         for c, rg in zip(part, rings):
-            yield unite_cluster(c, ev.center, ev.radius, bn, rg, tess.grid)
+            yield unite_stoppable(c, ev.center, ev.radius, bn, rg, tess.grid)
 
 
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,

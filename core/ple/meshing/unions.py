@@ -24,6 +24,8 @@ diagonals is a cluster of two beams. ``piece_estimate`` gives both before any un
 
 from __future__ import annotations
 
+import multiprocessing
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -105,6 +107,44 @@ def _turned(points: np.ndarray, turns) -> np.ndarray:
         r[i, i], r[i, j], r[j, i], r[j, j] = c, -s, s, c
         out = out @ r.T
     return out
+
+
+STOPPABLE_TRIANGLES = 200_000  # clusters from this estimate on are united in a child process
+
+
+def unite_stoppable(cluster: Cluster, center, radius, beam_nodes, rings: dict, grid: float):
+    """``unite_cluster``, in a forked child process when the cluster is large
+    (``STOPPABLE_TRIANGLES``): a signal then stops the command at once (the child is killed)
+    instead of after a long call into manifold3d that holds the interpreter."""
+    if piece_estimate(cluster)[0] < STOPPABLE_TRIANGLES or not hasattr(os, "fork"):
+        return unite_cluster(cluster, center, radius, beam_nodes, rings, grid)
+    ctx = multiprocessing.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+    child = ctx.Process(target=_child, args=(send, cluster, center, radius, beam_nodes, rings, grid), daemon=True)
+    child.start()
+    send.close()
+    try:
+        while not recv.poll(0.05):
+            if not child.is_alive():
+                raise PleError("the union of an unclean cluster ended without a result (out of memory?)")
+        ok, value = recv.recv()
+    finally:
+        if child.is_alive():
+            child.kill()
+        child.join()
+        recv.close()
+    if not ok:
+        raise PleError(value)
+    return value
+
+
+def _child(send, *args) -> None:
+    try:
+        send.send((True, unite_cluster(*args)))
+    except PleError as exc:
+        send.send((False, str(exc)))
+    finally:
+        send.close()
 
 
 def unite_cluster(cluster: Cluster, center, radius, beam_nodes, rings: dict, grid: float):
