@@ -14,7 +14,7 @@ def register(sub) -> None:
     p.add_argument("parts", metavar="URL", help="the folder or fsspec URL given to --parts")
     p.add_argument("--out", help=".stl for a partitioned mesh, .npz for a partitioned filter, a folder for "
                    "partitioned slices (a count job needs none: its totals are printed)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, outputs=("out",))  # the parts folder is an input
 
 
 def run(args) -> int:

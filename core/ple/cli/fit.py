@@ -10,7 +10,6 @@ With ``--out F.json`` the field is written as inline ``ple-clg/1`` data instead,
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
@@ -19,7 +18,7 @@ from ..clg.field import FieldSolid, field_to_dict
 from ..errors import PleError
 from ..filters.fit import fit_mesh
 from ..io.bodyfile import read_mesh
-from ..io.files import atomic_write_text, save_npz
+from ..io.files import atomic_write_text, save_npz, strict_json
 from ..model.budget import require
 from .common import add_budget_args, max_memory
 
@@ -75,14 +74,14 @@ def run(args) -> int:
     res = fit_mesh(v, f, bound=args.bound, orders=orders, symmetric=not args.no_symmetric,
                    max_terms=args.max_terms)
     if args.out.endswith(".json"):
-        atomic_write_text(args.out, json.dumps(field_to_dict(FieldSolid(res.field))))
+        atomic_write_text(args.out, strict_json(field_to_dict(FieldSolid(res.field)), "the fitted field"))
     else:
         arrays = res.field.arrays()
         arrays.update(order=np.array(res.order), hausdorff=np.array(res.hausdorff), bound=np.array(res.bound),
                       scale=np.array(transform["scale"]), offset=np.array(transform["offset"]))
         save_npz(args.out, arrays)
     report = dict(res.report(), out=args.out, **transform)
-    print(json.dumps(report, indent=1))
+    print(strict_json(report, "the fit report", indent=1))
     if not res.met:
         print(f"note: no order in {orders} meets the bound {args.bound}; wrote the closest (N={res.order})")
     return 0

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import sys
@@ -17,6 +16,7 @@ from ..app.jobs import assemble_stl, mesh_job
 from ..errors import PleError
 from ..filters.body import body_of
 from ..io.export import export_mesh, read_back, write_beam_lattice_3mf, write_mesh
+from ..io.files import strict_json
 from ..io.formats import DEFAULT_UNIT, UNITS, mesh_format
 from ..measure.check import is_clean
 from ..measure.integrals import lattice_volume
@@ -131,7 +131,7 @@ def run(args) -> int:
               "lists the pairs", file=sys.stderr)
     if args.check:
         written = read_back(args.out, args.unit)
-        print(json.dumps(check_report(lat, region, written, unclean=report is not None and len(report.nodes) > 0),
+        print(strict_json(check_report(lat, region, written, unclean=report is not None and len(report.nodes) > 0),
                          indent=1))
     return 0
 

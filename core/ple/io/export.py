@@ -47,7 +47,15 @@ from ..meshing.weld import (
 )
 from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, mesh_triangles, require
 from ..model.lattice import Lattice
-from .files import DirectWriter, WriteBehind, atomic_path, atomic_write_text, check_output_dir, write_marker
+from .files import (
+    DirectWriter,
+    WriteBehind,
+    atomic_path,
+    atomic_write_text,
+    check_output_dir,
+    strict_json,
+    write_marker,
+)
 from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, from_file_axes, mesh_format, to_file_axes, unit_name
 from .threemf import NS_BALLS, NS_BEAM, NS_CORE, package_bytes, write_3mf  # noqa: F401 - NS_* re-exported
 
@@ -479,5 +487,5 @@ def export_connectors(lat: Lattice, folder, radius: float, beam_radius: float | 
     if cyl:
         with atomic_path(folder / "beams.stl") as tmp:
             trimesh.util.concatenate(cyl).export(tmp, file_type="stl")
-    atomic_write_text(folder / "connectors.json", json.dumps(summary) + "\n")
+    atomic_write_text(folder / "connectors.json", strict_json(summary, "the connectors summary") + "\n")
     return summary
