@@ -39,6 +39,8 @@ def read_mesh(path, name: str | None = None) -> trimesh.Trimesh:
         check_input_file(path, "body mesh file", MAX_BODY_BYTES)
     except PleError as exc:
         raise PleError(f"{name}: {str(exc).removeprefix(str(path) + ': ')}") from None
+    if suffix == "stl":
+        check_stl_count(path, name)
     try:
         mesh = trimesh.load(str(path), force="mesh", process=False)
     except Exception as exc:  # noqa: BLE001 - any reader failure is a bad file, named
@@ -51,7 +53,27 @@ def read_mesh(path, name: str | None = None) -> trimesh.Trimesh:
     bad = int(np.count_nonzero(~np.isfinite(v).all(axis=1))) if v.ndim == 2 else 0
     if bad:
         raise PleError(f"{name}: {bad} of {len(v)} vertices are NaN or infinite")
+    f = np.asarray(mesh.faces)
+    if f.ndim != 2 or f.shape[1] != 3 or f.min() < 0 or f.max() >= len(v):
+        raise PleError(f"{name}: a face refers to vertex {int(f.max() if f.max() >= len(v) else f.min())}, "
+                       f"outside the {len(v)} vertices; the file is damaged")
     return mesh
+
+
+def check_stl_count(path: Path, name: str) -> None:
+    """A binary STL's header counts its triangles: a count that its size contradicts (a truncated
+    or damaged file) is named, not read as an empty or shortened mesh. ASCII STL passes."""
+    with open(path, "rb") as fh:
+        head = fh.read(1024)
+    size = path.stat().st_size
+    if head.lstrip().startswith(b"solid") and (b"facet" in head or b"endsolid" in head):
+        return  # ASCII
+    if size < 84:
+        return  # too short for a binary STL: trimesh's reader names it (empty)
+    count = int.from_bytes(head[80:84], "little")
+    if 84 + 50 * count != size:
+        raise PleError(f"{name}: a binary STL whose header counts {count:,} triangles, but whose size "
+                       f"({size:,} bytes) holds {(size - 84) / 50:,.6g}; the file is truncated or damaged")
 
 
 def body_from_trimesh(mesh, placement: Similarity | None = None, source: str | None = None,

@@ -65,8 +65,9 @@ def _check_disk_bound(lat: Lattice, r, parent: Path) -> None:
     bound = region_nodes(lat, r) * EVAL_NODE_BYTES + region_beams(lat, r) * EVAL_BEAM_BYTES
     free = shutil.disk_usage(parent).free
     if bound + DISK_MARGIN > free:
-        raise PleError(f"region {r} could stream up to {human(bound)} of chunks (if every node survives), more than "
-                       f"the {human(free)} free in {parent}; choose a smaller --region")
+        raise PleError(f"region {r} could stream up to {human(bound)} of chunks (if every node survives); with "
+                       f"{human(DISK_MARGIN)} kept free, more than the {human(free)} free in {parent}; "
+                       "choose a smaller --region or free some space")
 
 
 def _write_chunks(lat: Lattice, r, folder: Path, slab_groups: int, progress) -> dict:

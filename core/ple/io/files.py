@@ -252,6 +252,17 @@ def oserror_message(exc: OSError, path=None) -> str:
     return f"{where}: cannot write ({what}){hint}" if where is not None else f"cannot write ({what}){hint}"
 
 
+# ----- finite arrays --------------------------------------------------------------------------------
+def check_finite_array(arr, what: str) -> None:
+    """Refuse to write an array holding NaN or infinity (PleError naming ``what``): a writer never
+    writes garbage, it names the input that overflowed."""
+    a = np.asarray(arr)
+    if a.dtype.kind in "fc" and not np.isfinite(a).all():
+        bad = int(np.count_nonzero(~np.isfinite(a)))
+        raise PleError(f"{what} holds {bad:,} non-finite value(s) (NaN or infinity; an input overflows); "
+                       "nothing written")
+
+
 # ----- strict JSON ----------------------------------------------------------------------------------
 def strict_json(obj, what: str = "the output", **kwargs) -> str:
     """``json.dumps(obj, allow_nan=False, **kwargs)``: NaN and infinities are not JSON, so an
@@ -360,8 +371,13 @@ def temp_prefix(name: str) -> str:
 
 
 def make_temp_dir(parent: Path, name: str) -> Path:
-    """A fresh temporary folder beside an output (removed by the next run if we are killed)."""
-    return Path(tempfile.mkdtemp(prefix=temp_prefix(name), dir=parent))
+    """A fresh temporary folder beside an output (removed by the next run if we are killed), with a
+    normal folder's permissions (not ``mkdtemp``'s 0700): it becomes the output folder."""
+    path = Path(tempfile.mkdtemp(prefix=temp_prefix(name), dir=parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, 0o777 & ~umask)
+    return path
 
 
 def _destination(path: Path) -> tuple[Path, str]:
@@ -448,6 +464,8 @@ def atomic_write_bytes(path, data: bytes) -> None:
 def save_npz(path, arrays: dict) -> None:
     """Write arrays to ``path`` (.npz, as ``np.savez``) atomically. The zip is closed before its
     file, also when interrupted (``np.savez`` on a handle leaves that to the garbage collector)."""
+    for name, arr in arrays.items():
+        check_finite_array(arr, f"{path}: array {name!r}")
     with atomic_path(path) as tmp, open(tmp, "wb") as fh, zipfile.ZipFile(fh, "w", allowZip64=True) as zf:
         for name, arr in arrays.items():
             with zf.open(f"{name}.npy", "w", force_zip64=True) as member:
