@@ -60,6 +60,23 @@ def read_mesh(path, name: str | None = None) -> trimesh.Trimesh:
     return mesh
 
 
+MERGE_DIGITS = 1e8  # vertices closer than 1e-8 of the mesh's size are one vertex
+
+
+def merged_vertices(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) and faces (F, 3) with the vertices that coincide within 1e-8 of the mesh's
+    size merged (an STL stores each triangle's corners apart). The tolerance is relative, computed
+    in a frame scaled to the mesh, so a body of size 1e30 merges as one of size 1 (an absolute
+    rounding overflows there); the kept vertices keep their exact coordinates."""
+    if not len(v):
+        return v, f
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    scale = float((hi - lo).max()) or 1.0
+    keys = np.round((v - (lo + hi) / 2) / scale * MERGE_DIGITS).astype(np.int64)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    return v[first], inverse.reshape(-1)[f]
+
+
 def check_stl_count(path: Path, name: str) -> None:
     """A binary STL's header counts its triangles: a count that its size contradicts (a truncated
     or damaged file) is named, not read as an empty or shortened mesh. ASCII STL passes."""
@@ -83,8 +100,8 @@ def body_from_trimesh(mesh, placement: Similarity | None = None, source: str | N
     bad = int(np.count_nonzero(~np.isfinite(v).all(axis=1))) if v.ndim == 2 else 0
     if bad:
         raise PleError(f"{name}: {bad} of {len(v)} vertices are NaN or infinite")
-    mesh = trimesh.Trimesh(v, np.asarray(mesh.faces), process=False)
-    mesh.merge_vertices()
+    v, f = merged_vertices(v, np.asarray(mesh.faces))
+    mesh = trimesh.Trimesh(v, f, process=False)
     if mesh.is_watertight and not mesh.is_winding_consistent:
         trimesh.repair.fix_winding(mesh)
     return Body(mesh.vertices, mesh.faces, placement, source, open, name)
