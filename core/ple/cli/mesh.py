@@ -35,6 +35,7 @@ from ..model.budget import (
     region_beams,
     region_nodes,
     require,
+    streamed_stl_bytes,
 )
 from .common import add_cluster_args, add_lattice_args, lattice_from_args, max_memory, report_job
 
@@ -182,9 +183,9 @@ def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
     require(per_group, f"one node-group of {args.style} mesh", limit, "choose fewer --levels")
     out_dir = Path(args.out).resolve().parent
     free = shutil.disk_usage(out_dir).free if out_dir.is_dir() else None
-    if free is not None and tris * 50 > free:
-        raise PleError(f"{tris:,.3g} triangles ({args.style}) of {what} make a binary STL of about "
-                       f"{human(tris * 50)}, more than the {human(free)} free in {out_dir}; "
+    if free is not None and streamed_stl_bytes(tris) > free:
+        raise PleError(f"{tris:,.3g} triangles ({args.style}) of {what} make a binary STL of up to "
+                       f"{human(streamed_stl_bytes(tris))}, more than the {human(free)} free in {out_dir}; "
                        "choose a smaller --region or fewer --levels")
     boxes = stream_workers(args.workers) + 1  # boxes alive at once: one per worker and the one being written
     return int(max(1, min(1 << 14, limit // (per_group * boxes))))
