@@ -293,9 +293,8 @@ def check_apart(outputs: dict, inputs: dict) -> None:
 
     ``outputs`` and ``inputs`` map a flag (``--out``, ``--body``, …) to a path. An output is
     refused when it is the same file as an input (``os.path.samefile``: symlinks and hard links
-    included), when it is a folder that holds an input (folders are replaced or written into as a
-    whole), or when it lies inside an input folder as an existing file (a job's parts). Devices
-    and FIFOs are written in place and never replaced, so they are not compared."""
+    included), or when it is a folder that holds an input (folders are replaced or written into as
+    a whole). Devices and FIFOs are written in place and never replaced, so they are not compared."""
     for oflag, out in outputs.items():
         out = _local(out) if out is not None else None
         if not out or not os.path.lexists(out):
@@ -317,9 +316,6 @@ def check_apart(outputs: dict, inputs: dict) -> None:
             if stat.S_ISDIR(st.st_mode) and _inside(src, out):
                 raise PleError(f"{oflag} {out}: the output folder holds the input {iflag} {src}; "
                                "not writing over an input — give another folder")
-            if stat.S_ISREG(st.st_mode) and os.path.isdir(src) and _inside(out, src):
-                raise PleError(f"{oflag} {out}: is a file of the input folder {iflag} {src}; "
-                               "not overwriting an input — give another output")
 
 
 def plain_name(name, what: str) -> str:
