@@ -271,7 +271,7 @@ def test_a_full_disk_is_one_line_and_keeps_the_old_file(tmp_path, capsys, monkey
         fill(d, 64 << 10)
         refused(["eval", "cubic", "--param", "n=40", "--out", d / "e.npz"], capsys, "e.npz", "No space left")
         for fmt in ("ply", "glb", "obj", "3mf"):
-            refused(["mesh", "cubic", "--param", "n=4", "--style", "cnt", "--out", d / f"m.{fmt}"], capsys,
+            refused(["mesh", "cubic", "--param", "n=3", "--style", "refined", "--out", d / f"m.{fmt}"], capsys,
                     f"m.{fmt}", "No space left")
         # a streamed STL larger than its estimate passes the free-space check, then meets the full disk
         import ple.cli.mesh as cli_mesh
@@ -293,8 +293,8 @@ def test_a_read_only_disk_is_one_line(tmp_path, capsys, monkeypatch):
                 "Read-only")
         refused(["clg", "slice", CLG_PRESETS / "shelled.json", "--layer", "0.5", "--pixel", "0.5", "--out",
                  d / "sl"], capsys, "Read-only")
-        refused(["becots", "connectors", "becots_annulus", "--out", d / "cn"], capsys, "Read-only")
-        refused(["mesh", "cubic", "--param", "n=2", "--out", d / "m.stl"], capsys, "Read-only")
+        refused(["becots", "connectors", "becots_annulus", "--radius", "0.05", "--out", d / "cn"], capsys, "Read-only")
+        refused(["mesh", "cubic", "--param", "n=2", "--style", "cnt", "--out", d / "m.stl"], capsys, "Read-only")
         assert os.listdir(d) == []
 
 
