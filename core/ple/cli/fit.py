@@ -54,7 +54,9 @@ def load_mesh(path: str):
         _, uses = np.unique(closed.edges_sorted, axis=0, return_counts=True)
         raise PleError(f"mesh {path}: not closed ({int(np.count_nonzero(uses != 2)):,} edges not shared by exactly "
                        "two triangles); ple fit needs a closed mesh")
-    if not abs(float(closed.volume)) > 1e-9 * extent ** 3:
+    with np.errstate(all="ignore"):  # a flat mesh's centre of mass divides by its zero volume
+        volume = abs(float(closed.volume))
+    if not volume > 1e-9 * extent ** 3:
         raise PleError(f"mesh {path}: encloses no volume (flat); ple fit needs a closed mesh around a volume")
     return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
 
