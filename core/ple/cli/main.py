@@ -95,8 +95,7 @@ def check_paths(args) -> None:
     (``ple.io.files.check_apart``). The outputs are the arguments named by the parser's
     ``outputs`` default (``--out`` and ``--parts``); every other argument whose text (or the text
     after its last ``=``: ``--param file=F``, ``--implicit fourier:file=F``) names an existing
-    path is an input. A partitioned job's ``--scheduler`` is checked here too, before its folder
-    is created."""
+    path is an input."""
     names = getattr(args, "outputs", OUTPUTS)
     outputs = {f"--{n.replace('_', '-')}": getattr(args, n) for n in names if getattr(args, n, None)}
     inputs: dict = {}
@@ -111,10 +110,6 @@ def check_paths(args) -> None:
                 if cand and os.path.lexists(cand):
                     inputs[f"{flag}{f'[{n}]' if isinstance(value, list) else ''}"] = cand
     check_apart(outputs, inputs)
-    if getattr(args, "parts", None) and "parts" in names or getattr(args, "command", None) == "batch":
-        from ..app.cluster import check_scheduler  # only the commands that run jobs pay for it
-
-        check_scheduler(getattr(args, "scheduler", None), getattr(args, "workers", None))
 
 
 def run() -> None:

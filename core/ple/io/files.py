@@ -217,8 +217,8 @@ def _raise_terminated(signum, frame) -> None:
 
 def install_signal_handlers() -> dict:
     """SIGTERM and SIGHUP unwind the stack as Ctrl-C does (main thread only). Returns the handlers
-    they replace, for ``restore_signal_handlers``: only the console script (``ple.cli.main.run``)
-    installs them, never a library call."""
+    they replace, for ``restore_signal_handlers``: only the console script ``ple`` installs them,
+    never a library call."""
     old = {}
     for sig in (signal.SIGTERM, signal.SIGHUP):
         with contextlib.suppress(ValueError, OSError):  # not the main thread / not allowed

@@ -37,9 +37,14 @@ from typing import Any
 
 import numpy as np
 
+from ..algebra.similarity import Similarity
 from ..errors import PleError
+from ..filters.base import Filter
+from ..model.becots import BeCOTS
 from ..model.budget import check_finite, human
-from ..model.lattice import Lattice
+from ..model.grading import RadiusField
+from ..model.groupmap import GroupMap
+from ..model.lattice import MAX_COUNT, BeamPattern, Direction, Lattice, Node
 from .runtime import ROOT_PACKAGE, compile_program
 from .sources import load_lattice, resolve_source
 
@@ -312,13 +317,6 @@ def check_structure(lat: Lattice, name: str) -> None:
     """Every attribute of a Lattice a program returns has the type the core expects: a program
     may assign them directly (``lat.filter = 5``, ``lat.u = 'hello'``), which ``add_node`` and the
     setters would have refused. Raises PleError naming the attribute."""
-    from ..algebra.similarity import Similarity
-    from ..filters.base import Filter
-    from ..model.becots import BeCOTS
-    from ..model.grading import RadiusField
-    from ..model.groupmap import GroupMap
-    from ..model.lattice import MAX_COUNT, BeamPattern, Direction, Node
-
     def bad(attr: str, value, expected: str) -> PleError:
         return PleError(f"{name}: the returned lattice's {attr} is {type(value).__name__} {_short(value)}; "
                         f"expected {expected}")
