@@ -134,6 +134,33 @@ def _write_inputs(d: Path) -> None:
         (d / job).mkdir()
         (d / job / "manifest.json").write_text(manifest)
     (d / "job_empty").mkdir()
+    (d / "job_absolute").mkdir()
+    (d / "job_absolute" / "manifest.json").write_text(json.dumps({
+        "format": "ple-job/1", "kind": "mesh", "order": [str(d / "user.txt")],
+        "parts": {str(d / "user.txt"): {"bytes": 15, "sha256": "0" * 64, "triangles": 0}}}))
+    (d / "batch_escape").mkdir()
+    (d / "batch_escape" / "manifest.json").write_text(json.dumps({"format": "ple-batch/1",
+                                                                  "outputs": [{"file": "../user.txt"}]}))
+    (d / "ud").mkdir()
+    (d / "ud" / "part_000000.stl").write_text("the user's part")
+    flat = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+                           process=False)
+    flat.export(d / "flat.stl")
+    point = trimesh.Trimesh(np.zeros((4, 3)), [[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]], process=False)
+    (d / "point.ply").write_bytes(trimesh.exchange.ply.export_ply(point, encoding="ascii"))
+    ico = trimesh.creation.icosphere(subdivisions=1, radius=0.4)
+    f = ico.faces.copy()
+    f[0, 0] = 99999
+    (d / "badidx.ply").write_text(
+        f"ply\nformat ascii 1.0\nelement vertex {len(ico.vertices)}\nproperty float x\nproperty float y\n"
+        f"property float z\nelement face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n"
+        + "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in ico.vertices.tolist())
+        + "".join(f"3 {a} {b} {c}\n" for a, b, c in f.tolist()))
+    for name, line in (("filter5", "lat.filter = 5"), ("uhello", "lat.u = 'hello'"), ("beam3", "lat.beams.append(3)")):
+        (d / f"lat_{name}.py").write_text(
+            "def lattice():\n    lat = Lattice()\n    a = lat.add_node(Pt(0, 0, 0), 0.1)\n"
+            "    lat.add_beam(a, a, 1, 0, 0)\n    lat.set_u(3, Translation(Vec(1, 0, 0)))\n"
+            f"    {line}\n    return lat\n")
 
 
 @pytest.fixture(scope="module")
@@ -293,7 +320,7 @@ for extra, needle in ((("--bound", "0"), "--bound"), (("--bound", "-1"), "--boun
                       (("--max-terms", "-1"), "--max-terms"), (("--max-terms", "0"), "--max-terms")):
     case(REFUSE, "fit", "sphere.stl", "--normalize", *extra, "--out", "f.npz", needle=needle)
 case(REFUSE, "fit", "sphere.stl", "--out", "userdir", needle=".npz")
-case(ANY, "fit", "open.stl", "--orders", "8", "--out", "f_open.npz", outs=("f_open.npz",))
+case(REFUSE, "fit", "open.stl", "--orders", "8", "--out", "f_open.npz", needle="not closed")
 case(REFUSE, "fit", "sphere.stl", "--out", "f.txt", needle=".npz")
 
 # ----- assemble and partitioned jobs ----------------------------------------------------------------------
@@ -311,6 +338,30 @@ case(REFUSE, "mesh", "cubic", "--param", "n=10000", "--out", "pm.stl", "--parts"
      needle="parts")
 case(REFUSE, "filter", "cubic", "--param", "n=3", "--stencil", "edges:2", "--out", "f.npz", "--parts", "userdir",
      "--scheduler", "sync", needle="userdir")
+
+# ----- outputs that are inputs, damaged meshes, malformed programs -------------------------------------------
+case(REFUSE, "mesh", "cubic", "--param", "n=3", "--body", "box.stl", "--out", "box.stl", needle="same file")
+case(REFUSE, "skin", "cubic", "--param", "n=3", "--body", "box.stl", "--thickness", "0.5", "--out", "box.stl",
+     needle="same file")
+case(REFUSE, "clg", "pmc", "plate", "--points", "pts.npy", "--out", "pts.npy", needle="same file")
+case(REFUSE, "clg", "voxelize", "plate", "--grid", "4,4,4", "--out", "userdir", needle="userdir")
+case(REFUSE, "mesh", "cubic", "--param", "n=3", "--parts", "ud", "--scheduler", "sync", needle="no job manifest")
+case(REFUSE, "slice", "cubic", "--param", "n=2", "--layer", "0.5", "--pixel", "0.5", "--parts", "ud", "--scheduler",
+     "sync", needle="no job manifest")
+case(REFUSE, "assemble", "job_absolute", "--out", "a.stl", needle="plain file name")
+case(REFUSE, "batch", "cubic", "--param", "n=2", "--scheduler", "sync", "--out", "batch_escape",
+     needle="plain file name")
+case(REFUSE, "batch", "cubic", "--param", "n=2", "--scheduler", "bogus", "--out", "b_new", needle="--scheduler")
+for extra in (("eval", "cubic", "--param", "n=3", "--body", "badidx.ply", "--out", "e.npz"),
+              ("skin", "cubic", "--param", "n=3", "--body", "badidx.ply", "--thickness", "0.1", "--out", "s.stl"),
+              ("fit", "badidx.ply", "--normalize", "--out", "f.npz")):
+    case(REFUSE, *extra, needle="99999")
+for mesh, needle in (("flat.stl", "no volume"), ("point.ply", "one point")):
+    case(REFUSE, "fit", mesh, "--normalize", "--orders", "8", "--out", "f.npz", needle=needle)
+for name, needle in (("filter5", "filter is int"), ("uhello", "u is str"), ("beam3", "beams[1]")):
+    for cmd in (("info",), ("eval", "--out", "e.npz"), ("mesh", "--out", "m.stl")):
+        case(REFUSE, cmd[0], f"lat_{name}.py", *cmd[1:], needle=needle)
+case(REFUSE, "becots", "connectors", "becots_annulus", "--radius", "1e50", "--out", "cn", needle="non-finite")
 
 # ----- --fillet, Möbius and warp presets -----------------------------------------------------------------
 for fillet in ("nan", "-1", "inf", "1e308", "100"):

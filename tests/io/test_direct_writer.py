@@ -10,6 +10,7 @@ import threading
 
 import numpy as np
 import pytest
+from ple.errors import PleError
 from ple.io import export, files
 
 
@@ -111,8 +112,9 @@ def test_refused_at_a_write_goes_on_buffered(tmp_path, monkeypatch):
 
 
 def test_a_failed_write_leaves_nothing(tmp_path, monkeypatch):
-    """The disk fills up during the stream: the error reaches the caller, the destination keeps
-    what it had, no temporary is left and the writer thread has ended."""
+    """The disk fills up during the stream: the error reaches the caller as a user error (one line
+    naming the file), the destination keeps what it had, no temporary is left and the writer
+    thread has ended."""
     real_pwrite = os.pwrite
 
     def full(fd, data, offset):
@@ -124,7 +126,7 @@ def test_a_failed_write_leaves_nothing(tmp_path, monkeypatch):
     monkeypatch.setattr(export, "DirectWriter", lambda p: files.DirectWriter(p, buffer=4096, buffers=2))
     dest = tmp_path / "a.stl"
     dest.write_bytes(b"the user's file")
-    with pytest.raises(OSError, match="No space"):
+    with pytest.raises(PleError, match="a.stl: cannot write .No space"):
         export.write_stl(dest, chunks(np.random.default_rng(4)), grid=2.0**-12)
     assert dest.read_bytes() == b"the user's file"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.stl"]

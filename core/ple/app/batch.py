@@ -10,6 +10,8 @@ Finished outputs are skipped on a re-run (resume), the variants run as Dask task
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import itertools
 import json
 import math
@@ -22,7 +24,7 @@ import numpy as np
 
 from ..errors import PleError
 from ..io.export import export_mesh
-from ..io.files import atomic_write_text, check_output_dir, write_marker
+from ..io.files import atomic_write_text, check_output_dir, plain_name, write_marker
 from ..io.formats import format_named
 from ..meshing.styles import style as style_named
 from ..meshing.tessellate import _check_style, tessellate
@@ -30,7 +32,7 @@ from ..model.budget import MESH_TRIANGLE_BYTES, default_max_memory, mesh_triangl
 from ..program.runner import DEFAULT_TIMEOUT, run_program
 from ..program.runtime import Param, load_program_file, parse_param_value
 from ..program.sources import resolve_source
-from .cluster import dask_client, run_tasks, showing
+from .cluster import check_scheduler, dask_client, run_tasks, showing
 
 KIND = "ple-batch"  # the output-folder marker's kind
 MAX_VARIANTS = 10_000  # per batch (the plan is listed before anything is written)
@@ -123,8 +125,9 @@ def _run_variant(source: str, params: dict, style: str, levels, region, out: str
             "choose a smaller --region or fewer --levels")
     mesh = build_mesh(lat, style, levels, region)
     export_mesh(mesh, Path(out))
+    size, digest = file_digest(Path(out))
     return {"file": Path(out).name, "params": params, "triangles": int(len(mesh.faces)),
-            "bytes": Path(out).stat().st_size, "seconds": round(time.perf_counter() - t0, 3),
+            "bytes": size, "sha256": digest, "seconds": round(time.perf_counter() - t0, 3),
             "watertight": bool(mesh.is_watertight) if style != "balls-beams" else False}
 
 
@@ -137,19 +140,24 @@ def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", f
     embedded cluster of ``jobs`` workers by default, ``sync`` in this process, or a scheduler
     address); a variant whose worker dies is rerun, then reported by name."""
     style_named(style)
+    check_scheduler(scheduler, jobs)  # before anything is created
     path, variants = plan(source, sweeps, fmt)
     out = Path(out_dir)
     manifest_path = out / "manifest.json"
-    manifest = prepare_output_dir(out, "ple batch")
-    done = {e["file"] for e in manifest["outputs"] if (out / e["file"]).is_file()}
+    manifest = check_batch_dir(out)
+    done = {e["file"] for e in manifest["outputs"] if recorded(out, e)}  # size and SHA-256 as recorded
     todo = [v for v in variants if v.filename not in done]
     manifest.update({"program": path, "style": style, "format": fmt, "region": region})
     manifest["outputs"] = [e for e in manifest["outputs"] if e["file"] in done]
     jobs = max(1, min(jobs or os.cpu_count() or 1, len(todo) or 1))
     failures = []
     t0 = time.perf_counter()
-    if todo:
-        with dask_client(scheduler, jobs, showing(None if progress else False)) as client:
+    with contextlib.ExitStack() as stack:
+        client = None
+        if todo:  # the scheduler is reached before the folder is created or marked
+            client = stack.enter_context(dask_client(scheduler, jobs, showing(None if progress else False)))
+        make_batch_dir(out, "ple batch")
+        if todo:
             tasks = [(path, v.params, style, levels, region, str(out / v.filename), limits) for v in todo]
             for v, result in run_tasks(client, _run_variant, tasks, todo, "batch", [v.filename for v in todo],
                                        None if progress else False):
@@ -158,9 +166,9 @@ def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", f
                     failures.append({"file": v.filename, "params": v.params, "error": error})
                 else:
                     manifest["outputs"].append(result)
-                atomic_write_text(manifest_path, json.dumps(manifest, indent=1) + "\n")
+                atomic_write_text(manifest_path, json.dumps(manifest, indent=1, allow_nan=False) + "\n")
     manifest["failures"] = failures
-    atomic_write_text(manifest_path, json.dumps(manifest, indent=1) + "\n")
+    atomic_write_text(manifest_path, json.dumps(manifest, indent=1, allow_nan=False) + "\n")
     return {"written": len(todo) - len(failures), "skipped": len(variants) - len(todo), "failed": failures,
             "manifest": str(manifest_path), "seconds": time.perf_counter() - t0}
 
@@ -168,16 +176,49 @@ def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", f
 def prepare_output_dir(out: Path, command: str) -> dict:
     """Check, create and mark a batch output folder (ours, new or empty; never another folder's
     files: ``ple.io.files.check_output_dir``); returns its manifest (empty when new)."""
+    manifest = check_batch_dir(out)
+    make_batch_dir(out, command)
+    return manifest
+
+
+def check_batch_dir(out: Path) -> dict:
+    """The manifest of a batch output folder that is ours, new or empty (empty when new); any
+    other folder is refused. Creates nothing."""
     manifest_path = out / "manifest.json"
     if not _legacy_batch_folder(manifest_path):  # written before output markers existed
         check_output_dir(out, KIND)
-    manifest = read_manifest(manifest_path)
+    return read_manifest(manifest_path)
+
+
+def file_digest(path: Path, block: int = 1 << 20) -> tuple[int, str]:
+    """(size, SHA-256 hex) of a file, read a block at a time."""
+    h, size = hashlib.sha256(), 0
+    with open(path, "rb") as fh:
+        while data := fh.read(block):
+            h.update(data)
+            size += len(data)
+    return size, h.hexdigest()
+
+
+def recorded(out: Path, entry: dict) -> bool:
+    """Is a manifest entry's file there with the size and SHA-256 recorded for it? (An entry
+    without a hash, written before hashes were recorded, is made again.)"""
+    path = out / entry["file"]
+    try:
+        if not path.is_file() or path.stat().st_size != entry.get("bytes"):
+            return False
+        return file_digest(path) == (entry["bytes"], entry.get("sha256"))
+    except OSError:
+        return False
+
+
+def make_batch_dir(out: Path, command: str) -> None:
+    """Create and mark a batch output folder checked by ``check_batch_dir``."""
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise PleError(f"--out {out}: cannot create the folder ({exc.strerror})") from None
     write_marker(out, KIND, command)
-    return manifest
 
 
 def _legacy_batch_folder(manifest_path: Path) -> bool:
@@ -197,7 +238,8 @@ def read_manifest(path: Path) -> dict:
     if not isinstance(data, dict) or not isinstance(data.get("outputs"), list):
         raise PleError(f"{path}: existing manifest has no 'outputs' list")
     for n, entry in enumerate(data["outputs"]):
-        if not isinstance(entry, dict) or not isinstance(entry.get("file"), str) or "/" in entry["file"]:
+        if not isinstance(entry, dict) or not isinstance(entry.get("file"), str):
             raise PleError(f"{path}: outputs[{n}] is not an entry with a 'file' name; move the manifest away "
                            "to start afresh")
+        plain_name(entry["file"], f"{path}: outputs[{n}].file")
     return data

@@ -24,7 +24,17 @@ import urllib.request
 from collections.abc import Iterator
 
 from ..errors import PleError
-from .jobs import FORMAT, MANIFEST, Job, compute_part, location, read_manifest, valid_parts, write_atomic
+from .jobs import (
+    FORMAT,
+    MANIFEST,
+    Job,
+    check_job_folder,
+    compute_part,
+    location,
+    read_manifest,
+    valid_parts,
+    write_atomic,
+)
 from .progress import Progress
 
 CONNECT_TIMEOUT = 5  # seconds to reach a scheduler before giving up with a message
@@ -237,27 +247,28 @@ def run_job(job: Job, url: str, scheduler: str | None = "local", workers: int | 
     t0 = time.perf_counter()
     if client is None:
         check_scheduler(scheduler, workers)  # before the folder is created
-    fs, root = location(url)
+    fs, root = location(url, create=None)
+    check_job_folder(fs, root, url)  # new, empty or a job's: never another folder of the user's
     old = read_manifest(fs, root)
     if old and (old.get("kind") != job.kind or old.get("settings") != job.settings):
         raise PleError(f"{url}: holds the parts of another job ({old.get('kind')}, other settings); "
                        "choose another --out or remove it")
-    done = valid_parts(fs, root, old) & {p.name for p in job.parts}
+    done = valid_parts(fs, root, old) & {p.name for p in job.parts}  # size and SHA-256 as recorded
     manifest = {"format": FORMAT, "kind": job.kind, "settings": job.settings, "order": [p.name for p in job.parts],
                 "parts": {n: e for n, e in old.get("parts", {}).items() if n in done}, "failures": {}}
     todo = [p for p in job.parts if p.name not in done]
     path = posixpath.join(root, MANIFEST)
 
     def save() -> None:
-        write_atomic(fs, path, (json.dumps(manifest, indent=1) + "\n").encode())
+        write_atomic(fs, path, (json.dumps(manifest, indent=1, allow_nan=False) + "\n").encode())
 
-    save()
-    if todo:
-        if client is not None:
+    with contextlib.ExitStack() as stack:
+        if todo and client is None:  # the scheduler is reached before anything is created
+            client = stack.enter_context(dask_client(scheduler, workers, showing(progress)))
+        location(url)
+        save()
+        if todo:
             _run_parts(client, job, todo, url, manifest, save, progress)
-        else:
-            with dask_client(scheduler, workers, showing(progress)) as c:
-                _run_parts(c, job, todo, url, manifest, save, progress)
     return {"written": len(todo) - len(manifest["failures"]), "skipped": len(done), "failed": manifest["failures"],
             "manifest": f"{url.rstrip('/')}/{MANIFEST}", "seconds": round(time.perf_counter() - t0, 3)}
 

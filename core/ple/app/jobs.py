@@ -36,7 +36,7 @@ from ..clg.grid import iter_slices, layer_grid
 from ..errors import PleError
 from ..filters.ir import filter_from_dict
 from ..io.export import mesh_bytes, stl_chunk, stl_header
-from ..io.files import atomic_path
+from ..io.files import TMP_TAG, atomic_path, plain_name
 from ..io.formats import format_named
 from ..io.slices import slice_meta, write_slices
 from ..meshing.styles import style as style_named
@@ -71,15 +71,18 @@ class Job:
 
 
 # ----- locations ------------------------------------------------------------------------------------
-def location(url: str, create: bool = True):
+def location(url: str, create: bool | None = True):
     """(filesystem, root path) of a local folder or an fsspec URL; created if missing (else, with
-    ``create`` False, an error: reading a job never creates anything)."""
+    ``create`` False, an error: reading a job never creates anything; with ``create`` None, left
+    as it is: a job reaches its scheduler before it creates anything)."""
     try:
         fs, root = fsspec.core.url_to_fs(str(url))
     except (ValueError, ImportError) as exc:
         raise PleError(f"--out {url}: not a usable location ({exc})") from None
     if fs.isfile(root):
         raise PleError(f"--out {url}: is a file, not a folder")
+    if create is None:
+        return fs, root
     if not create:
         if not fs.isdir(root):
             raise PleError(f"{url}: no such folder of job parts")
@@ -115,7 +118,28 @@ def read_manifest(fs, root: str) -> dict:
     if (not isinstance(data, dict) or data.get("format") != FORMAT or not isinstance(data.get("parts"), dict)
             or not isinstance(data.get("order", []), list)):
         raise PleError(f"{path}: not a {FORMAT} manifest; choose an empty --out")
+    for name in [*data["parts"], *data.get("order", [])]:  # part names stay inside the job's folder
+        plain_name(name, f"{path}: part")
+    for name, entry in data["parts"].items():
+        if not isinstance(entry, dict):
+            raise PleError(f"{path}: parts.{name} is not an entry (bytes, sha256); move the manifest away "
+                           "to start afresh")
     return data
+
+
+def check_job_folder(fs, root: str, url: str) -> None:
+    """A job writes into a folder that is new, empty or holds a job manifest, never into another
+    folder of the user's (its files could share a part's name)."""
+    if not fs.isdir(root) or fs.exists(posixpath.join(root, MANIFEST)):
+        return
+    try:
+        names = [posixpath.basename(str(p).rstrip("/")) for p in fs.ls(root, detail=False)]
+    except OSError as exc:
+        raise PleError(f"--parts {url}: cannot read the folder ({exc.strerror or exc})") from None
+    names = [n for n in names if TMP_TAG not in n and ".tmp-" not in n]
+    if names:
+        raise PleError(f"--parts {url}: folder exists, is not empty and holds no job manifest ({MANIFEST}); "
+                       "not touching it — give a new or empty folder")
 
 
 def valid_parts(fs, root: str, manifest: dict) -> set[str]:
@@ -400,9 +424,7 @@ def assemble_stl(url: str, out, chunk: int = 1 << 22) -> int:
 def load_filter_parts(url: str):
     """The Evaluation of a partitioned filter job (beam ends resolved to rows)."""
     fs, root = location(url, create=False)
-    manifest = read_manifest(fs, root)
-    if manifest.get("kind") != "filter":
-        raise PleError(f"{url}: not a partitioned filter job")
+    manifest = _complete(url, fs, root, "filter")
     arrays = {k: [] for k in ("node_index", "center", "radius", "beam_index", "beam_ends")}
     for name in manifest["order"]:
         with fs.open(posixpath.join(root, name), "rb") as fh, np.load(io.BytesIO(fh.read())) as z:
@@ -419,7 +441,7 @@ def load_filter_parts(url: str):
 
 def count_totals(url: str) -> dict:
     """Kept nodes and beams of a partitioned count job, summed over its parts' manifest entries."""
-    fs, root = location(url)
+    fs, root = location(url, create=False)
     manifest = _complete(url, fs, root, "count")
     entries = [manifest["parts"][p] for p in manifest["order"]]
     return {"nodes": sum(e["nodes"] for e in entries), "beams": sum(e["beams"] for e in entries),
@@ -453,6 +475,6 @@ def iter_slice_parts(url: str) -> Iterator[tuple[int, float, np.ndarray]]:
 def assemble_slices(url: str, out_dir, progress=None) -> dict:
     """The slice folder of a partitioned slice job (``layer_00000.png`` … and ``manifest.json``),
     the same files as ``ple slice`` writes in one process; returns its manifest."""
-    fs, root = location(url)
+    fs, root = location(url, create=False)
     s = _complete(url, fs, root, "slice")["settings"]
     return write_slices(out_dir, iter_slice_parts(url), slice_meta(s["lo"], s["hi"], s["layer"], s["pixel"]), progress)

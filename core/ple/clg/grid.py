@@ -55,7 +55,9 @@ def check_grid(shape, grids: int = 1, max_bytes: float | None = None) -> tuple[i
     if min(nx, ny, nz) < 1:
         raise PleError(f"--grid {nx},{ny},{nz}: every count must be at least 1")
     if nx * ny * nz * grids > MAX_VOXELS:
-        raise PleError(f"--grid {nx},{ny},{nz}: {nx * ny * nz:.3g} voxels exceed the limit {MAX_VOXELS:.3g}")
+        held = f"{grids} grids of {nx * ny * nz:.3g} voxels ({nx * ny * nz * grids:.3g})" if grids > 1 else \
+            f"{nx * ny * nz:.3g} voxels"
+        raise PleError(f"--grid {nx},{ny},{nz}: {held} exceed the limit {MAX_VOXELS:.3g}")
     if max_bytes is not None:
         require(nx * ny * nz * (grids + 1), f"--grid {nx},{ny},{nz}: {nx * ny * nz:.3g} voxels", max_bytes,
                 "choose a coarser --grid")

@@ -4,9 +4,11 @@ job's parts as the slice folder of ``ple slice``; a count job's totals are print
 
 from __future__ import annotations
 
+import posixpath
+
 from ..app.jobs import assemble_slices, assemble_stl, count_totals, load_filter_parts, location, read_manifest
 from ..errors import PleError
-from ..io.files import save_npz
+from ..io.files import check_apart, save_npz
 
 
 def register(sub) -> None:
@@ -14,12 +16,16 @@ def register(sub) -> None:
     p.add_argument("parts", metavar="URL", help="the folder or fsspec URL given to --parts")
     p.add_argument("--out", help=".stl for a partitioned mesh, .npz for a partitioned filter, a folder for "
                    "partitioned slices (a count job needs none: its totals are printed)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, outputs=("out",))  # the parts folder is an input
 
 
 def run(args) -> int:
     fs, root = location(args.parts, create=False)  # reading parts creates nothing
-    kind = read_manifest(fs, root).get("kind")
+    manifest = read_manifest(fs, root)
+    kind = manifest.get("kind")
+    protocols = fs.protocol if isinstance(fs.protocol, tuple) else (fs.protocol,)
+    if args.out and "file" in protocols:  # the output is none of the parts it reads
+        check_apart({"--out": args.out}, {f"part {n}": posixpath.join(root, n) for n in manifest.get("order", [])})
     if kind == "count":
         totals = count_totals(args.parts)
         print(f"kept: {totals['nodes']:,} nodes, {totals['beams']:,} beams ({totals['parts']} parts)")

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import json
-
 from ..app.batch import run_batch
+from ..io.files import strict_json
 from ..io.formats import FORMAT_NAMES
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
 from .common import add_program_limits, max_memory
@@ -32,5 +31,5 @@ def register(sub) -> None:
 def run(args) -> int:
     result = run_batch(args.lattice, args.param, args.out, args.style, args.format, args.levels, args.region,
                        args.jobs, limits=(args.timeout, max_memory(args)), scheduler=args.scheduler)
-    print(json.dumps(result, indent=1))
+    print(strict_json(result, "the batch summary", indent=1))
     return 2 if result["failed"] else 0  # a variant the program rejects is bad input

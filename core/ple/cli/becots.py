@@ -3,14 +3,13 @@ connectors (thesis §4.3.5, §4.5.3)."""
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
 
 from ..errors import PleError
 from ..io.export import export_connectors
-from ..io.files import atomic_path, atomic_write_text
+from ..io.files import atomic_path, atomic_write_text, strict_json
 from ..io.inputs import load_npy
 from ..model.becots import BeCOTSField
 from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, region_beams, region_nodes, require
@@ -113,6 +112,6 @@ def run(args) -> int:
         raise PleError(f"--tol {args.tol}: expected a finite number >= 0")
     pts = _load(args.points, 3, "--points")
     answers = fld.inverse(pts, tol=args.tol)
-    atomic_write_text(args.out, json.dumps([[list(xy) for xy in a] for a in answers]) + "\n")
+    atomic_write_text(args.out, strict_json([[list(xy) for xy in a] for a in answers], "the inverted points") + "\n")
     print(f"wrote {args.out}: {sum(len(a) for a in answers)} answers for {len(pts)} points")
     return 0

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 
 from ..errors import PleError
-from ..io.files import atomic_write_text
+from ..io.files import atomic_write_text, strict_json
 from ..io.inputs import load_npy
 from ..model.budget import HIT_ARRAY_BYTES, HIT_LISTED_BYTES, estimate_hits, rangefinder_bytes, require
 from ..queries.biq import query
@@ -62,7 +60,7 @@ def run(args) -> int:
             (r,) = query(lat, row[None, :3], row[3:4], method=args.method)
             counts.append({"nodes": len(r.nodes), "beams": len(r.beams)})
             path = r.path
-        atomic_write_text(args.out, json.dumps({"queries": counts}) + "\n")
+        atomic_write_text(args.out, strict_json({"queries": counts}, "the counts") + "\n")
         hits = sum(c["nodes"] + c["beams"] for c in counts)
         print(f"wrote {args.out}: {len(counts)} queries, {hits} hits counted (path {path})")
         return 0
@@ -70,7 +68,7 @@ def run(args) -> int:
             "use --count for the numbers only, or smaller query balls")
     results = query(lat, q[:, :3], q[:, 3], method=args.method)
     doc = {"queries": [{"nodes": r.nodes.tolist(), "beams": r.beams.tolist()} for r in results]}
-    atomic_write_text(args.out, json.dumps(doc) + "\n")
+    atomic_write_text(args.out, strict_json(doc, "the hits") + "\n")
     path = results[0].path if results else "-"
     hits = sum(len(r.nodes) + len(r.beams) for r in results)
     print(f"wrote {args.out}: {len(results)} queries, {hits} hits (path {path})")

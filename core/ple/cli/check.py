@@ -4,8 +4,7 @@ components). Exit 0 when every rule holds, 1 when some fail (a report, not an er
 
 from __future__ import annotations
 
-import json
-
+from ..io.files import strict_json
 from ..measure.check import check_lattice, rule_lines
 from .common import add_lattice_args, lattice_from_args
 
@@ -25,7 +24,7 @@ def run(args) -> int:
     lat = lattice_from_args(args)
     report = check_lattice(lat, args.region, args.min_feature, args.max_slenderness)
     if args.json:
-        print(json.dumps(report, indent=1))
+        print(strict_json(report, "the check report", indent=1))
     else:
         kept = " (kept by its filter)" if report["filtered"] else ""
         print(f"region {report['region']}: {report['nodes']:,} balls, {report['beams']:,} beams{kept}")

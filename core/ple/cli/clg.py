@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import json
 import time
 
 import numpy as np
@@ -14,7 +13,7 @@ from ..clg.query import compiled
 from ..clg.rays import render, trace
 from ..errors import PleError
 from ..io.export import export_mesh
-from ..io.files import atomic_path
+from ..io.files import atomic_path, strict_json
 from ..io.inputs import load_npy
 from ..io.slices import write_pmc_slices
 from ..meshing.clg import mesh_clg
@@ -105,7 +104,7 @@ def run_info(args) -> int:
             "conical_shell": None if comp.shell is None else {
                 "apex": comp.shell.apex.tolist(), "axis": comp.shell.axis.tolist(), "phi": list(comp.shell.phi),
                 "distance": list(comp.shell.dist)}}
-    print(json.dumps(info, indent=1))
+    print(strict_json(info, "the CLG info", indent=1))
     return 0
 
 

@@ -10,16 +10,16 @@ With ``--out F.json`` the field is written as inline ``ple-clg/1`` data instead,
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
+import trimesh
 
 from ..clg.field import FieldSolid, field_to_dict
 from ..errors import PleError
 from ..filters.fit import fit_mesh
 from ..io.bodyfile import read_mesh
-from ..io.files import atomic_write_text, save_npz
+from ..io.files import atomic_write_text, save_npz, strict_json
 from ..model.budget import require
 from .common import add_budget_args, max_memory
 
@@ -40,8 +40,24 @@ def register(sub) -> None:
 
 
 def load_mesh(path: str):
-    """Vertices and faces of a mesh file, read within limits (``ple.io.bodyfile.read_mesh``)."""
+    """Vertices and faces of a closed mesh file that encloses a volume, read within limits
+    (``ple.io.bodyfile.read_mesh``): an open, flat or one-point mesh has no inside to fit."""
     mesh = read_mesh(path, f"mesh {path}")
+    closed = trimesh.Trimesh(np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64),
+                             process=False)
+    closed.merge_vertices()
+    v = np.asarray(closed.vertices, dtype=float)
+    extent = float((v.max(axis=0) - v.min(axis=0)).max())
+    if not extent > 0:
+        raise PleError(f"mesh {path}: all its vertices are one point; it encloses nothing to fit")
+    if not closed.is_watertight:
+        _, uses = np.unique(closed.edges_sorted, axis=0, return_counts=True)
+        raise PleError(f"mesh {path}: not closed ({int(np.count_nonzero(uses != 2)):,} edges not shared by exactly "
+                       "two triangles); ple fit needs a closed mesh")
+    with np.errstate(all="ignore"):  # a flat mesh's centre of mass divides by its zero volume
+        volume = abs(float(closed.volume))
+    if not volume > 1e-9 * extent ** 3:
+        raise PleError(f"mesh {path}: encloses no volume (flat); ple fit needs a closed mesh around a volume")
     return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
 
 
@@ -74,15 +90,19 @@ def run(args) -> int:
         transform = {"scale": scale, "offset": offset.tolist()}
     res = fit_mesh(v, f, bound=args.bound, orders=orders, symmetric=not args.no_symmetric,
                    max_terms=args.max_terms)
+    arrays = res.field.arrays()
+    if not (math.isfinite(res.hausdorff) and all(np.isfinite(np.asarray(a)).all() for a in arrays.values()
+                                                 if np.asarray(a).dtype.kind in "fc")):
+        raise PleError(f"mesh {args.mesh}: the fit is not finite (Hausdorff distance {res.hausdorff}); "
+                       "the mesh must lie in the cell (or use --normalize)")
     if args.out.endswith(".json"):
-        atomic_write_text(args.out, json.dumps(field_to_dict(FieldSolid(res.field))))
+        atomic_write_text(args.out, strict_json(field_to_dict(FieldSolid(res.field)), "the fitted field"))
     else:
-        arrays = res.field.arrays()
         arrays.update(order=np.array(res.order), hausdorff=np.array(res.hausdorff), bound=np.array(res.bound),
                       scale=np.array(transform["scale"]), offset=np.array(transform["offset"]))
         save_npz(args.out, arrays)
     report = dict(res.report(), out=args.out, **transform)
-    print(json.dumps(report, indent=1))
+    print(strict_json(report, "the fit report", indent=1))
     if not res.met:
         print(f"note: no order in {orders} meets the bound {args.bound}; wrote the closest (N={res.order})")
     return 0

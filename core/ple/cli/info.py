@@ -3,12 +3,12 @@ volume — of what the lattice keeps (its filter applied), in the whole index bo
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
 
 from ..errors import PleError
+from ..io.files import strict_json
 from ..measure.check import is_clean
 from ..measure.integrals import MAX_KEPT_NODES, kept_measures, lattice_measures
 from ..measure.moments import mass_properties
@@ -105,7 +105,7 @@ def run(args) -> int:
     lat = lattice_from_args(args)
     info = lattice_info(lat, args.region)
     if args.json:
-        print(json.dumps(info, indent=1))
+        print(strict_json(info, "the lattice info", indent=1))
         return 0
     c = info["counts"]
     print(f"groups      {c[0]} x {c[1]} x {c[2]} = {lat.groups:,}"

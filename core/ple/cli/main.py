@@ -10,13 +10,14 @@ import argparse
 import ast
 import importlib
 import importlib.util
+import os
 import pkgutil
 import sys
 from pathlib import Path
 
 from .. import cli
 from ..errors import PleError
-from ..io.files import install_signal_handlers
+from ..io.files import check_apart, install_signal_handlers, is_user_oserror, oserror_message, restore_signal_handlers
 
 NOT_COMMANDS = {"main", "common", "__main__"}  # the modules of ple.cli that add no sub-command
 
@@ -62,8 +63,8 @@ def main(argv: list[str] | None = None) -> int:
     first = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(first if first in command_names() else None)
     args = parser.parse_args(argv)
-    install_signal_handlers()  # SIGTERM/SIGHUP unwind like Ctrl-C: temporaries are removed
     try:
+        check_paths(args)
         return int(args.func(args) or 0)
     except PleError as exc:  # one line: control characters of the input (a key, a name) escaped
         msg = "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(exc))
@@ -76,13 +77,51 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into e.g. `head`
         sys.stderr.close()
         return 0
+    except OSError as exc:  # a full disk, a read-only file system, … outside a file writer (a folder, a marker)
+        if not is_user_oserror(exc):
+            raise
+        print(f"ple {args.command}: error: {oserror_message(exc)}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM/SIGHUP (io.files.Terminated)
         print(f"ple {args.command}: interrupted", file=sys.stderr)
         return 128 + getattr(exc, "signum", 2)
 
 
+OUTPUTS = ("out", "parts")  # the arguments a command writes, unless its parser sets ``outputs``
+
+
+def check_paths(args) -> None:
+    """The one check of every command's paths before any work: no output may overwrite an input
+    (``ple.io.files.check_apart``). The outputs are the arguments named by the parser's
+    ``outputs`` default (``--out`` and ``--parts``); every other argument whose text (or the text
+    after its last ``=``: ``--param file=F``, ``--implicit fourier:file=F``) names an existing
+    path is an input."""
+    names = getattr(args, "outputs", OUTPUTS)
+    outputs = {f"--{n.replace('_', '-')}": getattr(args, n) for n in names if getattr(args, n, None)}
+    inputs: dict = {}
+    for key, value in vars(args).items():
+        if key in names or key in ("func", "outputs", "command"):
+            continue
+        for n, text in enumerate(value if isinstance(value, list) else [value]):
+            if not isinstance(text, str):
+                continue
+            flag = key if key in ("lattice", "source", "mesh", "parts") else f"--{key.replace('_', '-')}"
+            for cand in {text, text.rpartition("=")[2]}:
+                if cand and os.path.lexists(cand):
+                    inputs[f"{flag}{f'[{n}]' if isinstance(value, list) else ''}"] = cand
+    check_apart(outputs, inputs)
+
+
 def run() -> None:
-    sys.exit(main())
+    """The console script ``ple``: SIGTERM and SIGHUP unwind like Ctrl-C (temporaries removed)
+    while it runs; the process's handlers are restored after it (``main`` itself sets no
+    process-wide state)."""
+    old = install_signal_handlers()
+    try:
+        code = main()
+    finally:
+        restore_signal_handlers(old)
+    sys.exit(code)
 
 
 if __name__ == "__main__":

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import sys
@@ -17,6 +16,7 @@ from ..app.jobs import assemble_stl, mesh_job
 from ..errors import PleError
 from ..filters.body import body_of
 from ..io.export import STL_RECORD, export_mesh, read_back, write_beam_lattice_3mf, write_mesh
+from ..io.files import strict_json
 from ..io.formats import DEFAULT_UNIT, UNITS, mesh_format
 from ..io.spill import SpillFiles
 from ..measure.check import is_clean, solid_volume
@@ -35,6 +35,7 @@ from ..model.budget import (
     region_beams,
     region_nodes,
     require,
+    streamed_stl_bytes,
 )
 from .common import add_cluster_args, add_lattice_args, lattice_from_args, max_memory, report_job
 
@@ -134,7 +135,7 @@ def run(args) -> int:
     if args.check:
         rep = check_report(lat, region, args.out, args.unit, unclean=report is not None and len(report.nodes) > 0)
         print(volume_line(rep))
-        print(json.dumps(rep, indent=1))
+        print(strict_json(rep, indent=1))
     return 0
 
 
@@ -188,9 +189,9 @@ def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
     require(per_group, f"one node-group of {args.style} mesh", limit, "choose fewer --levels")
     out_dir = Path(args.out).resolve().parent
     free = shutil.disk_usage(out_dir).free if out_dir.is_dir() else None
-    if free is not None and tris * 50 > free:
-        raise PleError(f"{tris:,.3g} triangles ({args.style}) of {what} make a binary STL of about "
-                       f"{human(tris * 50)}, more than the {human(free)} free in {out_dir}; "
+    if free is not None and streamed_stl_bytes(tris) > free:
+        raise PleError(f"{tris:,.3g} triangles ({args.style}) of {what} make a binary STL of up to "
+                       f"{human(streamed_stl_bytes(tris))}, more than the {human(free)} free in {out_dir}; "
                        "choose a smaller --region or fewer --levels")
     boxes = stream_workers(args.workers) + 1  # boxes alive at once: one per worker and the one being written
     return int(max(1, min(1 << 14, limit // (per_group * boxes))))

@@ -39,6 +39,8 @@ def read_mesh(path, name: str | None = None) -> trimesh.Trimesh:
         check_input_file(path, "body mesh file", MAX_BODY_BYTES)
     except PleError as exc:
         raise PleError(f"{name}: {str(exc).removeprefix(str(path) + ': ')}") from None
+    if suffix == "stl":
+        check_stl_count(path, name)
     try:
         mesh = trimesh.load(str(path), force="mesh", process=False)
     except Exception as exc:  # noqa: BLE001 - any reader failure is a bad file, named
@@ -51,7 +53,44 @@ def read_mesh(path, name: str | None = None) -> trimesh.Trimesh:
     bad = int(np.count_nonzero(~np.isfinite(v).all(axis=1))) if v.ndim == 2 else 0
     if bad:
         raise PleError(f"{name}: {bad} of {len(v)} vertices are NaN or infinite")
+    f = np.asarray(mesh.faces)
+    if f.ndim != 2 or f.shape[1] != 3 or f.min() < 0 or f.max() >= len(v):
+        raise PleError(f"{name}: a face refers to vertex {int(f.max() if f.max() >= len(v) else f.min())}, "
+                       f"outside the {len(v)} vertices; the file is damaged")
     return mesh
+
+
+MERGE_DIGITS = 1e8  # vertices closer than 1e-8 of the mesh's size are one vertex
+
+
+def merged_vertices(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) and faces (F, 3) with the vertices that coincide within 1e-8 of the mesh's
+    size merged (an STL stores each triangle's corners apart). The tolerance is relative, computed
+    in a frame scaled to the mesh, so a body of size 1e30 merges as one of size 1 (an absolute
+    rounding overflows there); the kept vertices keep their exact coordinates."""
+    if not len(v):
+        return v, f
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    scale = float((hi - lo).max()) or 1.0
+    keys = np.round((v - (lo + hi) / 2) / scale * MERGE_DIGITS).astype(np.int64)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    return v[first], inverse.reshape(-1)[f]
+
+
+def check_stl_count(path: Path, name: str) -> None:
+    """A binary STL's header counts its triangles: a count that its size contradicts (a truncated
+    or damaged file) is named, not read as an empty or shortened mesh. ASCII STL passes."""
+    with open(path, "rb") as fh:
+        head = fh.read(1024)
+    size = path.stat().st_size
+    if head.lstrip().startswith(b"solid") and (b"facet" in head or b"endsolid" in head):
+        return  # ASCII
+    if size < 84:
+        return  # too short for a binary STL: trimesh's reader names it (empty)
+    count = int.from_bytes(head[80:84], "little")
+    if 84 + 50 * count != size:
+        raise PleError(f"{name}: a binary STL whose header counts {count:,} triangles, but whose size "
+                       f"({size:,} bytes) holds {(size - 84) / 50:,.6g}; the file is truncated or damaged")
 
 
 def body_from_trimesh(mesh, placement: Similarity | None = None, source: str | None = None,
@@ -61,8 +100,8 @@ def body_from_trimesh(mesh, placement: Similarity | None = None, source: str | N
     bad = int(np.count_nonzero(~np.isfinite(v).all(axis=1))) if v.ndim == 2 else 0
     if bad:
         raise PleError(f"{name}: {bad} of {len(v)} vertices are NaN or infinite")
-    mesh = trimesh.Trimesh(v, np.asarray(mesh.faces), process=False)
-    mesh.merge_vertices()
+    v, f = merged_vertices(v, np.asarray(mesh.faces))
+    mesh = trimesh.Trimesh(v, f, process=False)
     if mesh.is_watertight and not mesh.is_winding_consistent:
         trimesh.repair.fix_winding(mesh)
     return Body(mesh.vertices, mesh.faces, placement, source, open, name)

@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import PleError
 from ..model.budget import EVAL_BEAM_BYTES, EVAL_NODE_BYTES, human, region_beams, region_nodes
 from ..model.lattice import Evaluation, Lattice
-from .files import check_output_dir, make_temp_dir, remove_stale_temporaries, replace_dir, write_marker
+from .files import check_output_dir, make_temp_dir, remove_stale_temporaries, replace_dir, strict_json, write_marker
 
 FORMAT = "ple-chunks/1"
 KIND = "ple-chunks"  # the output-folder marker's kind
@@ -65,8 +65,9 @@ def _check_disk_bound(lat: Lattice, r, parent: Path) -> None:
     bound = region_nodes(lat, r) * EVAL_NODE_BYTES + region_beams(lat, r) * EVAL_BEAM_BYTES
     free = shutil.disk_usage(parent).free
     if bound + DISK_MARGIN > free:
-        raise PleError(f"region {r} could stream up to {human(bound)} of chunks (if every node survives), more than "
-                       f"the {human(free)} free in {parent}; choose a smaller --region")
+        raise PleError(f"region {r} could stream up to {human(bound)} of chunks (if every node survives); with "
+                       f"{human(DISK_MARGIN)} kept free, more than the {human(free)} free in {parent}; "
+                       "choose a smaller --region or free some space")
 
 
 def _write_chunks(lat: Lattice, r, folder: Path, slab_groups: int, progress) -> dict:
@@ -89,7 +90,7 @@ def _write_chunks(lat: Lattice, r, folder: Path, slab_groups: int, progress) -> 
         progress.close()
     manifest = {"format": FORMAT, "region": str(r), "counts": list(lat.counts), "nodes": node_offset,
                 "beams": beam_total, "chunks": chunks}
-    (folder / "manifest.json").write_text(json.dumps(manifest, indent=1))
+    (folder / "manifest.json").write_text(strict_json(manifest, "the chunk manifest", indent=1))
     return manifest
 
 

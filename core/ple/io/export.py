@@ -46,7 +46,16 @@ from ..meshing.weld import (
 )
 from ..model.budget import evaluation_bytes, require
 from ..model.lattice import Lattice
-from .files import DirectWriter, WriteBehind, atomic_path, atomic_write_text, check_output_dir, write_marker
+from .files import (
+    DirectWriter,
+    WriteBehind,
+    atomic_path,
+    atomic_write_text,
+    check_finite_array,
+    check_output_dir,
+    strict_json,
+    write_marker,
+)
 from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, from_file_axes, mesh_format, to_file_axes, unit_name
 from .threemf import NS_BALLS, NS_BEAM, NS_CORE, package_bytes, write_3mf  # noqa: F401 - NS_* re-exported
 
@@ -223,6 +232,7 @@ def write_stl(path, chunks: Iterable, header: bytes = b"PLE binary STL", grid: f
         w = StlWriter(fh, header)
         try:
             for rec in ordered_map(lambda chunk: stl_chunk(chunk, grid, pool), chunks, workers):
+                check_finite_array(rec["vertices"], f"{path}: the mesh")
                 w.write_records(rec)
                 pool.give(rec)
             w.close()
@@ -294,6 +304,7 @@ def export_mesh(mesh: trimesh.Trimesh, path, unit: str = DEFAULT_UNIT, grid: flo
     snapped to float32 and welded first (``prepare``); returns the weld statistics."""
     fmt = mesh_format(path)
     unit_name(unit)
+    check_finite_array(mesh.vertices, f"{path}: the mesh")
     v, f, stats = prepare(mesh.vertices, mesh.faces, fmt, unit, grid)
     if len(f) and edge_manifold(f)["bad_edges"] and not edge_manifold(mesh.faces)["bad_edges"]:
         # edges of a few float32 steps (a Boolean's slivers) pinch when snapped: collapse them in
@@ -301,8 +312,11 @@ def export_mesh(mesh: trimesh.Trimesh, path, unit: str = DEFAULT_UNIT, grid: flo
         verts, faces = shortened(mesh.vertices, mesh.faces)
         v, f, stats = prepare(verts, faces, fmt, unit, grid)
     if len(f) and edge_manifold(f)["bad_edges"] and not edge_manifold(mesh.faces)["bad_edges"]:
-        check_float32_range(mesh.vertices, mesh.edges_unique_length.min(), fmt)
-        raise PleError(f"{Path(path).name}: the closed mesh does not stay closed in {fmt}'s float32 coordinates")
+        shortest = float(mesh.edges_unique_length.min())
+        if shortest > 0:  # a zero-length edge is a degenerate mesh, not a range float32 cannot hold
+            check_float32_range(mesh.vertices, shortest, fmt)
+        why = " (zero-length edges: degenerate triangles, e.g. of a self-intersecting body)" if shortest <= 0 else ""
+        raise PleError(f"{Path(path).name}: the closed mesh does not stay closed in {fmt}'s float32 coordinates{why}")
     data = encode_mesh(v, f, fmt, unit)
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
@@ -458,7 +472,16 @@ def export_connectors(lat: Lattice, folder, radius: float, beam_radius: float | 
     radius cylinders (``beams.stl``) and ``connectors.json`` (class keys, instance motions)."""
     folder = Path(folder)
     check_output_dir(folder, "ple-connectors")  # ours, new or empty: never another folder's files
-    classes, beams = constant_radius_connectors(lat, radius, beam_radius, grow, region)
+    with np.errstate(all="ignore"):  # a non-finite result is refused below, before anything is written
+        classes, beams = constant_radius_connectors(lat, radius, beam_radius, grow, region)
+        cyl = [trimesh.creation.cylinder(radius=beams["radius"], segment=np.stack([a, b]), sections=12)
+               for a, b in zip(beams["start"], beams["end"]) if np.linalg.norm(b - a) > 1e-12]
+    what = f"the connectors of radius {radius:g}{f' (beam radius {beam_radius:g})' if beam_radius else ''}"
+    for n, cls in enumerate(classes):
+        check_finite_array(cls.mesh.vertices, f"{what}: connector {n}")
+        check_finite_array(cls.instances, f"{what}: connector {n}'s motions")
+    for c in cyl:
+        check_finite_array(c.vertices, f"{what}: the beams")
     folder.mkdir(exist_ok=True)
     write_marker(folder, "ple-connectors", "ple becots connectors")
     summary = {"classes": [], "beams": len(beams["start"]), "radius": radius, "beam_radius": beams["radius"]}
@@ -469,12 +492,8 @@ def export_connectors(lat: Lattice, folder, radius: float, beam_radius: float | 
         summary["classes"].append({"file": path.name, "node": cls.key[0], "ends": [list(e) for e in cls.key[1]],
                                    "count": len(cls.instances), "nodes": cls.nodes.tolist(),
                                    "motions": cls.instances.round(12).tolist()})
-    cyl = []
-    for a, b in zip(beams["start"], beams["end"]):
-        if np.linalg.norm(b - a) > 1e-12:
-            cyl.append(trimesh.creation.cylinder(radius=beams["radius"], segment=np.stack([a, b]), sections=12))
     if cyl:
         with atomic_path(folder / "beams.stl") as tmp:
             trimesh.util.concatenate(cyl).export(tmp, file_type="stl")
-    atomic_write_text(folder / "connectors.json", json.dumps(summary) + "\n")
+    atomic_write_text(folder / "connectors.json", strict_json(summary, "the connectors summary") + "\n")
     return summary

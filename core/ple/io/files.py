@@ -215,11 +215,117 @@ def _raise_terminated(signum, frame) -> None:
     raise Terminated(signum)
 
 
-def install_signal_handlers() -> None:
-    """SIGTERM and SIGHUP unwind the stack as Ctrl-C does (main thread only)."""
+def install_signal_handlers() -> dict:
+    """SIGTERM and SIGHUP unwind the stack as Ctrl-C does (main thread only). Returns the handlers
+    they replace, for ``restore_signal_handlers``: only the console script ``ple`` installs them,
+    never a library call."""
+    old = {}
     for sig in (signal.SIGTERM, signal.SIGHUP):
         with contextlib.suppress(ValueError, OSError):  # not the main thread / not allowed
-            signal.signal(sig, _raise_terminated)
+            old[sig] = signal.signal(sig, _raise_terminated)
+    return old
+
+
+def restore_signal_handlers(old: dict) -> None:
+    """Put back the handlers ``install_signal_handlers`` replaced."""
+    for sig, handler in old.items():
+        with contextlib.suppress(ValueError, OSError, TypeError):
+            signal.signal(sig, handler)
+
+
+# ----- OS errors as user errors ------------------------------------------------------------------
+USER_ERRNOS = {errno.ENOSPC, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG, getattr(errno, "EDQUOT", -1)}
+
+
+def is_user_oserror(exc: BaseException) -> bool:
+    """A full disk, a read-only file system, a refused permission or a quota: the user's to fix."""
+    return isinstance(exc, OSError) and exc.errno in USER_ERRNOS
+
+
+def oserror_message(exc: OSError, path=None) -> str:
+    """One line for an OS error while writing ``path`` (default: the error's own file name)."""
+    where = path if path is not None else exc.filename
+    what = exc.strerror or os.strerror(exc.errno or 0) or type(exc).__name__
+    hint = {errno.ENOSPC: "; free some space or write elsewhere",
+            getattr(errno, "EDQUOT", -1): "; the disk quota is exhausted, free some space or write elsewhere",
+            errno.EROFS: "; write to a writable folder"}.get(exc.errno, "")
+    return f"{where}: cannot write ({what}){hint}" if where is not None else f"cannot write ({what}){hint}"
+
+
+# ----- finite arrays --------------------------------------------------------------------------------
+def check_finite_array(arr, what: str) -> None:
+    """Refuse to write an array holding NaN or infinity (PleError naming ``what``): a writer never
+    writes garbage, it names the input that overflowed."""
+    a = np.asarray(arr)
+    if a.dtype.kind in "fc" and not np.isfinite(a).all():
+        bad = int(np.count_nonzero(~np.isfinite(a)))
+        raise PleError(f"{what} holds {bad:,} non-finite value(s) (NaN or infinity; an input overflows); "
+                       "nothing written")
+
+
+# ----- strict JSON ----------------------------------------------------------------------------------
+def strict_json(obj, what: str = "the output", **kwargs) -> str:
+    """``json.dumps(obj, allow_nan=False, **kwargs)``: NaN and infinities are not JSON, so an
+    output holding one is refused (PleError naming ``what``), never written as ``Infinity``."""
+    try:
+        return json.dumps(obj, allow_nan=False, **kwargs)
+    except ValueError:
+        raise PleError(f"{what} holds a non-finite number (NaN or infinity); not writing it — "
+                       "an input makes it overflow or degenerate") from None
+
+
+# ----- outputs apart from inputs -------------------------------------------------------------------
+def _local(text) -> str | None:
+    """The local path of ``text`` (a path or ``file://`` URL), None for other URLs."""
+    text = os.fspath(text)
+    if text.startswith("file://"):
+        return text[len("file://"):]
+    return None if "://" in text else text
+
+
+def _inside(path: str, folder: str) -> bool:
+    a, b = os.path.realpath(path), os.path.realpath(folder)
+    return a != b and os.path.commonpath([a, b]) == b
+
+
+def check_apart(outputs: dict, inputs: dict) -> None:
+    """Refuse outputs that would overwrite an input, before any work (docs/reliability.md §1).
+
+    ``outputs`` and ``inputs`` map a flag (``--out``, ``--body``, …) to a path. An output is
+    refused when it is the same file as an input (``os.path.samefile``: symlinks and hard links
+    included), or when it is a folder that holds an input (folders are replaced or written into as
+    a whole). Devices and FIFOs are written in place and never replaced, so they are not compared."""
+    for oflag, out in outputs.items():
+        out = _local(out) if out is not None else None
+        if not out or not os.path.lexists(out):
+            continue
+        try:
+            st = os.stat(out)
+        except OSError:
+            continue
+        if not (stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode)):
+            continue
+        for iflag, src in inputs.items():
+            src = _local(src) if src is not None else None
+            if not src or not os.path.exists(src):
+                continue
+            with contextlib.suppress(OSError):
+                if os.path.samefile(out, src):
+                    raise PleError(f"{oflag} {out}: is the same file as the input {iflag} {src}; "
+                                   "not overwriting an input — give another output")
+            if stat.S_ISDIR(st.st_mode) and _inside(src, out):
+                raise PleError(f"{oflag} {out}: the output folder holds the input {iflag} {src}; "
+                               "not writing over an input — give another folder")
+
+
+def plain_name(name, what: str) -> str:
+    """``name`` if it is a plain file name (no folder part, not ``.``/``..``, no NUL), else a
+    PleError: names read from a manifest stay inside their folder."""
+    if (not isinstance(name, str) or not name or name in (".", "..") or "/" in name or "\\" in name
+            or "\0" in name or os.path.isabs(name)):
+        raise PleError(f"{what}: {name!r} is not a plain file name inside the folder; move the manifest away "
+                       "to start afresh")
+    return name
 
 
 def _alive(pid: int) -> bool:
@@ -261,8 +367,13 @@ def temp_prefix(name: str) -> str:
 
 
 def make_temp_dir(parent: Path, name: str) -> Path:
-    """A fresh temporary folder beside an output (removed by the next run if we are killed)."""
-    return Path(tempfile.mkdtemp(prefix=temp_prefix(name), dir=parent))
+    """A fresh temporary folder beside an output (removed by the next run if we are killed), with a
+    normal folder's permissions (not ``mkdtemp``'s 0700): it becomes the output folder."""
+    path = Path(tempfile.mkdtemp(prefix=temp_prefix(name), dir=parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, 0o777 & ~umask)
+    return path
 
 
 def _destination(path: Path) -> tuple[Path, str]:
@@ -327,6 +438,10 @@ def atomic_path(path) -> Iterator[Path]:
         else:
             with open(tmp_path, "rb") as src, open(path, "wb") as dst:
                 shutil.copyfileobj(src, dst, 1 << 20)
+    except OSError as exc:  # a full disk, a read-only file system, …: the user's, the old file intact
+        if is_user_oserror(exc):
+            raise PleError(oserror_message(exc, path)) from None
+        raise
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
@@ -345,6 +460,8 @@ def atomic_write_bytes(path, data: bytes) -> None:
 def save_npz(path, arrays: dict) -> None:
     """Write arrays to ``path`` (.npz, as ``np.savez``) atomically. The zip is closed before its
     file, also when interrupted (``np.savez`` on a handle leaves that to the garbage collector)."""
+    for name, arr in arrays.items():
+        check_finite_array(arr, f"{path}: array {name!r}")
     with atomic_path(path) as tmp, open(tmp, "wb") as fh, zipfile.ZipFile(fh, "w", allowZip64=True) as zf:
         for name, arr in arrays.items():
             with zf.open(f"{name}.npy", "w", force_zip64=True) as member:

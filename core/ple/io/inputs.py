@@ -90,7 +90,7 @@ def load_npy(path: str, flag: str) -> np.ndarray:
         with open(path, "rb") as fh:
             version = np.lib.format.read_magic(fh)
             shape, _, dtype = np.lib.format._read_array_header(fh, version, max_header_size=10_000)
-            if dtype.hasobject or math.prod(shape) * dtype.itemsize > MAX_NPY_BYTES:
+            if dtype.hasobject or dtype.kind == "c" or math.prod(shape) * dtype.itemsize > MAX_NPY_BYTES:
                 raise ValueError(f"array {shape} of {dtype} is not a plain numeric array within 1 GiB")
         arr = np.load(path, allow_pickle=False)
     except (OSError, ValueError, EOFError, TypeError) as exc:

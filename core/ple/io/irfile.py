@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import importlib
-import json
 from pathlib import Path
 
 from ..errors import PleError
 from ..filters.ir import lattice_from_ir, lattice_to_ir
 from ..model.lattice import Lattice
-from .files import atomic_write_text
+from .files import atomic_write_text, strict_json
 from .inputs import read_json
 
 
@@ -40,4 +39,4 @@ def load_ir(path) -> Lattice:
 def save_ir(lat: Lattice, path, resolved: bool = True) -> None:
     """Write the IR atomically (no partial file on failure); body mesh paths relative to it."""
     base = Path(path).parent
-    atomic_write_text(path, json.dumps(lattice_to_ir(lat, resolved, base), indent=1) + "\n")
+    atomic_write_text(path, strict_json(lattice_to_ir(lat, resolved, base), "the IR", indent=1) + "\n")

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import json
 import shutil
 from collections.abc import Iterable
 from pathlib import Path
@@ -19,6 +18,7 @@ from .files import (
     make_temp_dir,
     remove_stale_temporaries,
     replace_dir,
+    strict_json,
     write_marker,
 )
 
@@ -75,7 +75,7 @@ def _write_layers(out: Path, layers: Iterable, meta: dict, progress=None) -> dic
             progress(1)
     manifest = dict(meta, format=SLICES_FORMAT, layers=len(files), files=files, z=zs, filled_pixels=filled,
                     image_size=[int(shape[1]), int(shape[0])] if shape else [0, 0])
-    atomic_write_text(out / "manifest.json", json.dumps(manifest, indent=1) + "\n")
+    atomic_write_text(out / "manifest.json", strict_json(manifest, "the slice manifest", indent=1) + "\n")
     return manifest
 
 

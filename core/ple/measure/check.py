@@ -37,11 +37,11 @@ def is_clean(lat: Lattice, region=None, max_elements: int = QUICK_ELEMENTS) -> b
     lat.validate()
     whole = lat.filter is None and region is None and lat.becots is None
     if whole and all(similar_axes(lat)):
-        return unclean_pairs(lat, path="steady")["clean"]
+        return unclean_pairs(lat, path="steady", first=True)["clean"]
     r = lat.region(region)
     if (r.groups * len(lat.nodes) + lat.beam_count() * r.groups / max(1, lat.groups)) > max_elements:
         return None
-    return unclean_pairs(lat, lat.evaluate(r))["clean"]
+    return unclean_pairs(lat, lat.evaluate(r), first=True)["clean"]
 
 
 def solid_volume(lat: Lattice, region=None) -> dict | None:

@@ -17,7 +17,7 @@ from ..clg.field import FieldSolid
 from ..clg.model import CLG, Prim
 from ..clg.query import compiled, frame_of
 from ..errors import PleError
-from ..model.budget import MESH_TRIANGLE_BYTES, require
+from ..model.budget import CLG_TRIANGLE_BYTES, require, sphere_triangles
 
 MAX_TRIANGLES = 20_000_000  # estimated output size beyond which meshing is refused
 
@@ -71,23 +71,45 @@ def _expr(m, tree, parts):
     return m.Manifold.batch_boolean(vals, m.OpType.Subtract) if len(vals) > 1 else vals[0]
 
 
+def chunk_triangles(comp, ci: int, segments: int) -> float:
+    """Triangles of chunk ``ci``'s template (one group), bounded from above before anything is
+    meshed: a sphere per ball, two per beam (their hull), and each nested material's whole solid
+    (``solid_triangles``) inside every leaf that carries one."""
+    ball = sphere_triangles(segments)
+    total = 0.0
+    for prim in comp.leaves[ci]:
+        (_, cb), _ = comp.balls0[prim]
+        total += ball if cb is None else 2 * ball
+        child = comp.children.get(prim)
+        if child is not None and not isinstance(child[0], FieldSolid):
+            total += solid_triangles(child[0], segments)
+    return total
+
+
+def solid_triangles(comp, segments: int) -> float:
+    """Triangles of a compiled CLG's solid, bounded from above from its leaves and groups alone
+    (nested materials included): the budget's estimate, before any Boolean runs."""
+    r = comp.region if comp.region is not None else comp.lat.region(None)
+    return sum(chunk_triangles(comp, ci, segments) for ci in range(len(comp.names))) * r.groups
+
+
 def _solid_manifold(m, comp, segments: int, max_bytes: float | None = None):
     unit = _unit_sphere(m, segments)
     r = comp.region if comp.region is not None else comp.lat.region(None)
     groups = r.groups  # counted before the groups are listed: a huge pattern is refused first
-    templates = []
-    for ci in range(len(comp.names)):
-        parts = [_leaf(m, comp, prim, unit, segments) for prim in comp.leaves[ci]]
-        template = _expr(m, comp.trees[ci], parts)
-        est = template.num_tri() * groups
+    for ci in range(len(comp.names)):  # estimated before the template chunk is meshed
+        est = chunk_triangles(comp, ci, segments) * groups
         if est > MAX_TRIANGLES:
             raise PleError(f"chunk {comp.names[ci]!r}: about {est:.3g} triangles exceed the meshing limit "
                            f"{MAX_TRIANGLES:.0e}; use fewer groups or --segments")
-        templates.append(template)
-    total = sum(t.num_tri() for t in templates) * groups
     if max_bytes is not None:
-        require(total * MESH_TRIANGLE_BYTES, f"{total:.3g} triangles of the CLG mesh ({groups:,} groups)", max_bytes,
-                "use fewer groups or --segments")
+        total = solid_triangles(comp, segments)
+        require(total * CLG_TRIANGLE_BYTES, f"{total:.3g} triangles of the CLG mesh ({groups:,} groups, nested "
+                "materials included)", max_bytes, "use fewer groups or --segments")
+    templates = []
+    for ci in range(len(comp.names)):
+        parts = [_leaf(m, comp, prim, unit, segments) for prim in comp.leaves[ci]]
+        templates.append(_expr(m, comp.trees[ci], parts))
     g = comp.groups()
     lin, move, _ = comp.copies(g)
     unions = []

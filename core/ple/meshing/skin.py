@@ -36,14 +36,27 @@ def _manifold(vertices, faces):
     return m
 
 
-def _trimesh(m) -> trimesh.Trimesh:
+def _trimesh(m, frame: tuple | None = None) -> trimesh.Trimesh:
     """The Boolean's result with its slivers (features under a few float32 steps at its size,
-    which a float32 file cannot keep apart) removed by manifold3d itself: it stays manifold."""
+    which a float32 file cannot keep apart) removed by manifold3d itself: it stays manifold.
+    ``frame`` (centre, scale): the Boolean ran in that scaled frame (``body_frame``); the slivers
+    are measured and the result returned in world coordinates."""
+    c, s = frame if frame is not None else (np.zeros(3), 1.0)
     if not m.is_empty():
         box = np.asarray(m.bounding_box(), float)
-        m = m.simplify(COLLAPSE_GRIDS * grid_spacing(box[:3], box[3:]))
+        m = m.simplify(COLLAPSE_GRIDS * grid_spacing(box[:3] * s + c, box[3:] * s + c) / s)
     mesh = m.to_mesh()
-    return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts), process=False)
+    v = np.asarray(mesh.vert_properties, float)[:, :3] * s + c
+    return trimesh.Trimesh(v, np.asarray(mesh.tri_verts), process=False)
+
+
+def body_frame(bodies) -> tuple[np.ndarray, float]:
+    """(centre, scale) of a frame in which the bodies span about 1: manifold3d computes in
+    float32, whose products overflow or lose the mesh at sizes like 1e30 (or 4e10 beside a
+    radius of 1); a Boolean in this frame keeps the right cells at any size."""
+    lo = np.min([b.lo for b in bodies], axis=0)
+    hi = np.max([b.hi for b in bodies], axis=0)
+    return (lo + hi) / 2, float((hi - lo).max()) or 1.0
 
 
 def inward_offset(body: Body, thickness: float, edge: float | None = None):
@@ -145,10 +158,11 @@ def clip_to_bodies(mesh: trimesh.Trimesh, bodies) -> trimesh.Trimesh:
     for body in bodies:
         if not body.closed:
             raise PleError(f"{body.name}: an open body (winding-number fallback) cannot cut a mesh: close it")
-    solid = _manifold(mesh.vertices, mesh.faces)
+    c, s = body_frame(bodies)
+    solid = _manifold((np.asarray(mesh.vertices) - c) / s, mesh.faces)
     for body in bodies:
-        solid = solid ^ _manifold(body.vertices, body.faces)
-    out = _trimesh(solid)
+        solid = solid ^ _manifold((body.vertices - c) / s, body.faces)
+    out = _trimesh(solid, (c, s))
     out.metadata.update(mesh.metadata)
     out.metadata["ple_cut_by"] = [*mesh.metadata.get("ple_cut_by", ()), *bodies]
     return out

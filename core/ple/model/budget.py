@@ -116,7 +116,23 @@ def hub_triangles(degree: float, style: str, levels: int, segments: int) -> floa
 
 
 MESH_TRIANGLE_BYTES = 300  # peak per triangle while building (measured 120-240: vertices, faces, copies)
+CLG_TRIANGLE_BYTES = 650  # manifold3d's copies, their union and the trimesh (measured 540-600 with the interpreter)
+
+
+def sphere_triangles(segments: int) -> int:
+    """Triangles of manifold3d's sphere of ``segments`` circle segments (``Manifold.sphere``: s²/2);
+    a CLG beam, the hull of two spheres, has at most twice as many."""
+    return int(segments) ** 2 // 2
 CHECK_TRIANGLE_BYTES = 600  # with --check (trimesh's watertightness and volume; measured 545)
+
+
+STL_BOUND = 2.0  # real triangles / ``mesh_triangles`` measured at most 1.31 on the presets' styles
+
+
+def streamed_stl_bytes(triangles: float) -> float:
+    """An upper bound of the binary STL of a mesh estimated at ``triangles`` (``mesh_triangles``
+    times ``STL_BOUND``, 50 bytes a triangle): what the disk must hold before a stream starts."""
+    return 84 + 50 * STL_BOUND * triangles
 
 
 def mean_degree(lat: Lattice) -> float:

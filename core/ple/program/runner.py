@@ -35,9 +35,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
+from ..algebra.similarity import Similarity
 from ..errors import PleError
+from ..filters.base import Filter
+from ..model.becots import BeCOTS
 from ..model.budget import check_finite, human
-from ..model.lattice import Lattice
+from ..model.grading import RadiusField
+from ..model.groupmap import GroupMap
+from ..model.lattice import MAX_COUNT, BeamPattern, Direction, Lattice, Node
 from .runtime import ROOT_PACKAGE, compile_program
 from .sources import load_lattice, resolve_source
 
@@ -300,9 +307,70 @@ class Job:
 def _checked(lat, name: str) -> Lattice:
     if not isinstance(lat, Lattice):
         raise PleError(f"{name}: lattice() must return a Lattice")
+    check_structure(lat, name)
     lat.validate()
     check_finite(lat, name)
     return lat
+
+
+def check_structure(lat: Lattice, name: str) -> None:
+    """Every attribute of a Lattice a program returns has the type the core expects: a program
+    may assign them directly (``lat.filter = 5``, ``lat.u = 'hello'``), which ``add_node`` and the
+    setters would have refused. Raises PleError naming the attribute."""
+    def bad(attr: str, value, expected: str) -> PleError:
+        return PleError(f"{name}: the returned lattice's {attr} is {type(value).__name__} {_short(value)}; "
+                        f"expected {expected}")
+
+    def integer(x) -> bool:
+        return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
+
+    if not isinstance(lat.nodes, list):
+        raise bad("nodes", lat.nodes, "a list of nodes (use lat.add_node)")
+    for n, node in enumerate(lat.nodes):
+        if not isinstance(node, Node):
+            raise bad(f"nodes[{n}]", node, "a node (use lat.add_node)")
+        c = np.asarray(node.center) if isinstance(node.center, (np.ndarray, list, tuple)) else None
+        if c is None or c.shape != (3,) or c.dtype.kind not in "fiu":
+            raise bad(f"nodes[{n}].center", node.center, "a point of 3 numbers")
+        if not isinstance(node.radius, (float, int, np.floating, np.integer)) or isinstance(node.radius, bool) \
+                or not (math.isfinite(node.radius) and node.radius > 0):
+            raise bad(f"nodes[{n}].radius", node.radius, "a positive number")
+    if not isinstance(lat.beams, list):
+        raise bad("beams", lat.beams, "a list of beam-patterns (use lat.add_beam)")
+    for n, b in enumerate(lat.beams):
+        if not isinstance(b, BeamPattern):
+            raise bad(f"beams[{n}]", b, "a beam-pattern (use lat.add_beam)")
+        for f in ("n1", "n2", "di", "dj", "dk"):
+            if not integer(getattr(b, f)):
+                raise bad(f"beams[{n}].{f}", getattr(b, f), "an integer")
+        if not (0 <= b.n1 < len(lat.nodes) and 0 <= b.n2 < len(lat.nodes)):
+            raise PleError(f"{name}: the returned lattice's beams[{n}] joins node {b.n1} to {b.n2}, "
+                           f"outside the {len(lat.nodes)} nodes")
+    for attr in ("u", "v", "w"):
+        d = getattr(lat, attr)
+        if not isinstance(d, Direction):
+            raise bad(attr, d, f"a direction (use lat.set_{attr})")
+        if not integer(d.count) or not 1 <= d.count <= MAX_COUNT:
+            raise bad(f"{attr}.count", d.count, f"an integer in 1..{MAX_COUNT:,}")
+        if not isinstance(d.similarity, Similarity):
+            raise bad(f"{attr}.similarity", d.similarity, "a Similarity")
+        if not isinstance(d.cumulative, (bool, np.bool_)):
+            raise bad(f"{attr}.cumulative", d.cumulative, "True or False")
+    for attr, cls, expected in (("placement", Similarity, "a Similarity (use lat.set_placement)"),
+                                ("filter", Filter, "None or a filter (use lat.set_filter)"),
+                                ("group_map", GroupMap, "None or a GroupMap (use lat.set_group_map)"),
+                                ("radius_field", RadiusField, "None or a RadiusField (use lat.set_radius_field)"),
+                                ("becots", BeCOTS, "None or a BeCOTS slab (use lat.set_becots)")):
+        value = getattr(lat, attr, None)
+        if not isinstance(value, cls) and (attr == "placement" or value is not None):
+            raise bad(attr, value, expected)
+    if not isinstance(getattr(lat, "meta", None), dict):
+        raise bad("meta", getattr(lat, "meta", None), "a dict")
+
+
+def _short(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 def run_program(source: str, params=None, timeout: float | None = DEFAULT_TIMEOUT,

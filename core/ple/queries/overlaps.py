@@ -115,7 +115,7 @@ def pair_gaps(kind_a, ca, ra, ea, kind_b, cb, rb, eb, margin: float = math.inf):
 
 
 # ----- explicit elements --------------------------------------------------------------------------------
-def _explicit(ev: Evaluation, margin: float) -> dict:
+def _explicit(ev: Evaluation, margin: float, first: bool = False) -> dict:
     nn, nb = len(ev.radius), len(ev.beam_nodes)
     ends = np.concatenate([np.repeat(np.arange(nn)[:, None], 2, axis=1), ev.beam_nodes]).astype(np.int64)
     kinds = np.concatenate([np.zeros(nn, np.int64), np.ones(nb, np.int64)])
@@ -131,6 +131,8 @@ def _explicit(ev: Evaluation, margin: float) -> dict:
         gap, over, depth = pair_gaps(kinds[i], ev.center[ia[:, 0]], ev.radius[ia[:, 0]], ea,
                                      kinds[j], ev.center[ib[:, 0]], ev.radius[ib[:, 0]], eb, margin)
         result.add(kinds[i], kinds[j], gap, over, depth, labels[i], labels[j], np.ones(len(i), np.int64), gap)
+        if first and over.any():  # the question was only whether one exists (everything may overlap everything)
+            break
     out = result.report()
     out["path"] = "explicit"
     out["elements"] = int(nn + nb)
@@ -429,13 +431,16 @@ def _first_orientation(rep, counts, xk, xi, yk, yi) -> np.ndarray:
 
 
 # ----- public API -----------------------------------------------------------------------------------------
-def unclean_pairs(lat: Lattice, ev: Evaluation | None = None, margin: float = 0.0, path: str = "auto") -> dict:
+def unclean_pairs(lat: Lattice, ev: Evaluation | None = None, margin: float = 0.0, path: str = "auto",
+                  first: bool = False) -> dict:
     """Unclean pairs of a lattice, or of the elements ``ev`` (an evaluation of it: a region, or the
     kept part of a filtered lattice): {"clean", "unclean_pairs", "pairs" per kind, "worst" offenders
     (kind, depth, count of similar copies, both elements as {"ball"|"beam": [i, j, k, n|pattern]}),
     "min_gap" among non-incident pairs closer than ``margin`` (None if none), "min_gap_pair",
     "path"}. Without ``ev``: the whole unfiltered program (``path`` "auto" takes the steady path
-    when it applies, "explicit" evaluates the lattice)."""
+    when it applies, "explicit" evaluates the lattice). ``first``: explicit elements stop at the
+    first block of candidate pairs holding an unclean pair (only "clean" is then complete: the
+    quick answer, bounded in time and memory when everything overlaps everything)."""
     lat.validate()
     if path not in ("auto", "steady", "explicit"):
         raise PleError(f"unclean-pair path {path!r}: expected auto, steady or explicit")
@@ -445,7 +450,7 @@ def unclean_pairs(lat: Lattice, ev: Evaluation | None = None, margin: float = 0.
             return out
     if ev is None:
         ev = lat.evaluate()
-    return _explicit(ev, float(margin))
+    return _explicit(ev, float(margin), first)
 
 
 def is_clean(lat: Lattice, ev: Evaluation | None = None) -> bool:
