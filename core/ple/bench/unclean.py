@@ -29,6 +29,25 @@ import subprocess
 import sys
 import tempfile
 
+import numpy as np
+
+from ..algebra.similarity import Rotation, Swirl, Translation
+from ..algebra.vectors import Pt, Vec
+from ..io.export import RecordPool, stl_chunk, stl_header, write_stl
+from ..meshing.tessellate import (
+    BOX_TRIANGLES,
+    _check_style,
+    _Tessellator,
+    iter_triangles,
+    leave_to_unions,
+    union_pieces,
+)
+from ..meshing.unclean import UncleanReport
+from ..meshing.weld import grid_spacing
+from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, mesh_triangles
+from ..model.lattice import Lattice
+from ..program.sources import load_lattice
+
 CHILD = r"""
 import json, os, resource, sys, time
 import numpy as np
@@ -90,11 +109,6 @@ def add_arguments(p) -> None:
 
 def case_lattice(name: str, n: int):
     """The lattice of a case (module docstring)."""
-    from ..algebra.similarity import Rotation, Swirl, Translation
-    from ..algebra.vectors import Pt, Vec
-    from ..model.lattice import Lattice
-    from ..program.sources import load_lattice
-
     if name == "fig6_3":
         return load_lattice("fig6_3")
     lat = Lattice()
@@ -127,13 +141,6 @@ def write_tenth(lat, out, style: str, levels: int, fraction: float = 0.1, seed: 
     """The ``tenth`` case: a random tenth of the hubs unclean (as if their junctions had shrunk),
     streamed to binary STL as ``ple mesh`` streams an unclean region. Returns (triangles, report,
     estimated peak bytes)."""
-    import numpy as np
-
-    from ..io.export import RecordPool, stl_chunk, stl_header, write_stl
-    from ..meshing.tessellate import _check_style, _Tessellator, iter_triangles, leave_to_unions, union_pieces
-    from ..meshing.unclean import UncleanReport
-    from ..meshing.weld import grid_spacing
-
     r = lat.region()
     lv, sg = _check_style(style, levels, None)
     grid = grid_spacing(*lat.bounds(r))
@@ -156,9 +163,6 @@ def stream_estimate(lat, style: str, levels: int, report) -> float:
     """Peak bytes of streaming a region to STL beyond the process's own: its evaluation (the
     cleanliness check holds it), the boxes alive at once (two, each at most BOX_TRIANGLES) and the
     largest local union (``unions.piece_estimate``)."""
-    from ..meshing.tessellate import BOX_TRIANGLES, _check_style
-    from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, mesh_triangles
-
     r = lat.region()
     lv, sg = _check_style(style, levels, None)
     box = min(mesh_triangles(lat, r, style, lv, sg), BOX_TRIANGLES) * MESH_TRIANGLE_BYTES
