@@ -174,3 +174,13 @@ def test_moebius_doors_give_the_same_mesh(tmp_path, capsys):
     out = capsys.readouterr().out
     assert '"watertight": true' in out and '"self_intersecting_pairs": 0' in out
     assert main(["mesh", *src[:5], "--beam-lattice", "--out", str(tmp_path / "d.3mf")]) == 0
+
+
+def test_a_moebius_region_is_budgeted_as_one_box(tmp_path, capsys):
+    """Meshed per hub, a Möbius region is one box: its whole mesh is held at once, and the budget
+    counts it so (55.8 M refined triangles of a 60 x 60 slab, 15.6 GiB, against a 1 GiB limit)."""
+    out = tmp_path / "m.stl"
+    argv = ["mesh", "mobius_slab", "--param", "nu=60", "--param", "nv=60", "--max-memory", "1G", "--out", str(out)]
+    assert main(argv) == 2
+    assert "in one box (a Möbius lattice is meshed per hub)" in capsys.readouterr().err
+    assert not out.exists()

@@ -180,11 +180,11 @@ def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
                 limit, "choose a smaller --region, fewer --levels or --fallback cnt")
         return 1 << 14
     tris = mesh_triangles(lat, region, args.style, levels, segments)
-    if in_memory:
+    if in_memory or lat.group_map is not None:  # a group map's region is one box of hubs (Lattice.per_hub)
         per = CHECK_TRIANGLE_BYTES if args.check else MESH_TRIANGLE_BYTES
-        require(tris * per + evaluation_bytes(lat, region),
-                f"{tris:,.3g} triangles ({args.style}) of {what} in memory for .{fmt}", limit,
-                "write .stl (streamed), choose a smaller --region or fewer --levels")
+        how = f"in memory for .{fmt}" if in_memory else f"in one box (a {lat.group_map.kind} lattice is meshed per hub)"
+        require(tris * per + evaluation_bytes(lat, region), f"{tris:,.3g} triangles ({args.style}) of {what} {how}",
+                limit, f"{'write .stl (streamed), ' if in_memory else ''}choose a smaller --region or fewer --levels")
         return 1 << 14
     per_group = len(lat.nodes) * hub_triangles(mean_degree(lat), args.style, levels, segments) * MESH_TRIANGLE_BYTES
     require(per_group, f"one node-group of {args.style} mesh", limit, "choose fewer --levels")
