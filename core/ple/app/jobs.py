@@ -188,7 +188,8 @@ def mesh_job(source: str, params: dict, style: str = "refined", levels=None, reg
     Regions up to ``MAX_CHECK_GROUPS`` groups are checked for unclean hubs first, as the
     streamed STL is (``checked_stream``); an unclean region is one part, meshed with its
     manifold3d unions exactly as ``ple mesh`` without parts (``settings["unclean"]`` says so):
-    the unions join neighbourhoods across any box boundary, so they are not split."""
+    the unions join neighbourhoods across any box boundary, so they are not split. A lattice whose
+    groups a map places (Möbius, TMI) is one part too: it is meshed per hub, not in boxes of groups."""
     style_named(style)
     if style == "balls-beams":
         raise PleError("a partitioned mesh needs a closed style (refined, cnt or chocc)")
@@ -201,6 +202,8 @@ def mesh_job(source: str, params: dict, style: str = "refined", levels=None, reg
     if report is not None and len(report.nodes):
         settings["unclean"] = report.line()
         return Job("mesh", settings, [Part("part_000000.stl", {"box": str(r), "unions": True})])
+    if lat.group_map is not None:  # every hub its own template (``Lattice.per_hub``): no boxes of similar groups
+        return Job("mesh", settings, [Part("part_000000.stl", {"box": str(r), "whole": True})])
     parts = [Part(f"part_{n:06d}.stl", {"box": str(box)}) for n, box in enumerate(lat.iter_slabs(box_groups, r))]
     return Job("mesh", settings, parts)
 
@@ -309,7 +312,8 @@ def _sweep_part(settings: dict, part: Part) -> tuple[bytes, dict]:
 
 def _mesh_part(settings: dict, part: Part) -> tuple[bytes, dict]:
     lat = job_lattice(settings)
-    if part.params.get("unions"):  # an unclean region: one mesh with its unions, written as ``ple mesh`` writes it
+    if part.params.get("unions") or part.params.get("whole"):  # an unclean or group-mapped region: one mesh,
+        # with its unions, written as ``ple mesh`` writes it
         data = mesh_bytes(tessellate(lat, settings["region"], settings["style"], settings["levels"]), "stl")
         return data, {"triangles": (len(data) - 84) // 50}
     verts, faces = tessellation_box(lat, settings["region"], part.params["box"], settings["style"],

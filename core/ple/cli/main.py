@@ -12,6 +12,7 @@ import importlib
 import importlib.util
 import os
 import pkgutil
+import re
 import sys
 from pathlib import Path
 
@@ -28,11 +29,24 @@ def command_names() -> list[str]:
     return sorted(m.name for m in pkgutil.iter_modules(cli.__path__) if m.name not in NOT_COMMANDS)
 
 
+class Parser(argparse.ArgumentParser):
+    """The parser of ``ple`` and of its sub-commands (argparse makes sub-parsers of the parent's
+    class). A value that starts with a minus sign and a digit is a value, not an option, so vector
+    options take negative first values in the space form (``--bounds -0.5,-0.5,-0.5,0.5,0.5,0.5``,
+    ``--view -30,20``, ``--region -2:,0:1,0:1``): argparse itself takes only a whole negative
+    number (``-0.5``) for a value. No option of ``ple`` looks like a number; tested over every
+    option that takes a value (``tests/cli/test_vector_options.py``)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The parser of ``only`` (the sub-command about to run, imported with what it uses); with no
     sub-command, the list of them with their one-line help read from their source, none
     imported (``ple --help`` starts at once)."""
-    parser = argparse.ArgumentParser(prog="ple", description="PLE — the Programmed Lattice Editor.")
+    parser = Parser(prog="ple", description="PLE — the Programmed Lattice Editor.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in command_names():

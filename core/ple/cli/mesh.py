@@ -15,7 +15,15 @@ from ..app.cluster import run_job
 from ..app.jobs import assemble_stl, mesh_job
 from ..errors import PleError
 from ..filters.body import body_of
-from ..io.export import STL_RECORD, export_mesh, read_back, write_beam_lattice_3mf, write_mesh
+from ..io.export import (
+    DEFAULT_FALLBACK,
+    FALLBACK_STYLES,
+    STL_RECORD,
+    export_mesh,
+    read_back,
+    write_beam_lattice,
+    write_mesh,
+)
 from ..io.files import strict_json
 from ..io.formats import DEFAULT_UNIT, UNITS, mesh_format
 from ..io.spill import SpillFiles
@@ -48,7 +56,7 @@ CHECK_CHUNK = 1 << 18  # triangles read from the written STL at a time by --chec
 def register(sub) -> None:
     p = sub.add_parser("mesh", help="watertight mesh of a region (STL, 3MF, PLY, OBJ, GLB)")
     add_lattice_args(p)
-    p.add_argument("--style", choices=STYLE_NAMES, default=DEFAULT_STYLE,
+    p.add_argument("--style", choices=STYLE_NAMES, default=None,
                    help=f"tessellation style (default: {DEFAULT_STYLE}; balls-beams is a preview, not a closed solid)")
     p.add_argument("--levels", type=int, default=None, help="refinement levels of 'refined' (default 4)")
     p.add_argument("--segments", type=int, default=None, help="generators per circle of 'chocc' (default 16)")
@@ -63,8 +71,12 @@ def register(sub) -> None:
                    help="with --parts: node-groups per part (default 16384)")
     add_cluster_args(p, "; without --parts, threads assembling the streamed STL's boxes (the same file for any number)")
     p.add_argument("--beam-lattice", action="store_true",
-                   help="3MF only: balls and beams with the Beam Lattice extension beside the watertight "
-                        "triangle mesh of --style (extensions not required)")
+                   help="3MF only: balls and beams with the Beam Lattice extension beside a watertight "
+                        "triangle mesh, the fallback of consumers without beam support (extensions not required)")
+    p.add_argument("--fallback", choices=FALLBACK_STYLES, default=None,
+                   help=f"with --beam-lattice: the style of the fallback triangle mesh (default: --style if given, "
+                        f"else {DEFAULT_FALLBACK}, the cheapest closed style); none: beams only, the extensions "
+                        "required")
     p.add_argument("--check", action="store_true",
                    help="report, on the file as written and read back (an STL in blocks: bounded memory): "
                         "watertightness, winding, Euler characteristic, exact self-intersections, and the "
@@ -73,6 +85,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    fallback_style(args)  # before --style gets its default
+    args.style = args.style or DEFAULT_STYLE
     check_fillet(args.fillet, args.style)  # before any work
     if args.fillet and (args.parts or args.beam_lattice):
         raise PleError("--fillet shapes a single mesh file of style refined (not --parts or --beam-lattice)")
@@ -103,14 +117,15 @@ def run(args) -> int:
         info["unclean"] = lattice.metadata.get("ple_unclean")
         n = len(mesh.faces) - export_mesh(mesh, args.out, args.unit)["dropped_faces"]
     elif args.beam_lattice:
-        ev = lat.evaluate(region)
-        style = args.style if args.style != "balls-beams" else "refined"
-        mesh = tessellate(lat, region, style, args.levels, args.segments)
-        info["unclean"] = _say_unclean(mesh)
-        write_beam_lattice_3mf(args.out, ev.center, ev.radius, ev.beam_nodes, mesh=mesh, unit=args.unit)
-        print(f"wrote {args.out}: beam lattice, {len(ev.center):,} balls, {len(ev.beam_nodes):,} beams, "
-              f"with {len(mesh.faces):,} triangles ({style}), unit {args.unit}")
-    elif args.check and lat.group_map is not None:  # groups placed by a map: the STL stream needs similar groups
+        got = write_beam_lattice(lat, args.out, region, args.fallback, args.levels, args.segments, max_groups,
+                                 args.unit, info, stream_workers(args.workers))
+        if info["unclean"] is not None and len(info["unclean"].nodes):
+            print(info["unclean"].line())
+        mesh_text = (f"with {got['triangles']:,} triangles ({args.fallback})" if args.fallback != "none"
+                     else "without a triangle mesh (--fallback none: the beam extensions are required)")
+        print(f"wrote {args.out}: beam lattice, {got['balls']:,} balls, {got['beams']:,} beams, {mesh_text}, "
+              f"unit {args.unit}")
+    elif args.check and lat.group_map is not None:  # groups placed by a map: checked in memory
         mesh = tessellate(lat, region, args.style, args.levels, args.segments, fillet=args.fillet)
         info["unclean"] = _say_unclean(mesh)
         n = len(mesh.faces) - export_mesh(mesh, args.out, args.unit)["dropped_faces"]
@@ -168,11 +183,12 @@ def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
     levels, segments = _check_style(args.style, args.levels, args.segments)
     what = f"region {region} ({region_nodes(lat, region):,} nodes)"
     if args.beam_lattice:  # balls and beams, and the triangle mesh that rides along in the 3MF
-        style = args.style if args.style != "balls-beams" else "refined"
-        tris = mesh_triangles(lat, region, style, levels, segments)
+        style = args.fallback
+        tris = 0 if style == "none" else mesh_triangles(lat, region, style, *_check_style(style, args.levels,
+                                                                                           args.segments))
         require(evaluation_bytes(lat, region) + 150 * (region_nodes(lat, region) + region_beams(lat, region))
                 + tris * MESH_TRIANGLE_BYTES, f"the beam lattice of {what} with {tris:,.3g} triangles ({style})",
-                limit, "choose a smaller --region or fewer --levels")
+                limit, "choose a smaller --region, fewer --levels or --fallback cnt")
         return 1 << 14
     tris = mesh_triangles(lat, region, args.style, levels, segments)
     if args.check:  # the written file, checked block by block (an STL) or read back whole
@@ -180,10 +196,11 @@ def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
         require(min(tris, BLOCK_TRIANGLES) * per if fmt == "stl" else tris * per,
                 f"checking {tris:,.3g} triangles ({args.style}) of {what}", limit,
                 "choose a smaller --region or fewer --levels, or leave out --check")
-    if in_memory:
+    if in_memory or lat.group_map is not None:  # a group map's region is one box of hubs (Lattice.per_hub)
+        how = f"in memory for .{fmt}" if in_memory else f"in one box (a {lat.group_map.kind} lattice is meshed per hub)"
         require(tris * MESH_TRIANGLE_BYTES + evaluation_bytes(lat, region),
-                f"{tris:,.3g} triangles ({args.style}) of {what} in memory for .{fmt}", limit,
-                "write .stl (streamed), choose a smaller --region or fewer --levels")
+                f"{tris:,.3g} triangles ({args.style}) of {what} {how}",
+                limit, f"{'write .stl (streamed), ' if in_memory else ''}choose a smaller --region or fewer --levels")
         return 1 << 14
     per_group = len(lat.nodes) * hub_triangles(mean_degree(lat), args.style, levels, segments) * MESH_TRIANGLE_BYTES
     require(per_group, f"one node-group of {args.style} mesh", limit, "choose fewer --levels")
@@ -195,6 +212,23 @@ def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
                        "choose a smaller --region or fewer --levels")
     boxes = stream_workers(args.workers) + 1  # boxes alive at once: one per worker and the one being written
     return int(max(1, min(1 << 14, limit // (per_group * boxes))))
+
+
+def fallback_style(args) -> None:
+    """``args.fallback``: the beam lattice's fallback mesh, --fallback or else an explicit closed --style
+    or else DEFAULT_FALLBACK (cnt: the triangles of a beam lattice are for consumers without beam
+    support, and cnt is the cheapest closed style); --fallback without --beam-lattice is refused."""
+    if not args.beam_lattice:
+        if args.fallback is not None:
+            raise PleError("--fallback is the triangle mesh of --beam-lattice; without it, use --style")
+        return
+    if args.fallback is None:
+        args.fallback = args.style or DEFAULT_FALLBACK
+    elif args.style is not None and args.style != args.fallback:
+        raise PleError(f"--style {args.style} and --fallback {args.fallback}: with --beam-lattice, give one")
+    if args.fallback not in FALLBACK_STYLES:
+        raise PleError(f"--beam-lattice: the fallback mesh needs a closed style ({', '.join(FALLBACK_STYLES)}), "
+                       f"not {args.fallback}")
 
 
 def stream_workers(n: int | None) -> int:

@@ -40,6 +40,7 @@ from ..meshing.weld import (
     collapse_short_edges,
     edge_manifold,
     grid_spacing,
+    snap,
     snap_triangles,
     snapped_slices,
     weld,
@@ -305,10 +306,21 @@ def export_mesh(mesh: trimesh.Trimesh, path, unit: str = DEFAULT_UNIT, grid: flo
     fmt = mesh_format(path)
     unit_name(unit)
     check_finite_array(mesh.vertices, f"{path}: the mesh")
+    v, f, stats = prepare_closed(mesh, fmt, unit, grid, Path(path).name)
+    data = encode_mesh(v, f, fmt, unit)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return stats
+
+
+def prepare_closed(mesh: trimesh.Trimesh, fmt: str, unit: str = DEFAULT_UNIT, grid: float | None = None,
+                   name: str = "the mesh") -> tuple[np.ndarray, np.ndarray, dict]:
+    """``prepare`` for a closed mesh that must stay closed in the file: edges of a few float32
+    steps (a Boolean's slivers) that pinch when snapped are collapsed in 64 bits first (link
+    condition: the mesh stays a closed 2-manifold), then snapped again; a mesh that still does
+    not close is refused (PleError naming ``name``)."""
     v, f, stats = prepare(mesh.vertices, mesh.faces, fmt, unit, grid)
     if len(f) and edge_manifold(f)["bad_edges"] and not edge_manifold(mesh.faces)["bad_edges"]:
-        # edges of a few float32 steps (a Boolean's slivers) pinch when snapped: collapse them in
-        # 64 bits first (link condition: the mesh stays a closed 2-manifold), then snap again
         verts, faces = shortened(mesh.vertices, mesh.faces)
         v, f, stats = prepare(verts, faces, fmt, unit, grid)
     if len(f) and edge_manifold(f)["bad_edges"] and not edge_manifold(mesh.faces)["bad_edges"]:
@@ -316,11 +328,8 @@ def export_mesh(mesh: trimesh.Trimesh, path, unit: str = DEFAULT_UNIT, grid: flo
         if shortest > 0:  # a zero-length edge is a degenerate mesh, not a range float32 cannot hold
             check_float32_range(mesh.vertices, shortest, fmt)
         why = " (zero-length edges: degenerate triangles, e.g. of a self-intersecting body)" if shortest <= 0 else ""
-        raise PleError(f"{Path(path).name}: the closed mesh does not stay closed in {fmt}'s float32 coordinates{why}")
-    data = encode_mesh(v, f, fmt, unit)
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(data)
-    return stats
+        raise PleError(f"{name}: the closed mesh does not stay closed in {fmt}'s float32 coordinates{why}")
+    return v, f, stats
 
 
 def shortened(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
@@ -418,8 +427,70 @@ def write_beam_lattice_3mf(path, center, radius, beam_nodes, mesh=None, unit: st
     if mesh is None:
         v, f = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
     else:
-        v, f, _ = prepare(mesh.vertices, mesh.faces, "3mf", unit)
+        v, f, _ = prepare_closed(mesh, "3mf", unit, name=Path(path).name)
     write_3mf(path, v, f, unit_name(unit), (center, radius, beam_nodes))
+
+
+FALLBACK_STYLES = ("cnt", "chocc", "refined", "none")
+DEFAULT_FALLBACK = "cnt"  # the cheapest closed style: a fallback for consumers without beam support
+
+
+def write_beam_lattice(lat: Lattice, path, region=None, fallback: str = DEFAULT_FALLBACK, levels: int | None = None,
+                       segments: int | None = None, max_groups: int = 1 << 14, unit: str = DEFAULT_UNIT,
+                       info: dict | None = None, workers: int = 1) -> dict:
+    """A region's balls and cone beams as a 3MF Beam Lattice beside its watertight triangle mesh
+    of style ``fallback`` (``FALLBACK_STYLES``), which a consumer without beam support prints;
+    ``"none"`` writes the beams alone (the file then requires the extensions).
+
+    The fallback mesh comes from the stream of ``write_mesh``'s STL (``checked_stream``: boxes of
+    at most ``max_groups`` groups assembled by ``workers`` threads, each box snapped to the
+    region's float32 grid as it is made and kept as float32 vertices and int32 faces); the boxes
+    are welded into one indexed mesh (the hub vertices repeated across box boundaries are the same
+    grid points) and the model's XML is streamed into the package. An unclean region is meshed
+    in memory with its unions, as ``write_mesh`` does. ``info["unclean"]`` gets the report (None:
+    not checked, or no fallback). Returns {"balls", "beams", "triangles"}."""
+    if mesh_format(path) != "3mf":
+        raise PleError(f"{path}: a beam lattice is written as .3mf")
+    if fallback not in FALLBACK_STYLES:
+        raise PleError(f"fallback mesh {fallback!r}: expected one of {', '.join(FALLBACK_STYLES)}")
+    unit_name(unit)
+    r = lat.region(region)
+    info = {} if info is None else info
+    info["unclean"] = None
+    v, f = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    if fallback != "none":
+        v, f = _fallback_mesh(lat, r, fallback, levels, segments, max_groups, unit, info, workers, Path(path).name)
+    ev = lat.evaluate(r)
+    write_3mf(path, v, f, unit_name(unit), (ev.center, ev.radius, ev.beam_nodes))
+    return {"balls": len(ev.center), "beams": len(ev.beam_nodes), "triangles": len(f)}
+
+
+def _fallback_mesh(lat, r, style, levels, segments, max_groups, unit, info, workers, name):
+    """The beam lattice's triangle mesh (vertices float32 values (V, 3), faces (F, 3)), welded."""
+    bounds = np.array(lat.bounds(r))
+    check_float32_range(bounds, smallest_radius(lat, r), "3mf")
+    grid = grid_spacing(*bounds)  # ``output_grid``: every box snapped to one grid, as the streamed STL
+
+    def keep(chunk):  # in the assembling thread: the stream reuses the box's arrays once this returns
+        verts, faces = chunk
+        return snap(verts, grid).astype(np.float32), np.array(faces, np.int32)  # copies
+
+    checked, chunks = checked_stream(lat, r, style, levels, segments, max_groups, workers=workers, encode=keep,
+                                     grid=grid)
+    info["unclean"] = checked
+    if chunks is None:  # unclean hubs: their unions are made in memory, one mesh
+        mesh = tessellate(lat, r, style, levels, segments, unclean=checked)
+        info["unclean"] = mesh.metadata.get("ple_unclean")
+        v, f, _ = prepare_closed(mesh, "3mf", unit, grid, name)
+        return v, f
+    boxes = list(chunks)
+    offsets = np.cumsum([0] + [len(bv) for bv, _ in boxes])
+    verts = np.concatenate([bv for bv, _ in boxes] or [np.zeros((0, 3), np.float32)])
+    faces = np.concatenate([bf.astype(np.int64) + o for (_, bf), o in zip(boxes, offsets)]
+                           or [np.zeros((0, 3), np.int64)])
+    del boxes
+    v, f, _ = weld(verts, faces, grid)
+    return v, f
 
 
 def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: int | None = None,

@@ -38,43 +38,48 @@ RELS = ('<?xml version="1.0" encoding="UTF-8"?>\n'
         'Type="http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"/></Relationships>\n')
 
 
-def _rows(fmt: str, a: np.ndarray) -> str:
-    buf = io.StringIO()
-    if len(a):
-        np.savetxt(buf, a, fmt=fmt, delimiter="", newline="")
-    return buf.getvalue()
+ROWS = 1 << 16  # vertices, triangles, beams or balls formatted at a time: the text of a slice, never of a mesh
 
 
-def model_xml(vertices: np.ndarray, faces: np.ndarray, unit: str = "millimeter", lattice=None,
-              name: str = "PLE lattice") -> str:
-    """The 3D model part. ``vertices`` (V, 3) (float32 values), ``faces`` (F, 3) outward;
+def _write_rows(fh, fmt: str, a: np.ndarray) -> None:
+    for k in range(0, len(a), ROWS):
+        np.savetxt(fh, a[k:k + ROWS], fmt=fmt, delimiter="", newline="")
+
+
+def write_model(fh, vertices: np.ndarray, faces: np.ndarray, unit: str = "millimeter", lattice=None,
+                name: str = "PLE lattice") -> None:
+    """Write the 3D model part to the text stream ``fh``, ``ROWS`` rows at a time (the XML of a
+    large mesh is never one string). ``vertices`` (V, 3) (float32 values), ``faces`` (F, 3) outward;
     ``lattice``: None or (center (B, 3), radius (B,), beam_nodes (E, 2)) for a Beam Lattice."""
     if unit not in UNITS_3MF:
         raise PleError(f"3MF unit {unit!r}: expected one of {', '.join(UNITS_3MF)}")
-    v = np.asarray(vertices, np.float32).astype(float).reshape(-1, 3)
-    f = np.asarray(faces, np.int64).reshape(-1, 3)
+    v = np.asarray(vertices, np.float32).reshape(-1, 3)
+    f = np.asarray(faces).reshape(-1, 3)
     if not np.all(np.isfinite(v)):
         raise PleError("3MF: vertex coordinates must be finite")
     if len(f) and (f.min() < 0 or f.max() >= len(v)):
         raise PleError("3MF: a triangle refers to a missing vertex")
-    ns = f'xmlns="{NS_CORE}"'
-    lat_xml = ""
-    if lattice is not None:
-        center, radius, beam_nodes = _check_lattice(*lattice)
-        ns += f' xmlns:b="{NS_BEAM}" xmlns:b2="{NS_BALLS}"'
-        lat_xml = _beamlattice_xml(len(v), center, radius, beam_nodes)
-        v = np.concatenate([v, np.asarray(center, np.float32).astype(float)])
     if not len(f) and lattice is None:
         raise PleError("3MF: the mesh has no triangles")
-    verts = _rows('<vertex x="%.9g" y="%.9g" z="%.9g"/>', v)
-    tris = _rows('<triangle v1="%d" v2="%d" v3="%d"/>', f)
+    ns = f'xmlns="{NS_CORE}"'
+    if lattice is not None:
+        lattice = _check_lattice(*lattice)
+        ns += f' xmlns:b="{NS_BEAM}" xmlns:b2="{NS_BALLS}"'
     required = ' requiredextensions="b b2"' if lattice is not None and not len(f) else ""
-    return (f'<?xml version="1.0" encoding="UTF-8"?>\n'
-            f'<model {ns} unit="{unit}" xml:lang="en-US"{required}>'
-            f'<metadata name="Application">PLE, the Programmed Lattice Editor</metadata>'
-            f'<resources><object id="1" type="model" name="{name}"><mesh>'
-            f'<vertices>{verts}</vertices><triangles>{tris}</triangles>{lat_xml}'
-            f'</mesh></object></resources><build><item objectid="1"/></build></model>\n')
+    fh.write(f'<?xml version="1.0" encoding="UTF-8"?>\n'
+             f'<model {ns} unit="{unit}" xml:lang="en-US"{required}>'
+             f'<metadata name="Application">PLE, the Programmed Lattice Editor</metadata>'
+             f'<resources><object id="1" type="model" name="{name}"><mesh><vertices>')
+    vertex = '<vertex x="%.9g" y="%.9g" z="%.9g"/>'
+    _write_rows(fh, vertex, v.astype(float))
+    if lattice is not None:  # the balls' centres follow the mesh's vertices
+        _write_rows(fh, vertex, lattice[0].astype(np.float32).astype(float))
+    fh.write("</vertices><triangles>")
+    _write_rows(fh, '<triangle v1="%d" v2="%d" v3="%d"/>', f)
+    fh.write("</triangles>")
+    if lattice is not None:
+        _write_beamlattice(fh, len(v), *lattice)
+    fh.write("</mesh></object></resources><build><item objectid=\"1\"/></build></model>\n")
 
 
 def _check_lattice(center, radius, beam_nodes):
@@ -90,7 +95,7 @@ def _check_lattice(center, radius, beam_nodes):
     return center, radius, beam_nodes
 
 
-def _beamlattice_xml(offset: int, center, radius, beam_nodes) -> str:
+def _write_beamlattice(fh, offset: int, center, radius, beam_nodes) -> None:
     """b:beamlattice of cone beams (r1, r2 = the end balls' radii) and b2:balls at every ball
     (ball mode ``mixed``); vertex ids start at ``offset`` (after the triangle mesh's)."""
     c32 = np.asarray(center, np.float32).astype(float)
@@ -99,26 +104,34 @@ def _beamlattice_xml(offset: int, center, radius, beam_nodes) -> str:
     default_r = float(np.median(radius))
     beams = np.column_stack([beam_nodes + offset, radius[beam_nodes[:, 0]], radius[beam_nodes[:, 1]]]) \
         if len(beam_nodes) else np.zeros((0, 4))
-    beams_xml = _rows('<b:beam v1="%d" v2="%d" r1="%.17g" r2="%.17g"/>', beams)
-    balls = np.column_stack([np.arange(len(radius)) + offset, radius])
-    balls_xml = _rows('<b2:ball vindex="%d" r="%.17g"/>', balls)
-    return (f'<b:beamlattice minlength="{min_length:.9g}" radius="{default_r:.17g}" clippingmode="none" '
-            f'cap="sphere" b2:ballmode="mixed" b2:ballradius="{default_r:.17g}">'
-            f'<b:beams>{beams_xml}</b:beams><b2:balls>{balls_xml}</b2:balls></b:beamlattice>')
+    fh.write(f'<b:beamlattice minlength="{min_length:.9g}" radius="{default_r:.17g}" clippingmode="none" '
+             f'cap="sphere" b2:ballmode="mixed" b2:ballradius="{default_r:.17g}"><b:beams>')
+    _write_rows(fh, '<b:beam v1="%d" v2="%d" r1="%.17g" r2="%.17g"/>', beams)
+    fh.write("</b:beams><b2:balls>")
+    _write_rows(fh, '<b2:ball vindex="%d" r="%.17g"/>', np.column_stack([np.arange(len(radius)) + offset, radius]))
+    fh.write("</b2:balls></b:beamlattice>")
+
+
+def _write_package(target, vertices, faces, unit: str, lattice) -> None:
+    """The 3MF package (a zip) into ``target`` (a path or a binary stream); the model part is
+    streamed into its zip entry (``write_model``)."""
+    with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("[Content_Types].xml", CONTENT_TYPES)
+        z.writestr("_rels/.rels", RELS)
+        with z.open("3D/3dmodel.model", "w", force_zip64=True) as raw, \
+                io.TextIOWrapper(raw, encoding="utf-8", newline="") as fh:
+            write_model(fh, vertices, faces, unit, lattice)
 
 
 def package_bytes(vertices, faces, unit: str = "millimeter", lattice=None) -> bytes:
-    """The bytes of a 3MF package (see ``model_xml``): for writers to other places (job parts)."""
+    """The bytes of a 3MF package (see ``write_model``): for writers to other places (job parts)."""
     buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
-        z.writestr("[Content_Types].xml", CONTENT_TYPES)
-        z.writestr("_rels/.rels", RELS)
-        z.writestr("3D/3dmodel.model", model_xml(vertices, faces, unit, lattice))
+    _write_package(buf, vertices, faces, unit, lattice)
     return buf.getvalue()
 
 
 def write_3mf(path, vertices, faces, unit: str = "millimeter", lattice=None) -> None:
-    """Write a 3MF package atomically (see ``model_xml``)."""
-    data = package_bytes(vertices, faces, unit, lattice)
+    """Write a 3MF package atomically (see ``write_model``), streamed: the file holds the text,
+    memory a slice of it."""
     with atomic_path(path) as tmp:
-        tmp.write_bytes(data)
+        _write_package(tmp, vertices, faces, unit, lattice)

@@ -736,11 +736,8 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     ``cut`` is False (for a skin, which cuts and unites in one run of Booleans). ``unclean``: the
     region's report when the caller has it already (``checked_stream``), so the check runs once."""
     levels, segments = _check_style(style, levels, segments)
-    r = lat.region(region)
     bodies = clip_bodies(lat)
-    if lat.group_map is not None:  # groups not similar (Möbius, warps): the general per-hub path
-        lat = lat.explicit(r)
-        r = lat.region()
+    lat, r = lat.per_hub(region)  # groups not similar (Möbius, TMI): every hub its own template
     if style == "balls-beams":
 
         ev = lat.evaluate(r)
@@ -835,9 +832,7 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
         chunk = np.asarray(mesh.vertices), np.asarray(mesh.faces)
         yield chunk if encode is None else encode(chunk)
         return
-    if lat.group_map is not None:  # groups not similar (Möbius, warps): the general per-hub path
-        lat = lat.explicit(r)
-        r = lat.region()
+    lat, r = lat.per_hub(r)  # groups not similar (Möbius, TMI): every hub its own template
     workers = max(1, int(workers))
     tess = _tess if _tess is not None else _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style),
                                                         workers=workers)
@@ -981,9 +976,9 @@ def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: in
     levels, segments = _check_style(style, levels, segments)
     if style == "balls-beams":
         raise PleError("a checked stream needs a closed style (refined, cnt or chocc)")
-    r = lat.region(region)
     if clip_bodies(lat):  # cut at a body's surface: one Boolean of the whole mesh, in memory
         return None, None
+    lat, r = lat.per_hub(region)  # groups not similar (Möbius, TMI): every hub its own template
     tess = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style), grid=grid,
                         workers=max(1, int(workers)))  # grid: the region's output_grid when the caller has it
     report, ev = tess.find_unclean() if r.groups <= MAX_CHECK_GROUPS else (None, None)

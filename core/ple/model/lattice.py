@@ -674,6 +674,16 @@ class Lattice:
         out.meta = dict(self.meta, explicit_of=str(r))
         return out
 
+    def per_hub(self, region=None) -> tuple[Lattice, Region]:
+        """This lattice and its region as per-hub work sees them: unchanged when similarities place
+        the groups; for a group map (Möbius, TMI), whose hubs are exact images but not similar
+        copies, ``explicit`` (every hub its own template node) and its one-group region."""
+        r = self.region(region)
+        if self.group_map is None:
+            return self, r
+        out = self.explicit(r)
+        return out, out.region()
+
     def with_counts(self, nu: int, nv: int, nw: int) -> Lattice:
         """A copy with other repetition counts and the same incremental similarities."""
         other = self.copy()
