@@ -17,6 +17,7 @@ from ple.errors import PleError
 from ple.io.irfile import load_ir, save_ir
 from ple.meshing.achocc import CENTRE_MARGIN, JunctionError, _visible_face, hub_geometry
 from ple.meshing.chocc import _null_space_planes, apollonius_planes, chocc
+from ple.meshing.hubs import hub_template
 from ple.meshing.tessellate import tessellate
 from union_oracle import union_volume
 
@@ -158,6 +159,19 @@ def test_near_coincident_directions_are_unclean_and_united():
     ev = lat.evaluate()
     est, err = union_volume(ev.center, ev.radius, ev.beam_nodes, 16000)
     assert mesh.is_watertight and abs(mesh.volume / est - 1) <= 0.01 + 4 * err / est
+
+
+@pytest.mark.parametrize("angle", [1e-8, 1e-6, 1e-3])
+def test_coincidence_threshold(angle):
+    """Below about 1e-8 rad two directions are one for the ACHoCC (cos θ rounds to 1): an error;
+    above it the hub builds, unclean (its caps shrunk to their share, finite)."""
+    nb = np.array([X, [1, np.tan(angle), 0], Y, Z])
+    if angle < 1e-7:
+        with pytest.raises(JunctionError, match="same direction"):
+            hub_template(np.zeros(3), 0.06, nb, [0.06, 0.05, 0.06, 0.06], "cnt", 0, 16)
+    else:
+        hub = hub_template(np.zeros(3), 0.06, nb, [0.06, 0.05, 0.06, 0.06], "cnt", 0, 16)
+        assert not hub.geometry.clean and np.isfinite(hub.vertices).all()
 
 
 def test_zero_length_beam_names_the_hub():

@@ -69,7 +69,8 @@ def check_junction(radius, dirs: np.ndarray, other_radii: np.ndarray, lengths: n
     if len(dirs) > 1:
         i, j = np.triu_indices(len(dirs), 1)
         sin_t = np.linalg.norm(np.cross(dirs[i], dirs[j]), axis=1)
-        same = np.flatnonzero((sin_t < 1e-9) & (np.einsum("mi,mi->m", dirs[i], dirs[j]) > 0))
+        cos_t = np.einsum("mi,mi->m", dirs[i], dirs[j])
+        same = np.flatnonzero(((sin_t < 1e-9) & (cos_t > 0)) | (cos_t >= 1.0))  # as inflated_radius sees them
         if len(same):
             k = same[0]
             raise JunctionError("two beams leave the ball in the same direction (a beam-pattern repeated, or "
