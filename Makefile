@@ -8,8 +8,9 @@ PIP_FLAGS := --disable-pip-version-check -q
 
 CONSUMER_DEBS := admesh prusa-slicer
 GLTF_VALIDATOR := $(VENV)/node/node_modules/gltf-validator
+WHEELS := build/wheels/.fetched
 
-.PHONY: setup syslibs consumers demo test lint bench extension docs clean
+.PHONY: setup syslibs consumers demo test lint bench wheels extension docs clean
 
 setup: $(STAMP)
 
@@ -36,7 +37,7 @@ consumers:
 	@test -d $(GLTF_VALIDATOR) || { command -v npm >/dev/null && npm install -s --prefix $(VENV)/node gltf-validator; } \
 	  || echo "warning: could not install gltf-validator with npm (its tests will skip)"
 
-$(STAMP): pyproject.toml setup.py core/ple/io/_stlcodec.c core/ple/meshing/_assemble.c | syslibs consumers
+$(STAMP): pyproject.toml setup.py core/ple/io/_stlcodec.c core/ple/meshing/_assemble.c core/ple/meshing/_selfcheck.c | syslibs consumers
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) is required (bpy 5.0.1 needs Python 3.11)"; exit 2; }
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install $(PIP_FLAGS) --upgrade pip
@@ -46,7 +47,7 @@ $(STAMP): pyproject.toml setup.py core/ple/io/_stlcodec.c core/ple/meshing/_asse
 demo: $(STAMP)
 	$(BIN)/python -m tools.demo
 
-test: $(STAMP)
+test: $(STAMP) $(WHEELS)
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest tests
 
@@ -59,7 +60,15 @@ bench: $(STAMP)
 clean:
 	rm -rf $(VENV) dist build out *.egg-info core/*.egg-info
 
-extension: $(STAMP)
+# the pure-Python wheels the extension bundles (trimesh), downloaded once: building the extension,
+# and every test that builds it, then needs no network
+$(WHEELS): ple_addon/build.py | $(STAMP)
+	@$(BIN)/python -m ple_addon.build --fetch-wheels && touch $@ \
+	  || echo "warning: no wheels downloaded (offline?): the extension is built without trimesh"
+
+wheels: $(WHEELS)
+
+extension: $(STAMP) $(WHEELS)
 	$(BIN)/python -m ple_addon.build
 
 docs: $(STAMP)

@@ -1,6 +1,7 @@
-"""The compiled parts of PLE, both optional: a binary STL encoder (``ple.io._stlcodec``) and box
-assembly (``ple.meshing._assemble``). Without a C compiler the build skips them and
-``ple.io.export`` and ``ple.meshing.tessellate`` use numpy (the same bytes, slower)."""
+"""The compiled parts of PLE, all optional: a binary STL encoder (``ple.io._stlcodec``), box
+assembly (``ple.meshing._assemble``) and the self-intersection check (``ple.meshing._selfcheck``).
+Without a C compiler the build skips them and ``ple.io.export``, ``ple.meshing.tessellate`` and
+``ple.meshing.selfcheck`` use numpy (the same results, slower)."""
 
 from setuptools import Extension, setup
 
@@ -8,4 +9,6 @@ FLAGS = ["-O2", "-ffp-contract=off", "-fno-fast-math"]  # IEEE operations as wri
 
 setup(ext_modules=[Extension("ple.io._stlcodec", ["core/ple/io/_stlcodec.c"], optional=True, extra_compile_args=FLAGS),
                    Extension("ple.meshing._assemble", ["core/ple/meshing/_assemble.c"], optional=True,
+                             extra_compile_args=FLAGS),
+                   Extension("ple.meshing._selfcheck", ["core/ple/meshing/_selfcheck.c"], optional=True,
                              extra_compile_args=FLAGS)])

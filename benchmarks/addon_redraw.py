@@ -52,7 +52,8 @@ def main() -> None:
 def measure(bpy, name: str, edits: int) -> dict:
     from ple.meshing.preview import balls_beams_mesh
 
-    from ple_addon import draw, rig
+    from ple_addon import draw
+    from ple_addon.rig import model, sync
 
     bpy.ops.ple.lattice_add(source="PRESET", preset=name, region=(10, 10, 10))
     r = bpy.context.active_object
@@ -60,10 +61,10 @@ def measure(bpy, name: str, edits: int) -> dict:
         r.ple.counts = tuple(max(10, c) for c in r.ple.counts)
     r.ple.region_max = (10, 10, 10)  # exactly 10^3 node-groups
     bpy.context.view_layer.update()
-    frame = rig.parts(r)["u"]
+    frame = model.parts(r)["u"]
     start = frame.location.copy()
     total, handler = [], []
-    orig_refresh = rig.refresh
+    orig_refresh = sync.refresh
 
     def timed_refresh(obj, force=False):
         t0 = time.perf_counter()
@@ -71,7 +72,7 @@ def measure(bpy, name: str, edits: int) -> dict:
         handler.append(time.perf_counter() - t0)
         return out
 
-    rig.refresh = timed_refresh
+    sync.refresh = timed_refresh
     try:
         for n in range(edits):
             frame.location = (start[0] + 0.01 * (n % 7 + 1), start[1], start[2])
@@ -79,12 +80,12 @@ def measure(bpy, name: str, edits: int) -> dict:
             bpy.context.view_layer.update()
             total.append(time.perf_counter() - t0)
     finally:
-        rig.refresh = orig_refresh
-    region = rig.parts(r)["region"]
+        sync.refresh = orig_refresh
+    region = model.parts(r)["region"]
     evaluated = region.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
-    lat = rig.lattice_of(r)
-    box = rig.region_of(r, lat)
-    ev = rig.evaluate_region(r, lat)
+    lat = model.lattice_of(r)
+    box = model.region_of(r, lat)
+    ev = model.evaluate_region(r, lat)
     t_eval = min(_time(lambda: lat.evaluate(box)) for _ in range(5))
     t_write = min(_time(lambda: draw.region_mesh(region.data, ev)) for _ in range(5))
 

@@ -33,6 +33,8 @@ import threading
 import time
 from pathlib import Path
 
+from .corelink import PleError, core
+
 ROOT = Path(__file__).resolve().parent.parent
 STYLES = {"chocc": "CHOCC", "cnt": "CNT", "refined": "REFINED"}
 
@@ -47,11 +49,9 @@ def build_zip(tmp: Path) -> Path:
 
 
 def run(args) -> int:
-    from ple.app.batch import plan, prepare_output_dir
-    from ple.app.cluster import dask_client, run_tasks
-    from ple.errors import PleError
-    from ple.io.files import atomic_write_text
-
+    plan, prepare_output_dir = core("app.batch").plan, core("app.batch").prepare_output_dir
+    dask_client, run_tasks = core("app.cluster").dask_client, core("app.cluster").run_tasks
+    atomic_write_text = core("io.files").atomic_write_text
     try:
         if args.style not in STYLES:
             raise PleError(f"--style {args.style!r}: expected one of {', '.join(STYLES)}")
@@ -122,7 +122,7 @@ def _worker_start(tmp: Path):
 
 
 # ----- worker: bpy in the worker process ------------------------------------------------------------
-_BLENDER: dict = {}  # zip hash -> (bpy, rig module, core export module): installed once per process
+_BLENDER: dict = {}  # zip hash -> (bpy, the installed extension's package): installed once per process
 # Blender runs on the thread that imported bpy (the package ``ple_addon`` imports it just before
 # this module): the main thread when this module was an embedded worker's main module (its
 # ``__mp_main__``, run first) or a worker's ``--preload``; a Dask worker that first met it while
@@ -157,8 +157,7 @@ def _blender(addon: tuple[str, bytes]):
                                                  enable_on_install=True)
     name = f"bl_ext.{module}.ple"
     addon_utils.enable(name, default_set=True)
-    _BLENDER[sha] = (bpy, importlib.import_module(f"{name}.rig"),
-                     importlib.import_module(f"{name}.vendor.ple.io.export"))
+    _BLENDER[sha] = (bpy, importlib.import_module(name))
     return _BLENDER[sha]
 
 
@@ -170,8 +169,6 @@ def blender_variant(addon, job: dict, params: dict, path: str) -> dict:
     Blender's API works only on the process's main thread (elsewhere its operators crash), and a
     Dask task runs on a worker thread: the task hands its work to the worker's main thread (its
     event loop) and waits, so one variant at a time runs with ``bpy`` in each worker process."""
-    from ple.errors import PleError
-
     if threading.current_thread() is threading.main_thread():
         return _variant_here(addon, job, params, path)
     if not BPY_ON_MAIN_THREAD:
@@ -187,24 +184,26 @@ def blender_variant(addon, job: dict, params: dict, path: str) -> dict:
 
 
 def _variant_here(addon, job: dict, params: dict, path: str) -> dict:
-    from ple.errors import PleError
-
     t0 = time.perf_counter()
-    bpy, rigmod, core_export = _blender(addon)
+    bpy, ext = _blender(addon)
     try:
         if job["blend"]:
             bpy.ops.wm.open_mainfile(filepath=job["blend"], load_ui=False)
         else:
             bpy.ops.wm.read_homefile(use_empty=True, load_ui=False)
-        entry = _one_variant(bpy, rigmod, core_export, job, params, Path(path))
+        entry = _one_variant(bpy, ext, job, params, Path(path))
     except Exception as exc:  # the program, the rig or the exporter refused this variant
         raise PleError(f"{type(exc).__name__}: {exc}") from None
     return {"file": Path(path).name, "params": params, **entry, "seconds": round(time.perf_counter() - t0, 3),
             "worker_pid": os.getpid()}
 
 
-def _one_variant(bpy, rigmod, core_export, job: dict, params: dict, path: Path) -> dict:
+def _one_variant(bpy, ext, job: dict, params: dict, path: Path) -> dict:
+    """One variant in this Blender, through the installed extension ``ext`` (its rig, and its core
+    through its ``corelink``)."""
     import numpy as np
+
+    model, sync = ext.rig.model, ext.rig.sync
 
     objects_before = len(bpy.data.objects)
     text = bpy.data.texts.new("program.py")
@@ -213,13 +212,13 @@ def _one_variant(bpy, rigmod, core_export, job: dict, params: dict, path: Path) 
         raise RuntimeError("ple.lattice_add failed (see the program)")
     rig = bpy.context.view_layer.objects.active
     for name, value in params.items():
-        rig[rigmod.PARAM_PREFIX + name] = value
-    rigmod.refresh(rig, force=True)
+        rig[model.PARAM_PREFIX + name] = value
+    sync.refresh(rig, force=True)
     if rig.ple.status:
         raise RuntimeError(rig.ple.status)
     rig.ple.region_min = (0, 0, 0)
-    rig.ple.region_max = tuple(rigmod.lattice_of(rig).counts)
-    rigmod.refresh(rig, force=True)
+    rig.ple.region_max = tuple(model.lattice_of(rig).counts)
+    sync.refresh(rig, force=True)
     meshes_before = set(bpy.data.objects)
     if bpy.ops.ple.tessellate(style=STYLES[job["style"]]) != {"FINISHED"}:
         raise RuntimeError(f"ple.tessellate failed: {rig.ple.status}")
@@ -247,7 +246,8 @@ def _one_variant(bpy, rigmod, core_export, job: dict, params: dict, path: Path) 
         me.vertices.foreach_get("co", verts)
         faces = np.empty(len(me.polygons) * 3, np.int32)
         me.polygons.foreach_get("vertices", faces)
-        core_export.export_mesh(trimesh.Trimesh(verts.reshape(-1, 3), faces.reshape(-1, 3), process=False), tmp)
+        mesh = trimesh.Trimesh(verts.reshape(-1, 3), faces.reshape(-1, 3), process=False)
+        ext.corelink.core("io.export").export_mesh(mesh, tmp)
     os.replace(tmp, path)
     entry = {"triangles": sum(len(p.vertices) - 2 for p in obj.data.polygons), "bytes": path.stat().st_size,
              "objects_at_start": objects_before}

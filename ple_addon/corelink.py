@@ -43,7 +43,16 @@ program = core("program.runtime")
 runner = core("program.runner")  # programs and long core work contained in a child process
 snippets = core("program.snippets")
 styles = core("meshing.styles")  # also the triangle estimate of a style
+weld = core("meshing.weld")  # meshes that survive float32 (files, Blender meshes)
 work = core("model.budget")  # the work budget: estimates of a region (balls, beams, triangles, memory), limits
 PleError = ple.PleError
 Lattice = ple.Lattice
 Similarity = ple.Similarity
+
+
+def register() -> None:
+    pass
+
+
+def unregister() -> None:
+    pass

@@ -1,4 +1,5 @@
-"""Writing core arrays into Blender data: the region mesh, the cage curve, frame matrices.
+"""Every writer of Blender data from core arrays: the region mesh, the cage curve, frame matrices,
+meshes of faces (tessellations, previews, solids), materials and the balls-and-beams modifier.
 
 Bulk data goes through ``foreach_set`` on float32/int32 arrays; datablocks are reused (resized
 only when the element counts change), so thousands of edits create no new datablocks.
@@ -172,3 +173,28 @@ def set_detail(obj, elements: int) -> None:
         key = ids.get(name)
         if key is not None and mod.get(key) != value:
             mod[key] = value
+
+
+def mesh_from_arrays(name: str, verts, faces, me=None):
+    """A mesh of vertices (n, 3) and faces (f, k) of k corners each (a new one, or ``me`` refilled)."""
+    if me is None:
+        me = bpy.data.meshes.new(name)
+    else:
+        me.clear_geometry()
+    k = faces.shape[1] if len(faces) else 3
+    me.vertices.add(len(verts))
+    me.loops.add(k * len(faces))
+    me.polygons.add(len(faces))
+    me.attributes["position"].data.foreach_set("vector", verts.astype(np.float32).ravel())
+    me.attributes[".corner_vert"].data.foreach_set("value", faces.astype(np.int32).ravel())
+    me.polygons.foreach_set("loop_start", np.arange(0, k * len(faces), k, dtype=np.int32))
+    me.update(calc_edges=True)
+    return me
+
+
+def register() -> None:
+    pass
+
+
+def unregister() -> None:
+    pass

@@ -4,7 +4,7 @@ preferences, so that an endless loop, a memory bomb or a long LiL costs the chil
 
 Blocking calls (running a program, a filtered redraw, applying edits) wait at most the program
 time limit. Jobs (tessellate, export, LiL) are followed step by step by a modal operator
-(``operators.SteppedOperator``): progress in the status bar and the panel, Esc stops the child
+(``ops.base.SteppedOperator``): progress in the status bar and the panel, Esc stops the child
 at once, and nothing is applied to the rig before the child's result is complete.
 """
 
@@ -52,3 +52,11 @@ def follow(job, progress):
         return items, job.result()
     finally:
         job.cancel()
+
+
+def register() -> None:
+    pass
+
+
+def unregister() -> None:
+    pass

@@ -48,3 +48,13 @@ def max_bytes() -> float:
 
 
 CLASSES = (PLE_AddonPreferences,)
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

@@ -13,23 +13,19 @@ from bpy.props import (
     StringProperty,
 )
 
+from .rig import events
+
 
 def _rig_changed(self, context):
-    from . import rig
-
-    rig.on_settings_changed(self.id_data)
+    events.on_settings_changed(self.id_data)
 
 
 def _cumulative_changed(self, context):
-    from . import rig
-
-    rig.on_cumulative_changed(self.id_data)
+    events.on_cumulative_changed(self.id_data)
 
 
 def _counts_changed(self, context):
-    from . import rig
-
-    rig.on_counts_changed(self.id_data)
+    events.on_counts_changed(self.id_data)
 
 
 def _is_rig(self, obj):

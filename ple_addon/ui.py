@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import bpy
 
-from . import rig as rigmod
 from .corelink import PleError, presets, snippets
+from .ops.base import RigPanel, draw_source_menu
+from .rig import model
+from .session import SESSION
 
 _previews = {}
 
@@ -44,30 +46,10 @@ class PLE_MT_add(bpy.types.Menu):  # noqa: N801 - Blender naming
     bl_label = "PLE Lattice"
 
     def draw(self, context):
-        layout = self.layout
-        for name in presets.preset_names():
-            icon = preset_icon(name)
-            kw = {"icon_value": icon} if icon else {"icon": "LIGHTPROBE_VOLUME"}
-            op = layout.operator("ple.lattice_add", text=name, **kw)
-            op.source, op.preset = "PRESET", name
-        layout.separator()
-        layout.operator("ple.lattice_add", text="From File…", icon="FILE_SCRIPT").source = "FILE"
+        draw_source_menu(self.layout, "ple.lattice_add", presets.preset_names(), "LIGHTPROBE_VOLUME", preset_icon)
 
 
-class PLE_PT_base:  # noqa: N801 - Blender naming
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "PLE"
-
-    @classmethod
-    def poll(cls, context):
-        return rigmod.rig_of(context.active_object) is not None
-
-    def rig(self, context):
-        return rigmod.rig_of(context.active_object)
-
-
-class PLE_PT_program(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender naming
+class PLE_PT_program(RigPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
     bl_label = "Program"
 
     @classmethod
@@ -82,8 +64,8 @@ class PLE_PT_program(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender nami
             return
         p = rig.ple
         layout.prop(p, "text")
-        for key in [k for k in rig.keys() if k.startswith(rigmod.PARAM_PREFIX)]:
-            layout.prop(rig, f'["{key}"]', text=key[len(rigmod.PARAM_PREFIX):], slider=True)
+        for key in [k for k in rig.keys() if k.startswith(model.PARAM_PREFIX)]:
+            layout.prop(rig, f'["{key}"]', text=key[len(model.PARAM_PREFIX):], slider=True)
         row = layout.row(align=True)
         row.operator("ple.program_run", icon="PLAY")
         row.operator("ple.program_apply", icon="FILE_REFRESH")
@@ -96,7 +78,7 @@ class PLE_PT_program(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender nami
         row.operator("ple.snippet_copy", icon="COPYDOWN")
         row.prop(p, "snippet_digits")
         try:
-            n = len(snippets.coalesce(rigmod.edits_of(rig)))
+            n = len(snippets.coalesce(model.edits_of(rig)))
         except PleError:
             n = 0
         row = layout.row()
@@ -112,7 +94,7 @@ class PLE_PT_program(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender nami
             layout.label(text=p.message, icon="INFO")
 
 
-class PLE_PT_frames(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender naming
+class PLE_PT_frames(RigPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
     bl_label = "Frames"
 
     def draw(self, context):
@@ -120,7 +102,7 @@ class PLE_PT_frames(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender namin
         layout = self.layout
         layout.label(text="Drag, rotate or scale a frame: G places the lattice,")
         layout.label(text="U, V, W are the similarities of the steady rows.")
-        parts = rigmod.parts(rig)
+        parts = model.parts(rig)
         col = layout.column(align=True)
         for n, axis in enumerate("uvw"):
             row = col.row(align=True)
@@ -130,7 +112,7 @@ class PLE_PT_frames(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender namin
         layout.prop(rig.ple, "counts")
 
 
-class PLE_PT_region(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender naming
+class PLE_PT_region(RigPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
     bl_label = "Region"
 
     def draw(self, context):
@@ -141,7 +123,7 @@ class PLE_PT_region(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender namin
         layout.prop(p, "cage_interior")
 
 
-class PLE_PT_template(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender naming
+class PLE_PT_template(RigPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
     bl_label = "Template"
 
     def draw(self, context):
@@ -152,7 +134,7 @@ class PLE_PT_template(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender nam
         row.operator("ple.node_add", icon="ADD")
         row.operator("ple.node_remove", icon="REMOVE")
         layout.operator("ple.beam_add", icon="ADD")
-        st = rigmod._state.get(rig.ple.uid)
+        st = SESSION.states.get(rig.ple.uid)
         if st is not None and st.lattice is not None:
             for b, beam in enumerate(st.lattice.beams):
                 row = layout.row()
@@ -160,7 +142,7 @@ class PLE_PT_template(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender nam
                 row.operator("ple.beam_remove", text="", icon="X").index = b
 
 
-class PLE_PT_filters(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender naming
+class PLE_PT_filters(RigPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
     bl_label = "Filters"
 
     def draw(self, context):
@@ -177,7 +159,7 @@ class PLE_PT_filters(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender nami
         row.operator("ple.stencil_filter")
 
 
-class PLE_PT_output(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender naming
+class PLE_PT_output(RigPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
     bl_label = "Tessellate & Export"
 
     def draw(self, context):
@@ -189,3 +171,47 @@ class PLE_PT_output(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender namin
 
 
 CLASSES = (PLE_MT_add, PLE_PT_program, PLE_PT_frames, PLE_PT_region, PLE_PT_template, PLE_PT_filters, PLE_PT_output)
+
+
+# (operator, key, modifiers): in the 3D viewport, Object Mode
+KEYMAP = (("ple.program_run", "R", {"ctrl": True, "alt": True}),
+          ("ple.program_apply", "A", {"ctrl": True, "alt": True}),
+          ("ple.snippet_copy", "C", {"ctrl": True, "alt": True}),
+          ("ple.duplicate", "D", {"ctrl": True, "alt": True}),
+          ("ple.remove", "X", {"ctrl": True, "alt": True}))
+_keymap_items: list = []
+
+
+def register_keymap():
+    kc = bpy.context.window_manager.keyconfigs.addon
+    if kc is None:  # background mode has no add-on key configuration
+        return
+    km = kc.keymaps.new(name="Object Mode", space_type="EMPTY")
+    for idname, key, mods in KEYMAP:
+        _keymap_items.append((km, km.keymap_items.new(idname, key, "PRESS", **mods)))
+
+
+def unregister_keymap():
+    for km, kmi in _keymap_items:
+        km.keymap_items.remove(kmi)
+    _keymap_items.clear()
+
+
+def menu_add(self, context):
+    self.layout.menu(PLE_MT_add.bl_idname, text="PLE Lattice", icon="LIGHTPROBE_VOLUME")
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    bpy.types.VIEW3D_MT_add.append(menu_add)
+    load_previews()
+    register_keymap()
+
+
+def unregister() -> None:
+    unregister_keymap()
+    free_previews()
+    bpy.types.VIEW3D_MT_add.remove(menu_add)
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

@@ -23,7 +23,8 @@ OUTSIDE = ("tools", "ple_addon")  # repository tools and the Blender add-on
 OPTIONAL = {"scipy", "manifold3d", "PIL", "lib3mf", "bpy", "mathutils", "addon_utils", "dask", "distributed", "fsspec",
             "resource"}  # resource: POSIX only (the runner falls back where it is missing)
 QUERY_DISPATCHER = "ple.queries.biq"
-COMPILED = {"ple.io._stlcodec", "ple.meshing._assemble"}  # optional C extensions (setup.py), imported in a try
+# optional C extensions (setup.py), imported in a try
+COMPILED = {"ple.io._stlcodec", "ple.meshing._assemble", "ple.meshing._selfcheck"}
 DOOR_NAMES = re.compile(r"\bple\.(cli|bench)\b|\bple_addon\b|\btools\.\w")  # also in strings (subprocess)
 WRITES = {"write_text", "write_bytes", "savez", "savez_compressed", "save", "tofile", "export", "dump"}
 
@@ -190,3 +191,99 @@ def test_a_forbidden_import_is_caught(tmp_path, module, text, rule):
     found = violations(root)
     assert any(rule in v and "bad" in v for v in found), found
     assert all("bad" in v for v in found), found  # nothing else in the copy is reported
+
+
+# ----- the add-on and the tools ---------------------------------------------------------------------
+ADDON = CORE.parent.parent / "ple_addon"
+TOOLS = CORE.parent.parent / "tools"
+# rank of each add-on module (docs/architecture.md): a module imports only modules of lower rank
+ADDON_RANK = {"corelink": 0, "prefs": 0, "session": 1, "draw": 1, "jobs": 1,
+              "rig.hooks": 2, "rig.model": 3, "rig.edits": 4, "rig.sync": 5, "rig.events": 6, "rig": 7,
+              "props": 7, "ops.base": 7, "ops.program": 8, "ops.template": 8, "ops.output": 8, "ops": 9, "ui": 9,
+              "features": 10, "features.body": 10, "features.clg": 10, "features.mobius": 10, "features.check": 10,
+              "": 11, "batch": 11, "build": 11}
+MAX_LINES = 400  # no add-on module is longer
+
+
+def _short(mod: str) -> str:
+    return mod.split(".", 1)[1] if "." in mod else ""
+
+
+def import_cycles(root: Path) -> list[str]:
+    """Import circles among the modules of the package at ``root``, function-local imports included."""
+    known = modules(root)
+    edges: dict[str, set[str]] = {}
+    for src, dst, _line, _local in imports(root):
+        if dst in known and dst != src:
+            edges.setdefault(src, set()).add(dst)
+    return [f"import cycle: {' -> '.join(comp)}" for comp in cycles(edges)]
+
+
+def addon_violations(root: Path) -> list[str]:
+    """Every broken rule of the add-on at ``root`` (``.../ple_addon``), one line each: ranks, the
+    features' independence, ``corelink`` as the one door into the core, no circles, module sizes."""
+    known = modules(root)
+    found = import_cycles(root)
+    for src, dst, line, local in imports(root):
+        where = f"{known[src].relative_to(root.parent)}:{line}"
+        top = dst.split(".")[0]
+        s, d = _short(src), _short(dst)
+        if top in ("ple", "vendor") or dst.startswith(f"{root.name}.vendor"):
+            if s != "corelink":
+                found.append(f"{where}: {src} imports the core ({dst}): only corelink may")
+            continue
+        if top != root.name or dst not in known or dst == src:
+            continue
+        if local:
+            found.append(f"{where}: function-local import of {dst}")
+        if s.startswith("features.") and d.startswith("features.") and s != d:
+            found.append(f"{where}: feature {src} imports the feature {dst}")
+        elif d.startswith("features.") and s != "":
+            found.append(f"{where}: {src} imports the feature {dst} (only the add-on's __init__ may)")
+        elif s not in ADDON_RANK:
+            found.append(f"{where}: {src} has no rank (give it one here and in docs/architecture.md)")
+        elif d in ADDON_RANK and ADDON_RANK[d] >= ADDON_RANK[s] and not (s == "" or d.startswith(f"{s}.")):
+            found.append(f"{where}: {src} imports {dst}, which is not below it")
+    for path in known.values():
+        n = len(path.read_text().splitlines())
+        if n > MAX_LINES:
+            found.append(f"{path.relative_to(root.parent)}: {n} lines (at most {MAX_LINES})")
+    return found
+
+
+def test_the_addon_keeps_its_layers():
+    assert addon_violations(ADDON) == []
+
+
+def test_every_addon_module_has_a_rank_and_registers():
+    for mod, path in modules(ADDON).items():
+        if _short(mod) in ("batch", "build"):  # repository tools, not shipped in the extension
+            continue
+        assert _short(mod) in ADDON_RANK, f"{mod}: give it a rank in ADDON_RANK and docs/architecture.md"
+        names = {n.name for n in ast.parse(path.read_text()).body if isinstance(n, ast.FunctionDef)}
+        assert {"register", "unregister"} <= names, f"{mod} needs register() and unregister()"
+
+
+def test_the_tools_import_no_circle():
+    assert import_cycles(TOOLS) == []
+
+
+@pytest.mark.parametrize("module, text, rule", [
+    ("features/bad.py", "from . import clg\n", "imports the feature"),
+    ("rig/bad.py", "from ..features import body\n", "only the add-on's __init__ may"),
+    ("ops/bad.py", "import ple\n", "only corelink may"),
+    ("draw.py", "from .rig import model\n", "not below it"),
+    ("rig/model.py", "def f():\n    from . import events\n", "function-local import"),
+    ("rig/model.py", "def f():\n    from . import events\n", "import cycle"),
+    ("ui.py", "\n" * MAX_LINES, "lines (at most"),
+])
+def test_a_forbidden_import_in_the_addon_is_caught(tmp_path, module, text, rule):
+    """The checker itself: a copy of the add-on with one bad module (or line) breaks exactly that rule."""
+    root = tmp_path / "ple_addon"
+    shutil.copytree(ADDON, root, ignore=shutil.ignore_patterns("__pycache__"))
+    path = root / module
+    path.write_text((path.read_text() if path.exists() else "") + text)
+    found = addon_violations(root)
+    bad = module.split("/")[-1].removesuffix(".py")
+    assert any(rule in v and bad in v for v in found), found
+    assert all(bad in v for v in found), found  # nothing else in the copy is reported

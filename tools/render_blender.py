@@ -17,7 +17,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from ple_addon import register, rig
+from ple_addon import register
+from ple_addon.rig import model
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -34,7 +35,7 @@ def render(out: Path, preset: str, region: tuple, size: tuple, clg: bool = False
     add = bpy.ops.ple.clg_add if clg else bpy.ops.ple.lattice_add  # a CLG rig: preview mesh over the region
     add(source="PRESET", preset=preset, region=region)
     r = bpy.context.active_object
-    p = rig.parts(r)
+    p = model.parts(r)
     bpy.context.view_layer.update()
     scene = bpy.context.scene
     scene.render.engine = "BLENDER_WORKBENCH"

@@ -1,16 +1,16 @@
 """The Blender extension, installed from the built zip into headless bpy 5.0.1.
 
-bpy state is global, so every case runs in its OWN fresh subprocess (``python
-tests/test_addon.py ZIP CASE``): it installs and enables the zip, runs ``case_<CASE>`` and
-prints ``CASE OK``; a crash of one case cannot lose the others. Truth comes from the core
-package installed in the environment (an independent copy of the vendored one).
+The cases run in the test run's one Blender worker (``conftest.py``, ``blender_worker.py``): the
+zip is installed once and every case starts from an empty scene, the add-on's default preferences
+and a forgotten session; a crash of one case costs only that case. Truth comes from the core
+package installed in the environment (an independent copy of the vendored one). The other add-on
+test modules share the helpers below (``bpy``, ``ple_ext`` and ``core`` are bound by the worker).
 """
 
 from __future__ import annotations
 
 import json
 import os
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -37,30 +37,17 @@ def lattice(thickness: Range(0.05, 0.3) = 0.1, n: Range(1, 9) = 3):
 
 
 # ----- pytest side ------------------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def zip_path(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("addon")
-    build = subprocess.run([sys.executable, "-m", "ple_addon.build", "--out", str(tmp)], cwd=ROOT,
-                           capture_output=True, text=True)
-    assert build.returncode == 0, build.stdout + build.stderr
-    path = Path(build.stdout.strip().splitlines()[-1])
-    assert path.name == "ple-0.1.0.zip" and path.is_file()
-    return path
-
-
 CASES = ["install", "lattice_add_sources", "region_matches_core", "frame_moves", "cumulative_frames",
          "param_slider", "counts", "template_ops", "snippet_round_trip", "ir_apply", "no_leaks", "errors",
          "untrusted", "undo", "filters", "tessellate", "export", "ui", "becots_corners"]
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_addon_case(zip_path, case, tmp_path):
-    res = subprocess.run([sys.executable, __file__, str(zip_path), case], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=600)
-    assert f"{case} OK" in res.stdout, res.stdout[-4000:] + res.stderr[-4000:]
+def test_addon_case(run_case, case):
+    run_case(__file__, case)
 
 
-# ----- bpy side (runs in the subprocess) ------------------------------------------------------------
+# ----- bpy side (runs in the Blender worker) --------------------------------------------------------
 bpy = ple_ext = core = None
 
 
@@ -74,7 +61,7 @@ def new_rig(preset="cubic", **kw):
 
 
 def part(rig, key):
-    return ple_ext.rig.parts(rig)[key]
+    return ple_ext.rig.model.parts(rig)[key]
 
 
 def region_arrays(rig):
@@ -140,7 +127,7 @@ def case_lattice_add_sources():
     rig = new_rig("fig6_3", region=(2, 2, 2))
     assert tuple(rig.ple.counts) == (7, 12, 15) and rig.ple.source_kind == "PROGRAM"
     assert "ple:thickness" in rig.keys() and rig.id_properties_ui("ple:thickness").as_dict()["max"] == 0.12
-    names = sorted(ple_ext.rig.parts(rig), key=str)
+    names = sorted(ple_ext.rig.model.parts(rig), key=str)
     assert names == sorted(["G", "u", "v", "w", "cage", "region", ("node", 0)], key=str)
     assert rig.users_collection[0].name == "PLE fig6_3"
     assert bpy.ops.ple.lattice_add(source="FILE", filepath=str(tmp / "prog.py")) == {"FINISHED"}
@@ -217,7 +204,7 @@ def case_cumulative_frames():
     co, _, _ = region_arrays(rig)
     assert np.isclose(co[:, 2].max(), 8, atol=1e-5)
     assert np.allclose(np.unique(np.round(co[:, 2], 5)), [0, 2, 4, 6, 8])
-    edits = ple_ext.rig.edits_of(rig)
+    edits = ple_ext.rig.model.edits_of(rig)
     assert edits[-1].cumulative and edits[-1].similarity.kind == "translation"
 
 
@@ -235,19 +222,19 @@ def case_counts():
     rig = new_rig("fig6_3")
     rig.ple.counts = (4, 12, 15)
     assert tuple(rig.ple.counts) == (4, 12, 15)
-    lat = ple_ext.rig.lattice_of(rig)
+    lat = ple_ext.rig.model.lattice_of(rig)
     assert lat.counts == (4, 12, 15)
     assert bpy.ops.ple.snippet_copy() == {"FINISHED"}
     assert bpy.data.texts["PLE snippet"].as_string().startswith("lat.set_u(4, lat.u.similarity")
     assert bpy.ops.ple.edits_clear() == {"FINISHED"}  # back to what the program gives
-    assert tuple(rig.ple.counts) == (7, 12, 15) and ple_ext.rig.edits_of(rig) == []
+    assert tuple(rig.ple.counts) == (7, 12, 15) and ple_ext.rig.model.edits_of(rig) == []
     assert_region_is(rig, core.load_lattice("fig6_3"), "0:3,0:3,0:3")
 
 
 def case_template_ops():
     rig = new_rig("cubic", region=(2, 2, 2))
     assert bpy.ops.ple.node_add(center=(0.5, 0.5, 0), radius=0.05) == {"FINISHED"}
-    p = ple_ext.rig.parts(rig)
+    p = ple_ext.rig.model.parts(rig)
     n0, n1 = p[("node", 0)], p[("node", 1)]
     assert np.allclose(matrix(n1)[:3, 3], [0.5, 0.5, 0]) and np.isclose(matrix(n1)[0, 0], 0.05)
     for o in bpy.context.view_layer.objects:
@@ -256,7 +243,7 @@ def case_template_ops():
     n0.select_set(True)
     bpy.context.view_layer.objects.active = n1
     assert bpy.ops.ple.beam_add(offset=(0, 0, 1)) == {"FINISHED"}  # picks the two selected nodes
-    lat = ple_ext.rig.lattice_of(rig)
+    lat = ple_ext.rig.model.lattice_of(rig)
     b = lat.beams[-1]
     assert (b.n1, b.n2, b.di, b.dj, b.dk) == (1, 0, 0, 0, 1)  # active node first
     n1.location = (0.5, 0.25, 0.1)  # move a template node
@@ -272,7 +259,7 @@ def case_template_ops():
     assert bpy.ops.ple.node_remove(index=0, rig=rig.name) == {"FINISHED"}
     want.remove_node(0)
     assert_region_is(rig, want, "0:2,0:2,0:2")
-    assert ("node", 1) not in ple_ext.rig.parts(rig)
+    assert ("node", 1) not in ple_ext.rig.model.parts(rig)
     fails(bpy.ops.ple.beam_remove, "beam-pattern 9", index=9, rig=rig.name)
 
 
@@ -293,7 +280,7 @@ def case_snippet_round_trip():
     rig.ple.counts = (4, 5, 3)
     assert bpy.ops.ple.node_add(center=(0.5, 0.5, 0.5), radius=0.05) == {"FINISHED"}
     assert bpy.ops.ple.beam_add(n1=0, n2=1, offset=(0, 0, 0)) == {"FINISHED"}
-    gui = ple_ext.rig.lattice_of(rig)
+    gui = ple_ext.rig.model.lattice_of(rig)
     assert bpy.ops.ple.snippet_copy() == {"FINISHED"}
     clip = bpy.context.window_manager.clipboard
     snippet = bpy.data.texts["PLE snippet"].as_string()
@@ -304,7 +291,7 @@ def case_snippet_round_trip():
     assert "# the template node-group" in new and "# along U" in new
     rerun = core.compile_program(new).run(thickness=0.1, n=4)
     assert core.program.snippets.lattices_close(rerun, gui, 1e-9)
-    assert rig.ple.edits == "[]" and core.program.snippets.lattices_close(ple_ext.rig.lattice_of(rig), gui, 1e-9)
+    assert rig.ple.edits == "[]" and core.program.snippets.lattices_close(ple_ext.rig.model.lattice_of(rig), gui, 1e-9)
 
 
 def case_ir_apply():
@@ -314,7 +301,7 @@ def case_ir_apply():
     rig = bpy.context.active_object
     part(rig, "v").location = (0.1, 1.5, 0)
     update()
-    gui = ple_ext.rig.lattice_of(rig)
+    gui = ple_ext.rig.model.lattice_of(rig)
     assert bpy.ops.ple.program_apply() == {"FINISHED"}
     again = core.model.ir.lattice_from_dict(json.loads(rig.ple.text.as_string()))
     assert core.program.snippets.lattices_close(again, gui, 1e-9)
@@ -333,7 +320,7 @@ def case_no_leaks():
             rig.ple.counts = (7, 12, 10 + n % 3)
         update()
     assert counts() == before, (before, counts())
-    assert len(ple_ext.rig.edits_of(rig)) <= 3  # coalesced
+    assert len(ple_ext.rig.model.edits_of(rig)) <= 3  # coalesced
 
 
 def case_errors():
@@ -384,8 +371,8 @@ def case_errors():
 def case_untrusted():
     """Programs in a file run only if Blender trusts scripts or the user ran them (SPEC §9)."""
     rig = new_rig("cubic")
-    ple_ext.rig._trusted.clear()
-    ple_ext.rig.clear_state()
+    ple_ext.session.SESSION.trusted.clear()
+    ple_ext.session.SESSION.forget_drawn()
     assert not bpy.context.preferences.filepaths.use_scripts_auto_execute
     rig["ple:n"] = 4
     rig.update_tag()
@@ -408,20 +395,20 @@ def case_undo():
     assert not np.allclose(region_arrays(rig)[0], co0)
     assert bpy.ops.ed.undo() == {"FINISHED"}
     rig = bpy.data.objects[name]
-    assert ple_ext.rig.edits_of(rig) == []
+    assert ple_ext.rig.model.edits_of(rig) == []
     assert np.allclose(region_arrays(rig)[0], co0)
     update()
-    assert ple_ext.rig.edits_of(rig) == []
+    assert ple_ext.rig.model.edits_of(rig) == []
     # an operator's step (bpy pushes it itself only in the UI: here we push it as the UI would)
     assert bpy.ops.ple.node_add(rig=name, center=(0.5, 0.5, 0), radius=0.05) == {"FINISHED"}
     bpy.ops.ed.undo_push(message="Add Template Node")
     assert len(region_arrays(bpy.data.objects[name])[0]) == 16
     assert bpy.ops.ed.undo() == {"FINISHED"}
     rig = bpy.data.objects[name]
-    assert len(region_arrays(rig)[0]) == 8 and ("node", 1) not in ple_ext.rig.parts(rig)
+    assert len(region_arrays(rig)[0]) == 8 and ("node", 1) not in ple_ext.rig.model.parts(rig)
     assert bpy.ops.ed.redo() == {"FINISHED"}
     rig = bpy.data.objects[name]
-    assert len(region_arrays(rig)[0]) == 16 and len(ple_ext.rig.lattice_of(rig).nodes) == 2
+    assert len(region_arrays(rig)[0]) == 16 and len(ple_ext.rig.model.lattice_of(rig).nodes) == 2
 
 
 def case_filters():
@@ -508,7 +495,7 @@ def case_export():
     assert rig.ple.status == "" and sorted(p.name for p in tmp.iterdir() if p.name.startswith(".")) == []
     # Esc in the modal run closes the step generator, which stops the child: nothing is written
     op = type("Op", (), {"filepath": str(tmp / "cancelled.stl"), "style": "CHOCC", "beyond_limit": False,
-                         "report": print, "mesh_job": ple_ext.operators.SteppedOperator.mesh_job})()
+                         "report": print, "mesh_job": ple_ext.ops.base.SteppedOperator.mesh_job})()
     steps = bpy.types.PLE_OT_export.steps(op, bpy.context, rig)
     first, second = next(steps), next(steps)
     assert first == 0.0 and 0.0 <= second < 1.0  # progress of the first boxes
@@ -573,7 +560,7 @@ def case_becots_corners():
     rig = new_rig("becots_kagome")
     lat = core.load_lattice("becots_kagome")
     corners = lat.becots.to_ir()["corners"]
-    p = ple_ext.rig.parts(rig)
+    p = ple_ext.rig.model.parts(rig)
     for label, c in zip("ABCD", corners):
         assert np.allclose(matrix(p[("corner", label)])[:3, 3], c, atol=1e-5)
     rig.ple.region_min, rig.ple.region_max = (0, 0, 0), (3, 3, lat.counts[2])
@@ -590,32 +577,3 @@ def case_becots_corners():
     p[("corner", "B")].location = p[("corner", "A")].location  # coincident corners: refused, not stored
     update()
     assert "coincide" in rig.ple.status and rig.ple.edits == good, (rig.ple.status, good, rig.ple.edits)
-
-
-def main(zip_path: str, case: str) -> None:
-    install(zip_path)
-    globals()[f"case_{case}"]()
-    print(f"{case} OK")
-
-
-def install(zip_path: str) -> None:
-    """Install and enable the zip in a fresh headless bpy (this module's globals then hold bpy,
-    the extension and the environment's core; other add-on test files reuse it)."""
-    global bpy, ple_ext, core
-    os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp()
-    import bpy as _bpy
-    import ple as _core
-
-    bpy = _bpy
-    core = _core
-    for name in ("model.cage", "filters", "model.ir", "io.irfile", "meshing.preview", "program.snippets"):
-        __import__(f"ple.{name}")
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)
-    import importlib
-
-    ple_ext = importlib.import_module("bl_ext.user_default.ple")
-
-
-if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])

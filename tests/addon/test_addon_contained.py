@@ -3,34 +3,29 @@ programs and long core work (LiL, tessellation) run in a child process (``ple.pr
 an endless loop, one long core call or a memory bomb is reported within its limit while Blender
 stays alive and the rig unchanged; a LiL job cancelled (Esc) or over its time limit changes nothing.
 
-Every case runs in its own fresh process (``python tests/addon/test_addon_contained.py ZIP CASE``)
-with the helpers of ``test_addon_live``; truth comes from the core installed in the environment.
+The cases run in the test run's one Blender worker (``conftest.py``) with the helpers of
+``test_addon_live``; truth comes from the core installed in the environment.
 """
 
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 import time
 
 import numpy as np
 import pytest
 import test_addon_live as live
-from test_addon_live import zip_path  # noqa: F401 - the fixture building the zip
 
 CASES = ["program_loop", "program_memory_bomb", "program_exits", "programs_still_run", "lil_job",
          "lil_job_cancel", "lil_job_time_limit", "tessellate_job_time_limit"]
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_addon_contained(zip_path, case, tmp_path):  # noqa: F811 - the fixture
-    res = subprocess.run([sys.executable, __file__, str(zip_path), case], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=600)
-    assert f"{case} OK" in res.stdout, (res.stdout[-4000:] + res.stderr[-4000:])
+def test_addon_contained(run_case, case):
+    run_case(__file__, case)
 
 
-# ----- bpy side (runs in the subprocess) ------------------------------------------------------------
+# ----- bpy side (runs in the Blender worker) --------------------------------------------------------
 def prefs():
     return live.bpy.context.preferences.addons["bl_ext.user_default.ple"].preferences
 
@@ -142,7 +137,7 @@ def case_programs_still_run():
     fu = live.part(rig, "u")
     fu.location = (fu.location[0] + 0.2, fu.location[1], fu.location[2])
     live.update()
-    gui = live.ple_ext.rig.lattice_of(rig)
+    gui = live.ple_ext.rig.model.lattice_of(rig)
     assert bpy.ops.ple.program_apply() == {"FINISHED"} and rig.ple.edits == "[]"
     assert core.program.snippets.lattices_close(live.rerun(rig), gui, 1e-9)
     assert no_child_left()
@@ -236,13 +231,3 @@ def case_tessellate_job_time_limit():
     rig.ple.region_max = (2, 2, 2)
     assert bpy.ops.ple.tessellate(style="CHOCC") == {"FINISHED"}
     assert len(bpy.data.objects) == objects + 1 and "triangles" in rig.ple.message
-
-
-def main(zip_file: str, case: str) -> None:
-    live.setup(zip_file)
-    globals()[f"case_{case}"]()
-    print(f"{case} OK")
-
-
-if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])

@@ -1,48 +1,50 @@
 """The add-on as a Blender user lives in it (issue 15), headless bpy 5.0.1 from the installed zip.
 
-Every case runs in its OWN fresh process (``python tests/addon/test_addon_live.py ZIP CASE``): it
-installs and enables the zip, runs ``case_<CASE>`` and prints ``CASE OK``; a crash or hang
-of one case cannot lose the others. Truth comes from the core package installed in the
-environment (an independent copy of the vendored one) and from numbers computed here.
+The cases run in the test run's one Blender worker (``conftest.py``): the zip installed once, every
+case from an empty scene; a crash or hang costs only its own case. ``region_budget`` measures this
+process's peak memory, so it runs in a fresh process of its own. Truth comes from the core package
+installed in the environment (an independent copy of the vendored one) and from numbers computed here.
 """
 
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
-import test_addon as base  # the shared installer and bpy-side helpers
+import test_addon as base
 from test_addon import (  # noqa: F401 - bpy-side helpers the cases use
     new_rig,
     part,
     region_arrays,
     update,
-    zip_path,  # noqa: F401 - the fixture building the zip
 )
-
-ROOT = Path(__file__).resolve().parents[2]
 
 CASES = ["becots_redraw", "becots_apply_presets", "becots_named_return", "becots_round_trip",
          "cumulative_off_then_counts", "lil_follows_coarse", "absurd_counts", "region_budget",
          "move_before_run_program", "trust_survives_rename", "shift_d_copy", "duplicate_operator",
          "delete_root", "remove_operator", "cursor", "frame_precision", "apply_in_branch", "poll",
          "program_time_limit", "tessellate_budget", "bake", "materials_and_sizes", "render_colours",
-         "program_file", "menu_keymap_prefs", "tessellate_steps", "live_errors_reported", "trust_per_file"]
+         "program_file", "menu_keymap_prefs", "tessellate_steps", "live_errors_reported", "trust_per_file",
+         "refusal_stays_until_next_edit", "reenabled_addon_edits_live", "reload_keeps_slider_values"]
+FRESH = {"region_budget"}
+ADDON = "bl_ext.user_default.ple"  # peak memory of the process: only a fresh one measures this case alone
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_addon_live(zip_path, case, tmp_path):  # noqa: F811 - the imported fixture
-    res = subprocess.run([sys.executable, __file__, str(zip_path), case], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=600)
-    assert f"{case} OK" in res.stdout, (res.stdout[-4000:] + res.stderr[-4000:])
+def test_addon_live(run_case, case):
+    run_case(__file__, case, fresh=case in FRESH)
 
 
-# ----- bpy side (runs in the subprocess) ------------------------------------------------------------
+@pytest.mark.xfail(strict=True, reason="core: Similarity.between_frames names its argument 'frame B' and "
+                                       "model.cage.direction_from_frame prefixes 'frame U: ' to that message")
+def test_a_bad_frame_is_named_once(run_case):
+    run_case(__file__, "bad_frame_named_once")
+
+
+# ----- bpy side (runs in the Blender worker) --------------------------------------------------------
 bpy = ple_ext = core = None
 
 
@@ -115,14 +117,14 @@ def case_becots_redraw():
     rig["ple:lift"] = 2.0
     rig.update_tag()
     update()
-    p = ple_ext.rig.parts(rig)
+    p = ple_ext.rig.model.parts(rig)
     assert np.allclose(matrix(p[("corner", "C")])[:3, 3], [5, 5, 2.0], atol=1e-6)  # C follows the slider
     assert np.allclose(matrix(p[("node", 0)])[:3, 3], core.load_lattice(
         "becots_triangle", {"lift": 2.0}).nodes[0].center, atol=1e-5)
     p[("corner", "A")].location = (0.1, 0.0, 0.0)  # a corner drag must not write a stale C back
     update()
     assert rig.ple.status == "", rig.ple.status
-    edit = ple_ext.rig.edits_of(rig)[-1]
+    edit = ple_ext.rig.model.edits_of(rig)[-1]
     assert np.allclose(edit.corners[2], [5, 5, 2.0], atol=1e-6) and np.allclose(edit.corners[0], [0.1, 0, 0])
     lat = core.load_lattice("becots_triangle", {"lift": 2.0})
     c = lat.becots.to_ir()["corners"]
@@ -132,12 +134,12 @@ def case_becots_redraw():
 
 def _drag_apply_rerun(preset):
     rig = new_rig(preset, region=(4, 4, 2))
-    p = ple_ext.rig.parts(rig)
+    p = ple_ext.rig.model.parts(rig)
     c = matrix(p[("corner", "C")])[:3, 3]
     p[("corner", "C")].location = tuple(c + [0.5, -0.25, 0.4])
     update()
     assert rig.ple.status == "", (preset, rig.ple.status)
-    gui = ple_ext.rig.lattice_of(rig)
+    gui = ple_ext.rig.model.lattice_of(rig)
     co0, _, _ = region_arrays(rig)
     assert bpy.ops.ple.program_apply() == {"FINISHED"}, preset
     assert rig.ple.status == "" and rig.ple.edits == "[]", (preset, rig.ple.status)
@@ -156,7 +158,7 @@ def case_becots_apply_presets():
     for name in core.program.presets.preset_names():
         if not name.startswith("becots_"):
             continue
-        if not ple_ext.rig.becots_corners(core.load_lattice(name)):
+        if not ple_ext.rig.model.becots_corners(core.load_lattice(name)):
             continue  # stacked / closed slabs have no corner handles
         _drag_apply_rerun(name)
         done.append(name)
@@ -173,10 +175,10 @@ def case_becots_named_return():
     rig = bpy.context.active_object
     rig.ple.region_max = (5, 5, 1)
     update()
-    p = ple_ext.rig.parts(rig)
+    p = ple_ext.rig.model.parts(rig)
     p[("corner", "B")].location = (0.5, 4.5, 0.0)
     update()
-    gui = ple_ext.rig.lattice_of(rig)
+    gui = ple_ext.rig.model.lattice_of(rig)
     assert bpy.ops.ple.program_apply() == {"FINISHED"}
     assert rig.ple.status == ""
     assert core.program.snippets.lattices_close(rerun(rig), gui, 1e-9)
@@ -186,7 +188,7 @@ def case_becots_named_return():
 def case_becots_round_trip():
     """Corner drags, lift slider, Apply, re-run: the drawing is reproduced within 1e-6."""
     rig = new_rig("becots_triangle", region=(12, 12, 1))
-    p = ple_ext.rig.parts(rig)
+    p = ple_ext.rig.model.parts(rig)
     p[("corner", "D")].location = (4.7, -0.5, 0.1)
     update()
     rig["ple:lift"] = 1.3
@@ -222,7 +224,7 @@ def case_cumulative_off_then_counts():
     rig.ple.counts = (4, 10, 10)
     x2 = np.sort(region_arrays(rig)[0][:, 0])
     assert np.allclose(x2, [0, 1.5, 3.0, 4.5], atol=1e-5), x2
-    assert not ple_ext.rig.edits_of(rig)[-1].cumulative
+    assert not ple_ext.rig.model.edits_of(rig)[-1].cumulative
     # the other way: cumulative on keeps the span from group 0 to the last group (4.5 over 3 steps)
     rig.ple.cumulative = (True, False, False)
     assert np.allclose(matrix(fu)[:3, 3], [4.5, 0, 0], atol=1e-5)
@@ -262,7 +264,7 @@ def case_lil_follows_coarse():
     fu = part(coarse, "u")  # a frame of the coarse rig
     fu.location = (fu.location[0] + 0.3, fu.location[1], fu.location[2])
     update()
-    u = ple_ext.rig.lattice_of(coarse).u.similarity
+    u = ple_ext.rig.model.lattice_of(coarse).u.similarity
     w = want(0.12, (3, 2.5, 0), u=core.algebra.similarity.similarity_from_dict(u.to_dict()))
     assert got().shape == w.shape and np.allclose(got(), w, atol=1e-5)
 
@@ -294,7 +296,7 @@ def case_region_budget():
     rig.ple.region_max = (400, 400, 400)
     status = rig.ple.status
     assert "refused" in status and "64 M" in status and "balls" in status and "GiB" in status, status
-    lat = ple_ext.rig.lattice_of(rig)
+    lat = ple_ext.rig.model.lattice_of(rig)
     est = core.model.budget.estimate(lat, "0:400,0:400,0:400")
     assert est.balls == 400**3 and est.beams == 3 * 400 * 400 * 399  # exact, independently counted
     assert tuple(rig.ple.region_max) == (3, 3, 3)  # the refused region is not kept
@@ -316,7 +318,7 @@ def case_move_before_run_program():
     tmp = Path(tempfile.mkdtemp())
     rig = new_rig("cubic", region=(2, 2, 2))
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "f.blend"))
-    ple_ext.rig._trusted.clear()  # as in a new session
+    ple_ext.session.SESSION.trusted.clear()  # as in a new session
     bpy.ops.wm.open_mainfile(filepath=str(tmp / "f.blend"))
     rig = bpy.data.objects["cubic"]
     assert not bpy.context.preferences.filepaths.use_scripts_auto_execute
@@ -351,11 +353,11 @@ def case_trust_per_file():
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "a.blend"))
     bpy.ops.wm.open_mainfile(filepath=str(tmp / "a.blend"))
     rig = bpy.data.objects["cubic"]
-    assert ple_ext.rig.trusted(rig) and rig.ple.status == ""
+    assert ple_ext.rig.model.trusted(rig) and rig.ple.status == ""
     shutil.copy(tmp / "a.blend", tmp / "b.blend")
     bpy.ops.wm.open_mainfile(filepath=str(tmp / "b.blend"))
     rig = bpy.data.objects["cubic"]
-    assert not ple_ext.rig.trusted(rig) and "trust" in rig.ple.status, rig.ple.status
+    assert not ple_ext.rig.model.trusted(rig) and "trust" in rig.ple.status, rig.ple.status
 
 
 def case_shift_d_copy():
@@ -372,10 +374,10 @@ def case_shift_d_copy():
         copy.location = (5, 0, 0)
         update()
         assert copy.ple.uid != rig.ple.uid and copy.ple.text != rig.ple.text
-        cp = ple_ext.rig.parts(copy)
+        cp = ple_ext.rig.model.parts(copy)
         assert {"G", "u", "v", "w", "cage", "region"} <= set(cp), cp
         assert all(o.ple.rig == copy for o in cp.values())
-        assert not set(cp.values()) & set(ple_ext.rig.parts(rig).values())
+        assert not set(cp.values()) & set(ple_ext.rig.model.parts(rig).values())
         cp["u"].location = (1.75, 0, 0)
         update()
         assert copy.ple.status == "", copy.ple.status
@@ -386,18 +388,18 @@ def case_shift_d_copy():
         assert np.isclose(np.sort(region_arrays(rig)[0][:, 0])[-1], 1.0, atol=1e-5)
     # an untrusted original (a file from elsewhere): the copy is not trusted either and gets its
     # parts once the user runs its program
-    ple_ext.rig._trusted.clear()
+    ple_ext.session.SESSION.trusted.clear()
     select_only(rig)
     with bpy.context.temp_override(active_object=rig, selected_objects=[rig]):
         assert bpy.ops.object.duplicate() == {"FINISHED"}
     copy = next(o for o in bpy.context.selected_objects if o.ple.role == "RIG")
     update()
-    assert "trust" in copy.ple.status and not ple_ext.rig.parts(copy)
+    assert "trust" in copy.ple.status and not ple_ext.rig.model.parts(copy)
     select_only(copy)
     assert bpy.ops.ple.program_run() == {"FINISHED"}
-    assert {"G", "u", "v", "w", "cage", "region"} <= set(ple_ext.rig.parts(copy))
+    assert {"G", "u", "v", "w", "cage", "region"} <= set(ple_ext.rig.model.parts(copy))
     assert_region_is(copy, core.load_lattice("cubic"), "0:2,0:2,0:2")
-    assert not ple_ext.rig.trusted(rig)
+    assert not ple_ext.rig.model.trusted(rig)
 
 
 def case_duplicate_operator():
@@ -413,8 +415,8 @@ def case_duplicate_operator():
     extent = np.ptp(np.concatenate([np.array([tuple(q.co)[:3] for q in sp.points])
                                     for sp in part(rig, "cage").data.splines]), axis=0)
     assert shift[0] > extent[0] and np.allclose(shift[1:], 0)  # beside the original, not overlapping it
-    ple_ext.rig._trusted.discard(rig.ple.uid)  # trusts are separate
-    assert ple_ext.rig.trusted(copy) and not ple_ext.rig.trusted(rig)
+    ple_ext.session.SESSION.trusted.discard(rig.ple.uid)  # trusts are separate
+    assert ple_ext.rig.model.trusted(copy) and not ple_ext.rig.model.trusted(rig)
 
 
 def _rig_objects():
@@ -422,17 +424,20 @@ def _rig_objects():
 
 
 def case_delete_root():
-    """Deleting only the lattice object removes its frames, nodes, cage and region too."""
+    """Deleting only the lattice object removes its frames, nodes, cage and region too. Done
+    several times: the depsgraph update after a deletion names objects that are freed while the
+    handler runs (reading them crashed Blender now and then)."""
     keep = new_rig("cubic", region=(2, 2, 2))
     n_keep = len(_rig_objects())
-    rig = new_rig("fig6_3", region=(2, 2, 2))
-    assert len(_rig_objects()) > n_keep
-    select_only(rig)
-    with bpy.context.temp_override(selected_objects=[rig], active_object=rig):
-        assert bpy.ops.object.delete() == {"FINISHED"}
-    update()
-    assert len(_rig_objects()) == n_keep, [o.name for o in _rig_objects()]
-    assert ple_ext.rig.parts(keep) and keep.ple.status == ""
+    for _ in range(6):
+        rig = new_rig("fig6_3", region=(2, 2, 2))
+        assert len(_rig_objects()) > n_keep
+        select_only(rig)
+        with bpy.context.temp_override(selected_objects=[rig], active_object=rig):
+            assert bpy.ops.object.delete() == {"FINISHED"}
+        update()
+        assert len(_rig_objects()) == n_keep, [o.name for o in _rig_objects()]
+        assert ple_ext.rig.model.parts(keep) and keep.ple.status == ""
 
 
 def case_remove_operator():
@@ -444,7 +449,7 @@ def case_remove_operator():
     assert bpy.ops.ple.remove() == {"FINISHED"}
     assert len(_rig_objects()) == n_keep and len(bpy.data.meshes) == meshes
     assert text.name in bpy.data.texts  # the program is kept
-    assert ple_ext.rig.parts(keep)
+    assert ple_ext.rig.model.parts(keep)
 
 
 def case_cursor():
@@ -471,7 +476,7 @@ def case_frame_precision():
     update()
     fv.location = (0.1, 1.2, 0.0)
     update()
-    gui = ple_ext.rig.lattice_of(rig)
+    gui = ple_ext.rig.model.lattice_of(rig)
     co0 = region_arrays(rig)[0]
     assert bpy.ops.ple.program_apply() == {"FINISHED"}
     text = rig.ple.text.as_string()
@@ -496,7 +501,7 @@ def case_apply_in_branch():
         fu.rotation_euler = (0.0, 0.05 * (step + 1), 0.0)
         update()
         assert rig.ple.status == "", rig.ple.status
-        gui = ple_ext.rig.lattice_of(rig)
+        gui = ple_ext.rig.model.lattice_of(rig)
         assert bpy.ops.ple.program_apply() == {"FINISHED"}
         text = rig.ple.text.as_string()
         assert text.count("lat.set_u(") == n_calls, text
@@ -600,7 +605,7 @@ def case_live_errors_reported():
     """A problem met while live editing (a degenerate frame) reaches the status line and is
     queued for the Info editor, once per new problem."""
     rig = new_rig("cubic", region=(2, 2, 2))
-    queue = ple_ext.rig._pending_reports
+    queue = ple_ext.session.SESSION.reports
     queue.clear()
     part(rig, "u").scale = (1.0, 2.0, 1.0)
     update()
@@ -609,7 +614,7 @@ def case_live_errors_reported():
     part(rig, "u").location = (1.1, 0, 0)  # the same problem again: not reported twice
     update()
     assert len(queue) == 1
-    ple_ext.rig.flush_reports()  # what the timer does in the user interface
+    ple_ext.session.flush_reports()  # what the timer does in the user interface
     assert queue == []
 
 
@@ -704,7 +709,7 @@ def case_program_file():
     assert bpy.ops.ple.program_save() == {"FINISHED"}
     assert path.read_text() == rig.ple.text.as_string() and "1.25" in path.read_text()
     assert core.program.snippets.lattices_close(core.compile_program(path.read_text()).run(),
-                                        ple_ext.rig.lattice_of(rig), 1e-9)
+                                        ple_ext.rig.model.lattice_of(rig), 1e-9)
     path.write_text(path.read_text().replace("1.25", "1.5"))
     assert bpy.ops.ple.program_reload() == {"FINISHED"}
     assert np.isclose(np.sort(region_arrays(rig)[0][:, 0])[-1], 1.5, atol=1e-5)
@@ -721,7 +726,6 @@ def case_menu_keymap_prefs():
     import importlib
 
     ui = importlib.import_module("bl_ext.user_default.ple.ui")
-    init = importlib.import_module("bl_ext.user_default.ple")
     assert hasattr(bpy.types, "PLE_MT_add")
     ops = []
 
@@ -746,35 +750,93 @@ def case_menu_keymap_prefs():
     assert all(thumbs[n].image_size[0] > 0 for n in shipped)
     if not bpy.app.background:  # icons exist only with a user interface
         assert all(kw.get("icon_value") for _, kw, p in ops if getattr(p, "preset", "") in shipped)
-    assert {k for k, _, _ in init.KEYMAP} >= {"ple.program_run", "ple.program_apply", "ple.duplicate", "ple.remove"}
+    assert {k for k, _, _ in ui.KEYMAP} >= {"ple.program_run", "ple.program_apply", "ple.duplicate", "ple.remove"}
     kc = bpy.context.window_manager.keyconfigs.addon
     if kc is not None:  # registered in the add-on key configuration (absent in some background builds)
         km = kc.keymaps.get("Object Mode")
-        assert km is not None and {k.idname for k in km.keymap_items} >= {k for k, _, _ in init.KEYMAP}
+        assert km is not None and {k.idname for k in km.keymap_items} >= {k for k, _, _ in ui.KEYMAP}
     prefs = bpy.context.preferences.addons["bl_ext.user_default.ple"].preferences
     assert prefs.memory_gb == 2.0 and prefs.max_triangles == 10_000_000 and prefs.program_seconds == 10.0
     assert prefs.job_seconds == 600.0
 
 
-def setup(path: str) -> None:
-    """Install and enable the zip in this (fresh) process (``test_addon.install``); sets ``bpy``,
-    ``ple_ext`` and ``core`` here too."""
-    global bpy, ple_ext, core
-    import importlib
+def case_refusal_stays_until_next_edit():
+    """A refused region or count (beyond the work budget, absurd) is set back; its reason stays the
+    status, and is reported once, through later updates until the user's next edit."""
+    rig = new_rig("cubic", region=(3, 3, 3))
+    rig.ple.counts = (10**4, 10**4, 10**4)
+    queue = ple_ext.session.SESSION.reports
+    queue.clear()
+    rig.ple.region_max = (400, 400, 400)
+    status = rig.ple.status
+    assert "refused" in status and "beyond the memory limit" in status, status
+    assert tuple(rig.ple.region_max) == (3, 3, 3)
+    assert len(queue) == 1 and "refused" in queue[0] and rig.name in queue[0], queue
+    for _ in range(2):
+        update()
+        assert rig.ple.status == status and len(queue) == 1, (rig.ple.status, queue)
+    part(rig, "u").location = (1.5, 0, 0)  # the next edit: drawn, nothing wrong any more
+    update()
+    assert rig.ple.status == "" and np.isclose(np.sort(region_arrays(rig)[0][:, 0])[-1], 3.0, atol=1e-5)
+    rig.ple.counts = (10**8, 10, 10)  # absurd counts: the slider goes back, the reason stays
+    status = rig.ple.status
+    assert "absurd" in status and tuple(rig.ple.counts) == (10**4,) * 3 and len(queue) == 2, (status, queue)
+    update()
+    assert rig.ple.status == status
+    rig.ple.region_max = (2, 2, 2)  # a setting is an edit too
+    assert rig.ple.status == ""
 
-    base.install(path)
-    bpy, ple_ext, core = base.bpy, base.ple_ext, base.core
-    for name in ("algebra.precision", "algebra.similarity", "filters", "meshing.preview", "meshing.styles",
-                 "meshing.tessellate", "model.budget", "model.cage", "model.ir", "program.presets",
-                 "program.runtime", "program.snippets", "program.sources"):
-        importlib.import_module(f"ple.{name}")
+
+def case_reenabled_addon_edits_live():
+    """Disabling and enabling the add-on keeps its rigs live: a frame drag after it moves the
+    region as one before it did, with no Run Program."""
+    import sys
+
+    import addon_utils
+
+    rig = new_rig("cubic", region=(2, 1, 1))
+    name = rig.name
+    part(rig, "u").location = (1.4, 0, 0)
+    update()
+    assert np.isclose(np.sort(region_arrays(rig)[0][:, 0])[-1], 1.4, atol=1e-5)
+    addon_utils.disable(ADDON, default_set=True)
+    addon_utils.enable(ADDON, default_set=True)
+    ext = sys.modules[ADDON]
+    rig = bpy.data.objects[name]
+    u = next(o for o in rig.children_recursive if o.ple.role == "FRAME" and o.ple.frame == "u")
+    u.location = (1.8, 0, 0)
+    update()
+    assert rig.ple.status == "", rig.ple.status
+    x = np.sort(region_arrays(rig)[0][:, 0])
+    assert np.isclose(x[-1], 1.8, atol=1e-5), x  # the drag moved the region (it used to stay at 1.4)
+    assert ext.rig.model.edits_of(rig)[-1].similarity is not None
 
 
-def main(path: str, case: str) -> None:
-    setup(path)
-    globals()[f"case_{case}"]()
-    print(f"{case} OK")
+def case_reload_keeps_slider_values():
+    """Reload after the program's inputs changed on disk: a slider keeps the user's value, its range
+    and default follow the program (Reset to Default gives the new default), a new input gets a slider."""
+    tmp = Path(tempfile.mkdtemp())
+    path = tmp / "prog.py"
+    path.write_text(base.PROGRAM)
+    assert bpy.ops.ple.lattice_add(source="FILE", filepath=str(path), region=(2, 2, 2)) == {"FINISHED"}
+    rig = bpy.context.active_object
+    rig["ple:thickness"] = 0.2  # the user's value
+    rig.update_tag()
+    update()
+    changed = base.PROGRAM.replace("thickness: Range(0.05, 0.3) = 0.1", "thickness: Range(0.05, 0.5) = 0.15")
+    changed = changed.replace("n: Range(1, 9) = 3", "n: Range(1, 9) = 3, m: Range(1, 5) = 2")
+    path.write_text(changed)
+    assert bpy.ops.ple.program_reload() == {"FINISHED"} and rig.ple.status == "", rig.ple.status
+    ui = rig.id_properties_ui("ple:thickness").as_dict()
+    assert rig["ple:thickness"] == 0.2 and ui["default"] == 0.15 and ui["max"] == 0.5, (rig["ple:thickness"], ui)
+    assert rig["ple:m"] == 2 and rig.id_properties_ui("ple:m").as_dict()["max"] == 5
+    assert np.allclose(region_arrays(rig)[1], 0.2)  # drawn with the user's value
 
 
-if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])
+def case_bad_frame_named_once():
+    """A non-uniformly scaled frame is refused with a message naming that frame, once."""
+    rig = new_rig("cubic", region=(2, 2, 2))
+    part(rig, "u").scale = (1.0, 2.0, 1.0)
+    update()
+    status = rig.ple.status
+    assert status.startswith("frame U: ") and "frame B" not in status, status

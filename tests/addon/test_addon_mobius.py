@@ -1,36 +1,27 @@
-"""Möbius lattices in the add-on (ple_addon/mobius_frames.py), headless bpy 5.0.1 from the installed
+"""Möbius lattices in the add-on (ple_addon/features/mobius.py), headless bpy 5.0.1 from the installed
 zip: the control frames X, Y, Z are empties with a C handle each; dragging them redraws the
 lattice. Node positions are compared with the core installed in the environment (an independent
 copy of the vendored one), the frames' points read off the empties with mathutils here.
 
-Each case runs in its own process through ``test_addon.main`` (install, enable, run the case)."""
+The cases run in the test run's one Blender worker (``conftest.py``)."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
+import test_addon as base  # the shared bpy-side helpers
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import test_addon as base  # noqa: E402  (the shared install-and-run helpers)
-from test_addon import zip_path  # noqa: E402,F401  (the built zip, a fixture)
-
-CASES = ["mobius_drag", "mobius_tmi_and_errors"]
+CASES = ["mobius_drag", "mobius_tmi_and_errors", "mobius_frame_put_back"]
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_addon_mobius(zip_path, case, tmp_path):  # noqa: F811
-    res = subprocess.run([sys.executable, __file__, str(zip_path), case], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=600)
-    assert f"{case} OK" in res.stdout, res.stdout[-4000:] + res.stderr[-4000:]
+def test_addon_mobius(run_case, case):
+    run_case(__file__, case)
 
 
-# ----- bpy side (runs in the subprocess) ------------------------------------------------------------
+# ----- bpy side (runs in the Blender worker) --------------------------------------------------------
 def positions(rig):
-    me = base.ple_ext.mobius_frames.parts(rig)["region"].data
+    me = base.ple_ext.features.mobius.parts(rig)["region"].data
     co = np.zeros(len(me.vertices) * 3, np.float32)
     me.attributes["position"].data.foreach_get("vector", co)
     ed = np.zeros(len(me.edges) * 2, np.int32)
@@ -56,7 +47,7 @@ def assert_drawn(rig, lat):
 
 
 def case_mobius_drag():
-    bpy, mf = base.bpy, base.ple_ext.mobius_frames
+    bpy, mf = base.bpy, base.ple_ext.features.mobius
     from ple.model.mobius import with_control_frames
     from ple.program.sources import load_lattice
 
@@ -96,7 +87,7 @@ def case_mobius_drag():
 
 
 def case_mobius_tmi_and_errors():
-    bpy, mf = base.bpy, base.ple_ext.mobius_frames
+    bpy, mf = base.bpy, base.ple_ext.features.mobius
     from ple.model.mobius import with_control_frames
     from ple.program.sources import load_lattice
 
@@ -129,7 +120,19 @@ def case_mobius_tmi_and_errors():
     assert len(bpy.data.objects) == n
 
 
-if __name__ == "__main__":
-    for name in CASES:
-        setattr(base, f"case_{name}", globals()[f"case_{name}"])
-    base.main(sys.argv[1], sys.argv[2])
+def case_mobius_frame_put_back():
+    """A handle moved onto its frame's origin shows the error; put back exactly where it was, the
+    error clears (the frames are then the ones last drawn)."""
+    bpy, mf = base.bpy, base.ple_ext.features.mobius
+    assert bpy.ops.ple.mobius_add(preset="mobius_slab") == {"FINISHED"}
+    rig = bpy.context.active_object
+    handle = mf.parts(rig)[("handle", "Y")]
+    was = tuple(handle.location)
+    before = positions(rig)[0]
+    handle.location = (0.0, 0.0, 0.0)
+    base.update()
+    assert "distinct" in rig["ple_status"], rig["ple_status"]
+    handle.location = was
+    base.update()
+    assert rig["ple_status"] == "", rig["ple_status"]
+    assert np.array_equal(positions(rig)[0], before)

@@ -18,6 +18,7 @@ from ple.meshing.tessellate import tessellate
 from ple.program.sources import load_lattice
 
 ROOT = Path(__file__).resolve().parents[2]
+pytestmark = pytest.mark.e2e  # each test starts Dask workers that install the extension themselves
 
 
 def batch_argv(out: Path, *extra: str, sweep: str = "radius=0.1,0.2,0.3", n: int = 2) -> list[str]:

@@ -1,35 +1,28 @@
 """The Body panel of the extension, installed from the built zip into headless bpy 5.0.1.
 
-Each case runs in its own process through ``test_addon``'s installer (``python
-tests/addon/test_body_panel.py ZIP CASE``). Truth is the core package of the environment (an
-independent copy of the vendored one) on the same mesh, built here with trimesh and placed by
-trimesh (the add-on reads it back from Blender with ``foreach_get`` and places it by the
-object's transform).
+The cases run in the test run's one Blender worker (``conftest.py``). Truth is the core package of
+the environment (an independent copy of the vendored one) on the same mesh, built here with trimesh
+and placed by trimesh (the add-on reads it back from Blender with ``foreach_get`` and places it by
+the object's transform).
 """
 
 from __future__ import annotations
 
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 import test_addon as base
-from test_addon import zip_path  # noqa: F401 - the module's fixture: the zip built once
 
-CASES = ["fill_modes", "grade_empties", "cleanup_skin_tessellate", "live_move", "bad_bodies", "ui"]
+CASES = ["fill_modes", "grade_empties", "cleanup_skin_tessellate", "live_move", "bad_bodies", "ui",
+         "skin_solid_no_coincident_vertices"]
 TURN = (0.3, -0.2, 0.5)  # the body object's rotation (XYZ Euler)
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_body_panel(zip_path, case, tmp_path):  # noqa: F811 - the imported fixture
-    res = subprocess.run([sys.executable, __file__, str(zip_path), case], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=600)
-    assert f"{case} OK" in res.stdout, res.stdout[-4000:] + res.stderr[-4000:]
+def test_body_panel(run_case, case):
+    run_case(__file__, case)
 
 
-# ----- bpy side (runs in the subprocess) ------------------------------------------------------------
+# ----- bpy side (runs in the Blender worker) --------------------------------------------------------
 def part_mesh():
     import trimesh
 
@@ -203,7 +196,23 @@ def case_ui():
     assert "UNDO" in base.bpy.types.PLE_OT_body_fill.bl_options
 
 
-if __name__ == "__main__":
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    base.__dict__.update({f"case_{c}": globals()[f"case_{c}"] for c in CASES})
-    base.main(sys.argv[1], sys.argv[2])
+def case_skin_solid_no_coincident_vertices():
+    """Skin Solid's mesh has no two vertices at one position, so merging by position (an STL round
+    trip, a slicer) keeps it watertight."""
+    import trimesh
+
+    bpy = base.bpy
+    rig = base.new_rig("cubic", region=(10, 10, 10))
+    obj = body_object()
+    assert fill(rig, obj, fill="ANY", cleanup=True, skin=0.3) == {"FINISHED"}
+    assert bpy.ops.ple.skin_solid() == {"FINISHED"}
+    me = bpy.data.objects[f"{rig.name}.skin"].data
+    co = np.zeros(len(me.vertices) * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    tri = np.zeros(len(me.polygons) * 3, np.int32)
+    me.polygons.foreach_get("vertices", tri)
+    assert len(np.unique(co, axis=0)) == len(co), len(co) - len(np.unique(co, axis=0))
+    merged = trimesh.Trimesh(co, tri.reshape(-1, 3), process=False)
+    merged.merge_vertices()
+    assert merged.is_watertight and merged.is_winding_consistent

@@ -1,18 +1,15 @@
-"""The add-on's Check panel (``ple_addon/check_panel.py``), installed from the built zip into headless
-bpy 5.0.1 through the helpers of ``test_addon`` (one fresh process per case). Truth: the core
+"""The add-on's Check panel (``ple_addon/features/check.py``), installed from the built zip into headless
+bpy 5.0.1 through the helpers of ``test_addon`` (in the test run's one Blender worker). Truth: the core
 installed in the environment (an independent copy of the vendored one) run on the same program,
 and a brute-force test of all element pairs."""
 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 import test_addon as base
-from test_addon import zip_path  # noqa: F401 - the built zip (a fixture)
 
 # a cubic lattice with both face diagonals of every xy face: they cross at the face centres
 CROSSING = '''"""Crossing face diagonals: unclean by construction."""
@@ -33,13 +30,11 @@ CASES = ["report", "show_and_errors", "filtered_whole"]
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_check_panel_case(zip_path, case, tmp_path):  # noqa: F811 - the fixture
-    res = subprocess.run([sys.executable, __file__, str(zip_path), case], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=600)
-    assert f"{case} OK" in res.stdout, res.stdout[-4000:] + res.stderr[-4000:]
+def test_check_panel_case(run_case, case):
+    run_case(__file__, case)
 
 
-# ----- bpy side (runs in the subprocess) ------------------------------------------------------------
+# ----- bpy side (runs in the Blender worker) --------------------------------------------------------
 def crossing_rig(region=(3, 3, 3)):
     text = base.bpy.data.texts.new("crossing.py")
     text.from_string(CROSSING)
@@ -131,9 +126,3 @@ def case_filtered_whole():
     assert got["rules"]["clean"]["ok"] and all_pairs_unclean(ev) == 0
     assert got["rules"]["components"]["count"] == 2
     assert got["mass"]["volume"] == pytest.approx(mass_properties(lat)["volume"], rel=1e-12)
-
-
-if __name__ == "__main__":
-    for name in CASES:
-        setattr(base, f"case_{name}", globals()[f"case_{name}"])
-    base.main(sys.argv[1], sys.argv[2])

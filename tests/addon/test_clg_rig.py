@@ -1,23 +1,19 @@
 """The CLG rig of the add-on (issue 16), installed from the built zip into headless bpy 5.0.1.
 
-Every case runs in its own fresh process (``python tests/addon/test_clg_rig.py ZIP CASE``), through
-``test_addon.install``. Truth comes from the core installed in the environment (an independent copy
-of the vendored one): Monte Carlo volumes over its PMC, its meshes and voxels of the edited pattern,
-and volumes and edge counts computed here from the Blender mesh data.
+The cases run in the test run's one Blender worker (``conftest.py``). Truth comes from the core
+installed in the environment (an independent copy of the vendored one): Monte Carlo volumes over its
+PMC, its meshes and voxels of the edited pattern, and volumes and edge counts computed here from the
+Blender mesh data.
 """
 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import test_addon as base  # noqa: E402
+import test_addon as base
 
 CASES = ["add_sources", "mesh_preview_volume", "corner_edit_follows", "frame_edit_steady", "voxel_and_slice_preview",
          "operators_write_files", "apply_to_clg_file", "duplicate_remove", "errors"]
@@ -38,23 +34,12 @@ def clg(hollow: Range(0.3, 0.8) = 0.5):
 '''
 
 
-@pytest.fixture(scope="module")
-def zip_path(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("clg_rig")
-    build = subprocess.run([sys.executable, "-m", "ple_addon.build", "--out", str(tmp)], cwd=base.ROOT,
-                           capture_output=True, text=True)
-    assert build.returncode == 0, build.stdout + build.stderr
-    return Path(build.stdout.strip().splitlines()[-1])
-
-
 @pytest.mark.parametrize("case", CASES)
-def test_clg_rig_case(zip_path, case, tmp_path):
-    res = subprocess.run([sys.executable, __file__, str(zip_path), case], cwd=tmp_path, capture_output=True,
-                         text=True, timeout=600)
-    assert f"{case} OK" in res.stdout, res.stdout[-4000:] + res.stderr[-4000:]
+def test_clg_rig_case(run_case, case):
+    run_case(__file__, case)
 
 
-# ----- bpy side (runs in the subprocess) ------------------------------------------------------------
+# ----- bpy side (runs in the Blender worker) --------------------------------------------------------
 def new_clg(preset="plate", **kw):
     assert base.bpy.ops.ple.clg_add(source="PRESET", preset=preset, **kw) == {"FINISHED"}
     return base.bpy.context.active_object
@@ -152,7 +137,7 @@ def case_add_sources():
     assert shelled.ple_clg.active and shelled.ple.source_kind == "IR"
     # the panel draws (chunks, solid, buttons) without errors
     seen = []
-    panel = base.ple_ext.clg_rig.PLE_PT_clg
+    panel = base.ple_ext.features.clg.PLE_PT_clg
     assert panel.poll(bpy.context)
     panel.draw(type("P", (), {"layout": base.CheckedLayout(seen)})(), bpy.context)
     for name in ("ple.clg_preview", "ple.clg_voxelize", "ple.clg_slice", "ple.clg_export", "preview", "chunk"):
@@ -177,7 +162,7 @@ def case_corner_edit_follows():
     """Drag BeCOTS corner C: the preview is the core's mesh of the CLG on the moved slab."""
     rig = new_clg("plate", region=(2, 2, 1))
     clg = core_clg("plate")
-    p = base.ple_ext.rig.parts(rig)
+    p = base.ple_ext.rig.model.parts(rig)
     p[("corner", "C")].location = (4.6, 4.2, 1.5)
     base.update()
     assert rig.ple.status == "" and rig.ple_clg.status == "", (rig.ple.status, rig.ple_clg.status)
@@ -197,7 +182,7 @@ def case_frame_edit_steady():
     """Move the U frame of a steady CLG (shelled): the preview's volume follows the edited pattern."""
     rig = new_clg("shelled", region=(2, 2, 2))
     rig.ple_clg.segments = 48  # a thin shell: the difference of two meshes, within 1 % at 48 segments
-    p = base.ple_ext.rig.parts(rig)
+    p = base.ple_ext.rig.model.parts(rig)
     u = p["u"]
     m = base.matrix(u)
     m[:3, 3] += np.array([0.3, 0.0, 0.0])  # a longer step along U: longer beams
@@ -205,7 +190,7 @@ def case_frame_edit_steady():
     base.update()
     assert rig.ple.status == "" and rig.ple_clg.status == "", (rig.ple.status, rig.ple_clg.status)
     vendored = base.ple_ext.corelink.core("model.ir")
-    lat = cm("model.ir").lattice_from_dict(vendored.lattice_to_dict(base.ple_ext.rig.lattice_of(rig)))
+    lat = cm("model.ir").lattice_from_dict(vendored.lattice_to_dict(base.ple_ext.rig.model.lattice_of(rig)))
     clg = core_clg("shelled")
     assert not np.allclose(lat.U.matrix, clg.pattern.U.matrix)
     co, polys = preview_data(rig)
@@ -228,7 +213,7 @@ def case_voxel_and_slice_preview():
     clg = core_clg("shelled")
     region = clg.pattern.region("0:2,0:2,0:1")
     comp = cm("clg.query").compiled(clg, region)
-    shape = base.ple_ext.clg_rig.grid_shape(comp.lo, comp.hi, 24)
+    shape = base.ple_ext.features.clg.grid_shape(comp.lo, comp.hi, 24)
     assert max(shape) == 24
     # independent of the add-on's voxels: PMC at the voxel centres computed here
     axes = [comp.lo[a] + (np.arange(shape[a]) + 0.5) * (comp.hi[a] - comp.lo[a]) / shape[a] for a in range(3)]
@@ -280,12 +265,12 @@ def case_apply_to_clg_file():
     back from the text is the edited one (same preview); a clg() program is refused, text kept."""
     bpy = base.bpy
     rig = new_clg("plate", region=(2, 2, 1))
-    p = base.ple_ext.rig.parts(rig)
+    p = base.ple_ext.rig.model.parts(rig)
     p[("corner", "C")].location = (4.6, 4.2, 1.5)
     base.update()
     before = preview_data(rig)[0].copy()
     assert bpy.ops.ple.program_apply() == {"FINISHED"}
-    assert base.ple_ext.rig.edits_of(rig) == []
+    assert base.ple_ext.rig.model.edits_of(rig) == []
     data = json.loads(rig.ple.text.as_string())
     moved = [list(base.matrix(p[("corner", c)])[:3, 3]) for c in "ABCD"]
     assert np.allclose(data["pattern"]["becots"]["corners"], moved, atol=1e-6)
@@ -296,7 +281,7 @@ def case_apply_to_clg_file():
     path.write_text(PROGRAM)
     assert bpy.ops.ple.clg_add(source="FILE", filepath=str(path.resolve())) == {"FINISHED"}
     prog = bpy.context.active_object
-    u = base.ple_ext.rig.parts(prog)["u"]
+    u = base.ple_ext.rig.model.parts(prog)["u"]
     u.location = (u.location[0] + 0.2, u.location[1], u.location[2])
     base.update()
     base.fails(bpy.ops.ple.program_apply, "Copy Snippet")
@@ -345,13 +330,3 @@ def case_errors():
     # a plain lattice rig is not a CLG rig
     base.new_rig("cubic")
     base.fails(bpy.ops.ple.clg_preview, "select a PLE CLG object")
-
-
-def main(zip_path: str, case: str) -> None:
-    base.install(zip_path)
-    globals()[f"case_{case}"]()
-    print(f"{case} OK")
-
-
-if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])

@@ -28,7 +28,8 @@ def test_eval_info_mesh_biq_on_a_tmi_slab(tmp_path, capsys):
     assert info["nodes"] == 16 and info["volume"] > 0 and "per-hub" in info["area_method"]
     mesh = tmp_path / "m.stl"
     assert main(["mesh", src, "--param", "nu=3", "--param", "nv=3", "--out", str(mesh), "--check"]) == 0
-    report = json.loads(capsys.readouterr().out.split("\n", 1)[1])
+    text = capsys.readouterr().out
+    report = json.loads(text[text.index("{"):])
     assert report["watertight"] and abs(report["relative_volume_error"]) < 0.01
     q = tmp_path / "q.npy"
     np.save(q, np.array([[0.0, 0.0, 0.0, 0.2], [2.0, 2.0, 0.0, 0.1]]))

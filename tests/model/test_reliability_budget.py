@@ -75,7 +75,7 @@ def test_sizes_and_slabs():
 WATCHED = [
     (["mesh", "cubic", "--param", "n=26", "--region", "0:26,0:26,0:1", "--out", "c.stl"], 0),
     (["mesh", "octet", "--levels", "6", "--region", "0:3,0:3,0:3", "--out", "o.glb"], 2),
-    (["mesh", "octet", "--levels", "6", "--region", "0:3,0:3,0:3", "--out", "o.stl", "--check"], 2),
+    (["mesh", "octet", "--levels", "6", "--region", "0:3,0:3,0:3", "--out", "o.ply", "--check"], 2),
     (["mesh", "cubic", "--param", "n=1000", "--style", "cnt", "--out", "cnt.stl"], 2),  # 9.97e8 beams
     (["mesh", "cubic", "--param", "n=79", "--out", "c.glb"], 2),
     (["mesh", "cubic", "--param", "n=79", "--out", "c.3mf", "--beam-lattice"], 2),  # its triangle mesh is refused

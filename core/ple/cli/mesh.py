@@ -16,11 +16,11 @@ from ..app.cluster import run_job
 from ..app.jobs import assemble_stl, mesh_job
 from ..errors import PleError
 from ..filters.body import body_of
-from ..io.export import export_mesh, read_back, write_beam_lattice_3mf, write_mesh
+from ..io.export import STL_RECORD, export_mesh, read_back, write_beam_lattice_3mf, write_mesh
 from ..io.formats import DEFAULT_UNIT, UNITS, mesh_format
-from ..measure.check import is_clean
-from ..measure.integrals import lattice_volume
-from ..meshing.selfcheck import count_self_intersections
+from ..io.spill import SpillFiles
+from ..measure.check import is_clean, solid_volume
+from ..meshing.selfcheck import BLOCK_TRIANGLES, check_triangles
 from ..meshing.skin import skin
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
 from ..meshing.tessellate import _check_style, check_fillet, tessellate
@@ -39,8 +39,9 @@ from ..model.budget import (
 from .common import add_cluster_args, add_lattice_args, lattice_from_args, max_memory, report_job
 
 MAX_MESH_GROUPS = 20_000_000  # streamed binary STL
-MAX_MEMORY_GROUPS = 500_000  # formats built in memory (trimesh), --check and --beam-lattice
+MAX_MEMORY_GROUPS = 500_000  # formats built in memory (trimesh) and --beam-lattice
 CHECK_SAMPLES = 400_000
+CHECK_CHUNK = 1 << 18  # triangles read from the written STL at a time by --check
 
 
 def register(sub) -> None:
@@ -64,8 +65,9 @@ def register(sub) -> None:
                    help="3MF only: balls and beams with the Beam Lattice extension beside the watertight "
                         "triangle mesh of --style (extensions not required)")
     p.add_argument("--check", action="store_true",
-                   help="report, on the file as written and read back: watertightness, winding, Euler "
-                        "characteristic, self-intersections and volume vs the lattice's")
+                   help="report, on the file as written and read back (an STL in blocks: bounded memory): "
+                        "watertightness, winding, Euler characteristic, exact self-intersections, and the "
+                        "mesh volume vs the lattice's (ple info's)")
     p.set_defaults(func=run)
 
 
@@ -82,10 +84,10 @@ def run(args) -> int:
     region = lat.region(args.region)
     if region.groups > MAX_MESH_GROUPS:
         raise PleError(f"region {region} has {region.groups:,} node-groups; choose a smaller --region")
-    in_memory = args.check or args.beam_lattice or fmt != "stl" or args.skin is not None
+    in_memory = args.beam_lattice or fmt != "stl" or args.skin is not None or (args.check and lat.group_map is not None)
     if in_memory and region.groups > MAX_MEMORY_GROUPS:
         raise PleError(f"region {region} has {region.groups:,} node-groups: too many to hold in memory for "
-                       f".{fmt}{' with --check' if args.check else ''}; write .stl (streamed) or a smaller --region")
+                       f".{fmt}; write .stl (streamed) or a smaller --region")
     max_groups = _within_budget(args, lat, region, fmt, in_memory)
     t0 = time.perf_counter()
     if args.beam_lattice and fmt != "3mf":
@@ -107,7 +109,7 @@ def run(args) -> int:
         write_beam_lattice_3mf(args.out, ev.center, ev.radius, ev.beam_nodes, mesh=mesh, unit=args.unit)
         print(f"wrote {args.out}: beam lattice, {len(ev.center):,} balls, {len(ev.beam_nodes):,} beams, "
               f"with {len(mesh.faces):,} triangles ({style}), unit {args.unit}")
-    elif args.check:
+    elif args.check and lat.group_map is not None:  # groups placed by a map: the STL stream needs similar groups
         mesh = tessellate(lat, region, args.style, args.levels, args.segments, fillet=args.fillet)
         info["unclean"] = _say_unclean(mesh)
         n = len(mesh.faces) - export_mesh(mesh, args.out, args.unit)["dropped_faces"]
@@ -130,9 +132,9 @@ def run(args) -> int:
         print("warning: the lattice is not clean (elements overlap elements they share no ball with): ple check "
               "lists the pairs", file=sys.stderr)
     if args.check:
-        written = read_back(args.out, args.unit)
-        print(json.dumps(check_report(lat, region, written, unclean=report is not None and len(report.nodes) > 0),
-                         indent=1))
+        rep = check_report(lat, region, args.out, args.unit, unclean=report is not None and len(report.nodes) > 0)
+        print(volume_line(rep))
+        print(json.dumps(rep, indent=1))
     return 0
 
 
@@ -172,9 +174,13 @@ def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
                 limit, "choose a smaller --region or fewer --levels")
         return 1 << 14
     tris = mesh_triangles(lat, region, args.style, levels, segments)
+    if args.check:  # the written file, checked block by block (an STL) or read back whole
+        per = CHECK_TRIANGLE_BYTES
+        require(min(tris, BLOCK_TRIANGLES) * per if fmt == "stl" else tris * per,
+                f"checking {tris:,.3g} triangles ({args.style}) of {what}", limit,
+                "choose a smaller --region or fewer --levels, or leave out --check")
     if in_memory:
-        per = CHECK_TRIANGLE_BYTES if args.check else MESH_TRIANGLE_BYTES
-        require(tris * per + evaluation_bytes(lat, region),
+        require(tris * MESH_TRIANGLE_BYTES + evaluation_bytes(lat, region),
                 f"{tris:,.3g} triangles ({args.style}) of {what} in memory for .{fmt}", limit,
                 "write .stl (streamed), choose a smaller --region or fewer --levels")
         return 1 << 14
@@ -205,35 +211,52 @@ def _say_unclean(mesh):
     return rep
 
 
-def check_report(lat, region, mesh, unclean: bool = False) -> dict:
-    """Watertight, winding, Euler characteristic, self-intersections (exact test,
-    ``ple.meshing.selfcheck``) and mesh volume against the lattice volume (``ple.measure.lattice_volume``
-    for the whole lattice when available, else a Monte Carlo estimate of the union of balls and
-    cone-beams in the region, always for an ``unclean`` lattice, whose overlaps the closed form
-    would count twice)."""
-    rep = {"triangles": int(len(mesh.faces)), "watertight": bool(mesh.is_watertight),
-           "winding_consistent": bool(mesh.is_winding_consistent),
-           "euler_characteristic": int(mesh.euler_number)}
-    rep.update(count_self_intersections(mesh.vertices, mesh.faces))
-    rep["mesh_volume"] = float(mesh.volume)
-    whole = region == lat.region() and lat.filter is None and not unclean  # the closed form knows no filter
-    exact = None
-    if whole:
-
-        try:
-            exact = lattice_volume(lat)
-        except PleError:  # e.g. too many hub classes: fall back to the Monte Carlo estimate
-            exact = None
-        if exact is not None:
-            exact = float(exact)
-            rep["lattice_volume"], rep["lattice_volume_source"] = exact, "ple.measure.lattice_volume"
-    if exact is None:
+def check_report(lat, region, path, unit: str = DEFAULT_UNIT, unclean: bool = False) -> dict:
+    """The written mesh file checked as a consumer reads it (``ple.meshing.selfcheck.check_triangles``:
+    watertight, winding, Euler characteristic, exact self-intersections, faces without area; an
+    STL read in chunks and checked in blocks, memory bounded), and its volume against the lattice's:
+    the volume ``ple info`` reports (``ple.measure.check.solid_volume``: the union of balls and
+    cone-beams of a clean lattice), else, for an ``unclean`` lattice whose overlaps it would count
+    twice, or one too varied to measure, a Monte Carlo estimate of the union in the region."""
+    with SpillFiles(Path(path).resolve().parent) as blocks:  # beside the file: as much room as it took
+        c = check_triangles(lambda: file_triangles(path, unit), store=blocks)
+    rep = {k: c[k] for k in ("triangles", "watertight", "winding_consistent", "euler_characteristic",
+                             "self_intersecting_pairs", "self_intersecting_faces", "degenerate_faces")}
+    rep["mesh_volume"] = float(c["volume"])
+    try:
+        solid = None if unclean else solid_volume(lat, region)
+    except PleError:  # e.g. too many hubs to measure: the Monte Carlo estimate
+        solid = None
+    if solid is not None:
+        err = f" ±{solid['error']:.2g}" if solid["error"] is not None else ""
+        rep["lattice_volume"], rep["lattice_volume_source"] = solid["volume"], f"ple info ({solid['method']}){err}"
+    else:
         est, err = monte_carlo_volume(lat, region)
         rep["lattice_volume"], rep["lattice_volume_source"] = est, f"monte carlo ±{err:.2g}"
-        exact = est
-    if exact:
-        rep["relative_volume_error"] = float(mesh.volume / exact - 1)
+    if rep["lattice_volume"]:
+        rep["relative_volume_error"] = float(rep["mesh_volume"] / rep["lattice_volume"] - 1)
     return rep
+
+
+def volume_line(rep: dict) -> str:
+    """The mesh volume beside the lattice's, and their difference in percent."""
+    diff = f": difference {100 * rep['relative_volume_error']:+.3f} %" if "relative_volume_error" in rep else ""
+    return (f"volume: mesh {rep['mesh_volume']:.9g}, lattice {rep['lattice_volume']:.9g} "
+            f"({rep['lattice_volume_source']}){diff}")
+
+
+def file_triangles(path, unit: str = DEFAULT_UNIT, chunk: int = CHECK_CHUNK):
+    """Triangles (k, 3, 3) of a written mesh file in PLE's axes and ``unit``: a binary STL's
+    float32 corners ``chunk`` records at a time (never the whole file), other formats read back
+    whole (``ple.io.export.read_back``)."""
+    if mesh_format(path) != "stl":
+        m = read_back(path, unit)
+        yield np.asarray(m.vertices)[np.asarray(m.faces)]
+        return
+    n = int(np.fromfile(path, "<u4", count=1, offset=80)[0])
+    records = np.memmap(path, STL_RECORD, mode="r", offset=84, shape=(n,))
+    for i in range(0, n, chunk):
+        yield np.array(records["vertices"][i:i + chunk])  # a copy: the map's pages can go
 
 
 def monte_carlo_volume(lat, region, samples: int = CHECK_SAMPLES, seed: int = 0) -> tuple[float, float]:

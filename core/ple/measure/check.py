@@ -11,6 +11,7 @@ import numpy as np
 from ..errors import PleError
 from ..model.lattice import Evaluation, Lattice
 from ..queries.overlaps import similar_axes, unclean_pairs
+from .integrals import kept_measures, lattice_measures
 from .moments import mass_properties
 
 MAX_CHECK_ELEMENTS = 20_000_000  # nodes + beams evaluated by one check (memory bound)
@@ -41,6 +42,23 @@ def is_clean(lat: Lattice, region=None, max_elements: int = QUICK_ELEMENTS) -> b
     if (r.groups * len(lat.nodes) + lat.beam_count() * r.groups / max(1, lat.groups)) > max_elements:
         return None
     return unclean_pairs(lat, lat.evaluate(r))["clean"]
+
+
+def solid_volume(lat: Lattice, region=None) -> dict | None:
+    """The volume ``ple info`` reports for what the lattice keeps in ``region``: {"volume",
+    "error" (the quadrature's estimate, 3σ; None when not estimated), "method"}; the union of the
+    balls and cone-beams when the lattice is clean (its hubs have disjoint interiors). None when
+    it is not measured (too many hub classes)."""
+    r = lat.region(region)
+    if lat.group_map is not None:  # groups placed by a map: area and volume per hub
+        props = lattice_measures(lat) if str(r) == str(lat.region()) else kept_measures(lat, r)
+        method, error = props.get("area_method", ""), None
+    else:
+        props = mass_properties(lat, r)
+        method, error = props.get("method", ""), props.get("quadrature_error")
+    if props.get("volume") is None:
+        return None
+    return {"volume": float(props["volume"]), "error": None if error is None else float(error), "method": method}
 
 
 def _label(ev: Evaluation, kind: str, rows) -> list[dict]:

@@ -130,16 +130,41 @@ def contact_circles(radius, r_plus, dirs, other_radii, lengths, strict: bool = T
     return np.arctan2(np.maximum(y, 0.0), x), x, y
 
 
-def _max_inflation(radius, other_radii, lengths) -> float:
-    """The largest r⁺ for which every contact disk stays in the first MAX_DISK_REACH of its beam
-    and keeps at least MIN_DISK_RADIUS of the thinner ball's radius (beyond: unclean)."""
-    sphi, cphi = beam_profile(radius, other_radii, lengths)
+def disk_reach(radius, sphi, cphi, other_radii, lengths) -> np.ndarray:
+    """Per beam (..., S), the largest s (distance from the tangent point along the profile) at
+    which its contact disk stays in the first MAX_DISK_REACH of the beam (the two ends never
+    cross) and keeps at least MIN_DISK_RADIUS of the thinner ball's radius. ``radius``: a float
+    or (H, 1)."""
     # axial x = r sin(phi) + s cos(phi) ≤ reach·L, radius y = r cos(phi) − s sin(phi) ≥ m·min(r, r_o)
     s_max = (MAX_DISK_REACH * lengths - radius * sphi) / cphi
     y_min = MIN_DISK_RADIUS * np.minimum(radius, other_radii)
     s_y = np.where(sphi > 0, (radius * cphi - y_min) / np.where(sphi > 0, sphi, 1.0), np.inf)
-    s = np.clip(np.minimum(s_max, s_y).min(), 0.0, None)
-    return float(np.sqrt(radius**2 + s**2))
+    return np.clip(np.minimum(s_max, s_y), 0.0, None)
+
+
+def _max_inflation(radius, other_radii, lengths) -> float:
+    """The largest r⁺ for which every contact disk stays within its ``disk_reach``."""
+    sphi, cphi = beam_profile(radius, other_radii, lengths)
+    return float(np.sqrt(radius**2 + disk_reach(radius, sphi, cphi, other_radii, lengths).min() ** 2))
+
+
+def pulled_circles(radius, r_plus, sphi, cphi, reach, theta):
+    """Contact circles of a junction whose S⁺ passes the far end of a short beam: each beam's
+    disk where S⁺ meets it, or nearer, at its ``disk_reach`` (s = min(sqrt(r⁺² − r²), reach)).
+    The circles then lie at their own distances rho from the centre, not on one sphere; the
+    junction is the CHoCC of their cones of directions (half-angles alpha), each vertex at its
+    circle's distance, and stays star-shaped from the centre. radius, r_plus: floats or (H, 1);
+    sphi, cphi, reach (..., S); theta (..., S, S) the angles between beams (inf on the
+    diagonal). Returns alphas, rho (..., S) and ok (...): every disk real, in front of the
+    centre, and the caps of directions disjoint (else the beams' cones cross nearer than the
+    disks and the junction is unclean)."""
+    s = np.minimum(np.sqrt(np.maximum(r_plus**2 - radius**2, 0.0)), reach)
+    x = radius * sphi + s * cphi
+    y = radius * cphi - s * sphi
+    alphas = np.arctan2(np.maximum(y, 0.0), x)
+    gap = theta - (alphas[..., :, None] + alphas[..., None, :])
+    ok = np.all((y > 0) & (x > 0), axis=-1) & np.all(gap > 1e-9, axis=(-2, -1))
+    return alphas, np.hypot(x, y), ok
 
 
 @dataclass
@@ -162,6 +187,20 @@ class HubGeometry:
     clean: bool = True
     alphas: np.ndarray | None = None
     base_triangles: np.ndarray | None = None  # CHoCC triangles before the off-centre fix (a hint for neighbours)
+    rho: np.ndarray | None = None
+
+    @property
+    def pulled(self) -> bool:
+        """Whether a short beam pulled a contact circle in from S⁺."""
+        return self.rho is not None
+
+    def circle_radii(self) -> np.ndarray:
+        """Distance (S,) of each contact circle from the centre: r⁺, or ``rho`` if pulled in."""
+        return np.full(self.slots, self.r_plus) if self.rho is None else self.rho
+
+    def disk_axial(self) -> np.ndarray:
+        """Axial position (S,) of each contact disk's centre along its beam."""
+        return self.circle_radii() * np.cos(self.alphas)
 
     def exit_distance(self, u: np.ndarray) -> np.ndarray:
         """Distance (V,) from the centre along unit rays ``u`` (V, 3) to the boundary of the
@@ -262,15 +301,24 @@ def hub_geometry(radius: float, dirs, other_radii, lengths, hint=None, r_plus_mi
     if len(dirs):  # a beam widening away from the ball meets S⁺ in front of the centre only beyond r / cos(phi)
         _, cphi = beam_profile(radius, other_radii, lengths)
         r_plus = max(r_plus, radius / cphi.min() * (1 + 1e-2))
-    clean = True
+    clean, rho = True, None
     if len(dirs):
         limit = _max_inflation(radius, other_radii, lengths)
-        if r_plus > limit:  # unclean: neighbouring junctions would overlap; stay inside the beams
+        if r_plus > limit and r_plus_min <= 0:  # a short beam: pull its circle in, if the caps stay apart
+            sphi, cphi = beam_profile(radius, other_radii, lengths)
+            theta = np.arccos(np.clip(dirs @ dirs.T, -1, 1))
+            np.fill_diagonal(theta, np.inf)
+            pa, prho, ok = pulled_circles(radius, r_plus, sphi, cphi,
+                                          disk_reach(radius, sphi, cphi, other_radii, lengths), theta)
+            if ok:
+                alphas, rho = pa, prho
+        if rho is None and r_plus > limit:  # unclean: neighbouring junctions would overlap; stay inside the beams
             r_plus, clean = max(limit, radius), False
-        else:
+        elif rho is None:
             r_plus = max(r_plus, min(r_plus_min, limit))
-    alphas, _, _ = contact_circles(radius, r_plus, dirs, other_radii, lengths, strict=clean)
-    if len(dirs) > 1:
+    if rho is None:
+        alphas, _, _ = contact_circles(radius, r_plus, dirs, other_radii, lengths, strict=clean)
+    if len(dirs) > 1 and rho is None:
         theta = np.arccos(np.clip(dirs @ dirs.T, -1, 1))
         np.fill_diagonal(theta, np.inf)
         gap = theta - (alphas[:, None] + alphas[None, :])
@@ -310,4 +358,4 @@ def hub_geometry(radius: float, dirs, other_radii, lengths, hint=None, r_plus_mi
         alist = np.concatenate([alist, [0.0]])
         c = chocc(normals, alist)
     return HubGeometry(float(radius), float(r_plus), dirs, other_radii, lengths, c, len(dirs), clean, alphas,
-                       base_triangles)
+                       base_triangles, rho)

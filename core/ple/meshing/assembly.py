@@ -26,10 +26,12 @@ except ImportError:  # not built (no C compiler): numpy assembles
 
 @dataclass
 class TemplateGeometry:
-    """What the stream reads of a template's ``HubGeometry``: r⁺ and the ACHoCC's clean flag."""
+    """What the stream reads of a template's ``HubGeometry``: r⁺, the ACHoCC's clean flag and
+    whether a short beam pulled a contact circle in from S⁺ (``achocc.pulled_circles``)."""
 
     r_plus: float
     clean: bool
+    pulled: bool = False
 
 
 class Packed:
@@ -47,7 +49,7 @@ class Packed:
         self.faces, self.face_lens, self.face_ids = _pack_arrays([[t.faces] for t in templates], 3)
         self.rings, self.ring_lens, self.ring_ids = _pack_arrays([t.rings for t in templates], 1)
         self.caps, self.cap_lens, self.cap_ids = _pack_arrays([t.caps for t in templates], 3)
-        self.geometry = [(float(t.geometry.r_plus), bool(t.geometry.clean)) for t in templates]
+        self.geometry = [(float(t.geometry.r_plus), bool(t.geometry.clean), bool(t.geometry.pulled)) for t in templates]
 
     def templates(self, chunk: int) -> list:
         """The templates, their arrays views of this object's, each with its table row (``chunk``:

@@ -31,13 +31,13 @@ from ..errors import PleError
 from .achocc import (
     CENTRE_MARGIN,
     INFLATE,
-    MAX_DISK_REACH,
-    MIN_DISK_RADIUS,
     UNCLEAN_GAP,
     HubGeometry,
     JunctionError,
+    disk_reach,
     exit_distances,
     hub_geometry,
+    pulled_circles,
 )
 from .chocc import (
     DEGENERATE_ARC,
@@ -82,7 +82,7 @@ def _segments(style: str, segments: int):
     return cnt_segments if style in ("cnt", "refined") else sampled_segments(segments)
 
 
-def refine_arrays(verts, hull, faces, fcor, fpar, rings, real, normals, alphas, r_plus, corridor_point,
+def refine_arrays(verts, hull, faces, fcor, fpar, rings, real, normals, alphas, rho, corridor_point,
                   exit_distance, levels: int, corridors=None):
     """§6 refinement of H hubs with one CNT topology: ``levels`` 1-to-4 splits (a corridor quad,
     two triangles, becomes 8 around its centre), arc midpoints snapped to their circle, other new
@@ -91,7 +91,8 @@ def refine_arrays(verts, hull, faces, fcor, fpar, rings, real, normals, alphas, 
     verts (H, V, 3) in hub units (centre at 0), hull (H, V, 3) the same vertices on the CHoCC
     hull (unit sphere); faces (F, 3), their corridor fcor (F,) (-1: a planar CHoCC triangle) and
     corridor coordinates fpar (F, 3, 2); rings (per circle, vertex ids) of which the first
-    ``real`` are contact circles; normals (H, n, 3), alphas (H, n), r_plus (H,);
+    ``real`` are contact circles; normals (H, n, 3), alphas (H, n), rho (H, real) the distance of
+    each contact circle from the centre (r⁺, or nearer where a short beam pulls it in);
     ``corridor_point(cor (k,), s (k,), t (k,))`` -> (H, k, 3) points of the curved corridors;
     ``exit_distance(u (H, k, 3))`` -> (H, k) distance to the lattice along unit rays.
 
@@ -107,7 +108,7 @@ def refine_arrays(verts, hull, faces, fcor, fpar, rings, real, normals, alphas, 
     # per corridor: is its end a (t = 0) / b (t = 1) a point circle (the corridor is a cone with its apex there)
     ends = np.asarray(corridors)[:, :2] if corridors is not None and len(corridors) else np.zeros((0, 2), np.int64)
     point_end = np.concatenate([np.asarray(alphas)[0][ends] == 0.0, np.zeros((1, 2), bool)])  # row -1: triangles
-    rp = np.asarray(r_plus, float)[:, None, None]
+    rho = np.asarray(rho, float)
     rings = [np.asarray(r).copy() for r in rings]
     for _ in range(levels):
         nv = verts.shape[1]
@@ -148,6 +149,7 @@ def refine_arrays(verts, hull, faces, fcor, fpar, rings, real, normals, alphas, 
         if arcs:
             q, x, y, ci = (np.concatenate(a) for a in zip(*arcs))
             is_arc[q] = True
+            rp = rho[:, ci][..., None]
             mids[:, q] = _arc_mids(verts[:, x], verts[:, y], normals[:, ci], alphas[:, ci], rp, e1[:, ci], e2[:, ci])
             hnew[:, q] = mids[:, q] / rp
         proj = ~is_arc
@@ -199,7 +201,7 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
     """``refine_arrays`` of one hub's CNT; its point circles (off-centre fix, seeds) are
     projected onto the lattice first. Returns vertices in hub units, faces, rings."""
     c = hub.chocc
-    verts = mesh.vertices * hub.r_plus
+    verts = _on_circles(mesh, hub)
     off = mesh.vertex_circle >= hub.slots
     if off.any():  # point circles: onto the lattice too
         u = verts[off] / np.linalg.norm(verts[off], axis=1, keepdims=True)
@@ -208,10 +210,19 @@ def _refine(mesh: ChoccMesh, hub: HubGeometry, levels: int) -> tuple[np.ndarray,
     fcor = mesh.face_corridor if mesh.face_corridor is not None else np.full(len(faces), -1)
     fpar = mesh.face_params if mesh.face_params is not None else np.zeros((len(faces), 3, 2))
     v, f, rings = refine_arrays(verts[None], mesh.vertices[None], faces, fcor, fpar, mesh.rings, hub.slots,
-                                c.normals[None], c.alphas[None], np.array([hub.r_plus]),
+                                c.normals[None], c.alphas[None], hub.circle_radii()[None],
                                 lambda cor, s, t: mesh.corridor_point(cor, s, t)[None],
                                 lambda u: hub.exit_distance(u[0])[None], levels, c.corridors)
     return v[0], f, rings
+
+
+def _on_circles(mesh: ChoccMesh, hub: HubGeometry) -> np.ndarray:
+    """The CNT's unit-sphere vertices at their circles' distances (hub units): r⁺, or each
+    contact circle's own ``rho`` (``achocc.pulled_circles``); point circles stay at r⁺."""
+    if hub.rho is None:
+        return mesh.vertices * hub.r_plus
+    radii = np.concatenate([hub.rho, np.full(max(hub.chocc.n - hub.slots, 0), hub.r_plus)])
+    return mesh.vertices * radii[mesh.vertex_circle][:, None]
 
 
 def _caps(rings: list, nv: int) -> list:
@@ -230,7 +241,7 @@ def _hub_surface(hub, style: str, levels: int, segments: int):
     if style == "refined":
         verts, faces, rings = _refine(base, hub, levels)
     else:
-        verts, faces, rings = base.vertices * hub.r_plus, base.faces, base.rings
+        verts, faces, rings = _on_circles(base, hub), base.faces, base.rings
     return verts, faces, rings, base
 
 
@@ -258,11 +269,23 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
         _surface += [faces, rings, base]
     if min_edge > 0:  # lengths of snapped positions: the batch (``_collapsed``) sees the same ones
         faces, rings, _ = collapse_short_edges(_snapped(verts), faces, rings, min_edge)
-    axial = hub.r_plus * np.cos(hub.alphas)
+    axial = hub.disk_axial()
     rings = [rings[s] for s in range(hub.slots)]
     disk_centres = dirs * axial[:, None]
-    return HubTemplate(np.concatenate([verts, disk_centres]) + center, faces, rings,
-                       _caps(rings, len(verts)), hub)
+    caps = _caps(rings, len(verts))
+    if hub.pulled and not star_shaped(np.concatenate([verts, disk_centres]), faces, caps):
+        hub.clean = False  # folded: left to a local union (``ple.meshing.unions``)
+    return HubTemplate(np.concatenate([verts, disk_centres]) + center, faces, rings, caps, hub)
+
+
+def star_shaped(verts: np.ndarray, faces: np.ndarray, caps: list) -> bool:
+    """Whether a closed hub mesh (vertices (V, 3) relative to its centre, faces and cap fans)
+    has every face turned outward as seen from the centre: its faces' cones then cover each
+    direction once (the mesh encloses the centre: degree one), so no two faces meet. A junction
+    of pulled-in circles (``achocc.pulled_circles``) is kept only if it passes."""
+    f = np.concatenate([np.asarray(faces).reshape(-1, 3), *[np.asarray(c).reshape(-1, 3) for c in caps]])
+    t = verts[f]
+    return bool(np.all(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])) > 0))
 
 
 # ----- batches ----------------------------------------------------------------------------
@@ -270,12 +293,15 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
 class _Geometries:
     """The ACHoCC junctions of H hubs with S ≥ 3 beams (``achocc.hub_geometry`` as arrays):
     ok (H,) where the batch can tell the junction (no inflation loop, every contact circle a
-    real circle under a hemisphere), r_plus (H,), alphas (H, S), clean (H,)."""
+    real circle under a hemisphere), r_plus (H,), alphas (H, S), clean (H,), and rho (H, S) the
+    contact circles' distances (r⁺ but where a short beam pulls its circle in), pulled (H,)."""
 
     ok: np.ndarray
     r_plus: np.ndarray
     alphas: np.ndarray
     clean: np.ndarray
+    rho: np.ndarray
+    pulled: np.ndarray
 
 
 def _geometries(radius, dirs, other, lengths) -> _Geometries:
@@ -305,24 +331,25 @@ def _geometries(radius, dirs, other, lengths) -> _Geometries:
     cand = np.where(forward, np.hypot(px, py), r)
     r_plus = np.maximum(radius, cand.max(axis=1)) * (1 + INFLATE)
     r_plus = np.maximum(r_plus, radius / cphi.min(axis=1) * (1 + 1e-2))
-    # _max_inflation: beyond it the junction is unclean and r⁺ stays inside the beams
-    s_max = (MAX_DISK_REACH * lengths - r * sphi) / cphi
-    y_min = MIN_DISK_RADIUS * np.minimum(r, other)
-    s_y = np.where(sphi > 0, (r * cphi - y_min) / np.where(sphi > 0, sphi, 1.0), np.inf)
-    limit = np.sqrt(radius**2 + np.clip(np.minimum(s_max, s_y).min(axis=1), 0.0, None) ** 2)
-    clean = r_plus <= limit
+    # _max_inflation: beyond it the junction is unclean and r⁺ stays inside the beams, unless the
+    # short beams' circles can be pulled in (``achocc.pulled_circles``)
+    reach = disk_reach(r, sphi, cphi, other, lengths)
+    limit = np.sqrt(radius**2 + reach.min(axis=1) ** 2)
+    n = dirs.shape[1]
+    theta = np.arccos(np.clip(np.einsum("hai,hbi->hab", dirs, dirs), -1, 1))
+    theta[:, np.arange(n), np.arange(n)] = np.inf
+    p_alphas, p_rho, p_ok = pulled_circles(r, r_plus[:, None], sphi, cphi, reach, theta)
+    pulled = (r_plus > limit) & p_ok
+    clean = (r_plus <= limit) | pulled
     r_plus = np.where(clean, r_plus, np.maximum(limit, radius))
     # contact_circles (strict only for clean hubs)
     s = np.sqrt(np.maximum(r_plus**2 - radius**2, 0.0))[:, None]
     x = r * sphi + s * cphi
     y = r * cphi - s * sphi
-    ok &= ~clean | np.all((y > 0) & (x < lengths), axis=1)
-    alphas = np.arctan2(np.maximum(y, 0.0), x)
-    n = dirs.shape[1]
-    theta = np.arccos(np.clip(np.einsum("hai,hbi->hab", dirs, dirs), -1, 1))
+    ok &= ~clean | pulled | np.all((y > 0) & (x < lengths), axis=1)
+    alphas = np.where(pulled[:, None], p_alphas, np.arctan2(np.maximum(y, 0.0), x))
     gap = theta - (alphas[:, :, None] + alphas[:, None, :])
-    gap[:, np.arange(n), np.arange(n)] = np.inf
-    touching = gap.min(axis=(1, 2)) <= 1e-9
+    touching = (gap.min(axis=(1, 2)) <= 1e-9) & ~pulled
     ok &= ~(clean & touching)  # the inflation loop of hub_geometry: built alone
     # unclean caps overlapping at the allowed r⁺: each shrunk to its share (hub_geometry)
     share = (theta - UNCLEAN_GAP) * alphas[:, :, None] / np.maximum(alphas[:, :, None] + alphas[:, None, :], 1e-300)
@@ -330,7 +357,8 @@ def _geometries(radius, dirs, other, lengths) -> _Geometries:
     shrunk = np.clip(np.minimum(alphas, share.min(axis=2)), 0.0, None)
     alphas = np.where(touching[:, None], shrunk, alphas)
     ok &= np.all((alphas > 0) & (alphas < np.pi / 2), axis=1)
-    return _Geometries(ok, r_plus, alphas, clean)
+    rho = np.where(pulled[:, None], p_rho, r_plus[:, None])
+    return _Geometries(ok, r_plus, alphas, clean, rho, pulled)
 
 
 def _strict_hull(normals, alphas, tris):
@@ -353,7 +381,7 @@ def _strict_hull(normals, alphas, tris):
 class _Batch:
     """Hubs (H of them) in the representative's topology: CHoCC, CNT and corridors as arrays."""
 
-    def __init__(self, rep: HubGeometry, normals, alphas, r_plus, style: str, segments: int):
+    def __init__(self, rep: HubGeometry, normals, alphas, r_plus, rho, style: str, segments: int):
         c = rep.chocc
         self.tris, self.cors = c.triangles, c.corridors
         ok, (pn, pa, pts, ccw) = _strict_hull(normals, alphas, self.tris)
@@ -368,7 +396,7 @@ class _Batch:
         self.plane_normals = np.take_along_axis(pn, pick[..., None], axis=2)[:, :, 0]
         self.plane_alphas = np.take_along_axis(pa, pick, axis=2)[:, :, 0]
         self.points = np.take_along_axis(pts, pick[..., None, None], axis=2)[:, :, 0]
-        self.normals, self.alphas, self.r_plus = normals, alphas, r_plus
+        self.normals, self.alphas, self.r_plus, self.rho = normals, alphas, r_plus, rho
         self.frames = perpendicular_frames(normals)
         a, b, t1, t2 = self.cors.T
         corner = lambda t, x: np.argmax(self.tris[t] == x[:, None], axis=1)  # noqa: E731
@@ -411,7 +439,7 @@ class _Batch:
 
     def take(self, keep: np.ndarray) -> None:
         """Keep the hubs ``keep`` (indices or mask) only."""
-        for name in ("plane_normals", "plane_alphas", "points", "normals", "alphas", "r_plus", "th_a0", "th_b0",
+        for name in ("plane_normals", "plane_alphas", "points", "normals", "alphas", "r_plus", "rho", "th_a0", "th_b0",
                      "da", "db", "m", "ok"):
             setattr(self, name, getattr(self, name)[keep])
         self.frames = (self.frames[0][keep], self.frames[1][keep])
@@ -572,7 +600,7 @@ def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths
     Returns the hubs of this CNT whose collapses the batch cannot tell (``_collapsed``)."""
     faces, rings, base = surface
     normals = unit_rows(dirs[hubs])
-    full = _Batch(rep, normals, geo.alphas[hubs], geo.r_plus[hubs], style, segments)
+    full = _Batch(rep, normals, geo.alphas[hubs], geo.r_plus[hubs], geo.rho[hubs], style, segments)
     if len(base.vertices) != 3 * len(full.tris) + 2 * np.maximum(full.m[0] - 1, 0).sum():
         return []  # the representative's CNT is not its batch form (point circles, merged corridors)
     keep = np.flatnonzero(full.ok[1:]) + 1
@@ -586,20 +614,22 @@ def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths
         batch.take(sel)
         ids = hubs[sel]
         unit = batch.cnt_vertices()
-        rp = batch.r_plus
+        rp, rho = batch.r_plus, batch.rho
+        # every vertex of a batch's CNT lies on a contact circle (no point circles): at its distance
+        on = unit * rp[:, None, None] if not geo.pulled[ids].any() else unit * rho[:, base.vertex_circle, None]
         if style == "refined":
             verts, f, rg = refine_arrays(
-                unit * rp[:, None, None], unit, base.faces, base.face_corridor, base.face_params, base.rings,
-                dirs.shape[1], batch.normals, batch.alphas, rp, batch.corridor_point,
+                on, unit, base.faces, base.face_corridor, base.face_params, base.rings,
+                dirs.shape[1], batch.normals, batch.alphas, rho, batch.corridor_point,
                 lambda u, ids=ids: exit_distances(u, radii[ids], dirs[ids], nbr[ids], lengths[ids]), levels,
                 batch.cors)
         else:
-            verts, f, rg = unit * rp[:, None, None], base.faces, base.rings
+            verts, f, rg = on, base.faces, base.rings
         if topology is None:  # the same faces and rings for every chunk
             topology = _Surface(f, [rg[s] for s in range(len(rg))], verts.shape[1])
         surfaces = _collapsed(verts, topology, min_edge)
         caps = {}
-        disk = dirs[ids] * (rp[:, None] * np.cos(batch.alphas))[..., None]
+        disk = dirs[ids] * (rho * np.cos(batch.alphas))[..., None]
         allv = np.concatenate([verts, disk], axis=1) + centers[ids][:, None]
         for k, g in enumerate(ids):
             if surfaces[k] is None:
@@ -611,7 +641,9 @@ def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths
             c = Chocc(batch.normals[k], batch.alphas[k], batch.tris, batch.plane_normals[k], batch.plane_alphas[k],
                       batch.points[k], batch.cors, rep.chocc.twin, rep.chocc.rings, rep.chocc.ring_corridors)
             hub = HubGeometry(float(radii[g]), float(rp[k]), dirs[g], nbr[g], lengths[g], c, dirs.shape[1],
-                              bool(geo.clean[g]), batch.alphas[k], batch.tris)
+                              bool(geo.clean[g]), batch.alphas[k], batch.tris, rho[k] if geo.pulled[g] else None)
+            if hub.pulled and not star_shaped(np.concatenate([verts[k], disk[k]]), fk, caps[id(fk)]):
+                hub.clean = False  # folded: as ``hub_template``
             out[g] = HubTemplate(allv[k], fk, rk[:dirs.shape[1]], caps[id(fk)], hub)
     return ties
 

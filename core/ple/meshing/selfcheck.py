@@ -2,26 +2,45 @@
 
 A closed mesh that intersects itself counts the overlapping parts twice (slicers, volumes).
 ``self_intersections`` finds every pair of faces that meet other than in their shared
-vertices or edge:
+vertices or edge. Faces without area (a repeated vertex, or three collinear corners, decided
+exactly) have no interior and take no part (``degenerate`` finds them).
 
-- broad phase: a uniform grid (cell size from the median box) over boxes of slices of the faces
-  (a long needle gets small boxes along its length), pairs of faces with overlapping slices;
-- narrow phase, vectorized: orientation predicates ``orient3d`` in float64 with a static
-  error bound (Shewchuk's filter); the few undecided signs are recomputed exactly with
-  integers (the floats' exact values), so every decision is exact.
+Two forms give the same pairs (tested): the compiled one (``ple.meshing._selfcheck``, optional,
+the GIL released) and numpy:
+
+- broad phase: compiled, a hashed uniform grid (cells grown from ``CELL_MEDIANS`` median face
+  widths until a face lies in 3 cells on average), each face in the cells of its box, a long face
+  only in those of its slices across its longest axis, buckets shared among threads, every
+  pair of faces tested once (in the first cell both lie in) and never stored; numpy, a uniform
+  grid (cell size from the median box) over boxes of slices of the faces, candidate pairs sorted
+  and deduplicated;
+- narrow phase: orientation predicates ``orient3d`` / ``orient2d`` in float64 with a static
+  error bound (Shewchuk's filter); the few undecided signs are recomputed exactly (compiled:
+  floating-point expansions; numpy: integers, the floats' exact values), so every decision is
+  exact.
 
 Pairs without a common vertex intersect (or touch) iff an edge of one meets the other
 (non-coplanar), or, coplanar, iff their 2D projections overlap. Pairs with one common vertex
 intersect iff the edge opposite that vertex in one meets the other. Pairs with a common edge
-intersect iff they are coplanar and on the same side of it (a fold).
+intersect iff they are coplanar and on the same side of it (a fold). Two faces on the same three
+vertices coincide.
 """
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from ..algebra.vectors import cross
+from ..errors import PleError
 
+try:  # the compiled check (setup.py, optional): the numpy form's pairs, without candidate lists
+    from . import _selfcheck as _compiled
+except ImportError:  # not built (no C compiler): numpy checks
+    _compiled = None
+
+CELL_MEDIANS = 2.0  # the compiled grid's first cell over the median middle extent of the faces' boxes
 ERRBOUND = (7.0 + 56.0 * 2.0**-53) * 2.0**-53  # Shewchuk's o3derrboundA
 MAX_CELL_PAIRS = 1 << 22
 GRID_CELL = 0.5  # grid cell over the median slice size (slices: 2 median face extents long)
@@ -217,20 +236,70 @@ def _coplanar_overlap(t1: np.ndarray, t2: np.ndarray, normal: np.ndarray) -> np.
     return hit
 
 
-def self_intersections(vertices, faces, fresh=None) -> np.ndarray:
-    """Pairs (P, 2) of faces that intersect other than in their shared vertices or edge.
-    Faces with a repeated vertex are ignored (they have no interior). ``fresh`` (F,) bool: only
-    pairs with at least one fresh face (the others are known apart)."""
-    v = np.asarray(vertices, float).reshape(-1, 3)
-    f = np.asarray(faces, np.int64).reshape(-1, 3)
+def self_intersections(vertices, faces, fresh=None, *, workers: int | None = None) -> np.ndarray:
+    """Pairs (P, 2) int64 of faces (i < j, sorted) that intersect other than in their shared
+    vertices or edge, for vertices (V, 3) and faces (F, 3) (vertex ids: faces share a vertex when
+    they share its id). Faces without area (``degenerate``) are ignored. ``fresh`` (F,)
+    bool: only pairs with at least one fresh face (the others are known apart). ``workers``:
+    threads of the compiled form (default: the cores, one per 10⁵ faces; the same pairs for any
+    number)."""
+    v = np.ascontiguousarray(vertices, float).reshape(-1, 3)
+    f = np.ascontiguousarray(faces, np.int64).reshape(-1, 3)
+    fresh = None if fresh is None else np.ascontiguousarray(fresh, bool).reshape(-1)
+    finite = np.isfinite(v).all(axis=1)
+    if not finite.all() and not finite[f].all():
+        raise PleError("self-intersections: a face has a non-finite vertex coordinate")
+    if _compiled is None:
+        return _numpy_pairs(v, f, fresh)
+    if len(f) < 2:
+        return np.zeros((0, 2), np.int64)
+    if workers is None:
+        workers = min(os.cpu_count() or 1, 1 + len(f) // 100_000)
+    raw, _ = _compiled.pairs(v, f, fresh, _cell(v, f), max(1, int(workers)))
+    pairs = np.frombuffer(raw, np.int64).reshape(-1, 2)
+    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+
+
+def _cell(v: np.ndarray, f: np.ndarray) -> float:
+    """The compiled grid's first cell (it grows until the faces lie in few cells each):
+    ``CELL_MEDIANS`` median middle extents of the faces' boxes (the width of a needle, the size of
+    a compact face), from a sample of at most 10⁵ faces."""
+    step = max(1, len(f) // 100_000)
+    t = v[f[::step]]
+    ext = np.sort(t.max(axis=1) - t.min(axis=1), axis=1)[:, 1]
+    return max(float(np.median(ext)) * CELL_MEDIANS, float(np.abs(v).max(initial=0.0)) * 2.0**-40, 1e-300)
+
+
+def degenerate(vertices, faces) -> np.ndarray:
+    """(F,) bool: faces without area, a repeated vertex or three collinear corners (exact: every
+    projection of the face onto a coordinate plane has orientation 0)."""
+    v = np.ascontiguousarray(vertices, float).reshape(-1, 3)
+    f = np.ascontiguousarray(faces, np.int64).reshape(-1, 3)
+    if _compiled is not None:
+        return np.frombuffer(_compiled.flat(v, f), bool).copy()
+    out = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
+    k = np.flatnonzero(~out)
+    flat = np.ones(len(k), bool)
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        a, b, c = (v[f[k, m]][:, [i, j]] for m in range(3))
+        flat &= _orient2d(a, b, c) == 0
+    out[k[flat]] = True
+    return out
+
+
+def _numpy_pairs(v: np.ndarray, f: np.ndarray, fresh: np.ndarray | None) -> np.ndarray:
+    """``self_intersections`` by numpy (candidate pairs listed, then tested by kind)."""
+    keep = ~degenerate(v, f)
+    idx = np.flatnonzero(keep)
+    f = f[idx]
     tri = v[f]
-    pairs = candidate_pairs(tri, None if fresh is None else np.asarray(fresh, bool).reshape(-1))
+    pairs = candidate_pairs(tri, None if fresh is None else fresh[idx])
     if not len(pairs):
         return pairs
     fa, fb = f[pairs[:, 0]], f[pairs[:, 1]]
     shared = (fa[:, :, None] == fb[:, None, :])
     ns = shared.any(axis=2).sum(axis=1)
-    bad = np.zeros(len(pairs), bool)
+    bad = ns == 3  # the same three vertices: the faces coincide
     # no shared vertex
     sel = np.flatnonzero(ns == 0)
     if len(sel):
@@ -261,9 +330,7 @@ def self_intersections(vertices, faces, fresh=None) -> np.ndarray:
             sa = _orient2d(u[:, 1], u[:, 2], u[:, 0])
             sp = _orient2d(u[:, 1], u[:, 2], w[:, 0])
             bad[sel[c]] = sa * sp > 0
-    degenerate = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
-    bad &= ~(degenerate[pairs[:, 0]] | degenerate[pairs[:, 1]])
-    return pairs[bad]
+    return idx[pairs[bad]]
 
 
 def _rotate(t: np.ndarray, first: np.ndarray) -> np.ndarray:
@@ -295,6 +362,183 @@ def _disjoint_pairs(t1: np.ndarray, t2: np.ndarray) -> np.ndarray:
 
 
 def count_self_intersections(vertices, faces) -> dict:
-    """Intersecting face pairs and the number of faces involved."""
+    """Intersecting face pairs, the number of faces involved, and the faces without area (which
+    take no part)."""
     pairs = self_intersections(vertices, faces)
-    return {"self_intersecting_pairs": int(len(pairs)), "self_intersecting_faces": int(len(np.unique(pairs)))}
+    return {"self_intersecting_pairs": int(len(pairs)), "self_intersecting_faces": int(len(np.unique(pairs))),
+            "degenerate_faces": int(degenerate(vertices, faces).sum())}
+
+
+BLOCK_TRIANGLES = 1 << 20  # triangles per block of ``check_triangles`` (about 0.3 GB while checked)
+
+
+def check_triangles(read, block: int = BLOCK_TRIANGLES, store=None) -> dict:
+    """Watertightness, winding, Euler characteristic, exact self-intersections and volume of a
+    triangle soup read in chunks, as a consumer sees it (corners with equal coordinates are one
+    vertex), with memory bounded by ``block`` triangles whatever the soup's size.
+
+    ``read()`` returns a new iterator over chunks of triangles (k, 3, 3) (float32 or float64); it
+    is called twice (bounds, then the blocks). Soups of at most ``block`` triangles are checked in
+    memory. Larger ones are cut into blocks of a uniform grid over their box: a triangle goes to
+    every block its box meets, its record kept by ``store`` until the block is checked
+    (``put(key, records)``, ``take(key)``, ``keys()``; default ``MemoryBlocks``, in memory;
+    ``ple.io.spill.SpillFiles`` keeps them on disk, so only one block is in memory), and each
+    block is welded and checked alone. What spans blocks is counted once, by an owner that sees
+    all of it: a vertex by its block; an edge by the block of its lexicographically smaller end
+    (every face on the edge has that end in its box); a face by the block of its box's low
+    corner; a pair of faces by the block of the low corner of their boxes' intersection (which
+    lies in both boxes).
+
+    Returns {"triangles", "watertight" (every edge on exactly two faces), "winding_consistent"
+    (and they run it in opposite directions), "euler_characteristic" (V − E + F), "volume"
+    (signed, from the divergence theorem), "self_intersecting_pairs", "self_intersecting_faces",
+    "degenerate_faces" (``degenerate``), "blocks"}."""
+    count, lo, hi = 0, np.full(3, np.inf), np.full(3, -np.inf)
+    chunks, single = [], True  # single: every chunk float32 (an STL's), kept as such
+    for t in read():
+        t = np.asarray(t).reshape(-1, 3, 3)
+        single &= t.dtype == np.float32
+        if len(t):
+            lo, hi = np.minimum(lo, t.min(axis=(0, 1))), np.maximum(hi, t.max(axis=(0, 1)))
+        if count + len(t) <= block:
+            chunks.append(np.asarray(t, float))
+        count += len(t)
+    acc = _Tally()
+    if count <= block:  # one block: in memory
+        tri = np.concatenate(chunks) if chunks else np.zeros((0, 3, 3))
+        acc.add(tri, np.arange(len(tri)), None)
+        return acc.report(count, 1)
+    del chunks
+    store = MemoryBlocks() if store is None else store
+    grid = _BlockGrid(lo, hi, count, block)
+    record = np.dtype([("index", "<i8"), ("corners", "<f4" if single else "<f8", (3, 3))])
+    first = 0
+    for t in read():
+        t = np.asarray(t).reshape(-1, 3, 3)
+        rec = np.empty(len(t), record)
+        rec["index"], rec["corners"] = np.arange(first, first + len(t)), t
+        first += len(t)
+        for key, rows in grid.spread(grid.cells(t.min(axis=1)), grid.cells(t.max(axis=1))):
+            store.put(key, rec[rows])
+    keys = store.keys()
+    for key in keys:
+        rec = store.take(key)
+        acc.add(rec["corners"].astype(float), rec["index"], (grid, key))
+    return acc.report(count, len(keys))
+
+
+class MemoryBlocks:
+    """``check_triangles``' blocks kept in memory (the records of all blocks at once)."""
+
+    def __init__(self):
+        self._parts: dict = {}
+
+    def put(self, key: int, records: np.ndarray) -> None:
+        self._parts.setdefault(key, []).append(np.array(records))
+
+    def keys(self) -> list[int]:
+        return sorted(self._parts)
+
+    def take(self, key: int) -> np.ndarray:
+        return np.concatenate(self._parts.pop(key))
+
+
+class _BlockGrid:
+    """Blocks of a uniform grid over the box [lo, hi], about ``count / block`` of them (cubes, at
+    least one per axis); cell indices floor((x − lo) / size), clipped to the grid."""
+
+    def __init__(self, lo, hi, count: int, block: int):
+        ext = np.maximum(hi - lo, 0.0)
+        n = max(2.0, 2.0 * count / block)  # a triangle may go to a few blocks: aim at half-full ones
+        span = ext[ext > 0]
+        size = float(np.prod(span) / n) ** (1.0 / len(span)) if len(span) else 1.0
+        self.lo, self.size = lo, size
+        self.dims = np.maximum(1, np.ceil(ext / size).astype(np.int64))
+
+    def cells(self, x: np.ndarray) -> np.ndarray:
+        return np.clip(np.floor((x - self.lo) / self.size).astype(np.int64), 0, self.dims - 1)
+
+    def key(self, c: np.ndarray) -> np.ndarray:
+        return (c[..., 0] * self.dims[1] + c[..., 1]) * self.dims[2] + c[..., 2]
+
+    def spread(self, b0: np.ndarray, b1: np.ndarray):
+        """(block key, rows) for every block of the cell ranges [b0, b1] (k, 3) of the rows."""
+        span = b1 - b0 + 1
+        n = span.prod(axis=1)
+        rows = np.repeat(np.arange(len(b0)), n)
+        k = np.arange(len(rows)) - np.repeat(np.cumsum(n) - n, n)
+        sy, sz = span[rows, 1], span[rows, 2]
+        c = b0[rows] + np.stack([k // (sy * sz), (k // sz) % sy, k % sz], axis=1)
+        keys = self.key(c)
+        order = np.argsort(keys, kind="stable")
+        keys, rows = keys[order], rows[order]
+        starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
+        for s, e in zip(starts, np.r_[starts[1:], len(keys)]):
+            yield int(keys[s]), rows[s:e]
+
+
+def weld(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) and faces (k, 3) of triangles (k, 3, 3): corners with equal coordinates
+    are one vertex (−0 equal to 0), as consumers of STL merge them."""
+    t = np.ascontiguousarray(triangles, float).reshape(-1, 3)
+    if _compiled is not None:
+        inv, first = (np.frombuffer(x, np.int64) for x in _compiled.weld(t))
+        return t[first] + 0.0, inv.reshape(-1, 3)
+    v, inv = np.unique(t + 0.0, axis=0, return_inverse=True)
+    return v, inv.reshape(-1, 3)
+
+
+def _lexicographic_less(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(N,) bool: row p < row q in (x, y, z) order."""
+    x, y = p[:, 0] == q[:, 0], p[:, 1] == q[:, 1]
+    return (p[:, 0] < q[:, 0]) | (x & (p[:, 1] < q[:, 1])) | (x & y & (p[:, 2] < q[:, 2]))
+
+
+class _Tally:
+    """Counts of ``check_triangles`` summed over blocks."""
+
+    def __init__(self):
+        self.v = self.e = self.f = self.bad_edges = self.misoriented = self.degenerate = 0
+        self.volume = 0.0
+        self.pairs: list = []
+
+    def add(self, tri: np.ndarray, index: np.ndarray, block) -> None:
+        """One block: triangles (k, 3, 3), their indices in the soup, (grid, key) (None: all)."""
+        if not len(tri):
+            return
+        v, f = weld(tri)
+
+        def mine(points):
+            return np.ones(len(points), bool) if block is None else block[0].key(block[0].cells(points)) == block[1]
+
+        own_f = mine(tri.min(axis=1))
+        self.f += int(own_f.sum())
+        self.v += int(mine(v).sum())
+        a, b, c = (tri[own_f, i] for i in range(3))
+        self.volume += float(np.einsum("ij,ij->", a, cross(b, c))) / 6.0
+        self.degenerate += int(degenerate(v, f)[own_f].sum())
+        d = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])  # directed edges
+        p, q = v[d[:, 0]], v[d[:, 1]]
+        forward = _lexicographic_less(p, q)  # runs from its smaller end (in coordinates, as in every block)
+        keep = mine(np.where(forward[:, None], p, q))
+        d, forward = d[keep], forward[keep]
+        und = np.sort(d, axis=1)
+        _, inv, n = np.unique(und[:, 0] * len(v) + und[:, 1], return_inverse=True, return_counts=True)
+        fwd = np.bincount(inv.reshape(-1), forward, len(n))
+        self.e += len(n)
+        self.bad_edges += int((n != 2).sum())
+        self.misoriented += int(((n == 2) & (fwd != 1)).sum())
+        pairs = self_intersections(v, f)
+        if block is not None and len(pairs):
+            grid = block[0]
+            corner = np.maximum(grid.cells(tri[pairs[:, 0]].min(axis=1)), grid.cells(tri[pairs[:, 1]].min(axis=1)))
+            pairs = pairs[grid.key(corner) == block[1]]
+        self.pairs.append(np.sort(index[pairs], axis=1))
+
+    def report(self, count: int, blocks: int) -> dict:
+        pairs = np.concatenate(self.pairs) if self.pairs else np.zeros((0, 2), np.int64)
+        return {"triangles": int(count), "watertight": self.bad_edges == 0,
+                "winding_consistent": self.bad_edges == 0 and self.misoriented == 0,
+                "euler_characteristic": int(self.v - self.e + self.f), "volume": self.volume,
+                "self_intersecting_pairs": int(len(pairs)), "self_intersecting_faces": int(len(np.unique(pairs))),
+                "degenerate_faces": int(self.degenerate), "blocks": int(blocks)}

@@ -49,8 +49,9 @@ from .preview import balls_beams_mesh
 from .skin import clip_bodies, clip_to_bodies
 from .styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS
 from .styles import style as style_named
-from .unclean import SEPARATION_GRIDS, find_unclean, unite
-from .weld import COLLAPSE_GRIDS, grid_spacing
+from .unclean import SEPARATION_GRIDS, find_unclean
+from .unions import clusters, unite_cluster
+from .weld import COLLAPSE_GRIDS, grid_spacing, weld
 
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
 MAX_LEVELS = 6
@@ -243,7 +244,8 @@ class _Tessellator:
         fmin = float(np.min(lat.group_factors(corners[:, 0], corners[:, 1], corners[:, 2])))
         self.min_edge = COLLAPSE_GRIDS * self.grid / fmin
         self.hulls: dict = {}  # template id -> ids of its vertices on their convex hull
-        self.excluded = None  # sorted linear keys of nodes meshed elsewhere (``ple.meshing.unclean``)
+        self.excluded = None  # sorted linear keys of nodes meshed elsewhere (``ple.meshing.unions``)
+        self.excluded_beams = None  # sorted keys (source node key · patterns + pattern) of beams meshed elsewhere
         # hub templates of a box are built by ``workers`` processes (the CHoCC per topology is Python
         # work that threads cannot share); forked here, before any thread of the stream starts
         self.pool = None
@@ -271,6 +273,22 @@ class _Tessellator:
             return np.zeros(idx.shape[:-1], bool)
         return np.isin(self._key(idx), self.excluded)
 
+    def beam_excluded(self, src: np.ndarray, pattern: int) -> np.ndarray:
+        """Which beams of ``pattern`` from the nodes src (..., 4) a local union meshes
+        (``ple.meshing.unions``): their rings stay open (no cap, no strip)."""
+        if self.excluded_beams is None or src.size == 0:
+            return np.zeros(src.shape[:-1], bool)
+        return np.isin(self._key(src) * len(self.lat.beams) + pattern, self.excluded_beams)
+
+    def exclude(self, idx: np.ndarray, beam_index: np.ndarray) -> None:
+        """Leave the hubs idx (N, 4) and the beams beam_index (M, 4: source node i, j, k and
+        pattern; the source's template node is the pattern's) to local unions."""
+        self.excluded = np.unique(self._key(np.asarray(idx, np.int64).reshape(-1, 4)))
+        bi = np.asarray(beam_index, np.int64).reshape(-1, 4)
+        src = np.concatenate([bi[:, :3], np.array([self.lat.beams[p].n1 for p in bi[:, 3]], np.int64)
+                              .reshape(-1, 1)], axis=1)
+        self.excluded_beams = np.unique(self._key(src) * len(self.lat.beams) + bi[:, 3])
+
     def find_unclean(self):
         """The region's unclean hubs (``ple.meshing.unclean.find_unclean``) with r⁺ and the ACHoCC's
         clean flag of every hub from its template. Returns (report, evaluation)."""
@@ -281,13 +299,14 @@ class _Tessellator:
         tids, m, _, _ = self.instances(idx)
         rp_t = np.array([t.geometry.r_plus for t, _ in self.tpl_list])
         clean_t = np.array([bool(t.geometry.clean) for t, _ in self.tpl_list])
+        pulled_t = np.array([bool(t.geometry.pulled) for t, _ in self.tpl_list])
         f = self.lat.group_factors(idx[:, 0], idx[:, 1], idx[:, 2])
         points = partial(self._element_points, idx, tids, m, np.asarray(ev.beam_nodes, np.int64),
                          np.asarray(ev.beam_index, np.int64)[:, 3])
         # hulls more than the largest rounding of two vertices apart (the grid, then twice the grid
         # for files in other units) stay apart in every file
         return find_unclean(ev.center, ev.radius, ev.beam_nodes, rp_t[tids] * f, ~clean_t[tids], points,
-                            SEPARATION_GRIDS * self.grid, self._steady_layers(idx)), ev
+                            SEPARATION_GRIDS * self.grid, self._steady_layers(idx), pulled_t[tids]), ev
 
     def _steady_layers(self, idx: np.ndarray):
         """``find_unclean``'s ``steady`` (node_index, a, b, shrink) when the region's layers along W
@@ -366,6 +385,10 @@ class _Tessellator:
         lo = np.array([r.i0, r.j0, r.k0])
         hi = np.array([r.i1, r.j1, r.k1])
         inside = np.all((nb[..., :3] >= lo) & (nb[..., :3] < hi), axis=-1) & ~self.is_excluded(nb)
+        if self.excluded_beams is not None:  # rings a local union closes: neither cap nor strip
+            for s, (p, sign) in enumerate(self.slots[n]):
+                src = idx if sign > 0 else nb[:, s]
+                inside[:, s] |= self.beam_excluded(src, p)
         return nb, exists, inside
 
     def instances(self, idx: np.ndarray):
@@ -583,7 +606,7 @@ class _Tessellator:
         for p, b in enumerate(lat.beams):
             src = np.flatnonzero(idx[:n_own, 3] == b.n1)
             dst_idx = np.concatenate([idx[src, :3] + [b.di, b.dj, b.dk], np.full((len(src), 1), b.n2)], axis=1)
-            ok = _in(dst_idx, self.region) & ~self.is_excluded(dst_idx)
+            ok = _in(dst_idx, self.region) & ~self.is_excluded(dst_idx) & ~self.beam_excluded(idx[src], p)
             ok[ok] = self.lat.keeps(dst_idx[ok])
             src, dst_idx = src[ok], dst_idx[ok]
             if len(src) == 0:
@@ -756,8 +779,8 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
         report, ev = unclean, lat.evaluate(r)
     elif check_clean:
         report, ev = tess.find_unclean()
-    if report is not None and len(report.nodes):
-        verts, faces = build_with_unions(tess, ev, report.nodes)
+    if report is not None and report.element_pairs is not None and len(report.nodes):
+        verts, faces = build_with_unions(tess, ev, report)
     else:
         verts, faces = tess.build(r)
     mesh = trimesh.Trimesh(verts, faces, process=False)
@@ -766,16 +789,55 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     return clip_to_bodies(mesh, bodies if cut else [])  # a lattice filling a body by `any` ends at its surface
 
 
-def build_with_unions(tess: _Tessellator, ev, nodes) -> tuple[np.ndarray, np.ndarray]:
-    """The region's mesh with the hubs ``nodes`` (rows of the evaluation ``ev``) left out of the
-    fast path and united with their balls and beams by manifold3d (``ple.meshing.unclean.unite``)."""
-    tess.excluded = np.unique(tess._key(np.asarray(ev.node_index, np.int64)[nodes]))
-    verts, faces = tess.build(tess.region)
-    used = np.unique(faces)
-    remap = np.full(len(verts), -1, np.int64)
-    remap[used] = np.arange(len(used))
-    return unite(verts[used], remap[faces], ev.center, ev.radius, ev.beam_nodes, nodes,
-                 tess.grid)
+def leave_to_unions(tess: _Tessellator, ev, report) -> list:
+    """Tell the fast path which hubs and beams the local unions of ``report`` mesh
+    (``ple.meshing.unions``); returns the clusters."""
+    cl = clusters(report, ev.beam_nodes)
+    idx = np.asarray(ev.node_index, np.int64)
+    hubs = np.concatenate([c.hubs for c in cl]) if cl else np.zeros(0, np.int64)
+    beams = np.concatenate([c.beams for c in cl]) if cl else np.zeros(0, np.int64)
+    bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
+    pattern = np.asarray(ev.beam_index, np.int64)[:, 3]
+    tess.exclude(idx[hubs], np.concatenate([idx[bn[beams, 0], :3], pattern[beams, None]], axis=1))
+    return cl
+
+
+def build_with_unions(tess: _Tessellator, ev, report) -> tuple[np.ndarray, np.ndarray]:
+    """The region's mesh in memory: the fast path without the clusters of ``report``, and their
+    local unions, welded where they share their rings' vertices, put on the output grid (the
+    mesh every float32 file of it holds)."""
+    cl = leave_to_unions(tess, ev, report)
+    v, f = weld_chunks([tess.build(tess.region), *union_pieces(tess, ev, cl)])
+    v, f, _ = weld(v, f, tess.grid)  # on the float32 grid, as every file holds it
+    return v, f
+
+
+def union_pieces(tess: _Tessellator, ev, cl: list):
+    """The meshes (vertices, faces) of the clusters ``cl`` (``leave_to_unions``), one by one: each
+    open along the contact rings it shares with the fast path, whose vertices it takes from the
+    hub templates placed as the boxes place them (``assembly.place``)."""
+    idx = np.asarray(ev.node_index, np.int64)
+    bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
+    pattern = np.asarray(ev.beam_index, np.int64)[:, 3]
+    for c in cl:
+        own = np.zeros(len(idx), bool)
+        own[c.hubs] = True
+        ends = [(int(j), e) for j in c.beams.tolist() for e in (0, 1) if not own[bn[j, e]]]
+        rings = {}
+        if ends:
+            rows = np.array([bn[j, e] for j, e in ends], np.int64)
+            tids, m, _, _ = tess.instances(idx[rows])
+            table = tess.table.snapshot()
+            counts = table[2][tids, 2]
+            offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+            verts = np.empty((int(counts.sum()), 3))
+            place(table, tids, offsets, m, verts)
+            for k, (j, e) in enumerate(ends):
+                tpl, slot_of = tess.tpl_list[int(tids[k])]
+                p = int(pattern[j])
+                slot = tess.slots[int(idx[bn[j, e], 3])].index((p, 1 if e == 0 else -1))
+                rings[(j, e)] = verts[offsets[k] + np.asarray(tpl.rings[slot_of[slot]], np.int64)]
+        yield unite_cluster(c, ev.center, ev.radius, bn, rings, tess.grid)
 
 
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,

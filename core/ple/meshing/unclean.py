@@ -52,15 +52,19 @@ class UncleanReport:
     pairs: int
     shrunk_hubs: int
     components: int
+    close_junctions: int = 0  # neighbouring junctions with pulled-in circles not proven apart
+    element_pairs: np.ndarray | None = None  # (P, 2) element ids (hubs 0..N-1, beams N + row) found overlapping
+    shrunk: np.ndarray | None = None  # (N,) hubs whose ACHoCC shrank its caps
 
     def line(self) -> str:
+        close = f", {self.close_junctions:,} close junction pairs" if self.close_junctions else ""
         return (f"unclean lattice: {len(self.nodes):,} hubs in {self.components:,} neighbourhoods "
-                f"({self.pairs:,} overlapping element pairs, {self.shrunk_hubs:,} shrunk junctions) "
+                f"({self.pairs:,} overlapping element pairs, {self.shrunk_hubs:,} shrunk junctions{close}) "
                 f"united with manifold3d")
 
 
 def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, margin: float = 0.0,
-                 steady=None) -> UncleanReport:
+                 steady=None, pulled=None) -> UncleanReport:
     """Unclean hubs of a region from its balls (center (N, 3), radius (N,)), beams (M, 2 rows),
     each hub's inflated radius r_plus (N,) (world units) and ``shrunk`` (N,) hubs whose ACHoCC
     was not clean. ``points(elements)``: for element ids (K,) (hubs 0..N-1, then beams N..N+M-1)
@@ -73,7 +77,12 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
     outside [a, b) and those whose lowest layer is a (the anchors) are looked up against all the
     others; each anchored pair with both elements inside [a, b) stands for its copies shifted up
     by 1, 2, … layers while they stay inside. ``shrink``: the smallest scale of a layer in
-    [a, b) relative to layer a (the margin of the anchored hulls is divided by it)."""
+    [a, b) relative to layer a (the margin of the anchored hulls is divided by it).
+
+    ``pulled`` (N,): hubs whose short beams pulled contact circles in from S⁺
+    (``achocc.pulled_circles``). Their S⁺ reaches past the disks, so the neighbour at the far
+    end of each of their beams is no longer kept apart by the ACHoCC: each such pair of
+    neighbouring junctions is tested on their hulls too (``points``; without it, unclean)."""
     c = np.asarray(center, float).reshape(-1, 3)
     rad = np.asarray(radius, float).reshape(-1)
     rp = np.maximum(np.asarray(r_plus, float).reshape(-1), rad)
@@ -124,10 +133,19 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
     hits = np.unique(np.concatenate(hits), axis=0) if hits else np.zeros((0, 2), np.int64)
     pairs = len(hits)
     bad[ends[hits].reshape(-1)] = True
+    found = [hits]
     if anchored is not None and len(hits):
         rep = hits[inside[hits[:, 0]] & inside[hits[:, 1]]]  # anchored: copies up to layer kb - 1
         if len(rep):
-            pairs += _mark_copies(bad, ends[rep], kmax[rep].max(axis=1), kb, node_index)
+            copied = _mark_copies(bad, ends[rep], kmax[rep].max(axis=1), kb, node_index, kinds[rep], bn)
+            pairs += len(copied)
+            found.append(copied)
+    close = 0
+    if pulled is not None:
+        near = _pulled_neighbours(np.asarray(pulled, bool).reshape(-1), bn, points, margin)
+        bad[near.reshape(-1)] = True
+        close = len(near)
+        found.append(near)
     nodes = np.flatnonzero(bad)
     comps = 0
     if len(nodes):
@@ -138,7 +156,23 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
         g = coo_matrix((np.ones(int(sel.sum())), (bn[sel, 0], bn[sel, 1])), shape=(n, n))
         _, lab = connected_components(g, directed=False)
         comps = len(np.unique(lab[nodes]))
-    return UncleanReport(nodes, pairs, shrunk_count, comps)
+    shrunk_mask = np.zeros(n, bool) if shrunk is None else np.asarray(shrunk, bool).copy()
+    return UncleanReport(nodes, pairs, shrunk_count, comps, close, np.concatenate(found).astype(np.int64),
+                         shrunk_mask)
+
+
+def _pulled_neighbours(pulled, bn, points, margin: float) -> np.ndarray:
+    """Pairs (P, 2) of neighbouring hubs (beams ``bn`` (M, 2) with a ``pulled`` end) whose
+    junction hulls are not proven apart (``separated``)."""
+    pairs = np.unique(np.sort(bn[pulled[bn[:, 0]] | pulled[bn[:, 1]]], axis=1), axis=0)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    if points is None or not len(pairs):
+        return pairs
+    apart = np.zeros(len(pairs), bool)
+    for lo in range(0, len(pairs), SEPARATION_CHUNK):
+        part = pairs[lo:lo + SEPARATION_CHUNK]
+        apart[lo:lo + len(part)] = separated(points(part[:, 0]), points(part[:, 1]), margin)
+    return pairs[~apart]
 
 
 def _query_pairs(ends, kinds, lo, hi, bn, query):
@@ -152,10 +186,13 @@ def _query_pairs(ends, kinds, lo, hi, bn, query):
         yield order[i], order[j]
 
 
-def _mark_copies(bad, ends, top, kb: int, node_index) -> int:
-    """Flag the nodes of the copies of element pairs (P, 2, 2 node rows) shifted up by 1, 2, …
-    layers while their highest layer ``top`` (P,) stays below kb; returns the number of copies."""
+def _mark_copies(bad, ends, top, kb: int, node_index, kinds, bn) -> np.ndarray:
+    """Flag the nodes of the copies of element pairs (P, 2, 2 node rows; ``kinds`` (P, 2): 0 a
+    hub, 1 a beam) shifted up by 1, 2, … layers while their highest layer ``top`` (P,) stays
+    below kb; returns the copies as element pairs (C, 2) (hubs by node row, beams N + their row
+    in ``bn``; a beam copy joins the shifted nodes: every beam between them)."""
     idx = np.asarray(node_index, np.int64)
+    n = len(idx)
     dims = idx.max(axis=0) + 1
     dims[2] = max(int(dims[2]), kb) + 1
     key = ((idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]) * dims[3] + idx[:, 3]
@@ -167,7 +204,26 @@ def _mark_copies(bad, ends, top, kb: int, node_index) -> int:
     at = np.minimum(np.searchsorted(key[order], k), len(key) - 1)
     found = key[order][at] == k
     bad[order[at][found]] = True
-    return int(shifts.sum())
+    # the copies as elements: hubs are their node, beams the beams between their shifted nodes
+    ok = found.all(axis=1)
+    shifted = order[at][ok].reshape(-1, 2, 2)
+    kind = np.repeat(np.asarray(kinds, np.int64), shifts, axis=0)[ok]
+    bkey = bn[:, 0] * n + bn[:, 1]
+    border = np.argsort(bkey, kind="stable")
+    out = []
+    for e in range(2):
+        a, b = shifted[:, e, 0], shifted[:, e, 1]
+        q = a * n + b
+        lo, hi = np.searchsorted(bkey[border], q, "left"), np.searchsorted(bkey[border], q, "right")
+        ids = []
+        for c in range(len(q)):
+            if kind[c, e] == 0:
+                ids.append([a[c]])
+            else:
+                ids.append((n + border[lo[c]:hi[c]]).tolist())
+        out.append(ids)
+    pairs = [(x, y) for xs, ys in zip(*out) for x in xs for y in ys]
+    return np.array(pairs, np.int64).reshape(-1, 2)
 
 
 SEPARATION_GRIDS = 8  # hulls this many output grid steps apart stay apart after two roundings of each vertex
@@ -281,7 +337,8 @@ def _unite_once(manifold3d, unit, base, mesh_vertices, mesh_faces, c, rad, beam_
 MAX_REPAIR_ROUNDS = 12
 
 
-def on_grid(vertices, faces, grid: float, centers, reach: float, old=None) -> tuple[np.ndarray, np.ndarray]:
+def on_grid(vertices, faces, grid: float, centers, reach: float, old=None,
+            pinned=None) -> tuple[np.ndarray, np.ndarray]:
     """A closed, self-intersection-free mesh moved onto the float32 grid ``grid`` so that it stays
     so: its edges under ``COLLAPSE_GRIDS`` grid steps are collapsed in 64 bits (link condition),
     the vertices snapped and welded (``ple.meshing.weld.weld``); then, on the faces with a corner within
@@ -294,16 +351,22 @@ def on_grid(vertices, faces, grid: float, centers, reach: float, old=None) -> tu
     finds any pair). ``old``: (vertices, faces) of the fast mesh the Boolean started from; its
     faces that come out unchanged (same corners on the grid) are known apart from each other
     (the clean hubs' fast path), so only pairs with a face the Boolean or a repair made are
-    tested. Returns (vertices on the grid, faces)."""
+    tested. Returns (vertices on the grid, faces).
+    ``pinned`` (K, 3): points that are vertices of the mesh and must stay (a local union's rings,
+    shared with the fast path): no collapse removes them, and they come back at their own
+    coordinates (on the grid they are where the fast path's writer puts its own)."""
     v = np.asarray(vertices, float)
     f = np.asarray(faces, np.int64)
+    pinned = np.zeros((0, 3)) if pinned is None else np.asarray(pinned, float).reshape(-1, 3)
+    fixed = _rows_in(v, pinned)
     for _ in range(MAX_REPAIR_ROUNDS):
         e = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
         e = e[np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1) < COLLAPSE_GRIDS * grid]
         n = len(f)
-        if not len(e) or len(f := collapse_edges(v, f, e, [])[0]) == n:
+        if not len(e) or len(f := collapse_edges(v, f, e, [], fixed)[0]) == n:
             break
     v, f, _ = weld(v, f, grid)
+    fixed = _rows_in(v, snap(pinned, grid))
     from scipy.spatial import cKDTree  # noqa: PLC0415 - optional package
 
     tree = cKDTree(np.asarray(centers, float).reshape(-1, 3))
@@ -332,7 +395,7 @@ def on_grid(vertices, faces, grid: float, centers, reach: float, old=None) -> tu
         edges = np.concatenate([_thinner_edges(v, f, probe), np.stack([f[flat, k], f[flat, (k + 1) % 3]], axis=1)])
         n = len(f)
         if len(edges):
-            f, near = collapse_edges(v, f, edges, near)
+            f, near = collapse_edges(v, f, edges, near, fixed)
         if len(f) == n:
             break  # nothing (more) can be collapsed (link condition, flips): the exact check decides
     pairs = near[self_intersections(v, f[near], _fresh(v, f[near], kept))]
@@ -344,7 +407,24 @@ def on_grid(vertices, faces, grid: float, centers, reach: float, old=None) -> tu
     used = np.unique(f)
     remap = np.full(len(v), -1, np.int64)
     remap[used] = np.arange(len(used))
-    return v[used], remap[f]
+    v = v[used]
+    if len(pinned):  # back at their own coordinates (the same grid point)
+        key = {tuple(q): p for q, p in zip(snap(pinned, grid).tolist(), pinned)}
+        for i in np.flatnonzero(_rows_in(v, snap(pinned, grid))):
+            v[i] = key[tuple(v[i].tolist())]
+    return v, remap[f]
+
+
+def _rows_in(v: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Which rows (V,) of v (V, 3) equal one of ``points`` (K, 3) exactly."""
+    if not len(points) or not len(v):
+        return np.zeros(len(v), bool)
+    return np.isin(_row_view(v), _row_view(points))
+
+
+def _row_view(a: np.ndarray) -> np.ndarray:
+    a = np.ascontiguousarray(np.asarray(a, float).reshape(-1, 3)) + 0.0  # -0.0 == 0.0
+    return a.view(np.dtype((np.void, 24))).reshape(-1)
 
 
 def _old_faces(old, grid: float, tree, bound: float):
@@ -402,9 +482,10 @@ def _thinner_edges(v, f, pairs) -> np.ndarray:
     return np.stack([f[face, k], f[face, (k + 1) % 3]], axis=1)
 
 
-def collapse_edges(v, f, edges, near):
+def collapse_edges(v, f, edges, near, fixed=None):
     """Collapse ``edges`` (E, 2) of a closed oriented mesh where the link condition holds, each
-    onto the one of its two vertices that flips none of the moved faces; collapses of one call
+    onto the one of its two vertices that flips none of the moved faces (never removing a vertex
+    of ``fixed`` (V,) bool); collapses of one call
     touch disjoint vertex neighbourhoods (so each one's test holds for all). Returns (faces, the
     face ids ``near`` still standing, renumbered)."""
     f = np.asarray(f, np.int64)
@@ -426,6 +507,8 @@ def collapse_edges(v, f, edges, near):
         if len(shared) != 2 or nx & ny != {w for t in shared for w in f[t].tolist()} - {x, y}:
             continue  # the link condition fails: the collapse would pinch the surface
         for keep, gone, moved in ((x, y, fy - shared), (y, x, fx - shared)):
+            if fixed is not None and fixed[gone]:
+                continue
             moved = f[sorted(moved)]
             before = v[moved]
             after = v[np.where(moved == gone, keep, moved)]

@@ -12,10 +12,9 @@ import json
 import bpy
 from bpy.props import EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from . import rig as rigmod
-from .corelink import PleError, core
-from .operators import RigOperator
-from .ui import PLE_PT_base
+from ..corelink import PleError, core
+from ..ops.base import RigOperator, RigPanel
+from ..rig import model
 
 check = core("measure.check")
 SHOWN_OFFENDERS = 3  # offenders listed (with a Show button) per failing rule
@@ -47,10 +46,10 @@ class PLE_OT_check(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender nam
 
     def run(self, context, rig):
         s = rig.ple_check
-        lat = rigmod.shown_lattice(rig)  # the panel's filter too: what is drawn is what is checked
+        lat = model.shown_lattice(rig)  # the panel's filter too: what is drawn is what is checked
         region = None
         if s.scope == "REGION":
-            region = rigmod.region_of(rig, lat)
+            region = model.region_of(rig, lat)
             if region is None:
                 raise PleError("the region is empty: set Region from/to inside the repetition counts")
         report = check.check_report(lat, region, s.min_feature or None, s.max_slenderness or None)
@@ -79,12 +78,12 @@ class PLE_OT_check_show(RigOperator, bpy.types.Operator):  # noqa: N801 - Blende
         worst = report["rules"].get(self.rule, {}).get("worst", [])
         if self.index >= len(worst):
             raise PleError(f"rule {self.rule!r} has no offender {self.index}")
-        r = check.offender_region(rigmod.shown_lattice(rig), worst[self.index])
+        r = check.offender_region(model.shown_lattice(rig), worst[self.index])
         rig.ple.region_min, rig.ple.region_max = (r.i0, r.j0, r.k0), (r.i1, r.j1, r.k1)
         return self.refreshed(rig)
 
 
-class PLE_PT_check(PLE_PT_base, bpy.types.Panel):  # noqa: N801 - Blender naming
+class PLE_PT_check(RigPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
     bl_label = "Check"
     bl_options = {"DEFAULT_CLOSED"}
 

@@ -22,17 +22,18 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from . import draw
-from .corelink import PleError, core, presets
+from .. import draw
+from ..corelink import PleError, core, presets
+from ..ops.base import SNIPPET_TEXT, RigPanel
+from ..rig import hooks
+from ..session import SESSION
 
 mobius = core("model.mobius")
 sources = core("program.sources")
 
 PRESETS = ("mobius_slab", "tmi_slab")  # the shipped Möbius presets: Add › PLE Lattice › NAME routes here
-SNIPPET_TEXT = "PLE snippet"  # the text block the steady rigs' snippets go to as well
 MAX_NODES = 200_000  # a region larger than this is not drawn live
 MOVE_DIGITS = 7  # matrices compared at this many decimals (float32 frames)
-_drawn: dict[str, tuple] = {}  # rig name -> (preset, params, base lattice, signature last drawn)
 
 
 def is_mobius_rig(obj) -> bool:
@@ -70,10 +71,15 @@ def _new_object(rig, name: str, data, parent):
     return obj
 
 
+def drawn() -> dict:
+    """Rig name -> (preset, params, base lattice, signature last drawn)."""
+    return SESSION.cache("mobius")
+
+
 def base_lattice(rig):
     """The preset's lattice with the rig's parameters (cached per rig)."""
     name, params = rig["ple_mobius"], json.loads(rig.get("ple_mobius_params", "{}"))
-    hit = _drawn.get(rig.name)
+    hit = drawn().get(rig.name)
     if hit is not None and hit[0] == name and hit[1] == params:
         return hit[2]
     if name not in presets.preset_names():
@@ -82,7 +88,7 @@ def base_lattice(rig):
     mobius.control_frames(lat)  # a PleError if it is not a Möbius lattice
     if lat.node_count() > MAX_NODES:
         raise PleError(f"{name}: {lat.node_count():,} nodes are more than {MAX_NODES:,} to draw live")
-    _drawn[rig.name] = (name, params, lat, ())
+    drawn()[rig.name] = (name, params, lat, ())
     return lat
 
 
@@ -107,8 +113,10 @@ def refresh(rig, force: bool = False) -> str | None:
     """Rebuild and redraw the lattice if a frame or handle moved; returns an error or None (the
     last good drawing stays, the error is the rig's ``ple_status``)."""
     sig = _signature(rig)
-    hit = _drawn.get(rig.name)
+    hit = drawn().get(rig.name)
     if not force and hit is not None and hit[3] == sig:
+        if rig.get("ple_status"):  # a degenerate frame was put back where it was: nothing is wrong now
+            rig["ple_status"] = ""
         return None
     try:
         base = base_lattice(rig)
@@ -120,8 +128,8 @@ def refresh(rig, force: bool = False) -> str | None:
     region = parts(rig).get("region")
     if region is not None:
         draw.region_mesh(region.data, ev)
-    name, params, _, _ = _drawn[rig.name]
-    _drawn[rig.name] = (name, params, base, sig)
+    name, params, _, _ = drawn()[rig.name]
+    drawn()[rig.name] = (name, params, base, sig)
     rig["ple_status"] = ""
     return None
 
@@ -152,7 +160,7 @@ def create(context, preset: str, params: dict | None = None):
     region.hide_select = True
     draw.add_balls_beams_modifier(region)
     draw.set_material(region, draw.REGION_MATERIAL)
-    _drawn.pop(rig.name, None)
+    drawn().pop(rig.name, None)
     error = refresh(rig, force=True)
     if error:
         bpy.data.batch_remove([rig, *rig.children_recursive])
@@ -207,10 +215,7 @@ class PLE_OT_mobius_snippet(bpy.types.Operator):  # noqa: N801 - Blender naming
         return {"FINISHED"}
 
 
-class PLE_PT_mobius(bpy.types.Panel):  # noqa: N801 - Blender naming
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "PLE"
+class PLE_PT_mobius(RigPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
     bl_label = "Möbius Frames"
 
     @classmethod
@@ -228,21 +233,31 @@ class PLE_PT_mobius(bpy.types.Panel):  # noqa: N801 - Blender naming
 
 
 def on_depsgraph_update(scene):
-    """Redraw the Möbius rigs whose frames or handles moved (called by the add-on's depsgraph handler)."""
+    """Redraw the Möbius rigs whose frames or handles moved (an ``updates`` hook of the rig's handler)."""
     for obj in scene.objects:
         if is_mobius_rig(obj):
             refresh(obj)
 
 
+def route(preset: str) -> str | None:
+    """Add › PLE Lattice of a Möbius preset makes a Möbius rig (a ``routes`` hook)."""
+    return PLE_OT_mobius_add.bl_idname if preset in PRESETS else None
+
+
+HOOKS = (("updates", on_depsgraph_update), ("routes", route))
 CLASSES = (PLE_OT_mobius_add, PLE_OT_mobius_snippet, PLE_PT_mobius)
 
 
 def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
+    for name, fn in HOOKS:
+        hooks.add(name, fn)
 
 
 def unregister():
+    for name, fn in HOOKS:
+        hooks.remove(name, fn)
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)
-    _drawn.clear()
+    SESSION.caches.pop("mobius", None)

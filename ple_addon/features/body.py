@@ -17,7 +17,11 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, PointerProperty, StringProperty
 
-from .corelink import PleError, Similarity, body, cleanup, grading, needs
+from .. import draw
+from ..corelink import PleError, Similarity, body, cleanup, grading, needs, weld
+from ..ops.base import RigPanel
+from ..rig import events, hooks, model, sync
+from ..session import SESSION
 
 FILL_MODES = [("INSIDE", "Inside", "keep balls wholly inside the body (beams where both balls are kept)"),
               ("CENTROID", "Centroid", "keep whole node-groups whose template centroid is inside"),
@@ -26,14 +30,11 @@ GRADES = [("NONE", "None", "constant thickness"),
           ("LINEAR", "Gradient", "radii times Factor A at empty A to Factor B at empty B, linear between"),
           ("SURFACE", "Surface", "radii times Factor A on the body's surface to Factor B at Depth inside")]
 SIMILARITY_TOL = 1e-5  # a body transform within this of a similarity is used as its placement
-_bodies: dict = {}  # (mesh key, placement) -> core Body, the last few
-_reports: dict = {}  # rig uid -> the last cleanup report line
+BODIES_KEPT = 4  # core Bodies cached (by mesh contents and placement)
 
 
 def _changed(self, context):
-    from . import rig as rigmod  # rig imports this module: bound at call time (as props does)
-
-    rigmod.on_settings_changed(self.id_data)
+    events.on_settings_changed(self.id_data)
 
 
 def _is_mesh(self, obj):
@@ -95,7 +96,8 @@ def body_of(rig, settings):
     m = relative(rig, obj)
     opened = "winding" if settings.open_winding else "error"
     key = (obj.name, verts.tobytes(), tris.tobytes(), m.round(9).tobytes(), opened)
-    found = _bodies.get(key)
+    bodies = SESSION.cache("bodies")
+    found = bodies.get(key)
     if found is not None:
         return found
     placement = None
@@ -107,9 +109,9 @@ def body_of(rig, settings):
         verts, placement = verts @ m[:3, :3].T + m[:3, 3], None
     _needs_package("scipy", "filling a body")
     made = body.Body(verts, tris, placement, open=opened, name=f"body {obj.name}")
-    if len(_bodies) >= 4:
-        _bodies.pop(next(iter(_bodies)))
-    _bodies[key] = made
+    if len(bodies) >= BODIES_KEPT:
+        bodies.pop(next(iter(bodies)))
+    bodies[key] = made
     return made
 
 
@@ -160,9 +162,9 @@ def fill(rig, lat, region):
         if the_body is None:
             raise PleError("Cleanup: choose a Body (cleanup removes what trimming to a body leaves)")
         out, report = cleanup.cleanup(out, region, skin=s.skin if s.skin > 0 and s.keep_skin else None)
-        _reports[rig.ple.uid] = str(report)
+        SESSION.cache("body reports")[rig.ple.uid] = str(report)
     else:
-        _reports.pop(rig.ple.uid, None)
+        SESSION.cache("body reports").pop(rig.ple.uid, None)
     return out
 
 
@@ -187,14 +189,12 @@ def users_of(obj) -> list:
             and obj in (r.ple_body.body, r.ple_body.grade_a, r.ple_body.grade_b)]
 
 
-def rigs_in_updates(depsgraph) -> list[str]:
-    """Names of the rigs whose body or gradient empty moved or whose body mesh was edited. Read by
-    the add-on's one depsgraph handler before anything is rebuilt or deleted (an update may name
-    objects that the rig handler then removes, e.g. the parts of a Shift+D copy)."""
+def rigs_in_updates(objects) -> list[str]:
+    """Names of the rigs whose body or gradient empty moved or whose body mesh was edited (of the
+    updated ``objects``; a ``watchers`` hook of the rig's depsgraph handler)."""
     seen = {}
-    for u in depsgraph.updates:
-        obj = u.id.original if isinstance(u.id, bpy.types.Object) else None
-        if obj is None or obj.ple.role != "NONE" or obj.type not in ("MESH", "EMPTY"):
+    for obj in objects:
+        if obj.ple.role != "NONE" or obj.type not in ("MESH", "EMPTY"):
             continue
         for r in users_of(obj):
             seen[r.name] = True
@@ -202,22 +202,8 @@ def rigs_in_updates(depsgraph) -> list[str]:
 
 
 # ----- panel and operators --------------------------------------------------------------------------
-class PLE_PT_body(bpy.types.Panel):  # noqa: N801 - Blender naming
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "PLE"
+class PLE_PT_body(RigPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
     bl_label = "Body"
-
-    @classmethod
-    def poll(cls, context):
-        from . import rig as rigmod
-
-        return rigmod.rig_of(context.active_object) is not None
-
-    def rig(self, context):
-        from . import rig as rigmod
-
-        return rigmod.rig_of(context.active_object)
 
     def draw(self, context):
         rig = self.rig(context)
@@ -241,7 +227,7 @@ class PLE_PT_body(bpy.types.Panel):  # noqa: N801 - Blender naming
         if s.grade == "SURFACE":
             layout.prop(s, "depth")
         layout.operator("ple.skin_solid", icon="MOD_SOLIDIFY")
-        report = _reports.get(rig.ple.uid)
+        report = SESSION.cache("body reports").get(rig.ple.uid)
         if report:
             layout.label(text=report)
 
@@ -263,9 +249,7 @@ class PLE_OT_body_fill(bpy.types.Operator):  # noqa: N801 - Blender naming
     open_winding: BoolProperty(name="Open mesh: winding numbers", default=False)
 
     def execute(self, context):
-        from . import rig as rigmod
-
-        rig = rigmod.rig_of(bpy.data.objects.get(self.rig) if self.rig else context.active_object)
+        rig = model.rig_of(bpy.data.objects.get(self.rig) if self.rig else context.active_object)
         if rig is None:
             self.report({"ERROR"}, "select a PLE lattice object (or one of its frames)")
             return {"CANCELLED"}
@@ -277,25 +261,15 @@ class PLE_OT_body_fill(bpy.types.Operator):  # noqa: N801 - Blender naming
         old = {k: getattr(s, k) for k in ("body", "fill", "skin", "cleanup", "keep_skin", "open_winding")}
         new = {"body": obj, "fill": self.fill, "skin": self.skin, "cleanup": self.cleanup,
                "keep_skin": self.keep_skin, "open_winding": self.open_winding}
-        _set_quietly(rigmod, s, new)
-        err = rigmod.refresh(rig, force=True)
+        events.set_quietly(s, **new)  # one redraw after, not one per setting
+        err = sync.refresh(rig, force=True)
         if err:  # a bad body (open, empty, NaN) is refused: the previous settings come back
-            _set_quietly(rigmod, s, old)
-            rigmod.refresh(rig, force=True)
+            events.set_quietly(s, **old)
+            sync.refresh(rig, force=True)
             rig.ple.status = err
             self.report({"ERROR"}, err)
             return {"CANCELLED"}
         return {"FINISHED"}
-
-
-def _set_quietly(rigmod, settings, values: dict) -> None:
-    """Set several panel settings with one redraw after (not one per setting)."""
-    was, rigmod._busy = rigmod._busy, True
-    try:
-        for k, v in values.items():
-            setattr(settings, k, v)
-    finally:
-        rigmod._busy = was
 
 
 class PLE_OT_skin_solid(bpy.types.Operator):  # noqa: N801 - Blender naming
@@ -309,10 +283,7 @@ class PLE_OT_skin_solid(bpy.types.Operator):  # noqa: N801 - Blender naming
     rig: StringProperty(name="Rig", description="Lattice object (default: the active one)")
 
     def execute(self, context):
-        from . import operators
-        from . import rig as rigmod
-
-        rig = rigmod.rig_of(bpy.data.objects.get(self.rig) if self.rig else context.active_object)
+        rig = model.rig_of(bpy.data.objects.get(self.rig) if self.rig else context.active_object)
         if rig is None:
             self.report({"ERROR"}, "select a PLE lattice object (or one of its frames)")
             return {"CANCELLED"}
@@ -321,8 +292,8 @@ class PLE_OT_skin_solid(bpy.types.Operator):  # noqa: N801 - Blender naming
             if s.body is None or s.skin <= 0:
                 raise PleError("Skin Solid: choose a Body and a Skin thickness above 0")
             _needs_package("manifold3d", "a skin")
-            lat = rigmod.shown_lattice(rig)
-            region = rigmod.region_of(rig, lat)
+            lat = model.shown_lattice(rig)
+            region = model.region_of(rig, lat)
             if region is None:
                 raise PleError("the region is empty: set Region from/to inside the repetition counts")
             tess, skinning = needs("meshing.tessellate"), needs("meshing.skin")
@@ -331,7 +302,11 @@ class PLE_OT_skin_solid(bpy.types.Operator):  # noqa: N801 - Blender naming
             rig.ple.status = str(exc)
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        me = operators.mesh_from_arrays(f"{rig.name}.skin", np.asarray(solid.vertices), np.asarray(solid.faces))
+        verts, faces = np.asarray(solid.vertices, float), np.asarray(solid.faces)
+        # Blender keeps float32 coordinates: weld as the core's float32 writers do (vertices on one
+        # grid point are one vertex), so merging by position cannot change the solid's topology
+        verts, faces, _ = weld.weld(verts, faces, weld.grid_spacing(verts.min(axis=0), verts.max(axis=0)))
+        me = draw.mesh_from_arrays(f"{rig.name}.skin", verts, faces)
         obj = bpy.data.objects.new(me.name, me)
         for coll in rig.users_collection:
             coll.objects.link(obj)
@@ -343,15 +318,22 @@ class PLE_OT_skin_solid(bpy.types.Operator):  # noqa: N801 - Blender naming
 CLASSES = (PLE_BodySettings, PLE_PT_body, PLE_OT_body_fill, PLE_OT_skin_solid)
 
 
+HOOKS = (("shown", fill), ("filtering", active), ("signatures", signature), ("watchers", rigs_in_updates))
+
+
 def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
     bpy.types.Object.ple_body = PointerProperty(type=PLE_BodySettings)
+    for name, fn in HOOKS:
+        hooks.add(name, fn)
 
 
 def unregister():
+    for name, fn in HOOKS:
+        hooks.remove(name, fn)
     del bpy.types.Object.ple_body
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)
-    _bodies.clear()
-    _reports.clear()
+    SESSION.caches.pop("bodies", None)
+    SESSION.caches.pop("body reports", None)

@@ -1,9 +1,8 @@
-"""The CLG rig (thesis §5, §10): a lattice rig whose text holds a CLG (a program defining ``clg()``
-or a ``ple-clg/1`` file). Its frames G, U, V, W, BeCOTS corners and template nodes edit the CLG's
-pattern exactly as they edit a lattice rig's lattice (``rig.py``); the chunks, the solid and the
-materials stay as the text gives them. Over the selected index region the rig shows a preview of
-the solid (or of one chunk union): the core's manifold3d mesh, its voxels, or one printer layer.
-It has voxelize, slice and export operators. Every number comes from the core (``corelink``).
+"""The CLG rig (thesis §5, §10): a lattice rig whose text holds a CLG (a ``clg()`` program or a
+``ple-clg/1`` file); its frames, corners and template nodes edit the CLG's pattern as a lattice
+rig's (through the rig's hooks), the chunks, solid and materials stay as the text gives them. Over
+the drawn region it previews the solid (or one chunk union): the core's manifold3d mesh, its voxels
+or one printer layer; voxelize, slice and export operators. Every number comes from the core.
 """
 
 from __future__ import annotations
@@ -15,10 +14,11 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, IntVectorProperty, StringProperty
 
-from . import draw, jobs
-from . import operators as ops
-from . import rig as rigmod
-from .corelink import PleError, core, ir, needs
+from .. import draw, jobs
+from ..corelink import PleError, core, ir, needs
+from ..ops.base import RigOperator, RigPanel, SourceAdd, draw_source_menu, output_path, select_only
+from ..rig import hooks, model, sync
+from ..session import SESSION, notify
 
 clg_sources = core("program.clg_sources")
 clg_ir = core("clg.ir")
@@ -31,14 +31,13 @@ PREVIEWS = [("NONE", "None", "no preview (the region's balls and beams only)"),
             ("MESH", "Mesh", "the solid meshed by the core (manifold3d booleans)"),
             ("VOXELS", "Voxels", "the solid's voxels over the region's box"),
             ("SLICE", "Slice", "one printer layer of voxels at the chosen height")]
-_loaded: dict = {}  # (kind, text, inputs) -> (program inputs or None, CLG): the latest few texts
-LOADED = 8
+LOADED = 8  # CLG texts (with their inputs) kept loaded
 
 
 # ----- settings ---------------------------------------------------------------------------------------
 def _preview_changed(self, context):
     rig = self.id_data
-    if rigmod.is_rig(rig) and self.active and not rigmod._busy:
+    if model.is_rig(rig) and self.active and not SESSION.busy:
         show_preview(rig)
 
 
@@ -61,27 +60,24 @@ class PLE_CLGSettings(bpy.types.PropertyGroup):  # noqa: N801 - Blender naming
 
 # ----- the CLG of a rig -------------------------------------------------------------------------------
 def load(kind: str, source: str, params: dict, name: str):
-    """(program inputs or None, CLG pattern) of a rig's text: a ``ple-clg/1`` file or a program defining ``clg()``
+    """(program inputs or None, CLG) of a rig's text: a ``ple-clg/1`` file or a program defining ``clg()``
     (the caller checked trust); kept for the latest few texts and inputs."""
-    key = (kind, source, tuple(sorted((k, repr(v)) for k, v in params.items())))
-    hit = _loaded.get(key)
+    key = (kind, source, model.params_key(params))
+    loaded = SESSION.cache("clg")
+    hit = loaded.get(key)
     if hit is None:
         if kind == "IR":
-            try:
-                data = json.loads(source)
-            except json.JSONDecodeError as exc:
-                raise PleError(f"{name}: malformed JSON at line {exc.lineno}: {exc.msg}") from None
-            hit = (None, clg_ir.clg_from_dict(data))
+            hit = (None, clg_ir.clg_from_dict(model.read_json(source, name)))
         else:
             def build():  # run contained: time and memory limits, like lattice programs
                 prog = clg_sources.compile_clg_program(source, name)
                 return prog.parameters(), prog.run(**params)
 
             hit = jobs.call(build, name, "the CLG program")
-        _loaded[key] = hit
-        while len(_loaded) > LOADED:
-            _loaded.pop(next(iter(_loaded)))
-    return hit[0], hit[1].pattern
+        loaded[key] = hit
+        while len(loaded) > LOADED:
+            loaded.pop(next(iter(loaded)))
+    return hit
 
 
 def base_clg(rig):
@@ -89,42 +85,45 @@ def base_clg(rig):
     text = rig.ple.text
     if text is None:
         raise PleError(f"{rig.name}: the CLG text block is missing")
-    if not rigmod.trusted(rig):
+    if not model.trusted(rig):
         raise PleError(f"{text.name}: not run because Blender does not trust scripts (press Run Program)")
-    params = rigmod.params_of(rig)
-    load(rig.ple.source_kind, text.as_string(), params, text.name)
-    key = (rig.ple.source_kind, text.as_string(), tuple(sorted((k, repr(v)) for k, v in params.items())))
-    return _loaded[key][1]
+    return load(rig.ple.source_kind, text.as_string(), model.params_of(rig), text.name)[1]
+
+
+def pattern_of(rig, source: str, params: dict, name: str):
+    """(program inputs or None, the CLG's pattern) of a CLG rig's text (a ``loaders`` hook of the rig)."""
+    if not rig.ple_clg.active:
+        return None
+    inputs, clg = load(rig.ple.source_kind, source, params, name)
+    return inputs, clg.pattern
 
 
 def clg_of(rig, lat=None):
     """The rig's current CLG: its text's chunks, solid and materials on the edited pattern ``lat``
     (default: the rig's lattice), the solid or the chunk union named in the panel."""
     clg = base_clg(rig)
-    lat = rigmod.lattice_of(rig) if lat is None else lat
+    lat = model.lattice_of(rig) if lat is None else lat
     chunk = rig.ple_clg.chunk.strip()
     return clg.with_pattern(lat).showing(chunk or None)
 
 
-def applied_text(rig) -> str:
-    """The CLG text with the GUI edits of its pattern written in (Apply to Program): a ``ple-clg/1``
-    file gets the edited pattern as its ``pattern`` object; a clg() program is refused (its
-    lattice is built inside clg(): copy the snippet into it instead)."""
+def applied_text(rig) -> str | None:
+    """The CLG text with the GUI edits of its pattern written in (Apply to Program, an ``appliers``
+    hook; None for other rigs): a ``ple-clg/1`` file gets the edited pattern as its ``pattern``
+    object; a clg() program is refused (its lattice is built inside clg(): copy the snippet)."""
+    if not rig.ple_clg.active:
+        return None
     if rig.ple.source_kind != "IR":
         raise PleError("Apply to Program rewrites ple-clg/1 files only; for a clg() program use Copy Snippet "
                        "and paste the lines where clg() builds its pattern")
     data = json.loads(rig.ple.text.as_string())
-    data["pattern"] = ir.lattice_to_ir(rigmod.lattice_of(rig), resolved=False)
+    data["pattern"] = ir.lattice_to_ir(model.lattice_of(rig), resolved=False)
     return json.dumps(data, indent=1) + "\n"
-
-
-def is_clg_rig(obj) -> bool:
-    return rigmod.is_rig(obj) and obj.ple_clg.active
 
 
 def clg_rig_of(context, name: str = ""):
     obj = bpy.data.objects.get(name) if name else context.active_object
-    rig = rigmod.rig_of(obj)
+    rig = model.rig_of(obj)
     if rig is None or not rig.ple_clg.active:
         raise PleError("select a PLE CLG object (or one of its frames)")
     return rig
@@ -141,7 +140,7 @@ def preview_arrays(rig, lat=None):
     """(vertices (n, 3), faces (f, k)) of the rig's preview, in the rig's coordinates."""
     s = rig.ple_clg
     clg = clg_of(rig, lat)
-    region = rigmod.region_of(rig, clg.pattern)
+    region = model.region_of(rig, clg.pattern)
     if region is None or s.preview == "NONE":
         return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
     if s.preview == "MESH":
@@ -159,15 +158,6 @@ def preview_arrays(rig, lat=None):
     return clg_grid.voxel_surface(vox, lo, hi)
 
 
-def preview_object(rig):
-    obj = rigmod.parts(rig).get("clg")
-    if obj is None:
-        obj = rigmod.new_part(rig, f"{rig.name}.clg", bpy.data.meshes.new(f"{rig.name}.clg"), "CLG")
-        obj.hide_select = True
-        draw.set_material(obj, PREVIEW_MATERIAL)
-    return obj
-
-
 def show_preview(rig, lat=None) -> str | None:
     """Recompute the preview; a problem (bad chunk name, a missing package, …) leaves the last good
     preview and becomes the CLG status (returned)."""
@@ -176,8 +166,8 @@ def show_preview(rig, lat=None) -> str | None:
     except PleError as exc:
         rig.ple_clg.status = str(exc)
         return str(exc)
-    obj = preview_object(rig)
-    ops.mesh_from_arrays(obj.name, verts, faces, obj.data)
+    obj = sync.mesh_part(rig, "CLG", PREVIEW_MATERIAL)
+    draw.mesh_from_arrays(obj.name, verts, faces, obj.data)
     obj.hide_viewport = obj.hide_render = rig.ple_clg.preview == "NONE"
     if rig.ple_clg.status:
         rig.ple_clg.status = ""
@@ -185,11 +175,11 @@ def show_preview(rig, lat=None) -> str | None:
 
 
 def on_drawn(rig, lat) -> None:
-    """After the rig drew its region (rig.AFTER_DRAW): a live preview follows the edit."""
+    """After the rig drew its region (an ``after_draw`` hook): a live preview follows the edit."""
     if rig.ple_clg.active and rig.ple_clg.live:
         err = show_preview(rig, lat)
         if err:
-            rigmod.notify(rig, err)
+            notify(rig, err)
 
 
 # ----- operators --------------------------------------------------------------------------------------
@@ -197,7 +187,7 @@ def _preset_items(self, context):
     return [(n, n, f"CLG preset {n}") for n in clg_sources.clg_preset_names()]
 
 
-class PLE_OT_clg_add(ops.SourceAdd, bpy.types.Operator):  # noqa: N801 - Blender naming
+class PLE_OT_clg_add(SourceAdd, bpy.types.Operator):  # noqa: N801 - Blender naming
     """Add a PLE CLG rig from a CLG preset, a program defining clg() (.py), a ple-clg/1 file (.json)
     or a text block"""
 
@@ -211,11 +201,6 @@ class PLE_OT_clg_add(ops.SourceAdd, bpy.types.Operator):  # noqa: N801 - Blender
         ("TEXT", "Text Block", "a text block of this file holding a CLG program or ple-clg/1 data")],
         default="PRESET")
     preset: EnumProperty(name="Preset", items=_preset_items)
-    filepath: StringProperty(name="File", subtype="FILE_PATH")
-    text: StringProperty(name="Text Block")
-    name: StringProperty(name="Name", description="Name of the CLG object (default: the source's)")
-    region: IntVectorProperty(name="Region", size=3, min=1, default=(3, 3, 3),
-                              description="Node-groups per direction drawn and previewed")
 
     what = ".py CLG program or .json ple-clg/1 file"
 
@@ -225,18 +210,18 @@ class PLE_OT_clg_add(ops.SourceAdd, bpy.types.Operator):  # noqa: N801 - Blender
     def execute(self, context):
         try:
             text, kind, default_name, linked = self.source_text()
-            rig = rigmod.create(context, self.name or default_name, text, kind, tuple(self.region), clg=True)
+            rig = sync.create(context, self.name or default_name, text, kind, tuple(self.region), clg=True)
         except PleError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         rig.ple.filepath = linked
-        ops.select_only(context, rig)
+        select_only(context, rig)
         if rig.ple_clg.status:
             self.report({"WARNING"}, rig.ple_clg.status)
         return {"FINISHED"}
 
 
-class CLGOperator(ops.RigOperator):
+class CLGOperator(RigOperator):
     """A rig operator that needs a CLG rig."""
 
     def get_rig(self, context):
@@ -250,7 +235,7 @@ WHOLE = BoolProperty(name="Whole CLG", default=False,
 def target(rig, whole: bool):
     """(compiled CLG, its clg) of the region (or the whole CLG)."""
     clg = clg_of(rig)
-    region = None if whole else rigmod.region_of(rig, clg.pattern)
+    region = None if whole else model.region_of(rig, clg.pattern)
     if region is None and not whole:
         raise PleError("the region is empty: set Region from/to inside the repetition counts")
     return clg_query.compiled(clg, region), clg, region
@@ -280,9 +265,7 @@ class PLE_OT_clg_voxelize(CLGOperator, bpy.types.Operator):  # noqa: N801 - Blen
     whole: WHOLE
 
     def run(self, context, rig):
-        path = Path(bpy.path.abspath(self.filepath))
-        if path.suffix != ".npy":
-            raise PleError(f"{self.filepath!r}: choose a .npy file")
+        path = output_path(self.filepath, (".npy",))
         comp, _clg, _region = target(rig, self.whole)
         vox = clg_grid.voxelize_clg(comp, comp.lo, comp.hi, tuple(self.grid))
         with files.atomic_path(path) as tmp:
@@ -324,9 +307,7 @@ class PLE_OT_clg_export(CLGOperator, bpy.types.Operator):  # noqa: N801 - Blende
     whole: WHOLE
 
     def run(self, context, rig):
-        path = Path(bpy.path.abspath(self.filepath))
-        if path.suffix.lower() not in (".stl", ".3mf", ".ply", ".obj", ".glb"):
-            raise PleError(f"{self.filepath!r}: choose a .stl, .3mf, .ply, .obj or .glb file")
+        path = output_path(self.filepath)
         _comp, clg, region = target(rig, self.whole)
         mesh = needs("meshing.clg").mesh_clg(clg, self.segments, region)
         needs("io.export").export_mesh(mesh, path)
@@ -335,18 +316,16 @@ class PLE_OT_clg_export(CLGOperator, bpy.types.Operator):  # noqa: N801 - Blende
 
 
 # ----- the panel and the Add menu ---------------------------------------------------------------
-class PLE_PT_clg(bpy.types.Panel):  # noqa: N801 - Blender naming
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "PLE"
+class PLE_PT_clg(RigPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
     bl_label = "CLG"
 
     @classmethod
     def poll(cls, context):
-        return is_clg_rig(rigmod.rig_of(context.active_object))
+        rig = model.rig_of(context.active_object)
+        return rig is not None and rig.ple_clg.active
 
     def draw(self, context):
-        rig = rigmod.rig_of(context.active_object)
+        rig = model.rig_of(context.active_object)
         s = rig.ple_clg
         layout = self.layout
         try:
@@ -389,18 +368,14 @@ class PLE_MT_clg_add(bpy.types.Menu):  # noqa: N801 - Blender naming
     bl_label = "PLE CLG"
 
     def draw(self, context):
-        layout = self.layout
-        for name in clg_sources.clg_preset_names():
-            op = layout.operator("ple.clg_add", text=name, icon="MOD_BOOLEAN")
-            op.source, op.preset = "PRESET", name
-        layout.separator()
-        layout.operator("ple.clg_add", text="From File…", icon="FILE_SCRIPT").source = "FILE"
+        draw_source_menu(self.layout, "ple.clg_add", clg_sources.clg_preset_names(), "MOD_BOOLEAN")
 
 
 def menu_add(self, context):
     self.layout.menu(PLE_MT_clg_add.bl_idname, text="PLE CLG", icon="MOD_BOOLEAN")
 
 
+HOOKS = (("loaders", pattern_of), ("after_draw", on_drawn), ("appliers", applied_text))
 CLASSES = (PLE_CLGSettings, PLE_OT_clg_add, PLE_OT_clg_preview, PLE_OT_clg_voxelize, PLE_OT_clg_slice,
            PLE_OT_clg_export, PLE_PT_clg, PLE_MT_clg_add)
 
@@ -410,14 +385,15 @@ def register() -> None:
         bpy.utils.register_class(cls)
     bpy.types.Object.ple_clg = bpy.props.PointerProperty(type=PLE_CLGSettings)
     bpy.types.VIEW3D_MT_add.append(menu_add)
-    rigmod.AFTER_DRAW.append(on_drawn)
+    for name, fn in HOOKS:
+        hooks.add(name, fn)
 
 
 def unregister() -> None:
-    if on_drawn in rigmod.AFTER_DRAW:
-        rigmod.AFTER_DRAW.remove(on_drawn)
+    for name, fn in HOOKS:
+        hooks.remove(name, fn)
     bpy.types.VIEW3D_MT_add.remove(menu_add)
     del bpy.types.Object.ple_clg
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)
-    _loaded.clear()
+    SESSION.caches.pop("clg", None)

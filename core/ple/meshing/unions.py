@@ -1,0 +1,195 @@
+"""Local unions of an unclean lattice, streamed beside its clean boxes.
+
+``find_unclean`` (``ple.meshing.unclean``) gives the element pairs whose meshes may meet
+(hub-hub, hub-beam, beam-beam, not incident) and the hubs whose ACHoCC shrank its caps. The union
+of a lattice is local: what is near an element depends only on the elements that reach it. So
+the unclean part is split into *clusters*, the connected groups of the overlap graph:
+
+- the hubs of a cluster (E: shrunk, or in a pair as a hub) are meshed as their balls;
+- its beams (B: in a pair as a beam, or incident to a hub of E) as the convex hull of their two
+  ends, each end either a ball of E or the contact ring of a clean junction;
+- everything else stays on the fast, boolean-free path (``ple.meshing.tessellate``), which
+  leaves the rings of B's beams open (no cap, no strip).
+
+Each cluster is one small manifold3d union; its faces on those rings (the ring polygons, which
+nothing else touches: whatever would have touched them is in the cluster) are removed, and the
+ring vertices are the very floats the fast path places (``assembly.place``), so the two meet
+exactly along the rings: one closed, oriented surface, without a global Boolean. The union's
+faces are put on the float32 output grid (``unclean.on_grid``) with the ring vertices pinned,
+and checked there for self-intersections (exact), piece by piece.
+
+Memory and time grow with the largest cluster, not with the lattice: a crossing pair of
+diagonals is a cluster of two beams. ``piece_estimate`` gives both before any union is made.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import PleError
+from .unclean import BALL_TURNS, SPHERE_SEGMENTS, on_grid
+
+UNION_TRIANGLE_BYTES = 600  # peak bytes per input triangle of a manifold3d union and its repair (measured, rounded up)
+
+
+@dataclass
+class Cluster:
+    """One local union: hubs (rows of the evaluation) meshed as balls, beams (rows) as hulls."""
+
+    hubs: np.ndarray
+    beams: np.ndarray
+
+
+def clusters(report, beam_nodes) -> list:
+    """The clusters of an unclean report (``find_unclean``): connected groups of the graph whose
+    vertices are the elements of E and B (module docstring) and whose edges are the overlapping
+    pairs and the incidences of E's hubs. beam_nodes (M, 2) node rows."""
+    bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
+    n, m = len(report.shrunk), len(bn)
+    pairs = np.asarray(report.element_pairs, np.int64).reshape(-1, 2)
+    hub_e = report.shrunk.copy()
+    hub_e[pairs[pairs < n]] = True
+    beam_b = np.zeros(m, bool)
+    beam_b[pairs[pairs >= n] - n] = True
+    incident = hub_e[bn[:, 0]] | hub_e[bn[:, 1]]
+    beam_b |= incident
+    if not hub_e.any() and not beam_b.any():
+        return []
+    from scipy.sparse import coo_matrix  # noqa: PLC0415 - optional package
+    from scipy.sparse.csgraph import connected_components  # noqa: PLC0415
+
+    rows = np.flatnonzero(incident)
+    edges = np.concatenate([pairs, np.stack([bn[rows, 0], n + rows], 1), np.stack([bn[rows, 1], n + rows], 1)])
+    edges = edges[np.concatenate([hub_e, beam_b])[edges].all(axis=1)]
+    g = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n + m, n + m))
+    _, label = connected_components(g, directed=False)
+    members = np.flatnonzero(np.concatenate([hub_e, beam_b]))
+    order = members[np.argsort(label[members], kind="stable")]
+    cuts = np.flatnonzero(np.diff(label[order])) + 1
+    return [Cluster(c[c < n], c[c >= n] - n) for c in np.split(order, cuts)]
+
+
+def excluded(report, beam_nodes) -> tuple[np.ndarray, np.ndarray]:
+    """Hub rows (E) and beam rows (B) the clusters of ``report`` mesh: the fast path leaves them out."""
+    cl = clusters(report, beam_nodes)
+    hubs = np.concatenate([c.hubs for c in cl]) if cl else np.zeros(0, np.int64)
+    beams = np.concatenate([c.beams for c in cl]) if cl else np.zeros(0, np.int64)
+    return np.sort(hubs), np.sort(beams)
+
+
+def piece_estimate(cluster: Cluster, ring_sizes: np.ndarray) -> tuple[int, int]:
+    """(input triangles, peak bytes) of a cluster's union, from above: a polygonal ball per hub,
+    a hull per beam of at most its two ends' vertices."""
+    ball = 2 * SPHERE_SEGMENTS * (SPHERE_SEGMENTS // 2)
+    tris = len(cluster.hubs) * ball + int(np.sum(2 * np.asarray(ring_sizes, np.int64)))
+    return tris, tris * UNION_TRIANGLE_BYTES
+
+
+def _unit_ball(manifold3d):
+    """A polygonal unit sphere whose volume is the exact ball's (4π/3): its vertices (V, 3)."""
+    s = manifold3d.Manifold.sphere(1.0, SPHERE_SEGMENTS)
+    k = (4.0 / 3.0 * np.pi / s.volume()) ** (1.0 / 3.0)
+    return np.asarray(s.to_mesh64().vert_properties[:, :3], float) * k
+
+
+def _turned(points: np.ndarray, turns) -> np.ndarray:
+    """Unit-ball vertices turned by Euler angles ``turns`` (fractions of a full turn, (3,))."""
+    out = points
+    for axis, t in enumerate(turns):
+        a = 2 * np.pi * t
+        c, s = np.cos(a), np.sin(a)
+        i, j = [(1, 2), (2, 0), (0, 1)][axis]
+        r = np.eye(3)
+        r[i, i], r[i, j], r[j, i], r[j, j] = c, -s, s, c
+        out = out @ r.T
+    return out
+
+
+def unite_cluster(cluster: Cluster, center, radius, beam_nodes, rings: dict, grid: float):
+    """The mesh of one cluster (vertices (V, 3), faces (F, 3)), open along the rings it shares
+    with clean junctions. ``rings``: (beam row, end 0|1) -> ring vertices (k, 3) in world
+    coordinates (clockwise about the beam, as the fast path placed them) for each end of the
+    cluster's beams that is not one of its hubs. Tries the balls as they are, then each turned
+    its own way (identical balls give symmetric lattices coplanar faces that a Boolean may leave
+    overlapping)."""
+    try:
+        import manifold3d
+    except ImportError as exc:  # pragma: no cover - a runtime dependency of unclean meshing
+        raise PleError("meshing an unclean lattice needs manifold3d (pip install manifold3d)") from exc
+    unit = _unit_ball(manifold3d)
+    last = None
+    for turns in (None, BALL_TURNS):
+        try:
+            return _unite_once(manifold3d, unit, cluster, center, radius, beam_nodes, rings, grid, turns)
+        except PleError as exc:
+            last = exc
+    raise last
+
+
+def _unite_once(manifold3d, unit, cluster, center, radius, beam_nodes, rings, grid, turns):
+    c = np.asarray(center, float)
+    rad = np.asarray(radius, float)
+    bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
+    own = set(cluster.hubs.tolist())
+
+    def ball(x):
+        u = unit if turns is None else _turned(unit, np.modf(x * turns)[0])
+        return u * rad[x] + c[x]
+
+    parts = [manifold3d.Manifold.hull_points(ball(int(x))) for x in cluster.hubs]
+    pinned = []
+    for j in cluster.beams.tolist():
+        ends = []
+        for e in (0, 1):
+            x = int(bn[j, e])
+            if x in own:
+                ends.append(ball(x))
+            else:
+                ends.append(rings[(j, e)])
+                pinned.append(rings[(j, e)])
+        parts.append(manifold3d.Manifold.hull_points(np.concatenate(ends)))
+    for p in parts:
+        if p.status() != manifold3d.Error.NoError or p.is_empty():
+            raise PleError("a beam of an unclean cluster has no volume (its two ends are flat)")
+    out = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add).to_mesh64()
+    v = np.asarray(out.vert_properties[:, :3], float)
+    f = np.asarray(out.tri_verts, np.int64)
+    ring_pts = np.concatenate(pinned) if pinned else np.zeros((0, 3))
+    centre = v.mean(axis=0) if len(v) else np.zeros(3)
+    reach = float(np.linalg.norm(v - centre, axis=1).max()) if len(v) else 0.0
+    v, f = on_grid(v, f, grid, centre[None], reach, pinned=ring_pts)
+    return _open_rings(v, f, pinned)
+
+
+def _open_rings(v, f, rings: list):
+    """Remove the faces lying on the rings (every corner a vertex of one ring: the ring's
+    polygon), and check that what is left is open exactly along the rings' edges."""
+    if not rings:
+        return v, f
+    where: dict = {}
+    for r, ring in enumerate(rings):
+        for p in map(tuple, np.asarray(ring, float)):
+            where[p] = r
+    ring_of = np.array([where.get(tuple(p), -1) for p in v.tolist()], np.int64)
+    fr = ring_of[f]
+    cap = (fr[:, 0] >= 0) & (fr[:, 0] == fr[:, 1]) & (fr[:, 1] == fr[:, 2])
+    f = f[~cap]
+    # the open edges must be the rings' edges, each once, in the opposite direction to the ring's
+    # order on the fast side (whatever the orientation, the set of undirected edges must match)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    key = {}
+    for a, b in e.tolist():
+        key[(a, b)] = key.get((a, b), 0) + 1
+    open_edges = {(a, b) for (a, b) in key if (b, a) not in key}
+    index = {tuple(p): i for i, p in enumerate(v.tolist())}
+    want = set()
+    for ring in rings:
+        ids = [index.get(tuple(p)) for p in np.asarray(ring, float).tolist()]
+        if any(i is None for i in ids):
+            raise PleError("a ring of an unclean cluster was changed by its union")
+        want |= {tuple(sorted((ids[k], ids[(k + 1) % len(ids)]))) for k in range(len(ids))}
+    if {tuple(sorted(x)) for x in open_edges} != want or len(open_edges) != len(want):
+        raise PleError("a ring of an unclean cluster was touched by its union")
+    return v, f

@@ -1,0 +1,124 @@
+"""Operators that make meshes and files of the drawn region: tessellate into an object, export a
+file (both jobs: progress, Esc cancels), bake the drawing into a plain mesh."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import (
+    EnumProperty,
+    StringProperty,
+)
+
+from .. import draw
+from ..corelink import PleError, needs
+from ..rig import model
+from .base import BEYOND, EXPORT_STYLES, STYLES, RigOperator, SteppedOperator, budget, core_style, output_path
+
+
+class PLE_OT_tessellate(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Tessellate the drawn region into a new mesh object (CHoCC, CNT or refined, CHoCC paper)"""
+
+    bl_idname = "ple.tessellate"
+    bl_label = "Tessellate Region"
+
+    style: EnumProperty(name="Style", items=STYLES, default="CHOCC")
+    beyond_limit: BEYOND
+
+    def steps(self, context, rig):
+        self._rig = rig
+        lat = model.shown_lattice(rig)  # the panel's filter too: what is drawn is what is meshed
+        region = model.region_of(rig, lat)
+        if region is None:
+            raise PleError("the region is empty: set Region from/to inside the repetition counts")
+        budget(lat, region, self.style, f"{self.style.lower()} tessellation of {region}",
+               beyond=self.beyond_limit)
+        yield 0.0
+        chunks = yield from self.mesh_job(lat, region, self.style)
+        verts, faces = needs("meshing.tessellate").weld_chunks(chunks)  # welded by the core
+        yield 0.8
+        me = draw.mesh_from_arrays(f"{rig.name}.{self.style.lower()}", verts, faces)
+        obj = bpy.data.objects.new(me.name, me)
+        for coll in rig.users_collection:
+            coll.objects.link(obj)
+        obj.matrix_world = rig.matrix_world
+        self.result = f"{obj.name}: {len(faces)} triangles"
+        yield 1.0
+
+
+class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Export the drawn region as a mesh file (STL, 3MF, PLY, OBJ, GLB)"""
+
+    bl_idname = "ple.export"
+    bl_label = "Export Region"
+
+    filepath: StringProperty(name="File", subtype="FILE_PATH")
+    filter_glob: StringProperty(default="*.stl;*.3mf;*.ply;*.obj;*.glb", options={"HIDDEN"})
+    style: EnumProperty(name="Style", items=EXPORT_STYLES, default="REFINED")
+    beyond_limit: BEYOND
+
+    def invoke(self, context, event):
+        if not self.filepath and context.window is not None and not bpy.app.background:
+            self.filepath = "lattice.stl"
+            context.window_manager.fileselect_add(self)
+            return {"RUNNING_MODAL"}
+        return super().invoke(context, event)
+
+    def steps(self, context, rig):
+        self._rig = rig
+        path = output_path(self.filepath)
+        lat = model.shown_lattice(rig)  # the panel's filter too: what is drawn is what is meshed
+        region = model.region_of(rig, lat)
+        if region is None:
+            raise PleError("the region is empty: set Region from/to inside the repetition counts")
+        tess, export = needs("meshing.tessellate"), needs("io.export")
+        streamed = path.suffix.lower() == ".stl"
+        budget(lat, region, self.style, f"export of {region}", streamed=streamed, beyond=self.beyond_limit)
+        yield 0.0
+        # binary STL is snapped to the region's float32 grid as `ple mesh` writes it (previews are
+        # not snapped); other formats are welded into one mesh by the core
+        chunks = yield from self.mesh_job(lat, region, self.style)
+        yield 0.8
+        if streamed:
+            grid = None if core_style(self.style) == "balls-beams" else tess.output_grid(lat, region)
+            count = export.write_stl(path, chunks, header=export.stl_header(), grid=grid)
+        else:
+            count = export.write_chunks(path, chunks)
+        self.result = f"{count} triangles written to {path}"
+        yield 1.0
+
+
+class PLE_OT_bake(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Freeze the drawn region (balls and beams as Blender draws them) into a plain mesh object"""
+
+    bl_idname = "ple.bake"
+    bl_label = "Bake Region"
+
+    def run(self, context, rig):
+        region = model.parts(rig).get("region")
+        if region is None or not len(region.data.vertices):
+            raise PleError("nothing to bake: the region is empty")
+        depsgraph = context.evaluated_depsgraph_get()
+        me = bpy.data.meshes.new_from_object(region.evaluated_get(depsgraph), preserve_all_data_layers=False,
+                                             depsgraph=depsgraph)
+        me.name = f"{rig.name}.baked"
+        obj = bpy.data.objects.new(me.name, me)
+        coll = context.scene.collection
+        coll.objects.link(obj)
+        obj.matrix_world = region.matrix_world
+        self.report({"INFO"}, f"{obj.name}: {len(me.polygons)} faces")
+        return {"FINISHED"}
+
+
+
+
+CLASSES = (PLE_OT_tessellate, PLE_OT_export, PLE_OT_bake)
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

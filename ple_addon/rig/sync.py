@@ -1,0 +1,373 @@
+"""A core lattice drawn as a rig (``ple.Lattice`` -> Blender objects): ``refresh`` reads the user's
+moves (``edits``), evaluates the rig (``model``) and writes the frames, template nodes, corners,
+cage and region (``draw``); creating, copying and removing rigs.
+
+Errors (a bad program, a degenerate frame) leave the program text, the edits and the last good
+drawing untouched and are shown as the rig's status (and reported to the Info editor).
+"""
+
+from __future__ import annotations
+
+import uuid
+
+import bpy
+import numpy as np
+from mathutils import Matrix, Vector
+
+from .. import draw
+from ..corelink import PleError, cage
+from ..session import SESSION, RigState, notify
+from . import hooks
+from .edits import baseline, user_edits
+from .model import (
+    PARAM_PREFIX,
+    PART_ROLES,
+    add_edits,
+    all_rigs,
+    base_lattice,
+    becots_corners,
+    check_budget,
+    evaluate_region,
+    lattice_of,
+    parts,
+    rig_of,
+    signature,
+    trust,
+    trusted,
+    uid,
+)
+
+
+def refresh(rig, force: bool = False, prepared=None) -> str | None:
+    """Read user moves, re-evaluate and redraw if anything changed; returns an error or None.
+    ``prepared``: (lattice, evaluation) a job computed for the rig as it is now, drawn instead
+    of evaluating again unless the user moved something since.
+
+    Errors (bad program, degenerate frame) leave the program text, the edits and the last
+    good drawing untouched and are shown as the rig's status; a refused setting (``refuse``)
+    stays shown until the user's next edit."""
+    if SESSION.busy:
+        return None
+    claim(rig)
+    st = SESSION.state(uid(rig))
+    with SESSION.quiet():
+        try:
+            if st.lattice is None and st.expected:  # moves made before the program could run
+                st.lattice = lattice_of(rig, st)
+            new = user_edits(rig, st)
+            if not new and not force and signature(rig) == st.signature and st.lattice is not None:
+                if rig.ple.status and not st.refused:  # e.g. a degenerate frame was put back
+                    rig.ple.status = ""
+                return None
+            if prepared is not None and not new:
+                lat, ev = prepared
+            else:
+                lat = lattice_of(rig, st, new)  # new edits are kept only if the lattice they give is valid
+                ev = evaluate_region(rig, lat, st)
+        except PleError as exc:
+            if rig.ple.status != str(exc):
+                notify(rig, str(exc))
+            rig.ple.status, st.refused = str(exc), False
+            return str(exc)
+        add_edits(rig, new)
+        st.lattice = lat
+        if not {"G", "u", "v", "w", "cage", "region"} <= set(parts(rig)):
+            build_parts(rig, lat)  # a copy (Shift+D) or a rig whose parts were deleted
+        draw_rig(rig, lat, ev, st)
+        for hook in hooks.each("after_draw"):  # e.g. a CLG rig's preview
+            hook(rig, lat)
+        st.signature = signature(rig)
+        st.cumulative = tuple(rig.ple.cumulative)
+        st.region = (tuple(rig.ple.region_min), tuple(rig.ple.region_max))
+        st.refused = False
+        if rig.ple.status:
+            rig.ple.status = ""
+        return None
+
+
+def refuse(rig, message: str, report: bool = True) -> None:
+    """A setting the user made was refused and set back (a region beyond the work budget, absurd
+    counts): ``message`` is the rig's status, and a report, until the user's next edit."""
+    rig.ple.status = message
+    SESSION.state(uid(rig)).refused = True
+    if report:
+        notify(rig, message)
+
+
+def draw_rig(rig, lat, ev, st: RigState) -> None:
+    p = parts(rig)
+    if tuple(rig.ple.counts) != lat.counts:
+        rig.ple.counts = lat.counts
+    if "region" in p:
+        draw.region_mesh(p["region"].data, ev)
+        draw.set_detail(p["region"], 0 if ev is None else len(ev.center) + len(ev.beam_nodes))
+    if "cage" in p:
+        draw.cage_curve(p["cage"].data, cage.cage_curves(lat, interior=rig.ple.cage_interior))
+    frames = {"G": lat.placement.matrix}
+    for n, axis in enumerate("uvw"):
+        frames[axis] = cage.direction_frame(lat, axis, rig.ple.cumulative[n])
+    for key, m in frames.items():
+        if key in p:
+            st.expected[key] = draw.set_matrix(p[key], m)
+    sync_nodes(rig, lat, p, st)
+    sync_corners(rig, lat, p, st)
+
+
+def sync_nodes(rig, lat, p: dict, st: RigState) -> None:
+    """One sphere empty per template node (child of G): location = centre, scale = radius."""
+    want = len(lat.nodes) if rig.ple.show_template else 0
+    stale = [obj for key, obj in p.items() if isinstance(key, tuple) and key[0] == "node" and key[1] >= want]
+    if stale:
+        layer = bpy.context.view_layer
+        if layer is not None and layer.objects.active in stale:
+            layer.objects.active = rig  # the active node goes: the rig becomes active, not nothing
+        bpy.data.batch_remove(stale)
+    for key in [k for k in st.expected if isinstance(k, tuple) and k[0] == "node" and k[1] >= want]:
+        del st.expected[key]
+    for n in range(want):
+        obj = p.get(("node", n))
+        if obj is None:
+            obj = new_part(rig, f"{rig.name}.N{n}", None, "NODE", parent=p.get("G"))
+            obj.empty_display_type = "SPHERE"
+            obj.empty_display_size = 1.0
+            obj.ple.node_index = n
+        node = lat.nodes[n]
+        m = np.diag([node.radius, node.radius, node.radius, 1.0])
+        m[:3, 3] = node.center
+        st.expected[("node", n)] = draw.set_matrix(obj, m)
+
+
+def sync_corners(rig, lat, p: dict, st: RigState) -> None:
+    """Corner empties A, B, C, D of a BeCOTS slab (children of G); moving one re-makes the
+    slab from the four corners (``set_becots``, thesis §4.2)."""
+    corners = becots_corners(lat)
+    stale = [obj for key, obj in p.items() if isinstance(key, tuple) and key[0] == "corner" and not corners]
+    if stale:
+        bpy.data.batch_remove(stale)
+        for label in "ABCD":
+            st.expected.pop(("corner", label), None)
+    for label, c in zip("ABCD", corners):
+        obj = p.get(("corner", label))
+        if obj is None:
+            obj = new_part(rig, f"{rig.name}.{label}", None, "CORNER", parent=p.get("G"))
+            obj.empty_display_type = "CUBE"
+            obj.empty_display_size = 0.5 * handle_size(lat)
+            obj.ple.frame = label
+        m = np.eye(4)
+        m[:3, 3] = c
+        st.expected[("corner", label)] = draw.set_matrix(obj, m)
+
+
+# ----- building a rig -------------------------------------------------------------------------
+def new_part(rig, name: str, data, role: str, parent=None):
+    obj = bpy.data.objects.new(name, data)
+    for coll in rig.users_collection:
+        coll.objects.link(obj)
+    obj.parent = parent if parent is not None else rig
+    obj.matrix_parent_inverse = Matrix.Identity(4)
+    obj.ple.role = role
+    obj.ple.rig = rig
+    return obj
+
+
+def mesh_part(rig, role: str, material):
+    """The rig's mesh part of ``role`` (e.g. "CLG": a preview), made once (``NAME.role``, not
+    selectable, with ``material``)."""
+    obj = parts(rig).get(role.lower())
+    if obj is None:
+        name = f"{rig.name}.{role.lower()}"
+        obj = new_part(rig, name, bpy.data.meshes.new(name), role)
+        obj.hide_select = True
+        draw.set_material(obj, material)
+    return obj
+
+
+def set_params(rig, inputs) -> None:
+    """Program inputs (``runtime.Param``) as custom properties with slider ranges (``Range(lo, hi)``).
+    A slider the rig has keeps its value (the user's); its range and default follow the program, so
+    Blender's Reset to Default Value gives the program's default. A new input gets its default."""
+    for prm in inputs:
+        key = PARAM_PREFIX + prm.name
+        if key not in rig:
+            rig[key] = prm.default
+        if isinstance(prm.default, (int, float)) and not isinstance(prm.default, bool):
+            ui = rig.id_properties_ui(key)
+            opts = {"description": f"program input {prm.name} of lattice()", "default": prm.default}
+            if prm.range is not None:
+                kind = type(prm.default)  # an int input gets int limits
+                lo, hi = kind(prm.range.lo), kind(prm.range.hi)
+                opts.update(min=lo, max=hi, soft_min=lo, soft_max=hi)
+            ui.update(**opts)
+
+
+def handle_size(lat) -> float:
+    """Display size of frame handles, readable on the whole lattice: half the mean U, V, W step
+    (their translation at the cage point), at least 3 % of the cage's extent, at most two steps,
+    and at least twice the mean ball radius."""
+    steps = [np.linalg.norm(cage.direction_frame(lat, a)[:3, 3] - cage.base_frame(lat)[:3, 3]) for a in "uvw"]
+    step = float(np.mean([x for x in steps if x > 0])) if any(x > 0 for x in steps) else 1.0
+    pts = np.concatenate(cage.cage_curves(lat, interior=0))
+    extent = float(np.ptp(pts, axis=0).max()) if len(pts) else step
+    size = min(max(0.5 * step, 0.03 * extent), 2.0 * step)
+    return max(size, 2.0 * float(lat.template_radii.mean()), 1e-3)
+
+
+def build_parts(rig, lat) -> None:
+    """The frames G, U, V, W, the cage and the region of a rig, those it lacks (template nodes
+    and BeCOTS corners are made by the drawing)."""
+    name = rig.name
+    size = handle_size(lat)
+    have = parts(rig)
+    g = have.get("G")
+    if g is None:
+        g = new_part(rig, f"{name}.G", None, "FRAME")
+        g.ple.frame, g.empty_display_type, g.empty_display_size = "G", "ARROWS", 1.5 * size
+    for axis in "uvw":
+        if axis not in have:
+            f = new_part(rig, f"{name}.{axis.upper()}", None, "FRAME", parent=g)
+            f.ple.frame, f.empty_display_type, f.empty_display_size = axis, "ARROWS", size
+    if "cage" not in have:
+        cage_obj = new_part(rig, f"{name}.cage", draw.new_cage_curve(f"{name}.cage", lat), "CAGE")
+        cage_obj.hide_select = True
+        draw.set_material(cage_obj, draw.CAGE_MATERIAL)
+    if "region" not in have:
+        region_obj = new_part(rig, f"{name}.region", draw.new_region_mesh(f"{name}.region"), "REGION")
+        region_obj.hide_select = True
+        draw.add_balls_beams_modifier(region_obj)
+        draw.set_material(region_obj, draw.REGION_MATERIAL)
+
+
+def create(context, name: str, text, source_kind: str = "PROGRAM", region=(3, 3, 3), location=None,
+           clg: bool = False):
+    """Build a rig for ``text`` (a Text datablock) at ``location`` (default: the 3D cursor);
+    raises PleError before creating anything if the program or IR is bad or the region is
+    beyond the work budget. With ``clg``, ``text`` holds a CLG and the rig edits its pattern."""
+    st = RigState()
+    probe = bpy.data.objects.new("~ple probe", None)  # evaluate before building anything
+    try:
+        probe.ple.text, probe.ple.source_kind = text, source_kind
+        probe.ple_clg.active = clg
+        SESSION.trusted.add(uid(probe))
+        base = base_lattice(probe, st)
+        inputs = st.inputs
+        clamped = tuple(min(r, c) for r, c in zip(region, base.counts))
+        check_budget(base, f"0:{clamped[0]},0:{clamped[1]},0:{clamped[2]}", "drawing the region")
+    finally:
+        SESSION.trusted.discard(uid(probe))
+        bpy.data.objects.remove(probe)
+    coll = bpy.data.collections.new(f"PLE {name}")
+    context.scene.collection.children.link(coll)
+    rig = bpy.data.objects.new(name, None)
+    coll.objects.link(rig)
+    rig.location = context.scene.cursor.location if location is None else location
+    rig.empty_display_type = "PLAIN_AXES"
+    rig.empty_display_size = handle_size(base)
+    rig.ple.role = "RIG"
+    rig.ple.text, rig.ple.source_kind = text, source_kind
+    rig.ple_clg.active = clg
+    rig.ple.region_max = clamped
+    trust(rig)
+    claim(rig)
+    if inputs is not None:
+        set_params(rig, inputs)
+    build_parts(rig, base)
+    SESSION.states[uid(rig)] = st
+    err = refresh(rig, force=True)
+    if err:
+        raise PleError(err)
+    return rig
+
+
+def remove(rig) -> None:
+    """Delete a rig's objects and its own datablocks (meshes, curves), keeping the program text."""
+    objs = [rig, *rig.children_recursive]
+    data = [o.data for o in objs if o.data is not None and o.data.users <= 1]
+    colls = [c for c in rig.users_collection if c.name.startswith("PLE ")]
+    SESSION.states.pop(rig.ple.uid, None)
+    SESSION.owner.pop(rig.ple.uid, None)
+    bpy.data.batch_remove(objs + data)
+    for c in colls:
+        if not c.objects and not c.children:
+            bpy.data.collections.remove(c)
+
+
+def remove_orphans() -> int:
+    """Delete parts whose rig is gone (the user deleted only the lattice object: Blender keeps
+    it in memory, unlinked, while its parts point to it); returns how many objects went."""
+    gone = [o for o in bpy.data.objects if o.ple.role == "RIG" and not o.users_collection]
+    orphans = [o for o in bpy.data.objects if o.ple.role in PART_ROLES and (rig_of(o) is None or rig_of(o) in gone)]
+    for rig in gone:
+        SESSION.states.pop(rig.ple.uid, None)
+    orphans += gone
+    if orphans:
+        data = [o.data for o in orphans if o.data is not None and o.data.users <= 1]
+        bpy.data.batch_remove(orphans + data)
+    return len(orphans)
+
+
+def claim(rig) -> None:
+    """Register the rig's stable id; a rig holding another object's id is a copy (Shift+D):
+    it gets its own id, its own program text (a copy), the original's trust, and parts of its own."""
+    key = uid(rig)
+    owner = SESSION.owner.get(key)
+    if owner is None or owner == rig.session_uid:
+        SESSION.owner[key] = rig.session_uid
+        return
+    if not any(o.session_uid == owner and o.ple.uid == key for o in all_rigs()):
+        SESSION.owner[key] = rig.session_uid  # the holder is gone (deleted, or a new session)
+        return
+    make_independent(rig, was_trusted=key in SESSION.trusted)
+
+
+def make_independent(rig, was_trusted: bool) -> None:
+    rig.ple.uid = uuid.uuid4().hex
+    SESSION.owner[rig.ple.uid] = rig.session_uid
+    if was_trusted:
+        SESSION.trusted.add(rig.ple.uid)
+    if rig.ple.text is not None:
+        rig.ple.text = rig.ple.text.copy()
+    rig.ple.filepath = ""  # the copy's program is not the original's file on disk
+    old = list(rig.children_recursive)  # duplicated parts (if they were selected) still point elsewhere
+    if old:  # the next drawing builds the copy's own parts (once its program may run)
+        data = [o.data for o in old if o.data is not None and o.data.users <= 1]
+        bpy.data.batch_remove(old + data)
+
+
+def duplicate(context, rig):
+    """A copy of a rig with its own program text, trust and parts, one handle size along U."""
+    lat = lattice_of(rig)
+    copy = rig.copy()
+    for coll in rig.users_collection:
+        coll.objects.link(copy)
+    copy.parent = rig.parent
+    cage_obj = parts(rig).get("cage")
+    width = cage_obj.dimensions.x if cage_obj is not None and cage_obj.dimensions.x > 0 else 5 * handle_size(lat)
+    copy.location = rig.location + Vector((1.25 * width, 0, 0))  # beside the original, not on it
+    make_independent(copy, was_trusted=trusted(rig))
+    SESSION.states.pop(copy.ple.uid, None)
+    err = refresh(copy, force=True)
+    if err:
+        raise PleError(err)
+    return copy
+
+
+
+
+def resync() -> None:
+    """Forget what was drawn and take every rig's parts as they are now as the baseline, then
+    redraw (after undo, redo, loading a file, and enabling the add-on in a running session:
+    the positions are the saved state, not user moves; moves made before Run Program still count)."""
+    SESSION.forget_drawn()
+    for r in all_rigs():
+        claim(r)
+        baseline(r)
+    for r in all_rigs():
+        refresh(r, force=True)
+
+
+def register() -> None:
+    pass
+
+
+def unregister() -> None:
+    pass

@@ -1,0 +1,112 @@
+"""What the add-on remembers during one Blender session, in one object: the drawn state of every
+rig, the trust the user gave, the busy flag that keeps the add-on's own writes from re-entering
+its update callbacks, the reports of live editing waiting for the Info editor, and the caches of
+the features. Nothing here is saved in the .blend; loading a file, undo and redo forget the
+drawn state (``forget_drawn``), a test's fresh start forgets everything (``reset``).
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import bpy
+
+REPORTS_KEPT = 50  # background sessions never flush their reports: keep only the latest
+
+
+@dataclass
+class RigState:
+    """What the add-on last drew for a rig, to tell user moves from its own writes."""
+
+    program_key: tuple = ()
+    inputs: list | None = None  # the program's inputs (runtime.Param), as its child process gave them
+    base: object = None
+    lattice: object = None
+    expected: dict = field(default_factory=dict)
+    signature: tuple = ()
+    topology: tuple = ()  # (key, Evaluation) of the last unfiltered region drawn
+    cumulative: tuple = (False, False, False)  # the Cumulative toggles when last drawn
+    region: tuple = ()  # (region_min, region_max) last drawn without error
+    refused: bool = False  # the status is a refused setting: it stays until the user's next edit
+
+
+@dataclass
+class Session:
+    states: dict = field(default_factory=dict)  # rig uid -> RigState
+    owner: dict = field(default_factory=dict)  # rig uid -> session_uid of the object holding it (a copy has another)
+    trusted: set = field(default_factory=set)  # uids of rigs whose program the user ran in this session
+    trust_file: str = ""  # the .blend the trusts were given in (a file saved under a new name carries them)
+    busy: bool = False  # the add-on itself writes to a rig: its update callbacks stay quiet
+    reports: list = field(default_factory=list)  # messages of live editing for the Info editor
+    object_count: int = 0  # objects in the scene at the last update (fewer: parts of a deleted rig may be left)
+    caches: dict = field(default_factory=dict)  # a feature's cache by name (bodies, CLGs, Möbius lattices)
+
+    @contextmanager
+    def quiet(self):
+        """Within: the add-on's own writes (settings set back, several settings at once) do not
+        trigger its update callbacks."""
+        was, self.busy = self.busy, True
+        try:
+            yield
+        finally:
+            self.busy = was
+
+    def state(self, uid: str) -> RigState:
+        return self.states.setdefault(uid, RigState())
+
+    def cache(self, name: str) -> dict:
+        return self.caches.setdefault(name, {})
+
+    def forget_drawn(self) -> None:
+        """After undo, redo or loading a file: positions are then not user moves."""
+        self.states.clear()
+        self.owner.clear()
+        self.object_count = 0
+
+    def forget_trust_of_other_files(self, path: str) -> None:
+        if path != self.trust_file:
+            self.trusted.clear()
+            self.trust_file = path
+
+    def reset(self) -> None:
+        """Everything forgotten, as in a new Blender session."""
+        self.forget_drawn()
+        self.trusted.clear()
+        self.trust_file = ""
+        self.busy = False
+        self.reports.clear()
+        self.caches.clear()
+
+
+SESSION = Session()
+
+
+def notify(rig, message: str) -> None:
+    """A problem met outside an operator (live editing): besides the panel's status line it goes
+    to the Info editor, through the ``ple.report`` operator run from a timer right after the
+    handler (handlers cannot report; in background mode timers never fire: ``flush_reports``)."""
+    SESSION.reports.append(f"{rig.name}: {message}")
+    del SESSION.reports[:-REPORTS_KEPT]
+    if not bpy.app.background and not bpy.app.timers.is_registered(flush_reports):
+        bpy.app.timers.register(flush_reports, first_interval=0.0)
+
+
+def flush_reports():
+    while SESSION.reports:
+        msg = SESSION.reports.pop(0)
+        try:
+            bpy.ops.ple.report(message=msg)
+        except RuntimeError:
+            print(f"PLE: {msg}")
+    return None
+
+
+def register() -> None:
+    pass
+
+
+def unregister() -> None:
+    if bpy.app.timers.is_registered(flush_reports):
+        bpy.app.timers.unregister(flush_reports)
+    SESSION.forget_drawn()

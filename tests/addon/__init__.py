@@ -1,0 +1,1 @@
+"""The Blender extension's tests (a package, so that its conftest does not shadow the core tests' own)."""
