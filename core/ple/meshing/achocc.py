@@ -28,6 +28,53 @@ MAX_FIX_CIRCLES = 8
 MAX_DISK_REACH = 0.45  # a contact disk may sit at most this far along its beam (two ends never cross)
 MIN_DISK_RADIUS = 0.25  # nor shrink below this fraction of the thinner ball
 UNCLEAN_GAP = 1e-3  # radians between shrunk caps of an unclean junction
+CENTRED_FACE = 1e-6  # a CNT face whose centroid is this close to the centre (unit sphere) gives no ray through it
+
+
+class JunctionError(PleError):
+    """A junction the ACHoCC cannot build: the geometric ``reason``, the incident ``beams`` it
+    concerns (indices into the hub's beams) and, once ``hubs.hub_templates`` knows it, the ``hub``
+    (a row of its call); the tessellator names the hub's node and beam-patterns. Pickles (its
+    arguments are its state): template processes raise it too."""
+
+    def __init__(self, reason: str, beams=(), hub: int | None = None):
+        beams = tuple(int(b) for b in beams)
+        super().__init__(reason, beams, hub)
+        self.reason, self.beams, self.hub = reason, beams, hub
+
+    def __str__(self) -> str:
+        return self.reason
+
+
+def check_junction(radius, dirs: np.ndarray, other_radii: np.ndarray, lengths: np.ndarray) -> None:
+    """Raise ``JunctionError`` for the junctions no cone-beam model has (the degenerate cases
+    the ACHoCC cannot mesh, each named by its geometry): a value that is not a finite number; a
+    beam of length 0 (its two balls share a centre); a ball inside a beam's other ball (|r − r_o|
+    ≥ L: the cone-beam is the larger ball, with no cone); two beams leaving in the same direction
+    (one beam-pattern repeated, or balls in line: the nearer beam lies inside the other)."""
+    if not (np.isfinite(radius) and np.all(np.isfinite(dirs)) and np.all(np.isfinite(other_radii))
+            and np.all(np.isfinite(lengths))):
+        bad = np.flatnonzero(~(np.isfinite(dirs).all(axis=1) & np.isfinite(other_radii) & np.isfinite(lengths)))
+        raise JunctionError("a radius, centre or beam direction is not a finite number", bad)
+    zero = np.flatnonzero(lengths <= 0)
+    if len(zero):
+        raise JunctionError("a beam has length 0 (its two balls share a centre)", zero[:1])
+    inside = np.flatnonzero(np.abs(radius - other_radii) >= lengths)
+    if len(inside):
+        k = inside[0]
+        which = "this hub's ball inside the other" if other_radii[k] > radius else "the other ball inside this hub's"
+        raise JunctionError(f"a ball lies inside the other ball of its beam ({which}: |r1 − r2| = "
+                            f"{abs(radius - other_radii[k]):.6g} ≥ length {lengths[k]:.6g}; the cone-beam "
+                            "is undefined)", [k])
+    if len(dirs) > 1:
+        i, j = np.triu_indices(len(dirs), 1)
+        sin_t = np.linalg.norm(np.cross(dirs[i], dirs[j]), axis=1)
+        cos_t = np.einsum("mi,mi->m", dirs[i], dirs[j])
+        same = np.flatnonzero(((sin_t < 1e-9) & (cos_t > 0)) | (cos_t >= 1.0))  # as inflated_radius sees them
+        if len(same):
+            k = same[0]
+            raise JunctionError("two beams leave the ball in the same direction (a beam-pattern repeated, or "
+                                "balls in line: one beam lies inside the other)", [i[k], j[k]])
 
 
 def beam_profile(radius, other_radii, lengths):
@@ -35,7 +82,8 @@ def beam_profile(radius, other_radii, lengths):
     the hub): sin phi = (r − r_other) / L (the cone tangent to both balls)."""
     s = (radius - other_radii) / lengths
     if np.any(np.abs(s) >= 1):
-        raise PleError("lattice is not clean: a ball lies inside a beam's other ball (cone-beam undefined)")
+        raise JunctionError("a ball lies inside a beam's other ball (cone-beam undefined)",
+                            np.flatnonzero(np.abs(s) >= 1)[:1])
     return s, np.sqrt(1 - s * s)
 
 
@@ -50,8 +98,9 @@ def inflated_radius(radius: float, dirs: np.ndarray, other_radii: np.ndarray, le
     d1, d2 = dirs[i], dirs[j]
     cos_t = np.clip(np.einsum("mi,mi->m", d1, d2), -1, 1)
     sin_t = np.sqrt(1 - cos_t**2)
-    if np.any(sin_t < 1e-9) and np.any(cos_t[sin_t < 1e-9] > 0):
-        raise PleError("lattice is not clean: two beams of one ball point the same way")
+    same = np.flatnonzero((sin_t < 1e-9) & (cos_t > 0))
+    if len(same):
+        raise JunctionError("two beams of one ball point the same way", [i[same[0]], j[same[0]]])
     # 2D frame (x along d1, y towards d2); profile k: n_k·p = r, n_k = sin(phi_k) d_k + cos(phi_k) w_k,
     # w_1 = (0, 1), w_2 = the normal of d2 towards d1 = (sin t, -cos t)
     n1 = np.stack([sphi[i], cphi[i]], axis=1)
@@ -76,7 +125,8 @@ def contact_circles(radius, r_plus, dirs, other_radii, lengths, strict: bool = T
     x = radius * sphi + s * cphi  # tangent point r n plus s along the profile line
     y = radius * cphi - s * sphi
     if strict and (np.any(y <= 0) or np.any(x >= lengths)):
-        raise PleError("lattice is not clean: a beam is too short for its junction (r+ passes its far end)")
+        raise JunctionError("a beam is too short for its junction (r+ passes its far end)",
+                            np.flatnonzero((y <= 0) | (x >= lengths))[:1])
     return np.arctan2(np.maximum(y, 0.0), x), x, y
 
 
@@ -246,6 +296,7 @@ def hub_geometry(radius: float, dirs, other_radii, lengths, hint=None, r_plus_mi
     dirs = np.asarray(dirs, float).reshape(-1, 3)
     other_radii = np.asarray(other_radii, float).reshape(-1)
     lengths = np.asarray(lengths, float).reshape(-1)
+    check_junction(radius, dirs, other_radii, lengths)
     r_plus = inflated_radius(radius, dirs, other_radii, lengths) * (1 + INFLATE)
     if len(dirs):  # a beam widening away from the ball meets S⁺ in front of the centre only beyond r / cos(phi)
         _, cphi = beam_profile(radius, other_radii, lengths)
@@ -292,7 +343,11 @@ def hub_geometry(radius: float, dirs, other_radii, lengths, hint=None, r_plus_mi
         h, g, nrm = _visible_face(c)
         if h > CENTRE_MARGIN:
             break
-        p = -g / np.linalg.norm(g)
+        # a face through the centre with its centroid there (a T-junction: the CNT quad between two
+        # antipodal contact circles, beside a third beam) has no ray from its centroid through the
+        # centre (round-off would pick one, or 0/0 a NaN): its outward normal is free, as below
+        gn = np.linalg.norm(g)
+        p = -g / gn if gn > CENTRED_FACE else nrm
         if np.any(np.arccos(np.clip(normals @ p, -1, 1)) <= alist + 1e-6):
             # the ray's exit lies in a cap: use the face's outward normal instead (its cap of
             # half-angle acos(h) ≥ 90° holds no circle, so the point is free and lifts the face)

@@ -76,7 +76,10 @@ def _null_space_planes(n: np.ndarray, alpha: np.ndarray) -> tuple[np.ndarray, np
     """Same solutions via the null space of the linear rows (N_i, −cos a_i, sin a_i) acting
     on (N, cos a, sin a): the coplanar-normals case of Eq. A.3, valid for any normals."""
     rows = np.concatenate([n, -np.cos(alpha)[..., None], np.sin(alpha)[..., None]], axis=-1)  # (..., 3, 5)
-    _, _, vt = np.linalg.svd(rows)
+    finite = np.isfinite(rows).all(axis=(-2, -1))
+    # LAPACK's SVD does not converge on NaN: such triples get NaN planes (no candidate)
+    vt = np.full(rows.shape[:-2] + (5, 5), np.nan)
+    vt[finite] = np.linalg.svd(rows[finite])[2]
     e = vt[..., 3:, :]  # (..., 2, 5) null-space basis
     d = np.array([1.0, 1.0, 1.0, -1.0, -1.0])
     q = np.einsum("...ai,i,...bi->...ab", e, d, e)  # |N|² − cos² − sin² = 0
@@ -374,6 +377,8 @@ def chocc(normals, alphas, hint=None) -> Chocc:
     n = len(normals)
     if n < 3:
         raise PleError(f"CHoCC needs at least 3 circles for triangles, got {n} (cases n=1, 2 have none)")
+    if not (np.isfinite(normals).all() and np.isfinite(alphas).all()):
+        raise PleError("CHoCC: a circle's normal or half-angle is not a finite number")
     if np.any(alphas < 0) or np.any(alphas >= np.pi / 2):
         raise PleError("CHoCC: circle half-angles must lie in [0, pi/2)")
     gap = np.arccos(np.clip(normals @ normals.T, -1, 1)) - (alphas[:, None] + alphas[None, :])

@@ -33,6 +33,7 @@ from .achocc import (
     INFLATE,
     UNCLEAN_GAP,
     HubGeometry,
+    JunctionError,
     disk_reach,
     exit_distances,
     hub_geometry,
@@ -258,7 +259,7 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
     vec = np.asarray(neighbor_centers, float).reshape(-1, 3) - center
     lengths = np.linalg.norm(vec, axis=1)
     if np.any(lengths <= 0):
-        raise PleError("a beam joins two balls with the same centre")
+        raise JunctionError("a beam has length 0 (its two balls share a centre)", np.flatnonzero(lengths <= 0)[:1])
     dirs = vec / lengths[:, None]
     hub = hub_geometry(radius, dirs, np.asarray(neighbor_radii, float).reshape(-1), lengths, hint)
     hub = filleted(hub, fillet, hint)  # optional junction fillet (001_ §6 Eq. 6): projection onto the blend
@@ -539,8 +540,8 @@ def hub_templates(centers, radii, neighbor_centers, neighbor_radii, style: str, 
         if not todo[h]:
             continue
         surface: list = []
-        out[h] = hub_template(centers[h], radii[h], nbc[h], nbr[h], style, levels, segments, hint, min_edge, fillet,
-                              surface)
+        out[h] = _named(h, hub_template, centers[h], radii[h], nbc[h], nbr[h], style, levels, segments, hint,
+                        min_edge, fillet, surface)
         todo[h] = False
         hub = out[h].geometry
         hint = hub.base_triangles
@@ -554,6 +555,17 @@ def hub_templates(centers, radii, neighbor_centers, neighbor_radii, style: str, 
     if reps is not None:
         reps[:] = (made[::-1] + used)[:REPS_KEPT]
     return out[:h_count], hint
+
+
+def _named(h: int, build, *args):
+    """``build(*args)`` for the hub of row h; a junction it cannot build raises ``JunctionError``
+    naming that row (the CHoCC's own errors and a numerical failure of its hull included)."""
+    try:
+        return build(*args)
+    except JunctionError as e:
+        raise JunctionError(e.reason, e.beams, h) from None
+    except (PleError, np.linalg.LinAlgError) as e:
+        raise JunctionError(f"no convex hull of its contact circles ({e})", (), h) from None
 
 
 @dataclass
@@ -576,7 +588,8 @@ def _batch_round(out, lead, hub, surface, rest, todo, centers, radii, nbc, dirs,
     ties = _batch_templates(out, hub, surface, np.concatenate([[lead], rest]), centers, radii, dirs, nbr,
                             lengths, geo, style, levels, segments, min_edge)
     for g in ties:  # this topology, but collapses the batch cannot tell: alone, no new batch
-        out[g] = hub_template(centers[g], radii[g], nbc[g], nbr[g], style, levels, segments, hint, min_edge)
+        out[g] = _named(g, hub_template, centers[g], radii[g], nbc[g], nbr[g], style, levels, segments, hint,
+                        min_edge)
     todo[rest] = [out[g] is None for g in rest]
 
 

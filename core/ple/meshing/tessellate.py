@@ -43,6 +43,7 @@ from ..algebra.vectors import perpendicular_frames, unit_rows
 from ..errors import PleError
 from ..model.budget import hub_triangles, mean_degree
 from ..model.lattice import Lattice, Region
+from .achocc import JunctionError
 from .assembly import Packed, Pieces, TemplateTable, fill, hub_faces, place
 from .hubs import hub_templates
 from .preview import balls_beams_mesh
@@ -405,6 +406,7 @@ class _Tessellator:
         info = {}
         nv = lat.counts[1]
         new: dict = {}  # hub shapes not seen yet: key -> (node, own radius, neighbourhood)
+        where: dict = {}  # key -> the node index (i, j, k, n) of its first hub (to name it in errors)
         per_node = []
         for n in range(len(lat.nodes)):
             sel = np.flatnonzero(idx[:, 3] == n)
@@ -442,13 +444,14 @@ class _Tessellator:
             for u, key in enumerate(keys):
                 if key not in self.templates and key not in new:
                     new[key] = (n, own[u], local[u])
+                    where[key] = tuple(int(x) for x in idx[reps[u]])
             per_node.append((sel, inv.reshape(-1), keys))
-        self._build_templates(new)
+        self._build_templates(new, where)
         for sel, inv, keys in per_node:
             tids[sel] = np.array([self.templates[key][0] for key in keys], np.int64)[inv]
         return tids, m, minv, info
 
-    def _build_templates(self, new: dict) -> None:
+    def _build_templates(self, new: dict, where: dict | None = None) -> None:
         """Templates of the hub shapes ``new`` (key -> (template node, own radius, neighbourhood
         (S, 4) with NaN rows for missing beams)), ids in the order of ``new``. Hubs with the same
         beam slots are built together (``hub_templates``: batches of one CHoCC topology),
@@ -473,9 +476,9 @@ class _Tessellator:
         if self.pool is not None and len(args) > 1:  # the largest first: no process is left with one at the end
             order = sorted(range(len(args)), key=lambda i: -len(args[i][1]))
             futures = dict(zip(order, [self.pool.submit(_hub_templates_task, args[i]) for i in order]))
-            results = [futures[i].result() for i in range(len(args))]
+            results = [self._named(futures[i].result, tasks[i][1], new, where) for i in range(len(args))]
         else:
-            results = [_hub_templates_task(a) for a in args]
+            results = [self._named(partial(_hub_templates_task, a), t[1], new, where) for a, t in zip(args, tasks)]
         built = {}
         for (hint_key, keys), (packed, hint, reps) in zip(tasks, results):
             built.update(zip(keys, self.table.unpack(packed)))
@@ -486,6 +489,32 @@ class _Tessellator:
             self.templates[key] = (len(self.templates), built[key], np.where(have, np.cumsum(have) - 1, -1))
             self.tpl_list.append(self.templates[key][1:])
         self.table.add(built[key] for key in new)  # in template-id order
+
+    def _named(self, result, keys, new: dict, where: dict | None):
+        """``result()`` of a template task over the hub shapes ``keys``; a junction it cannot build
+        (``achocc.JunctionError``) becomes a PleError naming the hub's node index (i, j, k, n), the
+        beam-patterns concerned and the geometric reason."""
+        try:
+            return result()
+        except JunctionError as e:
+            if e.hub is None or e.hub >= len(keys):
+                raise
+            key = keys[e.hub]
+            n, _, local = new[key]
+            slots = np.flatnonzero(~np.isnan(local[:, 3]))  # the hub's beams: its existing slots
+            at = f"hub (i, j, k, n) = {(where or {}).get(key, ('?', '?', '?', n))}"
+            names = []
+            for b in e.beams:
+                p, sign = self.slots[n][int(slots[b])]
+                bp = self.lat.beams[p]
+                names.append(f"{p} ({self._node_name(bp.n1)} -> {self._node_name(bp.n2)} {bp.offset}"
+                             f"{', incoming' if sign < 0 else ''})")
+            beams = f" [beam-pattern{'s' if len(names) > 1 else ''} {' and '.join(names)}]" if names else ""
+            raise PleError(f"cannot mesh {at}: {e.reason}{beams}") from None
+
+    def _node_name(self, n: int) -> str:
+        name = self.lat.nodes[n].name
+        return repr(name) if name is not None else str(n)
 
     # ----- assembly ---------------------------------------------------------------------
     def build(self, box: Region) -> tuple[np.ndarray, np.ndarray]:
