@@ -154,7 +154,7 @@ def write_tenth(lat, out, style: str, levels: int, fraction: float = 0.1, seed: 
     cl = leave_to_unions(tess, ev, report)
     pool = RecordPool()
     encode = lambda chunk: stl_chunk(chunk, grid, pool)  # noqa: E731
-    chunks = [iter_triangles(lat, r, style, lv, sg, _tess=tess, encode=encode), map(encode, union_pieces(tess, ev, cl))]
+    chunks = [map(encode, union_pieces(tess, ev, cl)), iter_triangles(lat, r, style, lv, sg, _tess=tess, encode=encode)]
     tris = write_stl(out, itertools.chain(*chunks), header=stl_header("mm"), pool=pool)
     return tris, report, stream_estimate(lat, style, levels, report)
 

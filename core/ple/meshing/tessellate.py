@@ -51,7 +51,7 @@ from .skin import clip_bodies, clip_to_bodies
 from .styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS
 from .styles import style as style_named
 from .unclean import SEPARATION_GRIDS, find_unclean
-from .unions import clusters, piece_estimate, unite_stoppable
+from .unions import Cluster, RingTouchedError, clusters, piece_estimate, unite_stoppable
 from .weld import COLLAPSE_GRIDS, grid_spacing, weld
 
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
@@ -289,6 +289,14 @@ class _Tessellator:
         src = np.concatenate([bi[:, :3], np.array([self.lat.beams[p].n1 for p in bi[:, 3]], np.int64)
                               .reshape(-1, 1)], axis=1)
         self.excluded_beams = np.unique(self._key(src) * len(self.lat.beams) + bi[:, 3])
+
+    def exclude_more(self, idx: np.ndarray, beam_index: np.ndarray) -> None:
+        """``exclude`` these hubs and beams too (a cluster that grew)."""
+        old_nodes, old_beams = self.excluded, self.excluded_beams
+        self.exclude(idx, beam_index)
+        if old_nodes is not None:
+            self.excluded = np.union1d(self.excluded, old_nodes)
+            self.excluded_beams = np.union1d(self.excluded_beams, old_beams)
 
     def find_unclean(self):
         """The region's unclean hubs (``ple.meshing.unclean.find_unclean``) with r⁺ and the ACHoCC's
@@ -790,7 +798,7 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
 def leave_to_unions(tess: _Tessellator, ev, report) -> list:
     """Tell the fast path which hubs and beams the local unions of ``report`` mesh
     (``ple.meshing.unions``); returns the clusters."""
-    cl = clusters(report, ev.beam_nodes)
+    cl = clusters(report, ev.beam_nodes, ev.center, ev.radius)
     idx = np.asarray(ev.node_index, np.int64)
     hubs = np.concatenate([c.hubs for c in cl]) if cl else np.zeros(0, np.int64)
     beams = np.concatenate([c.beams for c in cl]) if cl else np.zeros(0, np.int64)
@@ -807,42 +815,91 @@ def build_with_unions(tess: _Tessellator, ev, report) -> tuple[np.ndarray, np.nd
     local unions, welded where they share their rings' vertices, put on the output grid (the
     mesh every float32 file of it holds)."""
     cl = leave_to_unions(tess, ev, report)
-    v, f = weld_chunks([tess.build(tess.region), *union_pieces(tess, ev, cl)])
+    pieces = list(union_pieces(tess, ev, cl))  # first: a cluster may grow into the fast path's hubs
+    v, f = weld_chunks([tess.build(tess.region), *pieces])
     v, f, _ = weld(v, f, tess.grid)  # on the float32 grid, as every file holds it
     return v, f
+
+
+MAX_CLUSTER_GROWTH = 16  # times a cluster takes in the clean junctions whose rings its union touched
 
 
 def union_pieces(tess: _Tessellator, ev, cl: list, chunk: int = 512):
     """The meshes (vertices, faces) of the clusters ``cl`` (``leave_to_unions``), one by one: each
     open along the contact rings it shares with the fast path, whose vertices it takes from the
     hub templates placed as the boxes place them (``assembly.place``), ``chunk`` clusters' rings
-    at a time."""
+    at a time. A union that touches one of its rings (something of the cluster reaches that
+    clean junction) takes the junction's hub in as a ball, with its beams (merging any cluster
+    that holds one), and the fast path leaves them out too: so the pieces are held until every
+    cluster is settled, and drawn before the boxes are built."""
     idx = np.asarray(ev.node_index, np.int64)
     bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
     pattern = np.asarray(ev.beam_index, np.int64)[:, 3]
-    own = np.zeros(len(idx), bool)
-    for lo in range(0, len(cl), chunk):
-        part = cl[lo:lo + chunk]
-        ends = []
-        for k, c in enumerate(part):
-            own[c.hubs] = True
-            ends += [(k, int(j), e) for j in c.beams.tolist() for e in (0, 1) if not own[bn[j, e]]]
-            own[c.hubs] = False
-        rings: list = [{} for _ in part]
-        if ends:
-            rows = np.array([bn[j, e] for _, j, e in ends], np.int64)
-            tids, m, _, _ = tess.instances(idx[rows])
-            table = tess.table.snapshot()
-            counts = table[2][tids, 2]
-            offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-            verts = np.empty((int(counts.sum()), 3))
-            place(table, tids, offsets, m, verts)
-            for q, (k, j, e) in enumerate(ends):
-                tpl, slot_of = tess.tpl_list[int(tids[q])]
-                slot = tess.slots[int(idx[bn[j, e], 3])].index((int(pattern[j]), 1 if e == 0 else -1))
-                rings[k][(j, e)] = verts[offsets[q] + np.asarray(tpl.rings[slot_of[slot]], np.int64)]
-        for c, rg in zip(part, rings):
-            yield unite_stoppable(c, ev.center, ev.radius, bn, rg, tess.grid)
+    pending = deque(cl)
+    done: dict = {}  # id -> (cluster, piece): held until every cluster is settled (a later one may grow into it)
+    rings_of: dict = {}
+    while pending:
+        c = pending.popleft()
+        if id(c) not in rings_of:  # this cluster and the next ones' rings, placed at once
+            batch = [c, *itertools.islice(pending, chunk - 1)]
+            rings_of.update(zip(map(id, batch), _cluster_rings(tess, idx, bn, pattern, batch)))
+        rg = rings_of.pop(id(c))
+        for _ in range(MAX_CLUSTER_GROWTH):
+            try:
+                piece = unite_stoppable(c, ev.center, ev.radius, bn, rg, tess.grid)
+                break
+            except RingTouchedError as exc:
+                others = list(pending) + [d for d, _ in done.values()]
+                c, merged = _grown(c, [int(bn[j, e]) for j, e in exc.ring], bn, others)
+                gone = {id(p) for p in merged}
+                pending = deque(q for q in pending if id(q) not in gone)
+                for g in gone:
+                    rings_of.pop(g, None)
+                    done.pop(g, None)
+                tess.exclude_more(idx[c.hubs], np.concatenate([idx[bn[c.beams, 0], :3], pattern[c.beams, None]],
+                                                              axis=1))
+                rg = _cluster_rings(tess, idx, bn, pattern, [c])[0]
+        else:
+            raise PleError(f"an unclean cluster of {len(c.hubs):,} hubs and {len(c.beams):,} beams keeps "
+                           "touching the clean junctions around it")
+        done[id(c)] = (c, piece)
+    for _, piece in done.values():
+        yield piece
+
+
+def _cluster_rings(tess: _Tessellator, idx, bn, pattern, part: list) -> list:
+    """Per cluster of ``part``, its rings (beam row, end) -> vertices (k, 3) placed as the boxes
+    place them: the contact rings of the clean junctions at the ends of its beams."""
+    ends = []
+    for k, c in enumerate(part):
+        own = set(c.hubs.tolist())
+        ends += [(k, int(j), e) for j in c.beams.tolist() for e in (0, 1) if int(bn[j, e]) not in own]
+    rings: list = [{} for _ in part]
+    if not ends:
+        return rings
+    rows = np.array([bn[j, e] for _, j, e in ends], np.int64)
+    tids, m, _, _ = tess.instances(idx[rows])
+    table = tess.table.snapshot()
+    counts = table[2][tids, 2]
+    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    verts = np.empty((int(counts.sum()), 3))
+    place(table, tids, offsets, m, verts)
+    for q, (k, j, e) in enumerate(ends):
+        tpl, slot_of = tess.tpl_list[int(tids[q])]
+        slot = tess.slots[int(idx[bn[j, e], 3])].index((int(pattern[j]), 1 if e == 0 else -1))
+        rings[k][(j, e)] = verts[offsets[q] + np.asarray(tpl.rings[slot_of[slot]], np.int64)]
+    return rings
+
+
+def _grown(c, hubs_in: list, bn, others: list):
+    """Cluster ``c`` with the hubs ``hubs_in`` taken in (balls) with every beam at them, and with
+    the other clusters that share one of those hubs or beams merged in. Returns (cluster, the
+    merged clusters)."""
+    beams = np.flatnonzero(np.isin(bn, hubs_in).any(axis=1))
+    merged = [p for p in others if np.isin(p.beams, beams).any() or np.isin(p.hubs, hubs_in).any()]
+    hubs = np.unique(np.concatenate([c.hubs, hubs_in, *[p.hubs for p in merged]])).astype(np.int64)
+    allb = np.unique(np.concatenate([c.beams, beams, *[p.beams for p in merged]])).astype(np.int64)
+    return Cluster(hubs, allb), merged
 
 
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
@@ -999,9 +1056,9 @@ def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: in
                    workers: int = 1, encode=None, grid: float | None = None):
     """The streamed mesh of a region: (report, chunks). Regions up to MAX_CHECK_GROUPS groups are
     checked first (``ple.meshing.unclean``; the check's hub templates are reused by the stream);
-    report is None for larger regions (not checked). A region with unclean hubs streams its
-    boxes without its clusters, then each cluster's local union (``ple.meshing.unions``), which
-    meet the boxes exactly along contact rings: memory is bounded by a box and a cluster."""
+    report is None for larger regions (not checked). A region with unclean hubs streams each
+    cluster's local union (``ple.meshing.unions``), then its boxes without the clusters, which
+    meet the unions exactly along contact rings: memory is bounded by a box and a cluster."""
     levels, segments = _check_style(style, levels, segments)
     if style == "balls-beams":
         raise PleError("a checked stream needs a closed style (refined, cnt or chocc)")
@@ -1016,4 +1073,5 @@ def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: in
         return report, boxes
     cl = leave_to_unions(tess, ev, report)  # before the first box: the boxes leave the clusters' rings open
     pieces = union_pieces(tess, ev, cl)
-    return report, itertools.chain(boxes, pieces if encode is None else map(encode, pieces))
+    # the pieces first: a cluster that grows takes hubs from the boxes, which are built after it
+    return report, itertools.chain(pieces if encode is None else map(encode, pieces), boxes)

@@ -57,6 +57,7 @@ class UncleanReport:
     shrunk: np.ndarray | None = None  # (N,) hubs whose ACHoCC shrank its caps
     clusters: int = 0  # local unions (``ple.meshing.unions``), once the stream has split them
     union_bytes: int = 0  # the largest cluster's union, estimated from above (peak bytes)
+    r_plus: np.ndarray | None = None  # (N,) each hub's S⁺ radius (world units), which holds its junction
 
     def line(self) -> str:
         close = f", {self.close_junctions:,} close junction pairs" if self.close_junctions else ""
@@ -161,7 +162,7 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
         comps = len(np.unique(lab[nodes]))
     shrunk_mask = np.zeros(n, bool) if shrunk is None else np.asarray(shrunk, bool).copy()
     return UncleanReport(nodes, pairs, shrunk_count, comps, close, np.concatenate(found).astype(np.int64),
-                         shrunk_mask)
+                         shrunk_mask, r_plus=rp)
 
 
 def _pulled_neighbours(pulled, bn, points, margin: float) -> np.ndarray:

@@ -36,6 +36,18 @@ from .unclean import BALL_TURNS, SPHERE_SEGMENTS, on_grid
 UNION_TRIANGLE_BYTES = 600  # peak bytes per input triangle of a manifold3d union and its repair (measured, rounded up)
 
 
+class RingTouchedError(PleError):
+    """A cluster's union changed one of the contact rings it shares with the fast path: something
+    of the cluster reaches that clean junction. ``ring``: the rings, [(beam row, end 0|1), …]."""
+
+    def __init__(self, message: str, ring):
+        super().__init__(message)
+        self.ring = ring
+
+    def __reduce__(self):  # from the child process of ``unite_stoppable``
+        return RingTouchedError, (str(self), self.ring)
+
+
 @dataclass
 class Cluster:
     """One local union: hubs (rows of the evaluation) meshed as balls, beams (rows) as hulls."""
@@ -44,15 +56,29 @@ class Cluster:
     beams: np.ndarray
 
 
-def clusters(report, beam_nodes) -> list:
+def clusters(report, beam_nodes, center=None, radius=None) -> list:
     """The clusters of an unclean report (``find_unclean``): connected groups of the graph whose
     vertices are the elements of E and B (module docstring) and whose edges are the overlapping
-    pairs and the incidences of E's hubs. beam_nodes (M, 2) node rows."""
+    pairs and the incidences of E's hubs. beam_nodes (M, 2) node rows. With the balls (center
+    (N, 3), radius (N,)) and the report's r⁺, a clean hub whose S⁺ a neighbouring ball of E
+    reaches (its contact disk towards that ball is not safe from it) joins E, until none does."""
     bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
     n, m = len(report.shrunk), len(bn)
     pairs = np.asarray(report.element_pairs, np.int64).reshape(-1, 2)
     hub_e = report.shrunk.copy()
     hub_e[pairs[pairs < n]] = True
+    if center is not None and report.r_plus is not None and len(bn):
+        c, rad = np.asarray(center, float), np.asarray(radius, float)
+        reach = np.linalg.norm(c[bn[:, 0]] - c[bn[:, 1]], axis=1)
+        for _ in range(n):
+            grow = np.zeros(n, bool)
+            for a, b in ((0, 1), (1, 0)):  # a clean at end a, a ball of E at end b reaching a's S⁺
+                x, y = bn[:, a], bn[:, b]
+                hit = ~hub_e[x] & hub_e[y] & (reach - rad[y] <= report.r_plus[x])
+                grow[x[hit]] = True
+            if not grow.any():
+                break
+            hub_e |= grow
     beam_b = np.zeros(m, bool)
     beam_b[pairs[pairs >= n] - n] = True
     incident = hub_e[bn[:, 0]] | hub_e[bn[:, 1]]
@@ -134,7 +160,7 @@ def unite_stoppable(cluster: Cluster, center, radius, beam_nodes, rings: dict, g
         child.join()
         recv.close()
     if not ok:
-        raise PleError(value)
+        raise value
     return value
 
 
@@ -142,7 +168,7 @@ def _child(send, *args) -> None:
     try:
         send.send((True, unite_cluster(*args)))
     except PleError as exc:
-        send.send((False, str(exc)))
+        send.send((False, exc))
     finally:
         send.close()
 
@@ -179,16 +205,10 @@ def _unite_once(manifold3d, unit, cluster, center, radius, beam_nodes, rings, gr
         return u * rad[x] + c[x]
 
     parts = [manifold3d.Manifold.hull_points(ball(int(x))) for x in cluster.hubs]
-    pinned = []
+    keys = sorted(k for k in rings if int(bn[k[0], k[1]]) not in own)  # the rings shared with the fast path
+    pinned = [rings[k] for k in keys]
     for j in cluster.beams.tolist():
-        ends = []
-        for e in (0, 1):
-            x = int(bn[j, e])
-            if x in own:
-                ends.append(ball(x))
-            else:
-                ends.append(rings[(j, e)])
-                pinned.append(rings[(j, e)])
+        ends = [ball(int(bn[j, e])) if int(bn[j, e]) in own else rings[(j, e)] for e in (0, 1)]
         parts.append(manifold3d.Manifold.hull_points(np.concatenate(ends)))
     for p in parts:
         if p.status() != manifold3d.Error.NoError or p.is_empty():
@@ -200,36 +220,39 @@ def _unite_once(manifold3d, unit, cluster, center, radius, beam_nodes, rings, gr
     centre = v.mean(axis=0) if len(v) else np.zeros(3)
     reach = float(np.linalg.norm(v - centre, axis=1).max()) if len(v) else 0.0
     v, f = on_grid(v, f, grid, centre[None], reach, pinned=ring_pts)
-    return _open_rings(v, f, pinned)
+    return _open_rings(v, f, pinned, keys)
 
 
-def _open_rings(v, f, rings: list):
+def _open_rings(v, f, rings: list, keys: list):
     """Remove the faces lying on the rings (every corner a vertex of one ring: the ring's
-    polygon), and check that what is left is open exactly along the rings' edges."""
+    polygon), and check that what is left is open exactly along each ring's edges
+    (``RingTouchedError`` naming the first ring that is not, by its key of ``keys``)."""
     if not rings:
         return v, f
     where: dict = {}
     for r, ring in enumerate(rings):
-        for p in map(tuple, np.asarray(ring, float)):
+        for p in map(tuple, np.asarray(ring, float).tolist()):
             where[p] = r
     ring_of = np.array([where.get(tuple(p), -1) for p in v.tolist()], np.int64)
     fr = ring_of[f]
     cap = (fr[:, 0] >= 0) & (fr[:, 0] == fr[:, 1]) & (fr[:, 1] == fr[:, 2])
     f = f[~cap]
-    # the open edges must be the rings' edges, each once, in the opposite direction to the ring's
-    # order on the fast side (whatever the orientation, the set of undirected edges must match)
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    key = {}
-    for a, b in e.tolist():
-        key[(a, b)] = key.get((a, b), 0) + 1
-    open_edges = {(a, b) for (a, b) in key if (b, a) not in key}
+    directed = set(map(tuple, np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]).tolist()))
+    open_edges = {tuple(sorted(e)) for e in directed if (e[1], e[0]) not in directed}
     index = {tuple(p): i for i, p in enumerate(v.tolist())}
-    want = set()
-    for ring in rings:
+    want: set = set()
+    touched = []
+    for key, ring in zip(keys, rings):
         ids = [index.get(tuple(p)) for p in np.asarray(ring, float).tolist()]
-        if any(i is None for i in ids):
-            raise PleError("a ring of an unclean cluster was changed by its union")
-        want |= {tuple(sorted((ids[k], ids[(k + 1) % len(ids)]))) for k in range(len(ids))}
-    if {tuple(sorted(x)) for x in open_edges} != want or len(open_edges) != len(want):
-        raise PleError("a ring of an unclean cluster was touched by its union")
+        edges = {tuple(sorted((ids[k], ids[(k + 1) % len(ids)]))) for k in range(len(ids))} if None not in ids else None
+        if edges is None or not edges <= open_edges:
+            touched.append(key)
+        else:
+            want |= edges
+    if touched:
+        raise RingTouchedError("a ring of an unclean cluster was changed by its union", touched)
+    if open_edges != want:
+        rows = {int(r) for e in open_edges - want for r in ring_of[list(e)] if r >= 0}
+        raise RingTouchedError("a ring of an unclean cluster was touched by its union",
+                               [keys[r] for r in sorted(rows)] or list(keys))
     return v, f
