@@ -38,8 +38,6 @@ def test_addon_live(run_case, case):
     run_case(__file__, case, fresh=case in FRESH)
 
 
-@pytest.mark.xfail(strict=True, reason="core: Similarity.between_frames names its argument 'frame B' and "
-                                       "model.cage.direction_from_frame prefixes 'frame U: ' to that message")
 def test_a_bad_frame_is_named_once(run_case):
     run_case(__file__, "bad_frame_named_once")
 

@@ -143,14 +143,15 @@ class Similarity:
         return Similarity(s, angle, tuple(axis), tuple(fixed), 0.0)
 
     @staticmethod
-    def between_frames(frame_a, frame_b) -> Similarity:
+    def between_frames(frame_a, frame_b, names: tuple = ("frame A", "frame B")) -> Similarity:
         """The similarity taking 3D frame A onto frame B (§2.5.5).
 
         A frame is a 4x4 matrix whose columns are X, Y, Z, O (|X| = |Y| = |Z|, orthogonal,
         right-handed) or a tuple (O, X, Y, Z). The result maps O_A to O_B and each axis
-        vector of A to that of B; it is ``B · A⁻¹`` decomposed canonically.
+        vector of A to that of B; it is ``B · A⁻¹`` decomposed canonically. ``names``: how an
+        error names the two frames.
         """
-        fa, fb = _frame_matrix(frame_a, "frame A"), _frame_matrix(frame_b, "frame B")
+        fa, fb = _frame_matrix(frame_a, names[0]), _frame_matrix(frame_b, names[1])
         return Similarity.from_matrix(fb @ np.linalg.inv(fa), "similarity between frames")
 
     @staticmethod

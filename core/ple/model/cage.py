@@ -122,19 +122,13 @@ def direction_from_frame(lat: Lattice, axis: str, frame, cumulative: bool = Fals
     count exceeds 1). Degenerate frames (sheared, unequal or zero axes, mirrored) raise
     PleError naming the frame. A linear part equal to the current one up to float32 noise
     (a frame only dragged) keeps the current one exactly (``snap_linear``)."""
-    try:
-        new = Similarity.between_frames(base_frame(lat), clean_frame(frame))
-    except PleError as exc:
-        raise PleError(f"frame {axis.upper()}: {exc}") from None
+    new = Similarity.between_frames(base_frame(lat), clean_frame(frame), ("the base frame", f"frame {axis.upper()}"))
     return snap_linear(new, direction_similarity(lat, axis, cumulative), cage_point(lat))
 
 
 def placement_from_frame(frame, previous: Similarity | None = None) -> Similarity:
     """The placement G of a frame given as a 4x4 matrix in the rig's coordinates."""
-    try:
-        new = Similarity.between_frames(np.eye(4), clean_frame(frame))
-    except PleError as exc:
-        raise PleError(f"frame G: {exc}") from None
+    new = Similarity.between_frames(np.eye(4), clean_frame(frame), ("the identity frame", "frame G"))
     return new if previous is None else snap_linear(new, previous, np.zeros(3))
 
 
