@@ -192,6 +192,69 @@ def plot_curved(d) -> Path | None:
     return out
 
 
+def _cell(r: dict) -> str:
+    if "timeout" in r:
+        return f"stopped at {r['timeout']:.0f} s"
+    if "error" in r:
+        return f"error: {r['error']}"
+    return f"{r['seconds']:.1f} s (CPU {r['cpu_seconds']:.1f} s), {r['peak_rss_gb']:.2f} GB, {r['triangles']:,} tri"
+
+
+def unclean_section(d) -> list[str]:
+    out = ["## Unclean lattices (`ple bench unclean`)", "",
+           "Each case streamed to binary STL by `ple mesh`'s own path in a fresh process, beside one manifold3d "
+           "batch union of the same balls (32 segments) and cone-beams in a fresh process of its own, stopped after "
+           f"{d['union_timeout_s']:.0f} s (then the CPU speed-up is a lower bound, ≥). Estimate: the process's own "
+           "baseline, the region's evaluation, two boxes and the largest local union, computed before any work.", "",
+           "![unclean lattices: ours vs one manifold3d union](img/unclean.png)", "",
+           "| case | style | ours | triangles / s | estimate (peak / estimate) | manifold3d union | CPU speed-up | "
+           "what was unclean |", "|---|---|---|---|---|---|---|---|"]
+    for r in d["rows"]:
+        o, b = r["ours"], r["manifold3d_union"]
+        name = r["case"] + (f" {r['n']}³" if r["n"] else "")
+        style = r["style"] + (f" {r['levels']}" if r["style"] == "refined" else "")
+        if "seconds" not in o:
+            out.append(f"| {name} | {style} | {_cell(o)} | – | – | {_cell(b)} | – | – |")
+            continue
+        speed = r.get("cpu_speedup")
+        sp = "–" if speed is None else f"{'≥ ' if r.get('speedup_is_lower_bound') else ''}{speed:.1f}×"
+        what = (o.get("unclean") or "not checked").replace("unclean lattice: ", "")
+        what = what.replace(" united with manifold3d", "")
+        out.append(f"| {name} | {style} | {_cell(o)} | {o['triangles_per_s'] / 1e6:.2f} M/s | "
+                   f"{o['estimate_gb']:.2f} GB ({o['peak_over_estimate']:.2f}) | {_cell(b)} | {sp} | {what} |")
+    return out + ["", "Raw JSON: `benchmarks/results/unclean.json`.", ""]
+
+
+def plot_unclean(d) -> Path | None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    rows = [r for r in (d or {}).get("rows", []) if "cpu_seconds" in r["ours"]]
+    if not rows:
+        return None
+    labels = [f"{r['case']} {r['n'] or ''}\n{r['style']}" for r in rows]
+    ours = [r["ours"]["cpu_seconds"] for r in rows]
+    base = [r["manifold3d_union"].get("cpu_seconds", r["manifold3d_union"].get("timeout", 0)) for r in rows]
+    fig, ax = plt.subplots(figsize=(8, 3.6))
+    x = range(len(rows))
+    ax.bar([i - 0.2 for i in x], ours, 0.4, label="ple mesh (CPU s)", color="#4a7ab0")
+    ax.bar([i + 0.2 for i in x], base, 0.4, label="one manifold3d union (CPU s; hatched: stopped)", color="#999",
+           hatch=None)
+    for i, r in enumerate(rows):
+        if "timeout" in r["manifold3d_union"]:
+            ax.bar(i + 0.2, base[i], 0.4, color="none", edgecolor="#333", hatch="//")
+    ax.set_yscale("log")
+    ax.set_xticks(list(x), labels, fontsize=7)
+    ax.set_ylabel("CPU seconds (log)")
+    ax.set_title("Unclean lattices: local unions vs one global union (2 cores)")
+    ax.legend(frameon=False, fontsize=7)
+    fig.tight_layout()
+    out = DOCS / "img" / "unclean.png"
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
 def startup_section(d) -> list[str]:
     rows = d.get("startup") or d.get("commands")
     if not rows:
@@ -243,6 +306,10 @@ def write_report() -> Path:
         lines += curved_section(curved)
     if startup:
         lines += startup_section(startup)
+    unclean = _load("unclean")
+    if unclean:
+        plot_unclean(unclean)
+        lines += unclean_section(unclean)
     for title, name, d in (("BeCOTS RangeFinder", "becots", becots), ("Lazy evaluation", "eval", ev)):
         if d:
             lines += generic_section(title, name, d)
