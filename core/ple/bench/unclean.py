@@ -64,7 +64,8 @@ else:
     from ple.io.export import write_mesh
     from ple.bench.unclean import stream_estimate
     info = {}
-    tris = write_mesh(lat, out, style=style, levels=levels, info=info)
+    from ple.model.budget import default_max_memory
+    tris = write_mesh(lat, out, style=style, levels=levels, info=info, max_memory=default_max_memory())
     report = info["unclean"]
     estimate = stream_estimate(lat, style, levels, report)
 estimate += base

@@ -175,7 +175,14 @@ def _pulled_neighbours(pulled, bn, points, margin: float) -> np.ndarray:
     apart = np.zeros(len(pairs), bool)
     for lo in range(0, len(pairs), SEPARATION_CHUNK):
         part = pairs[lo:lo + SEPARATION_CHUNK]
-        apart[lo:lo + len(part)] = separated(points(part[:, 0]), points(part[:, 1]), margin)
+        pa, pb = points(part[:, 0]), points(part[:, 1])
+        # first across the beam: the plane normal to the line of centres between the two disks
+        u = pb.mean(axis=1) - pa.mean(axis=1)
+        gap = np.einsum("kpi,ki->kp", pb, u).min(axis=1) - np.einsum("kpi,ki->kp", pa, u).max(axis=1)
+        across = gap > margin * np.linalg.norm(u, axis=1)
+        rest = np.flatnonzero(~across)
+        across[rest] = separated(pa[rest], pb[rest], margin)
+        apart[lo:lo + len(part)] = across
     return pairs[~apart]
 
 
