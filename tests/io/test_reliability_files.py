@@ -178,7 +178,10 @@ def test_stale_temporaries_of_dead_processes_are_removed(tmp_path):
 
 
 def _start_big_write(tmp_path: Path, out: str):
-    proc = subprocess.Popen([sys.executable, "-m", "ple.cli", "mesh", "cubic", "--param", "n=40", "--out", out],
+    # long enough to be signalled mid-write (tens of millions of triangles), small enough that the
+    # disk check (an upper bound of the STL's size) passes on a machine with a few GiB free
+    proc = subprocess.Popen([sys.executable, "-m", "ple.cli", "mesh", "cubic", "--param", "n=40", "--levels", "2",
+                             "--out", out],
                             cwd=tmp_path, env={**os.environ, "PYTHONPATH": CORE},
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     for _ in range(600):  # until the temporary exists (the write has begun); not a timing assertion
