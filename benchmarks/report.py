@@ -205,7 +205,8 @@ def unclean_section(d) -> list[str]:
            "Each case streamed to binary STL by `ple mesh`'s own path in a fresh process, beside one manifold3d "
            "batch union of the same balls (32 segments) and cone-beams in a fresh process of its own, stopped after "
            f"{d['union_timeout_s']:.0f} s (then the CPU speed-up is a lower bound, ≥). Estimate: the process's own "
-           "baseline, the region's evaluation, two boxes and the largest local union, computed before any work.", "",
+           "baseline, the region's evaluation, two boxes and the largest local union, computed before any work."
+           + (f" {d['note']}." if d.get("note") else ""), "",
            "![unclean lattices: ours vs one manifold3d union](img/unclean.png)", "",
            "| case | style | ours | triangles / s | estimate (peak / estimate) | manifold3d union | CPU speed-up | "
            "what was unclean |", "|---|---|---|---|---|---|---|---|"]
