@@ -177,12 +177,19 @@ def test_stale_temporaries_of_dead_processes_are_removed(tmp_path):
     assert remove_stale_temporaries(tmp_path) == []
 
 
+def default_signals() -> None:
+    """In the child before exec: SIGINT and SIGTERM at their defaults, whatever the test run
+    inherited or set (an ignored SIGINT is inherited through exec, and Python then keeps it)."""
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_DFL)
+
+
 def _start_big_write(tmp_path: Path, out: str):
     # long enough to be signalled mid-write (tens of millions of triangles), small enough that the
     # disk check (an upper bound of the STL's size) passes on a machine with a few GiB free
     proc = subprocess.Popen([sys.executable, "-m", "ple.cli", "mesh", "cubic", "--param", "n=40", "--levels", "2",
                              "--out", out],
-                            cwd=tmp_path, env={**os.environ, "PYTHONPATH": CORE},
+                            cwd=tmp_path, env={**os.environ, "PYTHONPATH": CORE}, preexec_fn=default_signals,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     for _ in range(600):  # until the temporary exists (the write has begun); not a timing assertion
         if any(TMP_TAG in p.name for p in tmp_path.iterdir()):
