@@ -47,12 +47,18 @@ def test_signal_during_a_union_ends_the_mesh(tmp_path, sig):
     ple = Path(sys.executable).parent / "ple"
     proc = subprocess.Popen([str(ple), "mesh", str(src), "--style", "cnt", "--workers", "1", "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_signals)
-    deadline = time.monotonic() + 120
-    while not _children(proc.pid):  # the one thick cluster (every hub) is united in a child
+    deadline = time.monotonic() + 180
+    seen: dict = {}  # child pid -> first seen: the union's child lives for minutes, the program's for a moment
+    while True:
         assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read() if proc.poll() else "no child"
+        now = time.monotonic()
+        kids = _children(proc.pid)
+        seen = {k: seen.get(k, now) for k in kids}
+        old = [k for k, t in seen.items() if now - t > 1.0]
+        if old:
+            child = old[0]
+            break
         time.sleep(0.05)
-    child = _children(proc.pid)[0]
-    time.sleep(0.5)
     t0 = time.monotonic()
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
