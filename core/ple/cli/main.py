@@ -133,6 +133,9 @@ def run() -> None:
     old = install_signal_handlers()
     try:
         code = main()
+    except KeyboardInterrupt as exc:  # before a command runs (its modules still loading): nothing was written
+        print("ple: interrupted", file=sys.stderr)
+        code = 128 + getattr(exc, "signum", 2)
     finally:
         restore_signal_handlers(old)
     sys.exit(code)
