@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from ple.algebra.similarity import Scaling, Translation
 from ple.algebra.vectors import Pt, Vec
+from ple.bench.unclean import case_lattice
 from ple.cli.mesh import monte_carlo_volume
 from ple.meshing.selfcheck import self_intersections
 from ple.meshing.tessellate import tessellate
@@ -224,17 +225,9 @@ def test_false_alarms_of_the_spheres_leave_the_fast_mesh():
 
 def short_beam_lattice(n: int = 4) -> Lattice:
     """A curved lattice whose W-beams (about 0.42) are shorter than the reach of its junctions'
-    S⁺ (set by the acute U and diagonal beams): every hub's W circles are pulled in from S⁺."""
-    from ple.algebra.similarity import Rotation, Swirl
-
-    lat = Lattice()
-    a = lat.add_node(Pt(0, 0, 0), 0.12)
-    for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0)]:
-        lat.add_beam(a, a, *off)
-    lat.set_u(n, Translation(Vec(1, 0, 0)))
-    lat.set_v(n, Rotation(0.02, Vec(0, 0, 1), Pt(-45, 0, 0)))
-    lat.set_w(n, Swirl(0.0025, Vec(0, 1, 0), Pt(160, 0, 0), 0.999))
-    return lat
+    S⁺ (set by the acute U and diagonal beams): every hub's W circles are pulled in from S⁺ (the
+    bench's ``curved`` case)."""
+    return case_lattice("curved", n)
 
 
 @pytest.mark.parametrize("style, levels, tol", [("refined", 3, 0.01), ("cnt", 0, 0.05)])

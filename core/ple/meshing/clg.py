@@ -18,6 +18,7 @@ from ..clg.model import CLG, Prim
 from ..clg.query import compiled, frame_of
 from ..errors import PleError
 from ..model.budget import CLG_TRIANGLE_BYTES, require, sphere_triangles
+from .unions import unit_ball
 
 MAX_TRIANGLES = 20_000_000  # estimated output size beyond which meshing is refused
 
@@ -28,12 +29,6 @@ def _manifold():
     except ImportError:
         raise PleError("CLG meshing needs manifold3d (pip install manifold3d)") from None
     return manifold3d
-
-
-def _unit_sphere(m, segments: int):
-    sph = m.Manifold.sphere(1.0, segments)
-    k = (4 / 3 * np.pi / sph.volume()) ** (1 / 3)  # same volume as the unit ball
-    return sph.scale([k, k, k])
 
 
 def _similarity_3x4(lin: np.ndarray, move: np.ndarray) -> np.ndarray:
@@ -94,7 +89,7 @@ def solid_triangles(comp, segments: int) -> float:
 
 
 def _solid_manifold(m, comp, segments: int, max_bytes: float | None = None):
-    unit = _unit_sphere(m, segments)
+    unit = unit_ball(m, segments)
     r = comp.region if comp.region is not None else comp.lat.region(None)
     groups = r.groups  # counted before the groups are listed: a huge pattern is refused first
     for ci in range(len(comp.names)):  # estimated before the template chunk is meshed

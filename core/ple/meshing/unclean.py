@@ -20,11 +20,8 @@ but its two junctions. Tested conservatively, per element:
   beams are short and r⁺ large (bent, tapered rows: the warped preset at n = 70 has 6,539
   flagged pairs, all separated; ``ple check`` finds it clean); pairs not proven apart stay unclean.
 
-The unclean hubs U are left out of the fast mesh (whose beams towards them end in capped
-contact disks, as at a region's border); the union of the fast mesh with U's balls and the
-cone-beams (convex hulls of two balls) incident to U is one manifold3d boolean. Its result is a
-closed, oriented 2-manifold whose volume is that of the union of balls and beams (up to the
-polygonal balls, whose volume is matched to the exact ball's).
+What is found here is meshed by local unions (``ple.meshing.unions``), each put on the output
+grid by ``on_grid``.
 """
 
 from __future__ import annotations
@@ -272,84 +269,10 @@ def separated(a, b, margin) -> np.ndarray:
     return out
 
 
-def _unit_sphere(manifold3d):
-    """A polygonal unit sphere whose volume is the exact ball's (4π/3)."""
-    s = manifold3d.Manifold.sphere(1.0, SPHERE_SEGMENTS)
-    k = (4.0 / 3.0 * np.pi / s.volume()) ** (1.0 / 3.0)
-    return s.scale([k, k, k])
-
-
-def unite(mesh_vertices, mesh_faces, center, radius, beam_nodes, nodes, grid: float):
-    """The manifold3d union of a closed mesh with the balls ``nodes`` and every beam incident
-    to one of them (convex hull of its two balls), on the float32 grid ``grid`` (the region's
-    ``ple.meshing.weld.grid_spacing``). Returns (vertices, faces).
-
-    The Boolean runs on 64-bit input (``Mesh64``: float32 input moves vertices by up to half a
-    float32 step, and the union keeps the folds that makes); its result is then put on the grid
-    (``on_grid``), so the mesh in memory is the mesh every float32 file holds."""
-    try:
-        import manifold3d
-    except ImportError as exc:  # pragma: no cover - a dev/runtime dependency
-        raise PleError("meshing an unclean lattice needs manifold3d (pip install manifold3d)") from exc
-    c = np.asarray(center, float)
-    rad = np.asarray(radius, float)
-    unit = _unit_sphere(manifold3d)
-    base = None
-    if len(mesh_faces):
-        base = manifold3d.Manifold(manifold3d.Mesh64(
-            vert_properties=np.ascontiguousarray(mesh_vertices, np.float64),
-            tri_verts=np.ascontiguousarray(mesh_faces, np.uint64)))
-        if base.status() != manifold3d.Error.NoError:
-            raise PleError(f"the clean part of the mesh is not a manifold ({base.status()})")
-    # the polygonal balls as they are, then each turned its own way (a low-discrepancy sequence of
-    # angles): identical balls give the cone-beams of a symmetric lattice coplanar faces and ridges
-    # at one height (crossing diagonals of equal radius touch there), which the Boolean can leave
-    # overlapping; turned balls meet transversally, but make more small faces
-    for turns in (None, BALL_TURNS):
-        try:
-            return _unite_once(manifold3d, unit, base, mesh_vertices, mesh_faces, c, rad, beam_nodes, nodes, grid,
-                               turns)
-        except PleError:
-            if turns is not None:
-                raise
-    raise AssertionError("unreachable")
-
-
-def _unite_once(manifold3d, unit, base, mesh_vertices, mesh_faces, c, rad, beam_nodes, nodes, grid, turns):
-    """``unite`` with the balls turned by ``turns`` (None: not turned)."""
-    ball = {}
-
-    def ball_of(x):
-        if x not in ball:
-            b = unit if turns is None else unit.rotate(list(np.modf(x * turns)[0] * 360.0))
-            ball[x] = b.scale([rad[x]] * 3).translate(list(c[x]))
-        return ball[x]
-
-    parts = [ball_of(int(x)) for x in nodes]
-    mark = np.zeros(len(c), bool)
-    mark[nodes] = True
-    bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
-    for x, y in bn[mark[bn[:, 0]] | mark[bn[:, 1]]]:
-        # the cone-beam is the convex hull of its balls; built from the very ball meshes, so the
-        # boolean meets coincident vertices (resolved symbolically), never near-tangent surfaces
-        parts.append(manifold3d.Manifold.batch_hull([ball_of(int(x)), ball_of(int(y))]))
-    local = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add)
-    # every point of the parts lies within ``reach`` of the centre of one of their balls
-    involved = np.unique(np.concatenate([np.asarray(nodes, np.int64), bn[mark[bn[:, 0]] | mark[bn[:, 1]]].ravel()]))
-    length = np.linalg.norm(c[bn[:, 0]] - c[bn[:, 1]], axis=1)[mark[bn[:, 0]] | mark[bn[:, 1]]]
-    reach = float(np.max(rad[involved])) + (float(length.max()) / 2 if len(length) else 0.0)
-    if base is not None:
-        local = base + local
-    out = local.to_mesh64()
-    v, f = np.asarray(out.vert_properties[:, :3], float), np.asarray(out.tri_verts, np.int64)
-    return on_grid(v, f, grid, c[involved], reach, (mesh_vertices, mesh_faces) if base is not None else None)
-
-
 MAX_REPAIR_ROUNDS = 12
 
 
-def on_grid(vertices, faces, grid: float, centers, reach: float, old=None,
-            pinned=None) -> tuple[np.ndarray, np.ndarray]:
+def on_grid(vertices, faces, grid: float, centers, reach: float, pinned=None) -> tuple[np.ndarray, np.ndarray]:
     """A closed, self-intersection-free mesh moved onto the float32 grid ``grid`` so that it stays
     so: its edges under ``COLLAPSE_GRIDS`` grid steps are collapsed in 64 bits (link condition),
     the vertices snapped and welded (``ple.meshing.weld.weld``); then, on the faces with a corner within
@@ -359,10 +282,7 @@ def on_grid(vertices, faces, grid: float, centers, reach: float, old=None,
     rounds the grid values again), the shortest edge of the thinner face of each pair is collapsed
     onto one of its grid vertices, and so is the shortest edge of every cap flatter than
     ``COLLAPSE_GRIDS`` grid steps. The exact check on the grid has the last word (PleError if it
-    finds any pair). ``old``: (vertices, faces) of the fast mesh the Boolean started from; its
-    faces that come out unchanged (same corners on the grid) are known apart from each other
-    (the clean hubs' fast path), so only pairs with a face the Boolean or a repair made are
-    tested. Returns (vertices on the grid, faces).
+    finds any pair). Returns (vertices on the grid, faces).
     ``pinned`` (K, 3): points that are vertices of the mesh and must stay (a local union's rings,
     shared with the fast path): no collapse removes them, and they come back at their own
     coordinates (on the grid they are where the fast path's writer puts its own)."""
@@ -383,13 +303,12 @@ def on_grid(vertices, faces, grid: float, centers, reach: float, old=None,
     tree = cKDTree(np.asarray(centers, float).reshape(-1, 3))
     d, _ = tree.query(v, distance_upper_bound=reach + COLLAPSE_GRIDS * grid)
     near = np.flatnonzero(np.isfinite(d)[f].any(axis=1))
-    kept = _old_faces(old, grid, tree, reach + COLLAPSE_GRIDS * grid)
     tested = carry = None  # the faces of the last probe and its pairs (vertex id triples)
     for _ in range(MAX_REPAIR_ROUNDS):
         fn = np.sort(f[near], axis=1)
-        # the first probe tests the faces the Boolean made; later ones only those the last
+        # the first probe tests every face near the united parts; later ones only those the last
         # round's collapses made (the rest were tested), plus the last pairs still standing
-        fresh = _fresh(v, f[near], kept) if tested is None else _match(fn, tested) < 0
+        fresh = None if tested is None else _match(fn, tested) < 0
         # a probe: the faces rounded once more, to twice the grid (a file in other units, glTF's
         # metres, rounds the grid values again): faces that fold there are too thin to keep
         probe = near[self_intersections(snap(v, 2 * grid), f[near], fresh)]
@@ -409,7 +328,7 @@ def on_grid(vertices, faces, grid: float, centers, reach: float, old=None,
             f, near = collapse_edges(v, f, edges, near, fixed)
         if len(f) == n:
             break  # nothing (more) can be collapsed (link condition, flips): the exact check decides
-    pairs = near[self_intersections(v, f[near], _fresh(v, f[near], kept))]
+    pairs = near[self_intersections(v, f[near])]
     if len(pairs):
         raise PleError(f"the union of the unclean hubs keeps {len(pairs)} self-intersecting face pairs "
                        "on the float32 grid")
@@ -436,35 +355,6 @@ def _rows_in(v: np.ndarray, points: np.ndarray) -> np.ndarray:
 def _row_view(a: np.ndarray) -> np.ndarray:
     a = np.ascontiguousarray(np.asarray(a, float).reshape(-1, 3)) + 0.0  # -0.0 == 0.0
     return a.view(np.dtype((np.void, 24))).reshape(-1)
-
-
-def _old_faces(old, grid: float, tree, bound: float):
-    """The fast mesh's faces ``old`` (vertices, faces) near the united parts (a corner within
-    ``bound`` of a centre of ``tree``), corners snapped to the grid: (vertices, faces)."""
-    if old is None:
-        return None
-    ov = snap(np.asarray(old[0], float).reshape(-1, 3), grid)
-    of = np.asarray(old[1], np.int64).reshape(-1, 3)
-    d, _ = tree.query(ov, distance_upper_bound=bound)
-    return ov, of[np.isfinite(d)[of].any(axis=1)]
-
-
-def _fresh(v, faces, kept) -> np.ndarray | None:
-    """Which ``faces`` (vertex ids into v, on the grid) are not faces of ``kept`` (``_old_faces``):
-    compared exactly by their corners' grid coordinates. None without ``kept`` (all fresh)."""
-    if kept is None:
-        return None
-    ov, of = kept
-    if not len(of) or not len(faces):
-        return np.ones(len(faces), bool)
-    corners = np.concatenate([v[faces].reshape(-1, 3), ov[of].reshape(-1, 3)])
-    _, vid = np.unique(corners, axis=0, return_inverse=True)
-    vid = np.sort(vid.reshape(-1, 3), axis=1)
-    _, inv = np.unique(vid, axis=0, return_inverse=True)
-    inv = inv.reshape(-1)
-    present = np.zeros(int(inv.max()) + 1, bool)
-    present[inv[len(faces):]] = True
-    return ~present[inv[:len(faces)]]
 
 
 def _match(rows, table) -> np.ndarray:

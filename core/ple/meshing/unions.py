@@ -115,11 +115,11 @@ def piece_estimate(cluster: Cluster) -> tuple[int, int]:
     return tris, tris * UNION_TRIANGLE_BYTES
 
 
-def _unit_ball(manifold3d):
-    """A polygonal unit sphere whose volume is the exact ball's (4π/3): its vertices (V, 3)."""
-    s = manifold3d.Manifold.sphere(1.0, SPHERE_SEGMENTS)
+def unit_ball(manifold3d, segments: int = SPHERE_SEGMENTS):
+    """A polygonal unit sphere (manifold3d) whose volume is the exact ball's (4π/3)."""
+    s = manifold3d.Manifold.sphere(1.0, segments)
     k = (4.0 / 3.0 * np.pi / s.volume()) ** (1.0 / 3.0)
-    return np.asarray(s.to_mesh64().vert_properties[:, :3], float) * k
+    return s.scale([k, k, k])
 
 
 def _turned(points: np.ndarray, turns) -> np.ndarray:
@@ -184,7 +184,7 @@ def unite_cluster(cluster: Cluster, center, radius, beam_nodes, rings: dict, gri
         import manifold3d
     except ImportError as exc:  # pragma: no cover - a runtime dependency of unclean meshing
         raise PleError("meshing an unclean lattice needs manifold3d (pip install manifold3d)") from exc
-    unit = _unit_ball(manifold3d)
+    unit = np.asarray(unit_ball(manifold3d).to_mesh64().vert_properties[:, :3], float)
     last = None
     for turns in (None, BALL_TURNS):
         try:
