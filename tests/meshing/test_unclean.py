@@ -53,9 +53,9 @@ def assert_union_mesh(mesh, lat, region=None, samples=600_000, free=True):
 @pytest.mark.parametrize("seed", [1, 2])
 def test_random_unclean_lattice_meshes_its_union(seed):
     lat = random_unclean_lattice(seed)
-    # three levels: the clusters' hulls join the junctions' contact rings, as the strips do, and
-    # two levels' rings leave 1.4 % of seed 2's volume out (three: 0.25 %, four: 0.2 %)
-    mesh = tessellate(lat, None, "refined", 3)
+    # the default style (refined, four levels): seed 2 is 0.4 % under the union (three levels: 1 %,
+    # five: 0.05 %: the rings' and hubs' polygons, not the unions)
+    mesh = tessellate(lat, None, "refined", 4)
     rep = mesh.metadata["ple_unclean"]
     # seed 1 has overlapping balls and beams (``queries.overlaps``, exact): their meshes meet; seed
     # 2's elements are apart, but neighbouring junctions had to shrink
@@ -253,3 +253,44 @@ def _templates(lat, style, levels):
     tess = _Tessellator(lat, lat.region(), style, levels, 16)
     tess.instances(lat.region().node_index(len(lat.nodes)))
     return [t for t, _ in tess.tpl_list]
+
+
+@pytest.mark.parametrize("style", ["cnt", "chocc"])
+def test_neighbouring_pulled_hubs_apart_by_their_meshes(style, monkeypatch):
+    """Far rows of the curved 40³ (W-beams about 0.33): neighbouring pulled junctions whose hulls
+    overlap (no separating plane: ``separated`` finds none) while their meshes do not meet. The
+    hubs stay on the fast path, and the region's mesh is closed and free of self-intersections
+    (exact). (Its volume is not the region's union: beams leaving a region end in capped stubs; the
+    whole curved lattice's volume is tested above.)"""
+    import ple.meshing.unclean as unclean
+    from ple.model.lattice import Region
+
+    lat, region = case_lattice("curved", 40), Region(32, 36, 10, 14, 10, 14)
+    seen = {}
+    hulls_only = unclean._pulled_neighbours
+
+    def spy(pulled, bn, points, margin, meet=None):
+        seen["hulls"] = len(hulls_only(pulled, bn, points, margin))
+        seen["meshes"] = len(hulls_only(pulled, bn, points, margin, meet))
+        return hulls_only(pulled, bn, points, margin, meet)
+
+    monkeypatch.setattr(unclean, "_pulled_neighbours", spy)
+    mesh = tessellate(lat, region, style)
+    assert seen["hulls"] > 20 and seen["meshes"] == 0  # the hulls alone would have sent them to unions
+    assert len(mesh.metadata["ple_unclean"].nodes) == 0
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    assert mesh.is_watertight and mesh.is_winding_consistent and len(self_intersections(v, f)) == 0
+
+
+def test_hubs_meet_sees_a_hub_meet_itself():
+    """``_hubs_meet`` answers True for a hub paired with itself (every face meets its copy) and
+    False for neighbours of a clean lattice, so it is not vacuous."""
+    from ple.meshing.tessellate import _Tessellator
+
+    lat = short_beam_lattice(4)
+    tess = _Tessellator(lat, lat.region(), "cnt", 0, 16, grid=2.0**-20)
+    ev = lat.evaluate(lat.region())
+    tids, m, _, _ = tess.instances(np.asarray(ev.node_index, np.int64))
+    hubs = np.arange(len(tids))
+    assert tess._hubs_meet(tids, m, np.stack([hubs, hubs], 1)).all()
+    assert not tess._hubs_meet(tids, m, np.asarray(ev.beam_nodes, np.int64)).any()

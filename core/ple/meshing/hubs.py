@@ -55,7 +55,7 @@ from .chocc import (
     tie_broken,
 )
 from .fillet import filleted
-from .weld import collapse_short_edges, follows_trace, ordered_short
+from .weld import collapse_short_edges, follows_trace, ordered_short, sorted_edges
 
 BATCH_VERTICES = 1 << 21  # vertices of one batch's largest array level (bounds the batch's memory)
 REPS_KEPT = 8  # representatives a beam set keeps from one ``hub_templates`` call to the next
@@ -649,7 +649,7 @@ def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths
 
 
 def _edges(faces: np.ndarray) -> np.ndarray:
-    return np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1), axis=0)
+    return sorted_edges(faces, int(faces.max()) + 1 if len(faces) else 1)
 
 
 class _Surface:

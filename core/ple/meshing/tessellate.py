@@ -47,11 +47,12 @@ from .achocc import JunctionError
 from .assembly import Packed, Pieces, TemplateTable, fill, hub_faces, place
 from .hubs import hub_templates
 from .preview import balls_beams_mesh
+from .selfcheck import self_intersections
 from .skin import clip_bodies, clip_to_bodies
 from .styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS
 from .styles import style as style_named
 from .unclean import SEPARATION_GRIDS, find_unclean
-from .unions import Cluster, RingTouchedError, clusters, piece_estimate, unite_stoppable
+from .unions import Cluster, RingTouchedError, ShapeCache, clusters, piece_estimate, unite_stoppable
 from .weld import COLLAPSE_GRIDS, grid_spacing, weld
 
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
@@ -315,7 +316,8 @@ class _Tessellator:
         # hulls more than the largest rounding of two vertices apart (the grid, then twice the grid
         # for files in other units) stay apart in every file
         return find_unclean(ev.center, ev.radius, ev.beam_nodes, rp_t[tids] * f, ~clean_t[tids], points,
-                            SEPARATION_GRIDS * self.grid, self._steady_layers(idx), pulled_t[tids]), ev
+                            SEPARATION_GRIDS * self.grid, self._steady_layers(idx), pulled_t[tids],
+                            partial(self._hubs_meet, tids, m)), ev
 
     def _steady_layers(self, idx: np.ndarray):
         """``find_unclean``'s ``steady`` (node_index, a, b, shrink) when the region's layers along W
@@ -373,6 +375,50 @@ class _Tessellator:
                 out[k, at:at + len(ids)] = self.tpl_list[int(tids[h])][0].vertices[ids] @ m[h, :3, :3].T + m[h, :3, 3]
                 at += len(ids)
             out[k, at:] = out[k, at - 1]
+        return out
+
+    def _hubs_meet(self, tids, m, pairs, chunk: int = 2048) -> np.ndarray:
+        """Which hub pairs (P, 2 rows) have meshes that meet where the file holds them: each hub's
+        faces placed by its similarity and rounded to the output grid, the faces of one within the
+        other's bounding box tested exactly (``selfcheck.self_intersections``: a shared point counts
+        as meeting). Many pairs are tested at once, each pair moved apart from the others by a
+        whole power of two of grid steps (exact in float64)."""
+        g = self.grid
+        out = np.zeros(len(pairs), bool)
+        placed: dict = {}
+
+        def hub(h):
+            if h not in placed:
+                tpl = self.tpl_list[int(tids[h])][0]
+                v = np.round((tpl.vertices @ m[h, :3, :3].T + m[h, :3, 3]) / g)  # grid steps, whole numbers
+                placed[h] = (v, np.asarray(tpl.faces, np.int64))
+            return placed[h]
+
+        for lo in range(0, len(pairs), chunk):
+            part = pairs[lo:lo + chunk]
+            sides = [[hub(int(h)) for h in p] for p in part.tolist()]
+            span = max(float(np.ptp(np.concatenate([v for v, _ in s]), axis=0).max()) for s in sides)
+            step = 2.0 ** math.ceil(math.log2(span + 4.0))
+            verts, faces, owner, at = [], [], [], 0
+            for k, s in enumerate(sides):
+                boxes = [(v.min(axis=0) - 1, v.max(axis=0) + 1) for v, _ in s]
+                for side, (v, f) in enumerate(s):
+                    t = v[f]
+                    lo_b, hi_b = boxes[1 - side]
+                    near = np.all((t.max(axis=1) >= lo_b) & (t.min(axis=1) <= hi_b), axis=1)
+                    if not near.any():
+                        continue
+                    verts.append(v + np.array([k * step, 0.0, 0.0]))
+                    faces.append(f[near] + at)
+                    owner.append(np.full(int(near.sum()), 2 * k + side))
+                    at += len(v)
+            if not faces:
+                continue
+            owner = np.concatenate(owner)
+            hits = self_intersections(np.concatenate(verts), np.concatenate(faces), workers=1)
+            oa, ob = owner[hits[:, 0]], owner[hits[:, 1]]
+            cross = (oa // 2 == ob // 2) & (oa != ob)
+            out[lo + oa[cross] // 2] = True
         return out
 
     # ----- hubs -----------------------------------------------------------------------
@@ -838,6 +884,7 @@ def union_pieces(tess: _Tessellator, ev, cl: list, chunk: int = 512):
     pending = deque(cl)
     done: dict = {}  # id -> (cluster, piece): held until every cluster is settled (a later one may grow into it)
     rings_of: dict = {}
+    cache = ShapeCache(tess.grid)  # copies of a cluster's shape take its piece, moved (steady lattices)
     while pending:
         c = pending.popleft()
         if id(c) not in rings_of:  # this cluster and the next ones' rings, placed at once
@@ -845,8 +892,13 @@ def union_pieces(tess: _Tessellator, ev, cl: list, chunk: int = 512):
             rings_of.update(zip(map(id, batch), _cluster_rings(tess, idx, bn, pattern, batch)))
         rg = rings_of.pop(id(c))
         for _ in range(MAX_CLUSTER_GROWTH):
+            key, anchor, ring_keys = cache.key(c, ev.center, ev.radius, bn, rg)
+            piece = cache.get(key, anchor, ring_keys, rg)
+            if piece is not None:
+                break
             try:
                 piece = unite_stoppable(c, ev.center, ev.radius, bn, rg, tess.grid)
+                cache.put(key, anchor, ring_keys, rg, piece)
                 break
             except RingTouchedError as exc:
                 others = list(pending) + [d for d, _ in done.values()]

@@ -34,7 +34,7 @@ from ..algebra.elements import segment_distance
 from ..errors import PleError
 from ..queries.overlaps import non_incident_pairs
 from .selfcheck import self_intersections
-from .weld import COLLAPSE_GRIDS, edge_manifold, snap, weld
+from .weld import COLLAPSE_GRIDS, edge_manifold, snap, sorted_edges, weld
 
 TRIM = 0.5  # beams are tested from half their contact distance on (the rest is inside S⁺ of their hub)
 SPHERE_SEGMENTS = 32
@@ -65,7 +65,7 @@ class UncleanReport:
 
 
 def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, margin: float = 0.0,
-                 steady=None, pulled=None) -> UncleanReport:
+                 steady=None, pulled=None, meet=None) -> UncleanReport:
     """Unclean hubs of a region from its balls (center (N, 3), radius (N,)), beams (M, 2 rows),
     each hub's inflated radius r_plus (N,) (world units) and ``shrunk`` (N,) hubs whose ACHoCC
     was not clean. ``points(elements)``: for element ids (K,) (hubs 0..N-1, then beams N..N+M-1)
@@ -83,7 +83,10 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
     ``pulled`` (N,): hubs whose short beams pulled contact circles in from S⁺
     (``achocc.pulled_circles``). Their S⁺ reaches past the disks, so the neighbour at the far
     end of each of their beams is no longer kept apart by the ACHoCC: each such pair of
-    neighbouring junctions is tested on their hulls too (``points``; without it, unclean)."""
+    neighbouring junctions is tested on their hulls too (``points``; without it, unclean). The
+    hulls of two such junctions often overlap where their meshes do not (a refined or CNT hub is
+    far from convex); ``meet(pairs)`` (P, 2 hub rows) -> (P,) bool, when given, then tells
+    from the meshes themselves."""
     c = np.asarray(center, float).reshape(-1, 3)
     rad = np.asarray(radius, float).reshape(-1)
     rp = np.maximum(np.asarray(r_plus, float).reshape(-1), rad)
@@ -143,7 +146,7 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
             found.append(copied)
     close = 0
     if pulled is not None:
-        near = _pulled_neighbours(np.asarray(pulled, bool).reshape(-1), bn, points, margin)
+        near = _pulled_neighbours(np.asarray(pulled, bool).reshape(-1), bn, points, margin, meet)
         bad[near.reshape(-1)] = True
         close = len(near)
         found.append(near)
@@ -162,9 +165,9 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
                          shrunk_mask, r_plus=rp)
 
 
-def _pulled_neighbours(pulled, bn, points, margin: float) -> np.ndarray:
+def _pulled_neighbours(pulled, bn, points, margin: float, meet=None) -> np.ndarray:
     """Pairs (P, 2) of neighbouring hubs (beams ``bn`` (M, 2) with a ``pulled`` end) whose
-    junction hulls are not proven apart (``separated``)."""
+    junction hulls are not proven apart (``separated``) and, with ``meet``, whose meshes meet."""
     pairs = np.unique(np.sort(bn[pulled[bn[:, 0]] | pulled[bn[:, 1]]], axis=1), axis=0)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     if points is None or not len(pairs):
@@ -180,6 +183,9 @@ def _pulled_neighbours(pulled, bn, points, margin: float) -> np.ndarray:
         rest = np.flatnonzero(~across)
         across[rest] = separated(pa[rest], pb[rest], margin)
         apart[lo:lo + len(part)] = across
+    if meet is not None and not apart.all():
+        rest = np.flatnonzero(~apart)
+        apart[rest] = ~meet(pairs[rest])
     return pairs[~apart]
 
 
@@ -272,7 +278,8 @@ def separated(a, b, margin) -> np.ndarray:
 MAX_REPAIR_ROUNDS = 12
 
 
-def on_grid(vertices, faces, grid: float, centers, reach: float, pinned=None) -> tuple[np.ndarray, np.ndarray]:
+def on_grid(vertices, faces, grid: float, centers, reach: float, pinned=None,
+            rings=None) -> tuple[np.ndarray, np.ndarray]:
     """A closed, self-intersection-free mesh moved onto the float32 grid ``grid`` so that it stays
     so: its edges under ``COLLAPSE_GRIDS`` grid steps are collapsed in 64 bits (link condition),
     the vertices snapped and welded (``ple.meshing.weld.weld``); then, on the faces with a corner within
@@ -285,13 +292,15 @@ def on_grid(vertices, faces, grid: float, centers, reach: float, pinned=None) ->
     finds any pair). Returns (vertices on the grid, faces).
     ``pinned`` (K, 3): points that are vertices of the mesh and must stay (a local union's rings,
     shared with the fast path): no collapse removes them, and they come back at their own
-    coordinates (on the grid they are where the fast path's writer puts its own)."""
+    coordinates (on the grid they are where the fast path's writer puts its own). ``rings``: the
+    pinned points as a list of rings (each (k, 3)) whose polygons the caller removes (a local
+    union opened along them): faces with every corner on one ring are left out of the checks."""
     v = np.asarray(vertices, float)
     f = np.asarray(faces, np.int64)
     pinned = np.zeros((0, 3)) if pinned is None else np.asarray(pinned, float).reshape(-1, 3)
     fixed = _rows_in(v, pinned)
     for _ in range(MAX_REPAIR_ROUNDS):
-        e = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
+        e = sorted_edges(f, len(v))
         e = e[np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1) < COLLAPSE_GRIDS * grid]
         n = len(f)
         if not len(e) or len(f := collapse_edges(v, f, e, [], fixed)[0]) == n:
@@ -302,18 +311,25 @@ def on_grid(vertices, faces, grid: float, centers, reach: float, pinned=None) ->
 
     tree = cKDTree(np.asarray(centers, float).reshape(-1, 3))
     d, _ = tree.query(v, distance_upper_bound=reach + COLLAPSE_GRIDS * grid)
-    near = np.flatnonzero(np.isfinite(d)[f].any(axis=1))
+    keep = np.isfinite(d)[f].any(axis=1)
+    if rings:  # the ring polygons go: their faces (slivers once the ring is on the grid) are not checked
+        ring_of = np.full(len(v), -1, np.int64)
+        for r, ring in enumerate(rings):
+            ring_of[_rows_in(v, snap(np.asarray(ring, float).reshape(-1, 3), grid))] = r
+        fr = ring_of[f]
+        keep &= ~((fr[:, 0] >= 0) & (fr[:, 0] == fr[:, 1]) & (fr[:, 1] == fr[:, 2]))
+    near = np.flatnonzero(keep)
     tested = carry = None  # the faces of the last probe and its pairs (vertex id triples)
     for _ in range(MAX_REPAIR_ROUNDS):
         fn = np.sort(f[near], axis=1)
         # the first probe tests every face near the united parts; later ones only those the last
         # round's collapses made (the rest were tested), plus the last pairs still standing
-        fresh = None if tested is None else _match(fn, tested) < 0
+        fresh = None if tested is None else match_rows(fn, tested) < 0
         # a probe: the faces rounded once more, to twice the grid (a file in other units, glTF's
         # metres, rounds the grid values again): faces that fold there are too thin to keep
         probe = near[self_intersections(snap(v, 2 * grid), f[near], fresh)]
         if carry is not None and len(carry):
-            at = _match(carry.reshape(-1, 3), fn).reshape(-1, 2)
+            at = match_rows(carry.reshape(-1, 3), fn).reshape(-1, 2)
             probe = np.concatenate([probe, near[at[(at >= 0).all(axis=1)]]])
         tested, carry = fn, np.sort(f[probe], axis=2)
         # and caps flatter than the grid, which any rounding may fold onto their neighbours
@@ -357,7 +373,7 @@ def _row_view(a: np.ndarray) -> np.ndarray:
     return a.view(np.dtype((np.void, 24))).reshape(-1)
 
 
-def _match(rows, table) -> np.ndarray:
+def match_rows(rows, table) -> np.ndarray:
     """For each row of ``rows`` (K, 3) the index of an equal row of ``table`` (T, 3), or -1."""
     rows, table = np.asarray(rows).reshape(-1, 3), np.asarray(table).reshape(-1, 3)
     if not len(rows) or not len(table):

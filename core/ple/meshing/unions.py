@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import PleError
-from .unclean import BALL_TURNS, SPHERE_SEGMENTS, on_grid
+from .unclean import BALL_TURNS, SPHERE_SEGMENTS, match_rows, on_grid
 
 UNION_TRIANGLE_BYTES = 600  # peak bytes per input triangle of a manifold3d union and its repair (measured, rounded up)
 
@@ -122,6 +122,16 @@ def unit_ball(manifold3d, segments: int = SPHERE_SEGMENTS):
     return s.scale([k, k, k])
 
 
+_UNIT: dict = {}
+
+
+def _unit_vertices(manifold3d) -> np.ndarray:
+    """The vertices of ``unit_ball`` (computed once per process)."""
+    if "v" not in _UNIT:
+        _UNIT["v"] = np.asarray(unit_ball(manifold3d).to_mesh64().vert_properties[:, :3], float)
+    return _UNIT["v"]
+
+
 def _turned(points: np.ndarray, turns) -> np.ndarray:
     """Unit-ball vertices turned by Euler angles ``turns`` (fractions of a full turn, (3,))."""
     out = points
@@ -184,7 +194,7 @@ def unite_cluster(cluster: Cluster, center, radius, beam_nodes, rings: dict, gri
         import manifold3d
     except ImportError as exc:  # pragma: no cover - a runtime dependency of unclean meshing
         raise PleError("meshing an unclean lattice needs manifold3d (pip install manifold3d)") from exc
-    unit = np.asarray(unit_ball(manifold3d).to_mesh64().vert_properties[:, :3], float)
+    unit = _unit_vertices(manifold3d)
     last = None
     for turns in (None, BALL_TURNS):
         try:
@@ -219,7 +229,7 @@ def _unite_once(manifold3d, unit, cluster, center, radius, beam_nodes, rings, gr
     ring_pts = np.concatenate(pinned) if pinned else np.zeros((0, 3))
     centre = v.mean(axis=0) if len(v) else np.zeros(3)
     reach = float(np.linalg.norm(v - centre, axis=1).max()) if len(v) else 0.0
-    v, f = on_grid(v, f, grid, centre[None], reach, pinned=ring_pts)
+    v, f = on_grid(v, f, grid, centre[None], reach, pinned=ring_pts, rings=pinned)
     return _open_rings(v, f, pinned, keys)
 
 
@@ -229,30 +239,105 @@ def _open_rings(v, f, rings: list, keys: list):
     (``RingTouchedError`` naming the first ring that is not, by its key of ``keys``)."""
     if not rings:
         return v, f
-    where: dict = {}
-    for r, ring in enumerate(rings):
-        for p in map(tuple, np.asarray(ring, float).tolist()):
-            where[p] = r
-    ring_of = np.array([where.get(tuple(p), -1) for p in v.tolist()], np.int64)
+    pts = np.concatenate([np.asarray(r, float).reshape(-1, 3) for r in rings])
+    sizes = [len(np.asarray(r).reshape(-1, 3)) for r in rings]
+    rid = np.repeat(np.arange(len(rings)), sizes)
+    at = match_rows(v, pts)
+    ring_of = np.where(at >= 0, rid[np.maximum(at, 0)], -1)
     fr = ring_of[f]
-    cap = (fr[:, 0] >= 0) & (fr[:, 0] == fr[:, 1]) & (fr[:, 1] == fr[:, 2])
-    f = f[~cap]
-    directed = set(map(tuple, np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]).tolist()))
-    open_edges = {tuple(sorted(e)) for e in directed if (e[1], e[0]) not in directed}
-    index = {tuple(p): i for i, p in enumerate(v.tolist())}
-    want: set = set()
-    touched = []
-    for key, ring in zip(keys, rings):
-        ids = [index.get(tuple(p)) for p in np.asarray(ring, float).tolist()]
-        edges = {tuple(sorted((ids[k], ids[(k + 1) % len(ids)]))) for k in range(len(ids))} if None not in ids else None
-        if edges is None or not edges <= open_edges:
+    f = f[~((fr[:, 0] >= 0) & (fr[:, 0] == fr[:, 1]) & (fr[:, 1] == fr[:, 2]))]
+    n = max(len(v), 1)
+    d = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    d = d[~np.isin(d[:, 0] * n + d[:, 1], d[:, 1] * n + d[:, 0])]  # directed edges without their reverse
+    open_edges = np.unique(np.minimum(d[:, 0], d[:, 1]) * n + np.maximum(d[:, 0], d[:, 1]))
+    ids = match_rows(pts, v)
+    want, touched = [], []
+    for key, part in zip(keys, np.split(ids, np.cumsum(sizes)[:-1])):
+        nxt = np.roll(part, -1)
+        edges = np.minimum(part, nxt) * n + np.maximum(part, nxt)
+        if (part < 0).any() or not np.isin(edges, open_edges).all():
             touched.append(key)
         else:
-            want |= edges
+            want.append(edges)
     if touched:
         raise RingTouchedError("a ring of an unclean cluster was changed by its union", touched)
-    if open_edges != want:
-        rows = {int(r) for e in open_edges - want for r in ring_of[list(e)] if r >= 0}
+    extra = np.setdiff1d(open_edges, np.concatenate(want)) if want else open_edges
+    if len(extra):
+        ends = np.concatenate([extra // n, extra % n])
+        rows = sorted({int(r) for r in ring_of[ends] if r >= 0})
         raise RingTouchedError("a ring of an unclean cluster was touched by its union",
-                               [keys[r] for r in sorted(rows)] or list(keys))
+                               [keys[r] for r in rows] or list(keys))
     return v, f
+
+
+SHAPE_QUANTUM = 2.0**-10  # grid steps: clusters whose inputs agree to this, relative to an anchor, share a piece
+CACHE_TRIANGLES = 1 << 21  # triangles of united pieces kept for copies (the least recently used go first)
+
+
+class ShapeCache:
+    """United pieces kept by shape, for the copies of a cluster (a steady lattice repeats its
+    unclean neighbourhoods: every crossing of a row of diagonals, every hub of one shape).
+
+    A cluster's shape is its inputs (balls of its hubs, the ring vertices of its beams' clean ends,
+    in the cluster's row order) relative to an anchor (its first ball's centre, or its first ring
+    vertex), quantized to ``SHAPE_QUANTUM`` grid steps. A copy whose anchor lies a whole number of
+    grid steps from the cached one takes the cached piece (already on the grid, checked there)
+    moved by that exact translation, with its ring vertices replaced by its own: the floats the
+    fast path places at that copy, so the seams stay exact. Other copies (turned ones) are united
+    anew. Memory: at most ``CACHE_TRIANGLES`` kept triangles."""
+
+    def __init__(self, grid: float, limit: int = CACHE_TRIANGLES):
+        self.grid = float(grid)
+        self.limit = limit
+        self.kept: dict = {}
+        self.triangles = 0
+        self.hits = 0
+
+    def key(self, cluster: Cluster, center, radius, beam_nodes, rings: dict):
+        """(shape key, anchor (3,), ring keys in the order of the key) of a cluster."""
+        c = np.asarray(center, float)
+        bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
+        hubs = np.sort(np.asarray(cluster.hubs, np.int64))
+        order = {int(h): k for k, h in enumerate(hubs.tolist())}
+        ring_keys = [(int(j), e) for j in np.sort(cluster.beams).tolist() for e in (0, 1)
+                     if int(bn[j, e]) not in order]
+        pts = [c[hubs]] + [np.asarray(rings[k], float) for k in ring_keys]
+        pts = np.concatenate(pts) if pts else np.zeros((0, 3))
+        if not len(pts):
+            return None, None, ring_keys
+        anchor = pts[0]
+        ends = [order.get(int(bn[j, e]), -1) for j in np.sort(cluster.beams).tolist() for e in (0, 1)]
+        q = self.grid * SHAPE_QUANTUM
+        body = np.round(np.concatenate([(pts - anchor).ravel() / q, np.asarray(radius, float)[hubs] / q]))
+        sizes = [len(hubs)] + [len(rings[k]) for k in ring_keys] + ends
+        return (np.asarray(sizes, np.int64).tobytes(), body.tobytes()), anchor, ring_keys
+
+    def get(self, key, anchor, ring_keys, rings: dict):
+        """The piece of a copy of a kept shape, or None."""
+        hit = self.kept.get(key) if key is not None else None
+        if hit is None:
+            return None
+        v0, f, at, ids = hit
+        d = anchor - at
+        step = np.round(d / self.grid) * self.grid
+        if np.max(np.abs(d - step)) > self.grid * SHAPE_QUANTUM:
+            return None  # not a whole number of grid steps away: unite anew
+        self.kept[key] = self.kept.pop(key)  # most recently used
+        v = v0 + step
+        for k, r in zip(ring_keys, ids):
+            v[r] = rings[k]
+        self.hits += 1
+        return v, f.copy()
+
+    def put(self, key, anchor, ring_keys, rings: dict, piece) -> None:
+        if key is None or key in self.kept:
+            return
+        v, f = piece
+        ids = [match_rows(np.asarray(rings[k], float), v) for k in ring_keys]
+        if any((i < 0).any() for i in ids):  # a ring vertex not in the piece (not for an opened piece): not kept
+            return
+        self.kept[key] = (np.asarray(v, float), np.asarray(f, np.int64), np.asarray(anchor, float), ids)
+        self.triangles += len(f)
+        while self.triangles > self.limit and len(self.kept) > 1:
+            oldest = next(iter(self.kept))
+            self.triangles -= len(self.kept.pop(oldest)[1])

@@ -205,8 +205,7 @@ def collapse_short_edges(vertices: np.ndarray, faces: np.ndarray, rings: list, t
     while rounds is None or passes < rounds:
         passes += 1
         cur = np.array([fl[i] for i in np.flatnonzero(live)], np.int64).reshape(-1, 3)
-        e = np.concatenate([cur[:, [0, 1]], cur[:, [1, 2]], cur[:, [2, 0]]])
-        e = np.unique(np.sort(e, axis=1), axis=0)
+        e = sorted_edges(cur, len(v))
         d = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
         short = ordered_short(d, tol)
         if trace is not None:
@@ -260,6 +259,16 @@ def collapse_short_edges(vertices: np.ndarray, faces: np.ndarray, rings: list, t
             r = r[:-1]
         new_rings.append(r)
     return out, new_rings, done
+
+
+def sorted_edges(faces: np.ndarray, n: int) -> np.ndarray:
+    """The undirected edges (E, 2) of faces over n vertices, each (low, high) once, in
+    lexicographic order: ``np.unique(np.sort(edges, axis=1), axis=0)``, by one int64 key per edge
+    (a 1-D sort, several times faster than a sort of rows)."""
+    f = np.asarray(faces, np.int64).reshape(-1, 3)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    k = np.unique(np.minimum(e[:, 0], e[:, 1]) * n + np.maximum(e[:, 0], e[:, 1]))
+    return np.stack([k // n, k % n], axis=1)
 
 
 def follows_trace(vertices: np.ndarray, trace: list, tol: float) -> bool:
