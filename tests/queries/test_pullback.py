@@ -13,6 +13,7 @@ from ple.bench.curved import curved_lattice
 from ple.cli.main import main
 from ple.program.sources import load_lattice
 from ple.queries import biq, pullback
+from ple.queries.hits import _unique_rows
 from ple.queries.rangefinder import cached_plan
 from test_biq import KINDS, brute_force, lattice_of, random_lattice, random_queries
 
@@ -132,3 +133,10 @@ def test_cli_nodes_only(tmp_path, capsys):
     counts = tmp_path / "c.json"
     assert main(["biq", str(prog), "--queries", str(q), "--out", str(counts), "--nodes-only", "--count"]) == 0
     assert json.loads(counts.read_text())["queries"] == [{"nodes": len(w.nodes)} for w in want]
+
+
+def test_unique_rows_is_numpys_unique():
+    rng = np.random.default_rng(13)
+    for n in (0, 1, 2, 40, 3000):
+        a = rng.integers(-2, 3, (n, 5))
+        assert np.array_equal(_unique_rows(a), np.unique(a, axis=0).reshape(-1, 5))
