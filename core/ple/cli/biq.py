@@ -1,4 +1,4 @@
-"""``ple biq LATTICE --queries Q.npy --out H.json [--method auto|naive|rangefinder]`` (SPEC §6)."""
+"""``ple biq LATTICE --queries Q.npy --out H.json [--method auto|naive|rangefinder] [--nodes-only]`` (SPEC §6)."""
 
 from __future__ import annotations
 
@@ -20,6 +20,8 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, help="output .json")
     p.add_argument("--method", choices=("auto", "naive", "rangefinder"), default="auto",
                    help="auto (RangeFinder) or the naive reference")
+    p.add_argument("--nodes-only", action="store_true",
+                   help="node hits only: no beam is tested, and the output has no \"beams\" lists")
     p.add_argument("--count", action="store_true",
                    help="write only the number of node and beam hits per query (one query at a time in memory)")
     p.set_defaults(func=run)
@@ -57,19 +59,24 @@ def run(args) -> int:
         require(most * HIT_ARRAY_BYTES, f"the largest query (about {most:,.3g} hits)", limit, "use smaller query balls")
         counts, path = [], "-"
         for row in q:
-            (r,) = query(lat, row[None, :3], row[3:4], method=args.method)
-            counts.append({"nodes": len(r.nodes), "beams": len(r.beams)})
+            (r,) = query(lat, row[None, :3], row[3:4], method=args.method, beams=not args.nodes_only)
+            counts.append(_listed(args, len(r.nodes), len(r.beams)))
             path = r.path
         atomic_write_text(args.out, strict_json({"queries": counts}, "the counts") + "\n")
-        hits = sum(c["nodes"] + c["beams"] for c in counts)
+        hits = sum(c["nodes"] + c.get("beams", 0) for c in counts)
         print(f"wrote {args.out}: {len(counts)} queries, {hits} hits counted (path {path})")
         return 0
     require(float(est.sum()) * HIT_LISTED_BYTES, f"listing about {est.sum():,.3g} hits of {len(q)} queries", limit,
             "use --count for the numbers only, or smaller query balls")
-    results = query(lat, q[:, :3], q[:, 3], method=args.method)
-    doc = {"queries": [{"nodes": r.nodes.tolist(), "beams": r.beams.tolist()} for r in results]}
+    results = query(lat, q[:, :3], q[:, 3], method=args.method, beams=not args.nodes_only)
+    doc = {"queries": [_listed(args, r.nodes.tolist(), r.beams.tolist()) for r in results]}
     atomic_write_text(args.out, strict_json(doc, "the hits") + "\n")
     path = results[0].path if results else "-"
     hits = sum(len(r.nodes) + len(r.beams) for r in results)
     print(f"wrote {args.out}: {len(results)} queries, {hits} hits (path {path})")
     return 0
+
+
+def _listed(args, nodes, beams) -> dict:
+    """One query's entry: nodes and beams, or nodes alone with ``--nodes-only``."""
+    return {"nodes": nodes} if args.nodes_only else {"nodes": nodes, "beams": beams}

@@ -7,7 +7,13 @@ that it interferes with (closed sets: touching counts). Two paths give identical
 - ``"rangefinder"``: candidate index ranges from RangeFinder on steady rows (§7.1–7.3), then
   exact tests on the candidates only. The path taken is recorded on each result: ``"1"``
   (U, V, W commute and their maps are mutually invariant, §7.3.1 O(1) case), ``"u"`` (the
-  O(ū) case, per U index) or ``"uv"`` (the general algorithm over W-rows).
+  O(ū) case, per U index), ``"uv"`` (the general algorithm over W-rows) or ``"pullback"``
+  (the query pulled back into the base slab, ``ple.queries.pullback``: taken for node hits
+  alone on every steady lattice whose slab fits its plan, and for nodes and beams where the
+  general case would otherwise loop over W-rows).
+
+``beams=False`` answers node hits only (each result's ``beams`` is empty): no beam is tested
+or even found as a candidate.
 """
 
 from __future__ import annotations
@@ -19,34 +25,46 @@ import numpy as np
 from ..algebra.elements import ball_ball_interfere, ball_beam_interfere, beam_distance
 from ..errors import PleError
 from ..model.lattice import Lattice
-from . import becots_rangefinder
+from . import becots_rangefinder, pullback
 from .hits import BIQResult, check_queries, split_hits
-from .rangefinder import lattice_any, lattice_hits
+from .rangefinder import cached_plan, lattice_any, lattice_hits
 
 NAIVE_CHUNK = 1 << 21  # element × query tests per vectorized batch of the naive path
 NAIVE_QUERY_BATCH = 256
 
 
 # ----- public API ------------------------------------------------------------------------------
-def query(lat: Lattice, centers, radii, method: str = "auto") -> list[BIQResult]:
-    """Per query ball, the nodes and beams of ``lat`` it interferes with (see module doc)."""
+def query(lat: Lattice, centers, radii, method: str = "auto", beams: bool = True) -> list[BIQResult]:
+    """Per query ball, the nodes and beams of ``lat`` it interferes with (see module doc);
+    with ``beams=False`` the nodes only."""
     c, r = check_queries(centers, radii)
     lat.validate()
     if method not in ("auto", "naive", "rangefinder"):
         raise PleError(f"method {method!r}: expected auto, naive or rangefinder")
     if lat.group_map is not None:  # no steady rows: every element tested, O(elements) per query
-        node_hits, beam_hits = _naive_hits(lat, c, r)
+        node_hits, beam_hits = _naive_hits(lat, c, r, beams)
         return split_hits(len(c), node_hits, beam_hits, "naive (group map)")
     if lat.becots is not None and lat.radius_field is not None:
         method = "naive"  # the BeCOTS RangeFinder knows steady radii only
     if lat.becots is not None and method != "naive":
-        return _kept(lat, becots_rangefinder.query(lat, c, r))
+        return _kept(lat, _nodes_only(becots_rangefinder.query(lat, c, r), beams))
     if method == "naive":
-        node_hits, beam_hits = _naive_hits(lat, c, r)
+        node_hits, beam_hits = _naive_hits(lat, c, r, beams)
         path = "naive"
+    elif pullback.fits(lat) and (not beams or cached_plan(lat).path == "uv"):
+        node_hits, beam_hits = pullback.query(lat, c, r, beams)
+        path = "pullback"
     else:
         node_hits, beam_hits, path = lattice_hits(lat, c, r)
+        if not beams:
+            beam_hits = beam_hits[:0]
     return _kept(lat, split_hits(len(c), node_hits, beam_hits, path))
+
+
+def _nodes_only(results: list[BIQResult], beams: bool) -> list[BIQResult]:
+    if beams:
+        return results
+    return [BIQResult(x.nodes, x.beams[:0], x.path) for x in results]
 
 
 def any_hit(lat: Lattice, centers, radii) -> np.ndarray:
@@ -125,10 +143,10 @@ def _beam_balls(lat: Lattice, beams: np.ndarray):
     return start, end
 
 
-def _naive_hits(lat: Lattice, c: np.ndarray, r: np.ndarray):
-    """Exact tests of every query against every node and beam, streamed over slabs."""
+def _naive_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True):
+    """Exact tests of every query against every node (and beam), streamed over slabs."""
     if len(c) > NAIVE_QUERY_BATCH:
-        parts = [_naive_hits(lat, c[s:s + NAIVE_QUERY_BATCH], r[s:s + NAIVE_QUERY_BATCH])
+        parts = [_naive_hits(lat, c[s:s + NAIVE_QUERY_BATCH], r[s:s + NAIVE_QUERY_BATCH], beams)
                  for s in range(0, len(c), NAIVE_QUERY_BATCH)]
         shift = lambda h, s: h + np.array([s, 0, 0, 0, 0])  # noqa: E731
         return (np.concatenate([shift(n, s) for (n, _), s in zip(parts, range(0, len(c), NAIVE_QUERY_BATCH))]),
@@ -145,7 +163,7 @@ def _naive_hits(lat: Lattice, c: np.ndarray, r: np.ndarray):
             hit = ball_ball_interfere(c[:, None], r[:, None], centers[None, :, n], radii[None, :, n])
             qi, gi_ = np.nonzero(hit)
             node_parts.append(np.stack([qi, gi[gi_], gj[gi_], gk[gi_], np.full_like(qi, n)], axis=1))
-        for p in range(len(lat.beams)):
+        for p in range(len(lat.beams) if beams else 0):
             valid, (ca, ra), (cb, rb) = lat.beams_of_pattern(p, gi, gj, gk)
             if not valid.any():
                 continue

@@ -47,11 +47,21 @@ def split_hits(q: int, node_hits, beam_hits, path: str) -> list[BIQResult]:
     out = []
     parts = []
     for hits in (node_hits, beam_hits):
-        hits = np.asarray(hits, dtype=np.int64).reshape(-1, 5)
-        hits = np.unique(hits, axis=0)  # sorted lexicographically by (qid, i, j, k, x)
+        hits = _unique_rows(np.asarray(hits, dtype=np.int64).reshape(-1, 5))
         bounds = np.searchsorted(hits[:, 0], np.arange(q + 1))
         parts.append((hits[:, 1:], bounds))
     (nh, nb), (bh, bb) = parts
     for t in range(q):
         out.append(BIQResult(nh[nb[t]:nb[t + 1]], bh[bb[t]:bb[t + 1]], path))
     return out
+
+
+def _unique_rows(hits: np.ndarray) -> np.ndarray:
+    """The distinct rows of an int (n, c) array, sorted lexicographically (``np.unique(axis=0)``'s
+    answer, by a lexsort of the columns instead of a sort of row records)."""
+    if len(hits) < 2:
+        return hits
+    hits = hits[np.lexsort(hits.T[::-1])]
+    fresh = np.ones(len(hits), bool)
+    fresh[1:] = (hits[1:] != hits[:-1]).any(axis=1)
+    return hits[fresh]
