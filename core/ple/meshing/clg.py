@@ -135,14 +135,18 @@ def mesh_clg(clg: CLG, segments: int = 32, region=None, max_bytes: float | None 
     """A watertight trimesh of the CLG solid (of the chunk copies at the groups of ``region``, a
     ``Region``, if given: the add-on's preview of its drawn region). Refused before meshing when
     its estimated triangles exceed ``MAX_TRIANGLES`` or need more than ``max_bytes``."""
+    return mesh_compiled(compiled(clg, region), segments, max_bytes)
+
+
+def mesh_compiled(comp, segments: int = 32, max_bytes: float | None = None):
+    """``mesh_clg`` of a compiled CLG (``ple.clg.query.Compiled``, its copies placed as it places them)."""
     if segments < 8 or segments > 512:
         raise PleError(f"--segments {segments}: expected 8..512")
     m = _manifold()
-    solid = _solid_manifold(m, compiled(clg, region), segments, max_bytes)
+    solid = _solid_manifold(m, comp, segments, max_bytes)
     out = solid.to_mesh()
     verts = np.asarray(out.vert_properties, float)[:, :3]
     faces = np.asarray(out.tri_verts, np.int64)
     if len(faces) == 0:
         raise PleError("the CLG solid is empty: nothing to mesh")
     return trimesh.Trimesh(verts, faces, process=False)
-
