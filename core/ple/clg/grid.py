@@ -119,7 +119,7 @@ def voxelize_clg(comp, lo, hi, shape, progress: Callable | None = None, max_byte
     """Voxels of a compiled CLG by chunk copies (§5.6), the copies found by the RangeFinder: the grid
     is cut into tiles, each tile's enclosing ball asks which chunk copies it may touch (the box and
     conical-shell bounds, then ``Compiled.candidates``), and each such copy classifies only the
-    voxels of the tile inside its own box (the boxes of its positive primitives' balls); the chunk
+    voxels of the tile inside the boxes of its positive primitives' balls; the chunk
     unions are OR-ed and the solid is combined from them. The same centres and result as PMC per
     voxel; work follows the copies near the grid, not the pattern's size."""
     nx, ny, nz = check_grid(shape, len(comp.names) + 1, max_bytes)
@@ -175,32 +175,34 @@ def _tile_side(comp, step: np.ndarray, n: np.ndarray) -> np.ndarray:
 
 def _classify(comp, ci: int, g: np.ndarray, a0: np.ndarray, a1: np.ndarray, lo, step, pad, grid) -> None:
     """OR into ``grid`` the voxels of chunk ``ci``'s copies at groups ``g`` (m, 3) that lie in the
-    voxel boxes [a0, a1) (m, 3) and in each copy's box; in batches of ``BATCH`` voxel centres."""
-    box_lo, box_hi = np.full((len(g), 3), np.inf), np.full((len(g), 3), -np.inf)
+    voxel boxes [a0, a1) (m, 3) and in the box of one of the copy's positive primitives (whose
+    union holds the copy); in batches of ``BATCH`` voxel centres."""
     for ca, ra, cb, rb in comp.prim_balls(comp.positive[ci], g):
-        box_lo, box_hi = np.minimum(box_lo, ca - ra[:, None]), np.maximum(box_hi, ca + ra[:, None])
+        box_lo, box_hi = ca - ra[:, None], ca + ra[:, None]
         if cb is not None:
             box_lo, box_hi = np.minimum(box_lo, cb - rb[:, None]), np.maximum(box_hi, cb + rb[:, None])
-    b0 = np.maximum(np.ceil((box_lo - pad - lo) / step - 0.5), a0).astype(np.int64)
-    b1 = np.minimum(np.floor((box_hi + pad - lo) / step - 0.5) + 1, a1).astype(np.int64)
-    size = np.maximum(b1 - b0, 0)
-    count = size.prod(axis=1)
-    keep = count > 0
-    g, b0, size, count = g[keep], b0[keep], size[keep], count[keep]
-    ends = np.cumsum(count)
-    start = 0
-    while start < len(g):  # pairs whose voxels fill one batch (at least one pair)
-        stop = max(start + 1, int(np.searchsorted(ends, (ends[start - 1] if start else 0) + BATCH, "right")))
-        cnt = count[start:stop]
-        row = np.repeat(np.arange(start, stop), cnt)
-        local = np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-        yz = size[row, 1] * size[row, 2]
-        idx = np.column_stack([b0[row, 0] + local // yz, b0[row, 1] + (local % yz) // size[row, 2],
-                               b0[row, 2] + local % size[row, 2]])
-        val = comp.chunk_value(ci, lo + (idx + 0.5) * step, g[row], np.zeros(len(row)))[0]
-        inside = idx[val <= 0]
-        grid[inside[:, 0], inside[:, 1], inside[:, 2]] = True
-        start = stop
+        b0 = np.maximum(np.ceil((box_lo - pad - lo) / step - 0.5), a0).astype(np.int64)
+        b1 = np.minimum(np.floor((box_hi + pad - lo) / step - 0.5) + 1, a1).astype(np.int64)
+        size = np.maximum(b1 - b0, 0)
+        count = size.prod(axis=1)
+        keep = count > 0
+        gg, b0, size, count = g[keep], b0[keep], size[keep], count[keep]
+        ends = np.cumsum(count)
+        start = 0
+        while start < len(gg):  # pairs whose voxels fill one batch (at least one pair)
+            stop = max(start + 1, int(np.searchsorted(ends, (ends[start - 1] if start else 0) + BATCH, "right")))
+            cnt = count[start:stop]
+            row = np.repeat(np.arange(start, stop), cnt)
+            local = np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+            yz = size[row, 1] * size[row, 2]
+            idx = np.column_stack([b0[row, 0] + local // yz, b0[row, 1] + (local % yz) // size[row, 2],
+                                   b0[row, 2] + local % size[row, 2]])
+            fresh = ~grid[idx[:, 0], idx[:, 1], idx[:, 2]]  # a voxel already inside stays inside
+            idx, row = idx[fresh], row[fresh]
+            val = comp.chunk_value(ci, lo + (idx + 0.5) * step, gg[row], np.zeros(len(row)))[0]
+            inside = idx[val <= 0]
+            grid[inside[:, 0], inside[:, 1], inside[:, 2]] = True
+            start = stop
 
 
 def voxel_surface(vox, lo, hi) -> tuple[np.ndarray, np.ndarray]:

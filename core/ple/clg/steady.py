@@ -144,11 +144,9 @@ def element_finder(lat: Lattice, leaves: list, region: Region) -> ElementFinder:
     elem = np.array([k[1] if k[0] == "n" else nn + k[1] for k, _, _ in uses], dtype=np.int64)
     order = np.argsort(elem, kind="stable")
     counts_e = np.bincount(elem, minlength=nn + len(aux.beams))
-    finder = ElementFinder(aux, shift, region, np.concatenate([[0], np.cumsum(counts_e)]),
-                           np.array([uses[m][1] for m in order], dtype=np.int64),
-                           np.array([uses[m][2] for m in order], dtype=np.int64).reshape(-1, 3), len(leaves),
-                           node_of)
-    return finder
+    return ElementFinder(aux, shift, region, np.concatenate([[0], np.cumsum(counts_e)]),
+                         np.array([uses[m][1] for m in order], dtype=np.int64),
+                         np.array([uses[m][2] for m in order], dtype=np.int64).reshape(-1, 3), len(leaves), node_of)
 
 
 def own_balls(lat: Lattice, prims: list, g: np.ndarray) -> list:
