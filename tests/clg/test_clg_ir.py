@@ -110,11 +110,13 @@ def test_program_and_params(tmp_path):
         load_clg(str(bad))
 
 
-def test_non_commuting_pattern_is_refused(tmp_path, capsys):
+def test_non_commuting_pattern_is_accepted(tmp_path, capsys):
+    """U and V do not commute: the copies use the lattice's own nodes (ple.clg.steady), no refusal."""
     data = copy.deepcopy(SHELLED)
     data["pattern"]["V"] = {"count": 2, "similarity": {"kind": "rotation", "angle": 0.5, "axis": [0, 0, 1],
                                                        "point": [0, 0, 0]}}
     path = tmp_path / "nc.json"
     path.write_text(json.dumps(data))
-    assert main(["clg", "info", str(path)]) == 2
-    assert "do not commute" in capsys.readouterr().err
+    assert main(["clg", "info", str(path)]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["similar_copies"] is False and info["conical_shell"] is None

@@ -34,6 +34,13 @@ def random_pattern(rng, kind: str) -> dict:
         pat["placement"] = {"similarity": {"kind": "translation", "vector": [2.0, 0, 0]}}
         for n in nodes:
             n["center"][0] += 0.0
+    elif kind == "warped":  # random rotations, swirls, screws and scalings about unrelated axes: no two commute
+        for name, count in zip("UVW", (3, 3, 2)):
+            pat[name] = {"count": count, "similarity": warped_similarity(rng)}
+        if rng.random() < 0.5:
+            pat["placement"] = {"similarity": {"kind": "screw", "angle": float(rng.uniform(-3, 3)),
+                                               "axis": _unit(rng), "point": list(rng.normal(0, 1, 3)),
+                                               "distance": float(rng.normal())}}
     else:  # a BeCOTS slab from random corners
         a = [0.0, 0.0, 0.0]
         b = [float(x) for x in [0.2, 4, 0.2] + 0.2 * rng.standard_normal(3)]
@@ -43,6 +50,31 @@ def random_pattern(rng, kind: str) -> dict:
         for n in nodes:
             n["center"] = [float(x) * 0.5 for x in n["center"]]
     return pat
+
+
+def _unit(rng) -> list:
+    v = rng.standard_normal(3)
+    return [float(x) for x in v / np.linalg.norm(v)]
+
+
+def warped_similarity(rng) -> dict:
+    """A random rotation, swirl, screw or scaling about a random axis, its fixed point (or axis)
+    about 1/angle (1/|log factor|) from the origin so that one step moves the template about a unit."""
+    axis = np.array(_unit(rng))
+    side = np.cross(axis, _unit(rng))
+    side /= np.linalg.norm(side)
+    angle = float(rng.uniform(0.15, 0.4) * rng.choice([-1, 1]))
+    factor = float(rng.uniform(1.08, 1.2) ** rng.choice([-1, 1]))
+    kind = str(rng.choice(["rotation", "swirl", "screw", "scaling"]))
+    if kind == "scaling":
+        return {"kind": kind, "factor": factor, "point": [float(x) for x in side / abs(np.log(factor))]}
+    point = [float(x) for x in side / abs(angle)]
+    if kind == "rotation":
+        return {"kind": kind, "angle": angle, "axis": list(axis), "point": point}
+    if kind == "swirl":
+        return {"kind": kind, "angle": angle, "axis": list(axis), "point": point, "factor": factor}
+    return {"kind": kind, "angle": angle, "axis": list(axis), "point": [x / 2 for x in point],
+            "distance": float(rng.uniform(0.4, 0.8))}
 
 
 def rand_ref(rng, nn):

@@ -82,3 +82,33 @@ def test_shelled_volume_is_difference():
     vy = mesh_clg(clg_from_dict(inner), 40).volume
     assert 0 < vy < vx
     assert v == pytest.approx(vx - vy, rel=1e-6)
+
+
+CURVED = {"U": {"kind": "translation", "vector": [1, 0, 0]},
+          "V": {"kind": "rotation", "angle": 0.3, "axis": [0, 0, 1], "point": [-3.3, 0, 0]},
+          "W": {"kind": "scaling", "factor": 1.1, "point": [0, 0, -10]}}
+
+
+def test_non_commuting_mesh_is_watertight_and_matches_the_pmc_integral():
+    """U, V, W do not commute: each copy is meshed from the lattice's own nodes (ple.clg.steady)."""
+    from ple.clg.grid import voxelize_clg
+    data = load("shelled.json", (2, 2, 2))
+    for axis in "UVW":
+        data["pattern"][axis]["similarity"] = CURVED[axis]
+    clg = clg_from_dict(data)
+    comp = compiled(clg)
+    assert not comp.similar
+    mesh = mesh_clg(clg, segments=48)
+    assert mesh.is_watertight and mesh.is_volume
+    lo, hi = mesh.bounds[0] - 0.02, mesh.bounds[1] + 0.02
+    shape = np.maximum(((hi - lo) / 0.012).astype(int), 1)
+    vol = voxelize_clg(comp, lo, hi, shape).sum() * np.prod((hi - lo) / shape)
+    assert abs(mesh.volume - vol) <= 0.01 * vol, (mesh.volume, vol)
+
+
+def test_own_nodes_mesh_equals_similar_copies_on_translations():
+    from ple.clg.query import Compiled
+    from ple.meshing.clg import mesh_compiled
+    clg = clg_from_dict(load("shelled.json", (2, 2, 1)))
+    a, b = mesh_compiled(Compiled(clg), 32), mesh_compiled(Compiled(clg, similar=False), 32)
+    assert b.is_watertight and b.volume == pytest.approx(a.volume, rel=1e-9)

@@ -14,7 +14,9 @@ from ..model.budget import HUGE, require
 MAX_VOXELS = 1 << 32  # 4 GiB of bool output
 MAX_PIXELS = 1 << 26  # per printer layer
 MAX_LAYERS = 100_000  # printer layers of one slicing (one PNG each)
-GROUP_BYTES = 3 * 8 + 16 * 8  # a listed group and its copy's 4x4 matrix
+TILE, MAX_TILE = 16, 64  # voxels per tile side of voxelize_clg (at least; at most)
+TILE_ROWS = 1 << 20  # candidate (tile, copy) rows per batch of tiles, about
+TILE_WORK_BYTES = TILE_ROWS * 200 + (1 << 18) * 400  # candidate rows with their RangeFinder work; voxel centres
 BATCH = 1 << 18  # points per membership call
 
 
@@ -114,44 +116,93 @@ def iter_slices(pmc: Callable, lo, hi, layer: float, pixel: float, layers: range
 
 
 def voxelize_clg(comp, lo, hi, shape, progress: Callable | None = None, max_bytes: float | None = None) -> np.ndarray:
-    """Voxels of a compiled CLG by chunk copies (§5.6): each copy classifies only the voxels of its
-    own bounding box (the boxes of its positive primitives' bounding balls), the chunk unions are
-    OR-ed and the solid is combined from them; the same centres and result as PMC per voxel."""
+    """Voxels of a compiled CLG by chunk copies (§5.6), the copies found by the RangeFinder: the grid
+    is cut into tiles, each tile's enclosing ball asks which chunk copies it may touch (the box and
+    conical-shell bounds, then ``Compiled.candidates``), and each such copy classifies only the
+    voxels of the tile inside the boxes of its positive primitives' balls; the chunk
+    unions are OR-ed and the solid is combined from them. The same centres and result as PMC per
+    voxel; work follows the copies near the grid, not the pattern's size."""
     nx, ny, nz = check_grid(shape, len(comp.names) + 1, max_bytes)
-    r = comp.region if comp.region is not None else comp.lat.region(None)
-    if max_bytes is not None:  # the groups are listed (int64 i, j, k) and their copies' matrices made
-        require(r.groups * GROUP_BYTES, f"the {r.groups:,} chunk copies of the voxels", max_bytes)
+    if max_bytes is not None:  # a batch of candidate copies and of voxel centres, besides the grids
+        require(TILE_WORK_BYTES, "one batch of candidate chunk copies and voxel centres", max_bytes)
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     n = np.array([nx, ny, nz])
-    axes = [axis_centres(lo[a], hi[a], n[a]) for a in range(3)]
     step = (hi - lo) / n
-    groups = comp.groups()
-    unions = []
-    for ci in range(len(comp.names)):
-        grid = np.zeros((nx, ny, nz), bool)
-        for s in range(0, len(groups), 1 << 14):
-            g = groups[s:s + (1 << 14)]
-            lin, move, f = comp.copies(g)
-            for prim in comp.positive[ci]:  # the exact box of each positive primitive's copies
-                (ca, cb), (ra, rb) = comp.balls0[prim]
-                c, r = lin @ ca + move, f * ra
-                box_lo, box_hi = c - r[:, None], c + r[:, None]
-                if cb is not None:
-                    c, r = lin @ cb + move, f * rb
-                    box_lo, box_hi = np.minimum(box_lo, c - r[:, None]), np.maximum(box_hi, c + r[:, None])
-                a0 = np.clip(np.ceil((box_lo - lo) / step - 0.5), 0, n).astype(np.int64)
-                a1 = np.clip(np.floor((box_hi - lo) / step - 0.5) + 1, 0, n).astype(np.int64)
-                for gi in np.nonzero(np.all(a1 > a0, axis=1))[0]:
-                    sl = tuple(slice(a0[gi, a], a1[gi, a]) for a in range(3))
-                    pts = np.stack(np.meshgrid(*(axes[a][sl[a]] for a in range(3)), indexing="ij"), -1)
-                    shape_sl = pts.shape[:3]
-                    pts = pts.reshape(-1, 3)
-                    val = comp.chunk_value(ci, pts, np.repeat(g[gi][None], len(pts), 0), np.zeros(len(pts)))[0]
-                    grid[sl] |= (val <= 0).reshape(shape_sl)
-        unions.append(grid)
+    side = _tile_side(comp, step, n)
+    t0 = np.stack(np.meshgrid(*(np.arange(0, n[a], side[a]) for a in range(3)), indexing="ij"), -1).reshape(-1, 3)
+    t1 = np.minimum(t0 + side, n)
+    first, last = lo + (t0 + 0.5) * step, lo + (t1 - 0.5) * step  # the tiles' outermost voxel centres
+    centre, radius = (first + last) / 2, np.linalg.norm(last - first, axis=1) / 2
+    unions = [np.zeros((nx, ny, nz), bool) for _ in comp.names]
+    pad = 1e-9 * max(comp.scale, float(np.max(np.abs(hi - lo))))
+    batch, s = 8, 0
+    while s < len(t0):
+        tiles = np.arange(s, min(s + batch, len(t0)))
+        tiles = tiles[comp.near(centre[tiles], radius[tiles])]
+        q, g, c = (comp.candidates(centre[tiles], radius[tiles]) if len(tiles)
+                   else (np.zeros(0, np.int64), np.zeros((0, 3), np.int64), np.zeros(0, np.int64)))
+        for ci in range(len(comp.names)):
+            sel = c == ci
+            if sel.any():
+                _classify(comp, ci, g[sel], t0[tiles[q[sel]]], t1[tiles[q[sel]]], lo, step, pad, unions[ci])
         if progress is not None:
-            progress(1)
+            progress(min(s + batch, len(t0)) - s)
+        s += batch
+        batch = max(1, batch * 2 if len(q) < TILE_ROWS // 4 else batch // 2 if len(q) > TILE_ROWS else batch)
     return comp.combine_bool(unions)
+
+
+def voxel_tiles(comp, lo, hi, shape) -> int:
+    """The number of tiles ``voxelize_clg`` cuts the grid into (its progress total)."""
+    n = np.asarray(shape, dtype=np.int64)
+    side = _tile_side(comp, (np.asarray(hi, float) - np.asarray(lo, float)) / n, n)
+    return int(np.prod(-(-n // side)))
+
+
+def _tile_side(comp, step: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Voxels per tile side (3,): at least ``TILE``, and about two chunk copies across (a copy's
+    box measured at the first group of the copies), at most ``MAX_TILE``."""
+    r = comp.region if comp.region is not None else comp.lat.region(None)
+    g0 = np.array([[r.i0, r.j0, r.k0]])
+    size = 0.0
+    for ci in range(len(comp.names)):
+        for ca, ra, cb, rb in comp.prim_balls(comp.positive[ci], g0):
+            ext = [ca - ra[:, None], ca + ra[:, None]] + ([] if cb is None else [cb - rb[:, None], cb + rb[:, None]])
+            size = max(size, float(np.max(np.max(ext, axis=0) - np.min(ext, axis=0))))
+    side = np.ceil(2 * size / np.where(step > 0, step, 1.0))
+    return np.clip(side, TILE, MAX_TILE).astype(np.int64).clip(1, np.maximum(n, 1))
+
+
+def _classify(comp, ci: int, g: np.ndarray, a0: np.ndarray, a1: np.ndarray, lo, step, pad, grid) -> None:
+    """OR into ``grid`` the voxels of chunk ``ci``'s copies at groups ``g`` (m, 3) that lie in the
+    voxel boxes [a0, a1) (m, 3) and in the box of one of the copy's positive primitives (whose
+    union holds the copy); in batches of ``BATCH`` voxel centres."""
+    for ca, ra, cb, rb in comp.prim_balls(comp.positive[ci], g):
+        box_lo, box_hi = ca - ra[:, None], ca + ra[:, None]
+        if cb is not None:
+            box_lo, box_hi = np.minimum(box_lo, cb - rb[:, None]), np.maximum(box_hi, cb + rb[:, None])
+        b0 = np.maximum(np.ceil((box_lo - pad - lo) / step - 0.5), a0).astype(np.int64)
+        b1 = np.minimum(np.floor((box_hi + pad - lo) / step - 0.5) + 1, a1).astype(np.int64)
+        size = np.maximum(b1 - b0, 0)
+        count = size.prod(axis=1)
+        keep = count > 0
+        gg, b0, size, count = g[keep], b0[keep], size[keep], count[keep]
+        ends = np.cumsum(count)
+        start = 0
+        while start < len(gg):  # pairs whose voxels fill one batch (at least one pair)
+            stop = max(start + 1, int(np.searchsorted(ends, (ends[start - 1] if start else 0) + BATCH, "right")))
+            cnt = count[start:stop]
+            row = np.repeat(np.arange(start, stop), cnt)
+            local = np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+            yz = size[row, 1] * size[row, 2]
+            idx = np.column_stack([b0[row, 0] + local // yz, b0[row, 1] + (local % yz) // size[row, 2],
+                                   b0[row, 2] + local % size[row, 2]])
+            fresh = ~grid[idx[:, 0], idx[:, 1], idx[:, 2]]  # a voxel already inside stays inside
+            idx, row = idx[fresh], row[fresh]
+            val = comp.chunk_value(ci, lo + (idx + 0.5) * step, gg[row], np.zeros(len(row)))[0]
+            inside = idx[val <= 0]
+            grid[inside[:, 0], inside[:, 1], inside[:, 2]] = True
+            start = stop
 
 
 def voxel_surface(vox, lo, hi) -> tuple[np.ndarray, np.ndarray]:

@@ -3,8 +3,9 @@ Boolean expressions, named template chunks, the solid over chunk unions, and mat
 
 A node is referenced as ``(di, dj, dk, n)`` relative to the chunk's group: in the copy of a
 chunk at group (i, j, k) it is node N[i+di, j+dj, k+dk, n] of the pattern, which exists for all
-integer indices through the powers of U, V, W. ``Ball(node, s)`` has the node's centre and s
-times its radius; ``Beam(a, b, (s1, s2))`` is the convex hull of two such balls. A chunk union is
+integer indices through the powers of U, V, W, whether or not they commute (thesis §5.2;
+``ple.clg.steady``). ``Ball(node, s)`` has the node's centre and s times its radius;
+``Beam(a, b, (s1, s2))`` is the convex hull of two such balls. A chunk union is
 the copy of a template chunk at every group of the pattern's count range; the solid is a Boolean
 expression of chunk unions. A primitive with a material whose ``replace`` is a CLG L becomes
 X ∩ L (§10.1), L placed in the world frame or in the primitive's beam frame.
@@ -19,7 +20,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from ..algebra.similarity import commute
 from ..errors import PleError
 from ..model.lattice import MAX_COUNT, Lattice
 from .field import FieldSolid
@@ -203,7 +203,6 @@ class CLG:
         if not isinstance(self.pattern, Lattice):
             raise PleError(f"pattern: expected a Lattice, got {type(self.pattern).__name__}")
         self.pattern.validate()
-        check_commuting(self.pattern)
         if not isinstance(self.chunks, dict) or not self.chunks:
             raise PleError("chunks: expected at least one named chunk")
         mats = {}
@@ -262,15 +261,6 @@ class CLG:
 
     def used_chunks(self) -> list[str]:
         return sorted({c.name for c in chunk_refs(self.solid)})
-
-
-def check_commuting(lat: Lattice) -> None:
-    """CLG copies chunks by G ∘ W^k ∘ V^j ∘ U^i ∘ G⁻¹, which needs commuting U, V, W (§5.2)."""
-    for (a, sa), (b, sb) in ((("U", lat.U), ("V", lat.V)), (("U", lat.U), ("W", lat.W)),
-                             (("V", lat.V), ("W", lat.W))):
-        if not commute(sa, sb):
-            raise PleError(f"pattern: {a} and {b} do not commute; CLG chunks are similar copies only when "
-                           f"U, V, W commute (thesis §5.2)")
 
 
 def _node(lat: Lattice, ref, where: str) -> NodeRef:

@@ -1,13 +1,18 @@
 """PMC and local distance bounds of a CLG (thesis §5.5, §5.7, §10.2), visiting only the chunk copies
 a query can touch.
 
-Every primitive of every template chunk gets a bounding ball, and these balls become the template
-node-group of an auxiliary lattice with the pattern's U, V, W, counts, placement and BeCOTS
-description. Since U, V, W commute, the copy of a chunk at group g is ``M_g ∘ G⁻¹`` of the chunk at
-group 0 (``M_g = G ∘ W^k ∘ V^j ∘ U^i``), so the auxiliary node (g, m) bounds primitive m in the copy
-at g. A query ball (P, R) asks the auxiliary lattice which groups it touches — the BeCOTS
-RangeFinder (§8) in O(1) per query on BeCOTS slabs, the RangeFinder paths (§7) on steady lattices —
-after a box bound has rejected far points. Only those chunk copies are evaluated.
+Similar copies (U, V, W commute, ``ple.clg.steady.similar_copies``): every primitive of every
+template chunk gets a bounding ball, and these balls become the template node-group of an
+auxiliary lattice with the pattern's U, V, W, counts, placement and BeCOTS description. The copy of
+a chunk at group g is ``M_g ∘ G⁻¹`` of the chunk at group 0 (``M_g = G ∘ W^k ∘ V^j ∘ U^i``), so the
+auxiliary node (g, m) bounds primitive m in the copy at g. A query ball (P, R) asks the auxiliary
+lattice which groups it touches — the BeCOTS RangeFinder (§8) in O(1) per query on BeCOTS slabs,
+the RangeFinder paths (§7) on steady lattices — after a box bound and the conical shell have
+rejected far points. Only those chunk copies are evaluated.
+
+Any other steady pattern: each copy uses the lattice's own nodes N[g + d, n], and the candidates
+come from the RangeFinder of the element lattice of ``ple.clg.steady`` (the pattern's U, V, W with
+the primitives as its nodes and beam-patterns), after the box bound.
 
 Values follow the CSG distance rules of §5.7 (union: min, intersection: max, difference: max(a, −b))
 on exact signed distances of balls and cone-beams, clipped to [−R, R]: leaves farther than R are
@@ -30,14 +35,19 @@ from ..queries.rangefinder import lattice_hits
 from .bound import conical_shell
 from .model import CLG, ChunkRef, Op, Prim, leaves, positive_leaves
 from .rays import next_crossing, ray_ball_interval, ray_beam_interval
+from .steady import element_finder, own_balls, similar_copies
 
 BATCH = 1 << 15  # query points per RangeFinder batch (memory stays bounded)
 
 
 class Compiled:
-    """A CLG ready for queries: leaf tables per chunk, the auxiliary lattice, the box bound."""
+    """A CLG ready for queries: leaf tables per chunk, the auxiliary lattice, the box bound.
 
-    def __init__(self, clg: CLG, region=None, shell: bool = True):
+    ``similar`` chooses how copies are placed: None (default) similar copies exactly when U, V, W
+    commute (``ple.clg.steady.similar_copies``); False the lattice's own nodes on any pattern (the
+    general path, also usable on commuting patterns: tests and benchmarks compare the two)."""
+
+    def __init__(self, clg: CLG, region=None, shell: bool = True, similar: bool | None = None):
         self.clg = clg
         self.region = region
         lat = clg.pattern
@@ -51,6 +61,26 @@ class Compiled:
         for prim, rep in clg.replacements.items():
             if rep is not None:  # a CLG is compiled; a FieldSolid answers value() itself
                 self.children[prim] = (compiled(rep[0]) if isinstance(rep[0], CLG) else rep[0], rep[1])
+        self.positive = [list(dict.fromkeys(positive_leaves(clg.chunks[n]))) for n in self.names]
+        positive = {x.name for x in _positive_refs(clg.solid)}
+        if similar and not similar_copies(lat):
+            raise PleError("similar copies need commuting U, V, W (thesis §5.2)")
+        self.similar = similar_copies(lat) if similar is None else bool(similar)
+        if self.similar:
+            self._similar_bounds(positive, shell)
+        else:  # the lattice's own nodes per copy (ple.clg.steady); no spiral similarity, no conical shell
+            self.finder = element_finder(lat, self.leaves, lat.region(region))
+            self.aux = self.finder.aux
+            ends = [(ref.n, s, ref.offset) for c, n in enumerate(self.names) if n in positive
+                    for p in self.positive[c] for ref, s in ((p.a, p.sa), (p.b, p.sb)) if ref is not None]
+            self.lo, self.hi = self.finder.bounds(ends)
+            self.step_radius = float(np.median([x.radius for x in self.aux.nodes])) * self.aux.placement.factor
+            self.shell = None
+        self.scale = float(np.max(self.hi - self.lo))
+
+    def _similar_bounds(self, positive: set, shell: bool) -> None:
+        """The auxiliary lattice, box and conical shell of similar copies (module doc)."""
+        lat, region = self.lat, self.region
         # bounding balls of every leaf of every chunk at group 0, in the frame G⁻¹ (see module doc)
         ginv = lat.placement.inverse()
         self.ginv = ginv.matrix
@@ -71,16 +101,12 @@ class Compiled:
         aux.nodes, aux.beams, aux.filter = nodes, [], None
         self.aux = aux
         self.owner = np.asarray(owner, dtype=np.int64)
-        positive = {x.name for x in _positive_refs(clg.solid)}
         keep = [m for m, c in enumerate(owner) if self.names[c] in positive]
         box = aux.copy()
         box.nodes = [nodes[m] for m in keep]
         lo, hi, exact = fast_bounds(box, region)  # end groups only, where exact (ple.model.budget)
         self.lo, self.hi = (lo, hi) if exact else box.bounds(region)
-        self.scale = float(np.max(self.hi - self.lo))
         self.step_radius = float(np.median([x.radius for x in nodes])) * lat.placement.factor
-        # per chunk: its distinct positive leaves (their union bounds the chunk)
-        self.positive = [list(dict.fromkeys(positive_leaves(clg.chunks[n]))) for n in self.names]
         # the conical shell (§5.5) of the positive leaves of the positive chunks, when the pattern has one
         prims = [(ca, ra, cb, rb) for c, n in enumerate(self.names) if n in positive
                  for (ca, cb), (ra, rb) in (self.balls0[p] for p in self.positive[c])]
@@ -142,6 +168,8 @@ class Compiled:
 
     def candidates(self, p: np.ndarray, r: np.ndarray):
         """Unique (query, group (m, 3), chunk) triples whose primitive bounds touch ball (p, r)."""
+        if not self.similar:
+            return self.finder.candidates(p, r)
         if self.aux.becots is None:  # steady: the RangeFinder's flat hit rows (qid, i, j, k, n)
             rows = np.asarray(lattice_hits(self.aux, p, r)[0], dtype=np.int64).reshape(-1, 5)
             q, hits = rows[:, 0], rows[:, 1:]
@@ -166,8 +194,8 @@ class Compiled:
 
     def chunk_value(self, ci: int, p: np.ndarray, g: np.ndarray, r: np.ndarray, dirs=None, tiny: float = 0.0):
         """(values, next crossings or None) of chunk ``ci``'s copies at groups ``g`` (m, 3), points ``p``."""
-        copy = self.copies(g)
-        parts = [self.leaf_value(prim, p, copy, r, dirs, tiny) for prim in self.leaves[ci]]
+        balls = self.prim_balls(self.leaves[ci], g)
+        parts = [self.leaf_value(prim, p, b, r, dirs, tiny) for prim, b in zip(self.leaves[ci], balls)]
         vals = _eval(self.trees[ci], [x[0] for x in parts])
         return vals, (None if dirs is None else np.minimum.reduce([x[1] for x in parts]))
 
@@ -178,16 +206,28 @@ class Compiled:
                                     indexing="ij"), -1).reshape(-1, 3)
 
     def copies(self, g: np.ndarray):
-        """Linear parts (m, 3, 3), translations (m, 3) and factors (m,) of M_g ∘ G⁻¹ (module doc)."""
+        """Linear parts (m, 3, 3), translations (m, 3) and factors (m,) of M_g ∘ G⁻¹ (module doc;
+        similar copies only)."""
         m = self.lat.group_matrices(g[:, 0], g[:, 1], g[:, 2]) @ self.ginv
         return m[:, :3, :3], m[:, :3, 3], self.lat.group_factors(g[:, 0], g[:, 1], g[:, 2]) / self.lat.placement.factor
 
-    def leaf_value(self, prim: Prim, p: np.ndarray, copy, r: np.ndarray, dirs=None, tiny: float = 0.0):
-        """(signed value, next crossing along ``dirs`` or None) of a primitive's copies (``copies``)."""
-        lin, move, f = copy
-        (ca0, cb0), (ra0, rb0) = self.balls0[prim]
-        ca, ra = lin @ ca0 + move, f * ra0
-        cb, rb = (None, None) if cb0 is None else (lin @ cb0 + move, f * rb0)
+    def prim_balls(self, prims: list, g: np.ndarray) -> list:
+        """[(ca (m, 3), ra (m,), cb (m, 3) or None, rb (m,) or None)] of each primitive's copies at
+        groups ``g`` (m, 3): similar copies of the group-0 balls, or the lattice's own nodes."""
+        if not self.similar:
+            return own_balls(self.lat, prims, g)
+        lin, move, f = self.copies(g)
+        out = []
+        for prim in prims:
+            (ca0, cb0), (ra0, rb0) = self.balls0[prim]
+            out.append((lin @ ca0 + move, f * ra0, None if cb0 is None else lin @ cb0 + move,
+                        None if cb0 is None else f * rb0))
+        return out
+
+    def leaf_value(self, prim: Prim, p: np.ndarray, balls, r: np.ndarray, dirs=None, tiny: float = 0.0):
+        """(signed value, next crossing along ``dirs`` or None) of a primitive's copies, given their
+        ``balls`` (ca, ra, cb, rb) (``prim_balls``)."""
+        ca, ra, cb, rb = balls
         d = np.linalg.norm(p - ca, axis=1) - ra if prim.b is None else beam_distance(p, ca, ra, cb, rb)
         ev = None
         if dirs is not None:
@@ -325,9 +365,10 @@ def _positive_refs(expr) -> list:
 
 
 # ----- the reference: every primitive of every chunk copy (for benchmarks) -------------------------
-def brute_force_value(clg: CLG, points) -> np.ndarray:
-    """The naive CSG tree T of §5.5: every chunk copy at every group, O(ū v̄ w̄) per point."""
-    comp = compiled(clg)
+def brute_force_value(clg: CLG, points, similar: bool | None = None) -> np.ndarray:
+    """The naive CSG tree T of §5.5: every chunk copy at every group, O(ū v̄ w̄) per point
+    (copies placed as ``Compiled(similar=...)`` places them)."""
+    comp = compiled(clg) if similar is None else Compiled(clg, similar=similar)
     p = np.asarray(points, float).reshape(-1, 3)
     nu, nv, nw = clg.pattern.counts
     groups = np.stack(np.meshgrid(np.arange(nu), np.arange(nv), np.arange(nw), indexing="ij"), -1).reshape(-1, 3)

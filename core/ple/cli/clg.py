@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from ..app.progress import Progress
-from ..clg.grid import layer_grid, parse_bounds, voxelize_clg
+from ..clg.grid import check_grid, layer_grid, parse_bounds, voxel_tiles, voxelize_clg
 from ..clg.query import compiled
 from ..clg.rays import render, trace
 from ..errors import PleError
@@ -100,6 +100,7 @@ def run_info(args) -> int:
             "unused_chunks": sorted(set(clg.chunks) - set(comp.names)), "primitives": clg.primitive_count(),
             "materials": sorted(clg.materials), "depth": clg.depth, "counts": list(lat.counts),
             "becots": lat.becots is not None, "chunk_copies": lat.groups * len(comp.names),
+            "similar_copies": comp.similar,
             "box": [comp.lo.tolist(), comp.hi.tolist()],
             "conical_shell": None if comp.shell is None else {
                 "apex": comp.shell.apex.tolist(), "axis": comp.shell.axis.tolist(), "phi": list(comp.shell.phi),
@@ -129,7 +130,7 @@ def run_voxelize(args) -> int:
         raise PleError(f"--out {args.out}: expected a .npy file")
     comp = _load(args)
     lo, hi = parse_bounds(args.bounds, comp.lo, comp.hi)
-    bar = Progress(len(comp.names), "voxelize")
+    bar = Progress(voxel_tiles(comp, lo, hi, check_grid(shape)), "voxelize")
     vox = voxelize_clg(comp, lo, hi, shape, bar.update, max_memory(args))
     bar.close()
     _save_npy(args.out, vox)

@@ -1,8 +1,10 @@
 """Meshes of CLG solids (thesis §5): each template chunk is meshed once (balls and cone-beams as
 polyhedra, combined by its Boolean expression), its copies are placed by the similarity
-``M_g ∘ G⁻¹`` of each group, and chunk unions and the solid are combined by manifold3d's robust
-booleans, whose output is watertight and free of self-intersections by construction. A primitive
-with a replacing CLG becomes X ∩ mesh(L), L placed by its material's frame (§10.1).
+``M_g ∘ G⁻¹`` of each group (on patterns whose U, V, W do not commute, each copy is meshed from
+the lattice's own nodes instead, ``ple.clg.steady``), and chunk unions and the solid are
+combined by manifold3d's robust booleans, whose output is watertight and free of
+self-intersections by construction. A primitive with a replacing CLG becomes X ∩ mesh(L), L
+placed by its material's frame (§10.1).
 
 Polyhedra are scaled about their centres so that a meshed ball has the ball's exact volume (an
 inscribed polyhedron would lose ~1 % at 32 segments); beams are hulls of two such balls.
@@ -35,8 +37,9 @@ def _similarity_3x4(lin: np.ndarray, move: np.ndarray) -> np.ndarray:
     return np.column_stack([lin, move])
 
 
-def _leaf(m, comp, prim: Prim, unit, segments: int):
-    (ca, cb), (ra, rb) = comp.balls0[prim]
+def _leaf(m, comp, prim: Prim, balls, unit, segments: int):
+    """The manifold of one primitive from its balls (ca (3,), ra, cb (3,) or None, rb)."""
+    ca, ra, cb, rb = balls
     ball_a = unit.scale([ra] * 3).translate(list(ca))
     if cb is None:
         x = ball_a
@@ -73,8 +76,7 @@ def chunk_triangles(comp, ci: int, segments: int) -> float:
     ball = sphere_triangles(segments)
     total = 0.0
     for prim in comp.leaves[ci]:
-        (_, cb), _ = comp.balls0[prim]
-        total += ball if cb is None else 2 * ball
+        total += ball if prim.b is None else 2 * ball
         child = comp.children.get(prim)
         if child is not None and not isinstance(child[0], FieldSolid):
             total += solid_triangles(child[0], segments)
@@ -101,31 +103,50 @@ def _solid_manifold(m, comp, segments: int, max_bytes: float | None = None):
         total = solid_triangles(comp, segments)
         require(total * CLG_TRIANGLE_BYTES, f"{total:.3g} triangles of the CLG mesh ({groups:,} groups, nested "
                 "materials included)", max_bytes, "use fewer groups or --segments")
-    templates = []
-    for ci in range(len(comp.names)):
-        parts = [_leaf(m, comp, prim, unit, segments) for prim in comp.leaves[ci]]
-        templates.append(_expr(m, comp.trees[ci], parts))
     g = comp.groups()
-    lin, move, _ = comp.copies(g)
+    lin, move, _ = comp.copies(g) if comp.similar else (None, None, None)
     unions = []
-    for template in templates:
-        copies = [template.transform(_similarity_3x4(lin[n], move[n])) for n in range(len(g))]
+    for ci in range(len(comp.names)):
+        if comp.similar:  # one template chunk (group 0), placed by M_g ∘ G⁻¹ per copy
+            parts = [_leaf(m, comp, prim, _group0(comp, prim), unit, segments) for prim in comp.leaves[ci]]
+            template = _expr(m, comp.trees[ci], parts)
+            copies = [template.transform(_similarity_3x4(lin[n], move[n])) for n in range(len(g))]
+        else:  # copies are not similar: each from the lattice's own nodes (ple.clg.steady)
+            balls = comp.prim_balls(comp.leaves[ci], g)
+            copies = [_expr(m, comp.trees[ci], [_leaf(m, comp, prim, _one(b, n), unit, segments)
+                                                 for prim, b in zip(comp.leaves[ci], balls)]) for n in range(len(g))]
         unions.append(m.Manifold.batch_boolean(copies, m.OpType.Add) if len(copies) > 1 else copies[0])
     return _expr(m, comp.solid, unions)
+
+
+def _group0(comp, prim: Prim):
+    """A primitive's balls in the group-0 copy (similar copies)."""
+    (ca, cb), (ra, rb) = comp.balls0[prim]
+    return ca, ra, cb, rb
+
+
+def _one(balls, n: int):
+    """Copy ``n`` of a primitive's balls (``Compiled.prim_balls``)."""
+    ca, ra, cb, rb = balls
+    return ca[n], float(ra[n]), None if cb is None else cb[n], None if cb is None else float(rb[n])
 
 
 def mesh_clg(clg: CLG, segments: int = 32, region=None, max_bytes: float | None = None):
     """A watertight trimesh of the CLG solid (of the chunk copies at the groups of ``region``, a
     ``Region``, if given: the add-on's preview of its drawn region). Refused before meshing when
     its estimated triangles exceed ``MAX_TRIANGLES`` or need more than ``max_bytes``."""
+    return mesh_compiled(compiled(clg, region), segments, max_bytes)
+
+
+def mesh_compiled(comp, segments: int = 32, max_bytes: float | None = None):
+    """``mesh_clg`` of a compiled CLG (``ple.clg.query.Compiled``, its copies placed as it places them)."""
     if segments < 8 or segments > 512:
         raise PleError(f"--segments {segments}: expected 8..512")
     m = _manifold()
-    solid = _solid_manifold(m, compiled(clg, region), segments, max_bytes)
+    solid = _solid_manifold(m, comp, segments, max_bytes)
     out = solid.to_mesh()
     verts = np.asarray(out.vert_properties, float)[:, :3]
     faces = np.asarray(out.tri_verts, np.int64)
     if len(faces) == 0:
         raise PleError("the CLG solid is empty: nothing to mesh")
     return trimesh.Trimesh(verts, faces, process=False)
-
