@@ -138,14 +138,6 @@ def test_presets_mesh_closed(name, style, levels):
     assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
 
 
-def test_group_map_lattices_have_no_ir_form():
-    from ple.model.ir import lattice_to_dict
-
-    lat = TMIMap.from_five(*FIVE).lattice(_cell(), (2, 2))
-    with pytest.raises(PleError, match="no ple-lattice/1 form"):
-        lattice_to_dict(lat)
-
-
 def test_tmi_from_five_interpolates_e_for_random_configurations():
     """§11.4.2 warns that angle jumps can break M(.5,0) = E; the branch is chosen so that it holds."""
     rng = np.random.default_rng(3)
