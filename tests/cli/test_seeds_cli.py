@@ -35,7 +35,7 @@ def test_eval_info_mesh_biq_on_a_tmi_slab(tmp_path, capsys):
     np.save(q, np.array([[0.0, 0.0, 0.0, 0.2], [2.0, 2.0, 0.0, 0.1]]))
     res = tmp_path / "b.json"
     assert main(["biq", src, "--param", "nu=3", "--param", "nv=3", "--queries", str(q), "--out", str(res)]) == 0
-    assert "path naive (group map)" in capsys.readouterr().out  # the cost is named
+    assert "path mobius (" in capsys.readouterr().out  # the pre-image RangeFinder (thesis §11.2.1)
     hits = json.loads(res.read_text())["queries"]
     ev = lat.evaluate()
     d = np.linalg.norm(ev.center - [0, 0, 0], axis=1) - ev.radius - 0.2

@@ -112,7 +112,7 @@ def test_queries_measures_and_mesh_of_a_tmi_lattice():
         d = np.linalg.norm(ev.center - q[n], axis=1) - ev.radius - qr[n]
         want = set(map(tuple, ev.node_index[d <= 0].tolist()))
         assert set(map(tuple, hit.nodes.tolist())) == want
-        assert hit.path.startswith("naive")
+        assert hit.path.startswith("mobius")  # the pre-image RangeFinder (thesis §11.2.1, §11.4)
     # volume: per-hub measure vs the mesh vs Monte Carlo point membership
     meas = lattice_measures(lat)
     mesh = tessellate(lat, style="refined", levels=3)
