@@ -35,12 +35,12 @@ def test_eval_info_mesh_biq_on_a_tmi_slab(tmp_path, capsys):
     np.save(q, np.array([[0.0, 0.0, 0.0, 0.2], [2.0, 2.0, 0.0, 0.1]]))
     res = tmp_path / "b.json"
     assert main(["biq", src, "--param", "nu=3", "--param", "nv=3", "--queries", str(q), "--out", str(res)]) == 0
-    assert "path naive (group map)" in capsys.readouterr().out  # the cost is named
+    assert "path mobius (" in capsys.readouterr().out  # the pre-image RangeFinder (thesis §11.2.1)
     hits = json.loads(res.read_text())["queries"]
     ev = lat.evaluate()
     d = np.linalg.norm(ev.center - [0, 0, 0], axis=1) - ev.radius - 0.2
     assert sorted(map(tuple, hits[0]["nodes"])) == sorted(map(tuple, ev.node_index[d <= 0].tolist()))
-    assert main(["ir", src, "--out", str(tmp_path / "x.json")]) == 2
+    assert main(["ir", src, "--param", "nu=3", "--param", "nv=3", "--out", str(tmp_path / "x.json")]) == 0
 
 
 def test_bench_seeds_runs_small(capsys):

@@ -1,8 +1,10 @@
 """``ple fit MESH --out F.npz``: a T_d-symmetric Fourier field fitted to a closed mesh (004_ §3.2).
 
 The mesh (STL, OBJ, PLY, GLB, … in cell units inside [-0.5, 0.5]³, or moved and scaled there
-with ``--normalize``) is classified inside/outside on N³ grids; the order N is the smallest of
-``--orders`` whose zero level set is within ``--bound`` (Hausdorff, cell units) of the mesh.
+with ``--normalize``) is classified inside/outside on N³ grids, or with ``--distance`` its
+signed distance is sampled there (the field then approximates the distance function); the
+order N is the smallest of ``--orders`` whose zero level set is within ``--bound`` (Hausdorff,
+cell units) of the mesh.
 The coefficients file works as a filter: ``--implicit fourier:file=F.npz`` (Φ < 0 inside).
 With ``--out F.json`` the field is written as inline ``ple-clg/1`` data instead,
 ``{"fourier": {...}}``: the ``replace`` of a CLG material (``ple.clg.field``).
@@ -34,6 +36,8 @@ def register(sub) -> None:
     p.add_argument("--orders", default="8,16,32,64", help="candidate orders N, tried in order (default 8,16,32,64)")
     p.add_argument("--max-terms", type=int, default=None, help="keep about this many largest coefficients")
     p.add_argument("--no-symmetric", action="store_true", help="plain Fourier fit (no T_d projection)")
+    p.add_argument("--distance", action="store_true",
+                   help="fit the mesh's sampled signed distance (negative inside) instead of inside/outside")
     p.add_argument("--normalize", action="store_true",
                    help="centre the mesh's box at the origin and scale its largest side to 0.9")
     p.set_defaults(func=run)
@@ -89,7 +93,7 @@ def run(args) -> int:
         v = v * scale + offset
         transform = {"scale": scale, "offset": offset.tolist()}
     res = fit_mesh(v, f, bound=args.bound, orders=orders, symmetric=not args.no_symmetric,
-                   max_terms=args.max_terms)
+                   max_terms=args.max_terms, distance=args.distance)
     arrays = res.field.arrays()
     if not (math.isfinite(res.hausdorff) and all(np.isfinite(np.asarray(a)).all() for a in arrays.values()
                                                  if np.asarray(a).dtype.kind in "fc")):

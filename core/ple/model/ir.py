@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from ..algebra.mobius import Mobius
 from ..algebra.similarity import Similarity, similarity_from_dict
 from ..algebra.vectors import _as3
 from ..errors import PleError
@@ -17,6 +18,7 @@ from .becots import BeCOTSField, Stack
 from .budget import check_finite
 from .grading import grade_from_dict, grade_to_dict
 from .lattice import Lattice
+from .mobius import MobiusGroups, mobius_lattice
 from .schema import check_ir
 
 FORMAT = "ple-lattice/1"
@@ -112,6 +114,12 @@ def lattice_from_dict(data, filter_from_dict=None, surface_grade=None) -> Lattic
             lat.add_beam(beam["from"], beam["to"], *offset)
         except PleError as exc:
             raise PleError(f"{where}: {exc}") from None
+    if "mobius" in data:
+        clash = [k for k in ("U", "V", "W", "placement", "becots") if k in data]
+        if clash:
+            raise PleError(f"{clash[0]}: a Möbius lattice places its groups by mobius.U, V, W and frame; "
+                           f"remove {clash[0]}")
+        lat = mobius_from_ir(lat, data["mobius"], "mobius")
     for name in ("U", "V", "W"):
         if name not in data:
             continue
@@ -156,7 +164,7 @@ def lattice_to_dict(lat: Lattice, resolved: bool = True, filter_to_dict=None, fi
     written by ``filter_to_dict(filter)`` (``ple.filters.ir``); without it a filtered lattice is
     refused rather than written unfiltered. A radius field is written by ``field_to_dict``
     (default ``grade_to_dict``: linear and grid fields)."""
-    if lat.group_map is not None:  # Möbius patterns, TMI maps: no similarities to write
+    if lat.group_map is not None and not isinstance(lat.group_map, MobiusGroups):
         raise PleError(f"a lattice placed by a {lat.group_map.kind} map has no ple-lattice/1 form "
                        "(keep its program instead)")
     out: dict = {"format": FORMAT}
@@ -169,7 +177,11 @@ def lattice_to_dict(lat: Lattice, resolved: bool = True, filter_to_dict=None, fi
         return lat.nodes[i].name if lat.nodes[i].name is not None else i
 
     out["beams"] = [{"from": ref(b.n1), "to": ref(b.n2), "offset": [b.di, b.dj, b.dk]} for b in lat.beams]
+    if lat.group_map is not None:  # a Möbius lattice: its exact matrices, resolved or not
+        out["mobius"] = mobius_to_ir(lat.group_map, lat.counts)
     for name, d in (("U", lat.u), ("V", lat.v), ("W", lat.w)):
+        if lat.group_map is not None:
+            break
         if resolved:
             out[name] = {"count": d.count, "matrix": _matrix_list(d.incremental)}
         else:
@@ -177,8 +189,9 @@ def lattice_to_dict(lat: Lattice, resolved: bool = True, filter_to_dict=None, fi
             if d.cumulative:
                 entry["cumulative"] = True
             out[name] = entry
-    out["placement"] = ({"matrix": _matrix_list(lat.placement)} if resolved
-                        else {"similarity": lat.placement.to_dict()})
+    if lat.group_map is None:
+        out["placement"] = ({"matrix": _matrix_list(lat.placement)} if resolved
+                            else {"similarity": lat.placement.to_dict()})
     if lat.becots is not None and not resolved:
         out["becots"] = lat.becots.to_ir()
         del out["U"], out["V"]
@@ -188,6 +201,86 @@ def lattice_to_dict(lat: Lattice, resolved: bool = True, filter_to_dict=None, fi
         out["filter"] = filter_to_dict(lat.filter)
     if lat.radius_field is not None:
         out["grade"] = (field_to_dict or grade_to_dict)(lat.radius_field)
+    return out
+
+
+# ----- Möbius steady patterns (thesis §11.3): exact data, bit for bit -----------------------------
+MOBIUS_NORMALIZED = 1e-12  # |ad - bc - 1| within this: the matrix is kept as written (no rounding)
+
+
+def _complex_matrix(m: np.ndarray) -> list:
+    return [[[float(z.real), float(z.imag)] for z in row] for row in np.asarray(m, dtype=complex)]
+
+
+def _mobius_matrix(x, where: str) -> np.ndarray:
+    """A complex 2x2 matrix from ``[[[re, im], [re, im]], [[re, im], [re, im]]]`` (schema-checked):
+    kept as written when already normalized (ad - bc = 1), normalized otherwise; ad - bc = 0 refused."""
+    m = np.array([[complex(*z) for z in row] for row in x], dtype=complex)
+    det = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
+    if abs(det) <= 1e-13 * max(1.0, float(np.abs(m).max())) ** 2:
+        raise PleError(f"{where}: ad - bc = 0 defines no Möbius transformation")
+    if abs(det - 1) <= MOBIUS_NORMALIZED:
+        return m
+    try:
+        return Mobius.from_coefficients(*m.reshape(-1)).m
+    except PleError as exc:
+        raise PleError(f"{where}: {exc}") from None
+
+
+def _mobius_from_entry(d: dict, where: str) -> Mobius:
+    """One Möbius transformation: its ``matrix`` and, when given, its ``split`` U = R ∘ S ∘ R
+    (§11.2.3: the similarity S, with its angle beyond ±π if so, and the inversion's matrix M_R),
+    which its real powers use."""
+    m = _mobius_matrix(d["matrix"], f"{where}.matrix")
+    if "split" not in d:
+        return Mobius(m)
+    sp = d["split"]
+    c = sp["similarity"]
+    axis = np.asarray(c["axis"], dtype=float)
+    if abs(float(np.linalg.norm(axis)) - 1) > 1e-12:
+        raise PleError(f"{where}.split.similarity.axis: must be a unit vector, got {c['axis']}")
+    sim = Similarity(float(c["factor"]), float(c["angle"]), tuple(float(x) for x in c["axis"]),
+                     tuple(float(x) for x in c["point"]), float(c["distance"]))
+    mr = np.array([[complex(*z) for z in row] for row in sp["inversion"]], dtype=complex)
+    if abs(mr[0, 0] * mr[1, 1] - mr[0, 1] * mr[1, 0]) == 0:
+        raise PleError(f"{where}.split.inversion: ad - bc = 0 is no inversion")
+    out = Mobius(m, (sim, mr))
+    if not (out ** 1.0).allclose(Mobius(m), 1e-8):
+        raise PleError(f"{where}.split: R ∘ S ∘ R is not the matrix (U = R ∘ S ∘ R, thesis §11.2.3)")
+    return out
+
+
+def mobius_from_ir(template: Lattice, data: dict, where: str = "mobius") -> Lattice:
+    """The Möbius lattice of ``template`` and the IR ``"mobius"`` object (schema-checked): group
+    (i, j, k) placed by ``W**k ∘ V**j ∘ U**i ∘ frame`` (§11.3); a missing direction is the identity."""
+    ident = Mobius.identity()
+    gs, counts = [], []
+    for name in ("U", "V", "W"):
+        d = data.get(name)
+        gs.append(ident if d is None else _mobius_from_entry(d, f"{where}.{name}"))
+        counts.append(1 if d is None else d.get("count", 1))
+    frame = _mobius_from_entry(data["frame"], f"{where}.frame") if "frame" in data else ident
+    return mobius_lattice(template, gs[0], gs[1], gs[2], tuple(counts), frame)
+
+
+def mobius_to_ir(gm: MobiusGroups, counts) -> dict:
+    """The ``"mobius"`` object of a Möbius lattice: each normalized matrix as written in memory
+    (every float exact in JSON) and the split its powers use, so that reading it back evaluates
+    to the same bits."""
+    def entry(g: Mobius, count=None) -> dict:
+        out = {} if count is None else {"count": int(count)}
+        out["matrix"] = _complex_matrix(g.m)
+        if g.split is not None:
+            s, mr = g.split
+            out["split"] = {"similarity": {"factor": float(s.factor), "angle": float(s.angle),
+                                           "axis": [float(x) for x in s.axis], "point": [float(x) for x in s.point],
+                                           "distance": float(s.distance)},
+                            "inversion": _complex_matrix(mr)}
+        return out
+
+    out = {name: entry(g, n) for name, g, n in (("U", gm.u, counts[0]), ("V", gm.v, counts[1]),
+                                                  ("W", gm.w, counts[2]))}
+    out["frame"] = entry(gm.frame)
     return out
 
 

@@ -35,7 +35,7 @@ SCHEMA: dict[str, dict[str, tuple[str, bool]]] = {
                 "U": ("@direction", False), "V": ("@direction", False), "W": ("@direction", False),
                 "placement": ("@transform", False), "becots": ("@becots", False), "description": ("text", False),
                 "meta": ("json", False), "filter": ("filter", False),
-                "grade": ("grade", False)},
+                "grade": ("grade", False), "mobius": ("@mobius", False)},
     "node": {"id": ("ref", False), "center": ("vec3", True), "radius": ("positive", True)},
     "beam": {"from": ("ref", True), "to": ("ref", True), "offset": ("offset", False)},
     "direction": {"count": ("count", False), "cumulative": ("bool", False), "matrix": ("matrix", False),
@@ -50,6 +50,15 @@ SCHEMA: dict[str, dict[str, tuple[str, bool]]] = {
               "apex": ("vec3", False), "axis": ("vec3", False), "u": ("number2", False), "v": ("number2", False)},
     "stack": {"layers": ("count", True), "nodes_per_layer": ("count", True), "step": ("vec3", True),
               "mode": ("stack_mode", False)},
+    # Möbius steady patterns (thesis §11.3): complex 2x2 matrices, each entry [re, im]
+    "mobius": {"U": ("@mobius_direction", False), "V": ("@mobius_direction", False),
+               "W": ("@mobius_direction", False), "frame": ("@mobius_frame", False)},
+    "mobius_direction": {"count": ("count", False), "matrix": ("complex_matrix", True),
+                         "split": ("@mobius_split", False)},
+    "mobius_frame": {"matrix": ("complex_matrix", True)},
+    "mobius_split": {"similarity": ("@canonical", True), "inversion": ("complex_matrix", True)},
+    "canonical": {"factor": ("positive", True), "angle": ("number", True), "axis": ("vec3", True),
+                  "point": ("vec3", True), "distance": ("number", True)},
 }
 LIST_LIMITS = {"node": MAX_NODES, "beam": MAX_BEAMS, "vec3": 4}
 
@@ -144,6 +153,11 @@ def _check_value(kind: str, x, where: str) -> None:
     elif kind == "text":
         if not isinstance(x, str) or len(x) > MAX_TEXT:
             _fail(where, f"expected a text of at most {MAX_TEXT:,} characters")
+    elif kind == "complex_matrix":
+        for r, row in enumerate(_list(x, where, 2, "rows")):
+            for c, v in enumerate(_list(row, f"{where}[{r}]", 2, "complex numbers [re, im]")):
+                for n, part in enumerate(_list(v, f"{where}[{r}][{c}]", 2, "numbers [re, im]")):
+                    _number(part, f"{where}[{r}][{c}][{n}]")
     elif kind == "matrix":
         for r, row in enumerate(_list(x, where, 4, "rows")):
             for c, v in enumerate(_list(row, f"{where}[{r}]", 4, "numbers")):

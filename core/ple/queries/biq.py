@@ -25,7 +25,7 @@ import numpy as np
 from ..algebra.elements import ball_ball_interfere, ball_beam_interfere, beam_distance
 from ..errors import PleError
 from ..model.lattice import Lattice
-from . import becots_rangefinder, pullback
+from . import becots_rangefinder, mobius_rangefinder, pullback
 from .hits import BIQResult, check_queries, split_hits
 from .rangefinder import cached_plan, lattice_any, lattice_hits
 
@@ -41,9 +41,9 @@ def query(lat: Lattice, centers, radii, method: str = "auto", beams: bool = True
     lat.validate()
     if method not in ("auto", "naive", "rangefinder"):
         raise PleError(f"method {method!r}: expected auto, naive or rangefinder")
-    if lat.group_map is not None:  # no steady rows: every element tested, O(elements) per query
-        node_hits, beam_hits = _naive_hits(lat, c, r, beams)
-        return split_hits(len(c), node_hits, beam_hits, "naive (group map)")
+    if lat.group_map is not None:  # Möbius lattices: the pre-image's RangeFinder where it is exact
+        found = _kept(lat, _group_map_hits(lat, c, r, method))
+        return found if beams else [BIQResult(x.nodes, x.beams[:0], x.path) for x in found]
     if lat.becots is not None and lat.radius_field is not None:
         method = "naive"  # the BeCOTS RangeFinder knows steady radii only
     if lat.becots is not None and method != "naive":
@@ -71,12 +71,29 @@ def any_hit(lat: Lattice, centers, radii) -> np.ndarray:
     """bool (q,): does each query ball interfere with any kept ball or beam of ``lat``?"""
     c, r = check_queries(centers, radii)
     lat.validate()
-    if lat.group_map is not None and lat.filter is None:  # no steady rows: the naive path
-        return naive_any(lat, c, r)
-    if lat.becots is not None or lat.filter is not None or lat.radius_field is not None:
+    if (lat.becots is not None or lat.filter is not None or lat.radius_field is not None
+            or lat.group_map is not None):
         res = query(lat, c, r)
         return np.array([len(x.nodes) > 0 or len(x.beams) > 0 for x in res], dtype=bool)
     return lattice_any(lat, c, r)
+
+
+def _group_map_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, method: str) -> list[BIQResult]:
+    """Groups placed by a map: the Möbius RangeFinder (``ple.queries.mobius_rangefinder``) where
+    its pre-image lattice exists, with the naive path for the queries it leaves; otherwise every
+    element is tested, O(elements) per query, and the path names why."""
+    pl = None if method == "naive" else mobius_rangefinder.cached_plan(lat)
+    if pl is None or pl.pre is None:
+        node_hits, beam_hits = _naive_hits(lat, c, r)
+        why = "" if pl is None else f": {pl.reason}"
+        return split_hits(len(c), node_hits, beam_hits, f"naive (group map{why})")
+    node_hits, beam_hits, rest, path = mobius_rangefinder.lattice_hits(lat, c, r, pl)
+    if rest.any():  # query balls around the inversion centre: tested against every element
+        ids = np.flatnonzero(rest)
+        nh, bh = _naive_hits(lat, c[ids], r[ids])
+        nh[:, 0], bh[:, 0] = ids[nh[:, 0]], ids[bh[:, 0]]
+        node_hits, beam_hits = np.concatenate([node_hits, nh]), np.concatenate([beam_hits, bh])
+    return split_hits(len(c), node_hits, beam_hits, f"mobius ({path})")
 
 
 def _kept(lat: Lattice, results: list[BIQResult]) -> list[BIQResult]:

@@ -16,14 +16,15 @@ T = TypeVar("T")
 
 
 def lattice_key(lat: Lattice) -> tuple:
-    """Everything a plan depends on: counts, similarities, template balls, beam-patterns and the
-    BeCOTS description (its objects are kept alive with the plan, so their ids stay unique)."""
+    """Everything a plan depends on: counts, similarities, template balls, beam-patterns, the
+    BeCOTS description and the group map (their objects are kept alive with the plan, so their
+    ids stay unique)."""
     mats = tuple(np.round(s.matrix, 15).tobytes() for s in (lat.U, lat.V, lat.W, lat.placement))
     info = lat.becots
     becots = (id(info), id(getattr(info, "field", None)), getattr(info, "counts", None),
               getattr(info, "closed", None), id(getattr(info, "stack", None)))
     return (lat.counts, mats, lat.template_centers.tobytes(), lat.template_radii.tobytes(),
-            tuple((b.n1, b.n2, b.di, b.dj, b.dk) for b in lat.beams), becots)
+            tuple((b.n1, b.n2, b.di, b.dj, b.dk) for b in lat.beams), becots, id(lat.group_map))
 
 
 def cached(lat: Lattice, backend: str, build: Callable[[Lattice], T]) -> T:
@@ -34,7 +35,7 @@ def cached(lat: Lattice, backend: str, build: Callable[[Lattice], T]) -> T:
     if hit is not None and hit[0] == key:
         return hit[1]
     plan = build(lat)
-    plans[backend] = (key, plan, lat.becots)
+    plans[backend] = (key, plan, (lat.becots, lat.group_map))
     return plan
 
 
