@@ -19,8 +19,7 @@ degenerate-junction tests use 4 levels and 1 % + 4σ).
 Random lattices are mostly *unclean* (crossing diagonals, thick balls): they go through the
 union path (manifold3d's local unions), 0.1–13 s per lattice (both styles); this test classifies
 them (the hub templates and the detector run, no traceback) and unites nine fixed ones in
-``test_unclean_random_lattices_are_united``, two of which the unions still refuse with a PleError
-(xfail; ``PLE_RANDOM_LATTICES=all`` unites every one).
+``test_unclean_random_lattices_are_united`` (``PLE_RANDOM_LATTICES=all`` unites every one).
 """
 
 from __future__ import annotations
@@ -116,13 +115,9 @@ def test_random_steady_lattices_mesh_or_say_why(first):
     assert all(any(why in k for why in KNOWN) for k in errors), errors
 
 
-REFUSED = "the local unions refuse it (a clear PleError, no mesh): "
-UNCLEAN = [1, 8, 16, 23, 29, 35, 36,  # unclean lattices the union path meshes in about a second
-           pytest.param(14, marks=pytest.mark.xfail(reason=REFUSED + "3 self-intersecting face pairs left on "
-                                                    "the float32 grid (was: a ring changed by its union)",
-                                                    strict=False)),
-           pytest.param(27, marks=pytest.mark.xfail(reason=REFUSED + "4 self-intersecting face pairs left on "
-                                                    "the float32 grid", strict=False))]
+UNCLEAN = [1, 8, 14, 16, 23, 27, 29, 35, 36]  # unclean lattices the union path meshes in about a second
+# (14 and 27 were refused until the ring polygons, which the union is opened along, were left out
+# of on_grid's checks)
 
 
 @pytest.mark.parametrize("seed", UNCLEAN)
