@@ -25,9 +25,11 @@ from __future__ import annotations
 import itertools
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
+import time
 
 import numpy as np
 
@@ -104,6 +106,9 @@ def add_arguments(p) -> None:
                    help="comma-separated case names (fig6_3, curved, crossing, tenth) or all (default)")
     p.add_argument("--union-timeout", type=float, default=600.0,
                    help="seconds after which the manifold3d baseline is stopped (default 600)")
+    p.add_argument("--union-memory", type=float, default=12.0,
+                   help="GB of address space the manifold3d baseline may take before it is stopped (default 12: "
+                        "half this machine; the speed-up is then a lower bound)")
     p.add_argument("--scale", type=float, default=100.0,
                    help="every case's n in percent of its size (default 100: the issue's sizes)")
 
@@ -170,14 +175,26 @@ def stream_estimate(lat, style: str, levels: int, report) -> float:
     return evaluation_bytes(lat, r) + 2 * box + (report.union_bytes if report is not None else 0)
 
 
-def _run(code: str, args: list, timeout: float | None = None) -> dict:
+def _run(code: str, args: list, timeout: float | None = None, memory: float | None = None) -> dict:
+    """``code`` in a fresh Python process; its JSON line, or why there is none. ``memory``: bytes
+    of address space the process may take (``RLIMIT_AS``): a baseline that would take more than
+    the machine has is stopped there, with the CPU seconds it had spent (a lower bound)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    limit = None if memory is None else (lambda: resource.setrlimit(resource.RLIMIT_AS, (int(memory), int(memory))))
     try:
         proc = subprocess.run([sys.executable, "-c", code, *map(str, args)], capture_output=True, text=True,
-                              timeout=timeout)
+                              timeout=timeout, preexec_fn=limit)
     except subprocess.TimeoutExpired:
         return {"timeout": timeout}
     if proc.returncode:
-        return {"error": (proc.stderr.strip().splitlines() or [f"exit {proc.returncode}"])[-1]}
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        out = {"error": (proc.stderr.strip().splitlines() or [f"exit {proc.returncode}"])[-1]}
+        if memory is not None:
+            cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+            out.update({"memory_limit_gb": memory / 1e9, "seconds_until_stopped": time.perf_counter() - t0,
+                        "cpu_seconds_until_stopped": cpu})
+        return out
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
@@ -194,14 +211,14 @@ def run(args) -> dict:
             if "seconds" in ours:
                 ours["triangles_per_s"] = ours["triangles"] / max(ours["seconds"], 1e-9)
                 ours["peak_over_estimate"] = ours["peak_rss_gb"] / max(ours["estimate_gb"], 1e-9)
-            base = _run(UNION, [name, n], args.union_timeout)
+            base = _run(UNION, [name, n], args.union_timeout, args.union_memory * 1e9)
             row["manifold3d_union"] = base
             if "seconds" in ours:
-                t = base.get("cpu_seconds", base.get("timeout"))
+                t = base.get("cpu_seconds", base.get("timeout", base.get("cpu_seconds_until_stopped")))
                 if t is not None:
                     row["cpu_speedup"] = t / max(ours["cpu_seconds"], 1e-9)
-                    row["speedup_is_lower_bound"] = "timeout" in base
+                    row["speedup_is_lower_bound"] = "cpu_seconds" not in base
             rows.append(row)
             print(json.dumps(row), file=sys.stderr, flush=True)
     return {"benchmark": "unclean", "machine": f"{os.cpu_count()} cores", "union_timeout_s": args.union_timeout,
-            "rows": rows}
+            "union_memory_gb": args.union_memory, "rows": rows}
