@@ -96,3 +96,29 @@ def test_literal_r_plus_is_the_farthest_crossing_of_tangent_lines():
         d = np.array([[1.0, 0, 0], [np.cos(psi), np.sin(psi), 0]])
         expect = max(1 / np.cos(psi / 2), 1 / np.sin(psi / 2))
         assert np.isclose(literal_r_plus(1.0, d, 1.0, 20.0), expect)
+
+
+def test_thesis_lil_method_draws_every_valid_fine_beam_once():
+    """Both end nodes of every valid fine beam (thesis §7.4: two BIQs per beam), against the evaluation."""
+    from ple.bench.lil import fine_beam_ends
+
+    fine = load_lattice("thesis_regular", {"n": 4})
+    idx, beams = fine_beam_ends(fine, 10**6, np.random.default_rng(0))
+    ev = fine.evaluate()
+    assert beams == fine.beam_count() == len(ev.beam_nodes) and len(idx) == 2 * beams
+    ni = ev.node_index
+    want = {tuple(sorted((tuple(ni[a]), tuple(ni[b])))) for a, b in ev.beam_nodes}
+    got = {tuple(sorted((tuple(a), tuple(b)))) for a, b in zip(idx[:beams].tolist(), idx[beams:].tolist())}
+    assert got == want
+
+
+def test_thesis_lil_method_rows_agree_across_paths():
+    """Every path of the thesis-method LiL finds the same queries with a hit (one worker, small sample)."""
+    from ple.bench.lil import thesis_method_rows
+
+    rows = thesis_method_rows(300, 300, 1, 3)
+    assert [r["case"].split()[0] for r in rows] == ["regular", "cylindrical", "semi-regular"]
+    for row in rows:
+        hits = {p: v["queries_with_a_hit"] for p, v in row["ours"].items()}
+        assert len(set(hits.values())) == 1, hits
+        assert row["biqs"] == 2 * row["fine_beams"]
