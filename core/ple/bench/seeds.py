@@ -69,6 +69,7 @@ def add_arguments(p) -> None:
     p.add_argument("--skip-lil", action="store_true", help="only Table 7.2, pure BIQs and Fig. 21")
     p.add_argument("--skip-fig21-definitions", action="store_true",
                    help="skip Fig. 21 recomputed from the paper's definitions (~1 min)")
+    p.add_argument("--skip-fig93", action="store_true", help="skip Fig. 9.3's beam count at 138³ (~2–3 min)")
     p.add_argument("--seed", type=int, default=2024)
 
 
@@ -313,6 +314,45 @@ def fig_21_definitions(rhos=(0.5, 1.0, 2.0, 4.0), length: float = 20.0) -> dict:
     return out
 
 
+# thesis Fig. 9.3: a fine lattice of 138³ groups filtered by two coarse lattices (not given) keeps
+# 1,494,074 beams
+FIG_9_3_BEAMS = 1_494_074
+
+
+def fig_9_3(n: int = 138, steps: int = 24) -> dict:
+    """Fig. 9.3's beam count with the ``hier_lil3`` preset at n³ groups.
+
+    The thesis gives neither coarse lattice, so its count fixes at most one number of a chosen
+    family. The kept beams grow with each radius (a larger coarse element interferes with every
+    ball it did before), so bisections meet the count or end at the step across it: first the
+    medium radius with the coarse balls at the preset's largest radius (12); then, from the
+    medium radius just above that step, the coarse radius."""
+    def kept(medium: float, coarse: float) -> int:
+        lat = load_lattice("hier_lil3", {"n": n, "medium_radius": medium, "coarse_radius": coarse})
+        return int(len(lat.evaluate().beam_index))
+
+    def bisect(f, lo, hi, tol) -> dict:
+        k_lo, k_hi = f(lo), f(hi)
+        evals = [(lo, k_lo), (hi, k_hi)]
+        while k_lo < FIG_9_3_BEAMS < k_hi and hi - lo > tol and len(evals) < steps + 2:
+            mid = 0.5 * (lo + hi)
+            k = f(mid)
+            evals.append((mid, k))
+            lo, k_lo, hi, k_hi = (mid, k, hi, k_hi) if k < FIG_9_3_BEAMS else (lo, k_lo, mid, k)
+        hit = [x for x, k in evals if k == FIG_9_3_BEAMS]
+        return {"exact": hit[0] if hit else None, "bracket": [lo, hi], "beams": [k_lo, k_hi], "evaluations": evals}
+
+    fine = load_lattice("hier_lil3", {"n": n})
+    out = {"n": n, "fine_beams": fine.beam_count(), "thesis_beams": FIG_9_3_BEAMS,
+           "preset_defaults_beams": int(len(fine.evaluate().beam_index))}
+    out["medium_radius_search"] = med = bisect(lambda m: kept(m, 12.0), 0.2, 2.0, 1e-3)
+    if med["exact"] is None:
+        m = med["bracket"][1]
+        out["coarse_radius_search"] = crs = bisect(lambda c: kept(m, c), 1.0, 12.0, 1e-6)
+        crs["medium_radius"] = m
+    return out
+
+
 def _hub_volume(tpl) -> float:
     """Volume of a hub mesh closed by its cap disks (divergence theorem)."""
     faces = np.concatenate([tpl.faces] + list(tpl.caps))
@@ -337,6 +377,8 @@ def run(args) -> dict:
            "fig_21_theirs": FIG_21}
     if not args.skip_fig21_definitions:
         out["fig_21_definitions"] = fig_21_definitions()
+    if not args.skip_fig93:
+        out["fig_9_3"] = fig_9_3()
     if not args.skip_lil:
         out["table_7_1_and_rangefinder_table_1"] = lil_tables(args)
     return out
