@@ -116,7 +116,7 @@ def test_thesis_lil_method_rows_agree_across_paths():
     """Every path of the thesis-method LiL finds the same queries with a hit (one worker, small sample)."""
     from ple.bench.lil import thesis_method_rows
 
-    rows = thesis_method_rows(300, 300, 1, 3)
+    rows = thesis_method_rows(300, 300, 1, 3, full=())
     assert [r["case"].split()[0] for r in rows] == ["regular", "cylindrical", "semi-regular"]
     for row in rows:
         hits = {p: v["queries_with_a_hit"] for p, v in row["ours"].items()}
