@@ -10,11 +10,14 @@
   forced; timed on ``--lil-sample`` fine nodes and extrapolated to all. The semi-regular case
   runs at the thesis' 75³ (Fig. 7.9) and at the paper's 64³ (Fig. 12), each beside its source.
 - Fig. 21 (CHoCC paper): junction volume fractions of CHoCC, CNT and the 1- and 2-level refined
-  hubs relative to the chopped inflated ball, for three junctions like the figure's; ours are
-  measured on our hub meshes (the figure's exact beam directions are not given). The search
-  (``fig_21_search``) asks which setup reproduces the figure's top row: 8 beam directions (cube
-  corners or the square antiprism), cone-beams of end radius ρ at distance 20, r⁺ forced to
-  a multiple of the ball radius, new vertices projected onto the lattice or onto the ball alone.
+  hubs relative to the chopped inflated ball, for two junctions like the figure's (its beams
+  are not given); ``fig_21_definitions`` recomputes the top row from §5–6's definitions, one
+  figure number inverted and none searched: the columns that depend on the caps alone, the cap
+  angle the figure's CHoCC column implies and the CNT it then predicts, the refined columns at that angle
+  projected onto the lattice and onto the ball, and r⁺ read literally from §5.
+- Fig. 9.3 (thesis): the beam count of a compound LiL at 138³ on the ``hier_lil3`` preset,
+  searched over its medium and coarse radii (the thesis gives neither coarse lattice).
+- Table 7.1 by the thesis' own method (two BIQs per fine beam): ``ple bench lil``.
 """
 
 from __future__ import annotations
@@ -265,7 +268,8 @@ def _r_plus_for(d, rho, length, goal, value) -> float:
 
 
 def fig_21_definitions(rhos=(0.5, 1.0, 2.0, 4.0), length: float = 20.0) -> dict:
-    """Fig. 21's top row recomputed from §5–6's definitions, nothing fitted to the figure's four numbers.
+    """Fig. 21's top row recomputed from §5–6's definitions; of the figure's numbers only the CHoCC
+    column is used (inverted to a cap angle), no grid is searched.
 
     1. ``stated``: the minimal r⁺ (the definition) for each direction set and beam end radius ρ
        (ball 1, other ball at ``length``): neighbouring caps touch, so the CHoCC and CNT columns
