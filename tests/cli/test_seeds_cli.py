@@ -45,7 +45,7 @@ def test_eval_info_mesh_biq_on_a_tmi_slab(tmp_path, capsys):
 
 def test_bench_seeds_runs_small(capsys):
     assert main(["bench", "seeds", "--queries", "3", "--naive-queries", "1", "--skip-lil",
-                 "--skip-fig21-definitions"]) == 0
+                 "--skip-fig21-definitions", "--skip-fig93"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert {r["lattice"] for r in out["table_7_2"]} == {"thesis_regular", "thesis_cylindrical", "thesis_warped"}
     for row in out["table_7_2"]:
@@ -122,3 +122,16 @@ def test_thesis_lil_method_rows_agree_across_paths():
         hits = {p: v["queries_with_a_hit"] for p, v in row["ours"].items()}
         assert len(set(hits.values())) == 1, hits
         assert row["biqs"] == 2 * row["fine_beams"]
+
+
+def test_hier_lil3_reaches_fig_9_3s_size_and_its_counts_grow_with_the_radii():
+    """The slider takes n = 138 (thesis Fig. 9.3: 138³ groups); a larger medium or coarse radius
+    never keeps fewer beams, which is what the bisections of ``fig_9_3`` rest on."""
+    from ple.bench.seeds import fig_9_3
+
+    assert load_lattice("hier_lil3", {"n": 138}).beam_count() == 3 * 137 * 138 * 138
+    out = fig_9_3(n=17, steps=2)
+    counts = [k for _, k in sorted(out["medium_radius_search"]["evaluations"])]
+    assert counts == sorted(counts) and counts[0] < counts[-1] <= out["fine_beams"]
+    counts = [k for _, k in sorted(out["coarse_radius_search"]["evaluations"])]
+    assert counts == sorted(counts)

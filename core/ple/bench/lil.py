@@ -18,6 +18,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -27,7 +28,7 @@ from ..filters.base import FilteredLattice
 from ..filters.implicit import FourierField, ImplicitFilter, TPMSField, sample_grid
 from ..filters.lil import lil
 from ..program.sources import load_lattice
-from ..queries.biq import _naive_hits
+from ..queries.biq import query
 from ..queries.rangefinder import PATH_ORDER, cached_plan, lattice_hits
 from ._timing import best_of
 
@@ -237,14 +238,15 @@ def _biq_chunk(job) -> tuple[float, float, int]:
     what one thread of its own would take, wall seconds include waiting for a core."""
     coarse_name, cparams, c, r, path = job
     coarse = load_lattice(coarse_name, cparams)
-    if path == "naive":
-        _naive_hits(coarse, c[:1], r[:1])
+    if path == "naive":  # every coarse element per query (ple.biq.query's naive method)
+        query(coarse, c[:1], r[:1], method="naive")
         t0, p0 = time.perf_counter(), time.process_time()
-        nh, bh = _naive_hits(coarse, c, r)[:2]
-    else:
-        lattice_hits(coarse, c[:1], r[:1], path=path)
-        t0, p0 = time.perf_counter(), time.process_time()
-        nh, bh, _ = lattice_hits(coarse, c, r, path=path)
+        found = query(coarse, c, r, method="naive")
+        sec, cpu = time.perf_counter() - t0, time.process_time() - p0
+        return sec, cpu, sum(bool(len(q.nodes) or len(q.beams)) for q in found)
+    lattice_hits(coarse, c[:1], r[:1], path=path)
+    t0, p0 = time.perf_counter(), time.process_time()
+    nh, bh, _ = lattice_hits(coarse, c, r, path=path)
     sec, cpu = time.perf_counter() - t0, time.process_time() - p0
     hit = np.zeros(len(c), bool)
     for h in (nh, bh):
@@ -256,8 +258,6 @@ def thesis_method_rows(sample: int, naive_sample: int, workers: int, seed: int, 
     """Table 7.1 by the thesis' method: two BIQs per valid fine beam against the coarse lattice,
     every path, ``workers`` processes; the paths in ``full`` on every beam, the others timed on
     ``sample`` beams and extrapolated to all beams."""
-    from concurrent.futures import ProcessPoolExecutor
-
     rng = np.random.default_rng(seed)
     rows = []
     with ProcessPoolExecutor(workers) as pool:
