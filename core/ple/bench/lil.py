@@ -41,14 +41,18 @@ CASES = [
     ("semiregular", "thesis_regular", {"n": 64}, "lil_semiregular_coarse", 352.0, "RangeFinder paper Table 1"),
 ]
 
-# thesis Table 7.1 (s, 8 threads, i7-7700K, Java): two BIQs per fine beam (§7.4), Fig. 7.9's LiLs
+# thesis Table 7.1 (s, 8 threads, i7-7700K, Java) and RangeFinder paper Table 1 (min, 8 threads,
+# i7-6820HQ): two BIQs per fine beam (thesis §7.4, paper §7), the LiLs of thesis Fig. 7.9 / paper Fig. 12
 TABLE_7_1 = [
+    # case, fine preset, fine params, coarse preset, coarse params, thesis {path: s}, paper {path: min}
     ("regular 75³ / 9³", "thesis_regular", {}, "lil_regular_coarse", {},
-     {"naive": 427.0, "uv": 95.5, "u": 13.7, "1": 3.44}),
+     {"naive": 427.0, "uv": 95.5, "u": 13.7, "1": 3.44}, {"naive": 10.3, "uv": 2.20, "u": 0.31, "1": 0.067}),
     ("cylindrical 32×128×128 / 5×17×9", "thesis_cylindrical", {}, "lil_cylindrical_coarse", {},
-     {"naive": 1480.0, "uv": 239.0, "u": 22.3}),
+     {"naive": 1480.0, "uv": 239.0, "u": 22.3}, {"naive": 37.2, "uv": 5.98, "u": 0.541}),
     ("semi-regular 75³ / 8³", "thesis_regular", {}, "lil_semiregular_coarse", {"span": 74.0},
-     {"naive": 869.0, "uv": 266.0}),
+     {"naive": 869.0, "uv": 266.0}, {}),
+    ("semi-regular 64³ / 8³", "thesis_regular", {"n": 64}, "lil_semiregular_coarse", {},
+     {}, {"naive": 19.10, "uv": 5.87}),
 ]
 THESIS_THREADS = 8
 
@@ -261,7 +265,7 @@ def thesis_method_rows(sample: int, naive_sample: int, workers: int, seed: int, 
     rng = np.random.default_rng(seed)
     rows = []
     with ProcessPoolExecutor(workers) as pool:
-        for case, fine_name, fparams, coarse_name, cparams, theirs in TABLE_7_1:
+        for case, fine_name, fparams, coarse_name, cparams, theirs, paper in TABLE_7_1:
             fine, coarse = load_lattice(fine_name, fparams), load_lattice(coarse_name, cparams)
             idx, beams = fine_beam_ends(fine, sample, rng)
             c, r = fine.node_balls(idx)
@@ -294,10 +298,13 @@ def thesis_method_rows(sample: int, naive_sample: int, workers: int, seed: int, 
                 "biqs": biqs, "workers": workers, "ours": ours,
                 "thesis_seconds_8_threads": theirs,
                 "thesis_us_per_biq_per_thread": {k: v * THESIS_THREADS / biqs * 1e6 for k, v in theirs.items()},
+                "rangefinder_table_1_seconds_8_threads": {k: 60.0 * v for k, v in paper.items()},
+                "rangefinder_us_per_biq_per_thread": {k: 60.0 * v * THESIS_THREADS / biqs * 1e6
+                                                      for k, v in paper.items()},
                 "note": "ours: every fine beam where all_biqs_run, else a random sample of fine beams (both "
                         "end balls each) extrapolated to all; per BIQ the wall and the CPU time inside the BIQs "
                         "summed over the processes (CPU: what an unshared core would take). "
-                        "thesis: Table 7.1 total on 8 threads, per BIQ = total x 8 / BIQs."})
+                        "thesis / paper: Table 7.1 / Table 1 total on 8 threads, per BIQ = total x 8 / BIQs."})
     return rows
 
 
