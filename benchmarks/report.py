@@ -80,6 +80,24 @@ def lil_section(d) -> list[str]:
         out.append(f"| {r['case']}{': ' + label if label else ''} | {r['seconds']:.3f} s | "
                    f"{'–' if thesis is None else f'{thesis} s{src}'} | {_n(r.get('nodes_kept'))} | "
                    f"{_n(r.get('beams_kept'))} | {'–' if base is None else f'{base:.3f} s'} |")
+    thesis = [r for r in d.get("rows", []) if "thesis_us_per_biq_per_thread" in r]
+    if thesis:
+        out += ["", "Thesis Table 7.1 by its own method: two BIQs per valid fine beam against the coarse lattice, "
+                f"{thesis[0]['workers']} processes; paths marked \"all\" ran every BIQ, the others a sample "
+                "extrapolated to all. Ours per BIQ in CPU µs; theirs = the total × 8 threads ÷ BIQs (thesis "
+                "Table 7.1, i7-7700K; RangeFinder paper Table 1, i7-6820HQ).", "",
+                "| case | BIQs | path | ours, CPU µs a BIQ | thesis / paper, µs a BIQ per thread | ours, CPU s per "
+                "process | thesis / paper, 8 threads |", "|---|---|---|---|---|---|---|"]
+        g = lambda d, k, f: "–" if k not in d else format(d[k], f)  # noqa: E731
+        for r in thesis:
+            t, p = r["thesis_us_per_biq_per_thread"], r.get("rangefinder_us_per_biq_per_thread", {})
+            ts, ps = r["thesis_seconds_8_threads"], r.get("rangefinder_table_1_seconds_8_threads", {})
+            for path, v in r["ours"].items():
+                run = "all" if v["all_biqs_run"] else "extrap."
+                out.append(f"| {r['case']} | {r['biqs']:,} | {path} | {v['cpu_us_per_biq']:.3g} | "
+                           f"{g(t, path, '.3g')} / {g(p, path, '.3g')} | "
+                           f"{v['extrapolated_cpu_seconds_on_workers']:.3g} s ({run}) | "
+                           f"{g(ts, path, '.4g')} s / {g(ps, path, '.4g')} s |")
     return out + ["", "Raw JSON (with the 10⁸-beam streaming run when `--big` is given): "
                   "`benchmarks/results/lil.json`.", ""]
 

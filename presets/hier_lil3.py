@@ -3,7 +3,7 @@
 import math
 
 
-def lattice(n: Range(8, 80) = 40, fine_radius: Range(0.02, 0.2) = 0.08, medium_radius: Range(0.2, 2.0) = 0.7,
+def lattice(n: Range(8, 160) = 40, fine_radius: Range(0.02, 0.2) = 0.08, medium_radius: Range(0.2, 2.0) = 0.7,
             coarse_radius: Range(1.0, 12.0) = 7.0):
     fine = Lattice()
     a = fine.add_node(Pt(0, 0, 0), fine_radius)

@@ -45,7 +45,7 @@ def test_eval_info_mesh_biq_on_a_tmi_slab(tmp_path, capsys):
 
 def test_bench_seeds_runs_small(capsys):
     assert main(["bench", "seeds", "--queries", "3", "--naive-queries", "1", "--skip-lil",
-                 "--skip-fig21-search"]) == 0
+                 "--skip-fig21-definitions", "--skip-fig93"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert {r["lattice"] for r in out["table_7_2"]} == {"thesis_regular", "thesis_cylindrical", "thesis_warped"}
     for row in out["table_7_2"]:
@@ -69,4 +69,69 @@ def test_fig_21_fractions_rest_on_a_chopped_ball_measured_by_monte_carlo():
     assert abs(_chopped_ball_volume(hub) - mc) < 4 * (2 * hub.r_plus) ** 3 * np.sqrt(keep.mean() / len(p))
     r_plus, f = _fractions(d, 4.0, 20.0, 4.5, "ball")
     assert r_plus == hub.r_plus and f[0] > f[1] > f[2]  # CHoCC > CNT > refined, as in the figure
-    assert abs(f[2] - 0.300) < 0.02  # the paper's top row, 1-level (see docs/performance.md)
+
+
+def test_fig_21_chocc_and_cnt_columns_depend_on_the_caps_alone():
+    """At §5's minimal r⁺ evenly spread caps touch: the CHoCC and CNT fractions are the same for
+    every beam end radius (the figure does not give its beams), and equal caps give equal fractions."""
+    from ple.bench.seeds import _directions, _fractions
+    from ple.meshing.achocc import hub_geometry
+
+    for d in _directions().values():
+        a = _fractions(d, 0.5, 20.0, 0.0, "lattice")[1]
+        b = _fractions(d, 4.0, 20.0, 0.0, "lattice")[1]
+        assert np.allclose(a[:2], b[:2], atol=2e-3) and not np.allclose(a[2:], b[2:], atol=2e-3)
+        alpha = hub_geometry(1.0, d, np.full(8, 1.0), np.full(8, 20.0), r_plus_min=2.5).alphas[0]
+        rp = 1.0 / np.sin(alpha)  # a cylinder (end radius 1) meets the sphere of radius r⁺ at sin α = 1 / r⁺
+        assert np.isclose(rp, hub_geometry(1.0, d, np.full(8, 1.0), np.full(8, 20.0), r_plus_min=2.5).r_plus)
+
+
+def test_literal_r_plus_is_the_farthest_crossing_of_tangent_lines():
+    """Every profile line of a cone-beam is tangent to the ball, so two cross at r / cos(ψ/2), ψ the
+    angle between their normals; for cylinders the non-facing pair of two beams ψ degrees apart
+    crosses at r / cos(ψ/2) and the facing pair at r / sin(ψ/2)."""
+    from ple.bench.seeds import literal_r_plus
+
+    for psi in (1.2, 1.9, 2.5):
+        d = np.array([[1.0, 0, 0], [np.cos(psi), np.sin(psi), 0]])
+        expect = max(1 / np.cos(psi / 2), 1 / np.sin(psi / 2))
+        assert np.isclose(literal_r_plus(1.0, d, 1.0, 20.0), expect)
+
+
+def test_thesis_lil_method_draws_every_valid_fine_beam_once():
+    """Both end nodes of every valid fine beam (thesis §7.4: two BIQs per beam), against the evaluation."""
+    from ple.bench.lil import fine_beam_ends
+
+    fine = load_lattice("thesis_regular", {"n": 4})
+    idx, beams = fine_beam_ends(fine, 10**6, np.random.default_rng(0))
+    ev = fine.evaluate()
+    assert beams == fine.beam_count() == len(ev.beam_nodes) and len(idx) == 2 * beams
+    ni = ev.node_index
+    want = {tuple(sorted((tuple(ni[a]), tuple(ni[b])))) for a, b in ev.beam_nodes}
+    got = {tuple(sorted((tuple(a), tuple(b)))) for a, b in zip(idx[:beams].tolist(), idx[beams:].tolist())}
+    assert got == want
+
+
+def test_thesis_lil_method_rows_agree_across_paths():
+    """Every path of the thesis-method LiL finds the same queries with a hit (one worker, small sample)."""
+    from ple.bench.lil import thesis_method_rows
+
+    rows = thesis_method_rows(300, 300, 1, 3, full=())
+    assert [r["case"].split()[0] for r in rows] == ["regular", "cylindrical", "semi-regular", "semi-regular"]
+    for row in rows:
+        hits = {p: v["queries_with_a_hit"] for p, v in row["ours"].items()}
+        assert len(set(hits.values())) == 1, hits
+        assert row["biqs"] == 2 * row["fine_beams"]
+
+
+def test_hier_lil3_reaches_fig_9_3s_size_and_its_counts_grow_with_the_radii():
+    """The slider takes n = 138 (thesis Fig. 9.3: 138³ groups); a larger medium or coarse radius
+    never keeps fewer beams, which is what the bisections of ``fig_9_3`` rest on."""
+    from ple.bench.seeds import fig_9_3
+
+    assert load_lattice("hier_lil3", {"n": 138}).beam_count() == 3 * 137 * 138 * 138
+    out = fig_9_3(n=17, steps=2)
+    counts = [k for _, k in sorted(out["medium_radius_search"]["evaluations"])]
+    assert counts == sorted(counts) and counts[0] < counts[-1] <= out["fine_beams"]
+    counts = [k for _, k in sorted(out["coarse_radius_search"]["evaluations"])]
+    assert counts == sorted(counts)

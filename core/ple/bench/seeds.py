@@ -10,11 +10,14 @@
   forced; timed on ``--lil-sample`` fine nodes and extrapolated to all. The semi-regular case
   runs at the thesis' 75³ (Fig. 7.9) and at the paper's 64³ (Fig. 12), each beside its source.
 - Fig. 21 (CHoCC paper): junction volume fractions of CHoCC, CNT and the 1- and 2-level refined
-  hubs relative to the chopped inflated ball, for three junctions like the figure's; ours are
-  measured on our hub meshes (the figure's exact beam directions are not given). The search
-  (``fig_21_search``) asks which setup reproduces the figure's top row: 8 beam directions (cube
-  corners or the square antiprism), cone-beams of end radius ρ at distance 20, r⁺ forced to
-  a multiple of the ball radius, new vertices projected onto the lattice or onto the ball alone.
+  hubs relative to the chopped inflated ball, for two junctions like the figure's (its beams
+  are not given); ``fig_21_definitions`` recomputes the top row from §5–6's definitions, one
+  figure number inverted and none searched: the columns that depend on the caps alone, the cap
+  angle the figure's CHoCC column implies and the CNT it then predicts, the refined columns at that angle
+  projected onto the lattice and onto the ball, and r⁺ read literally from §5.
+- Fig. 9.3 (thesis): the beam count of a compound LiL at 138³ on the ``hier_lil3`` preset,
+  searched over its medium and coarse radii (the thesis gives neither coarse lattice).
+- Table 7.1 by the thesis' own method (two BIQs per fine beam): ``ple bench lil``.
 """
 
 from __future__ import annotations
@@ -67,7 +70,9 @@ def add_arguments(p) -> None:
     p.add_argument("--lil-sample", type=int, default=20000, help="fine nodes timed per LiL path (default 20000)")
     p.add_argument("--lil-naive-sample", type=int, default=200, help="fine nodes timed on the naive LiL path")
     p.add_argument("--skip-lil", action="store_true", help="only Table 7.2, pure BIQs and Fig. 21")
-    p.add_argument("--skip-fig21-search", action="store_true", help="skip the search for Fig. 21's setup (~80 s)")
+    p.add_argument("--skip-fig21-definitions", action="store_true",
+                   help="skip Fig. 21 recomputed from the paper's definitions (~1 min)")
+    p.add_argument("--skip-fig93", action="store_true", help="skip Fig. 9.3's beam count at 138³ (~4–6 min)")
     p.add_argument("--seed", type=int, default=2024)
 
 
@@ -215,27 +220,146 @@ def _fractions(d, rho, length, r_plus, onto) -> tuple[float, list[float]]:
     return hub.r_plus, out
 
 
-def fig_21_search() -> list[dict]:
-    """Best fit of Fig. 21's top row per (directions, projection) over ρ and r⁺ (stated grid)."""
-    theirs = np.array([FIG_21["8 beams, even"][k] for k in ("chocc", "cnt", "refined_1", "refined_2")])
+def _directions() -> dict:
+    """The two 8-direction sets that spread beams evenly: cube corners (the BCC centre node's
+    beams) and the square antiprism."""
     cube = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float) / np.sqrt(3)
-    rows = []
-    for dname, d in (("cube corners", cube), ("square antiprism", _antiprism())):
-        for onto in ("lattice", "ball"):
-            best = None
-            for rho in (1.0, 2.0, 4.0):
-                for rp in np.arange(1.0, 6.01, 0.25):
-                    r_plus, f = _fractions(d, rho, 20.0, rp, onto)
-                    err = float(np.abs(np.array(f) - theirs).max())
-                    if best is None or err < best["max_abs_error"]:
-                        best = {"directions": dname, "projected_onto": onto, "end_radius": rho, "length": 20.0,
-                                "r_plus": r_plus, "minimal_r_plus": hub_geometry(1.0, d, np.full(8, rho),
-                                                                                  np.full(8, 20.0)).r_plus,
-                                "ours": dict(zip(("chocc", "cnt", "refined_1", "refined_2"),
-                                                                    np.round(f, 3).tolist())),
-                                "max_abs_error": err}
-            rows.append(best)
-    return rows
+    return {"cube corners": cube, "square antiprism": _antiprism()}
+
+
+def literal_r_plus(radius: float, dirs, other_radius: float, length: float) -> float:
+    """r⁺ of §5 read literally: the farthest crossing of *any* two profile lines of two incident
+    beams (each beam has two in the plane of the axes), behind the centre or not. Our
+    ``inflated_radius`` keeps only the facing profiles' crossing in front of the ball."""
+    s = (radius - other_radius) / length
+    c = np.sqrt(1 - s * s)
+    best = float(radius)
+    for a, b in zip(*np.triu_indices(len(dirs), 1)):
+        ct = float(np.clip(dirs[a] @ dirs[b], -1, 1))
+        st = np.sqrt(1 - ct * ct)
+        if st < 1e-9:
+            continue
+        for s1 in (1.0, -1.0):
+            for s2 in (1.0, -1.0):  # profile k: n_k . p = r in the 2D frame (x along beam a)
+                n = np.array([[s, s1 * c], [s * ct + s2 * c * st, s * st - s2 * c * ct]])
+                if abs(np.linalg.det(n)) > 1e-12:
+                    best = max(best, float(np.linalg.norm(np.linalg.solve(n, [radius, radius]))))
+    return best
+
+
+def _chocc_fraction(d, rho, length, r_plus) -> tuple[float, float]:
+    """(cap half-angle, CHoCC / chopped ball) of one junction (ball radius 1)."""
+    s = len(d)
+    ln, rr = np.full(s, float(length)), np.full(s, float(rho))
+    hub = hub_geometry(1.0, d, rr, ln, r_plus_min=r_plus)
+    v = _hub_volume(hub_template(np.zeros(3), 1.0, d * ln[:, None], rr, "chocc", 1, 128,
+                                 target=lambda _: hub_geometry(1.0, d, rr, ln, r_plus_min=r_plus)))
+    return float(hub.alphas[0]), v / _chopped_ball_volume(hub)
+
+
+def _r_plus_for(d, rho, length, goal, value) -> float:
+    """Bisection on r⁺ (≥ the minimal one): the r⁺ where ``value(r⁺)`` (decreasing) meets ``goal``."""
+    lo = hub_geometry(1.0, d, np.full(len(d), rho), np.full(len(d), length)).r_plus
+    hi = 4.0 * lo
+    for _ in range(24):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if value(mid) > goal else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def fig_21_definitions(rhos=(0.5, 1.0, 2.0, 4.0), length: float = 20.0) -> dict:
+    """Fig. 21's top row recomputed from §5–6's definitions; of the figure's numbers only the CHoCC
+    column is used (inverted to a cap angle), no grid is searched.
+
+    1. ``stated``: the minimal r⁺ (the definition) for each direction set and beam end radius ρ
+       (ball 1, other ball at ``length``): neighbouring caps touch, so the CHoCC and CNT columns
+       depend on the directions only, not on the beams the paper does not give.
+    2. ``caps_for_chocc``: the one cap half-angle α at which the CHoCC column is the figure's
+       0.893 (CHoCC and CNT depend on the caps alone), and the CNT column it then *predicts*.
+    3. ``refined_at_that_alpha``: at that α, every ρ, the refined columns with new vertices
+       projected onto the lattice (§6) and onto the ball alone; the figure's 0.300 / 0.292 lies
+       below every lattice projection.
+    4. ``literal_r_plus``: r⁺ from every crossing of two beams' profile lines (a literal reading
+       of §5), and the four columns it gives.
+    """
+    theirs = FIG_21["8 beams, even"]
+    out = {"theirs": theirs, "stated": [], "caps_for_chocc": [], "refined_at_that_alpha": [], "literal_r_plus": []}
+    keys = ("chocc", "cnt", "refined_1", "refined_2")
+    for dname, d in _directions().items():
+        for rho in rhos:
+            r_plus, f = _fractions(d, rho, length, 0.0, "lattice")
+            out["stated"].append({"directions": dname, "end_radius": rho, "r_plus": r_plus,
+                                  "ours": dict(zip(keys, np.round(f, 3).tolist()))})
+        rp = _r_plus_for(d, 1.0, length, theirs["chocc"], lambda x, d=d: _chocc_fraction(d, 1.0, length, x)[1])
+        alpha = _chocc_fraction(d, 1.0, length, rp)[0]
+        minimal = hub_geometry(1.0, d, np.full(8, 1.0), np.full(8, length))
+        _, f = _fractions(d, 1.0, length, rp, "lattice")
+        out["caps_for_chocc"].append({"directions": dname, "alpha_deg": float(np.degrees(alpha)),
+                                      "alpha_deg_at_minimal_r_plus": float(np.degrees(minimal.alphas[0])),
+                                      "chocc": round(f[0], 3), "cnt_predicted": round(f[1], 3),
+                                      "cnt_theirs": theirs["cnt"]})
+        for rho in rhos:
+            rp = _r_plus_for(d, rho, length, alpha,
+                             lambda x, d=d, rho=rho: float(hub_geometry(1.0, d, np.full(8, rho), np.full(8, length),
+                                                          r_plus_min=x).alphas[0]))
+            row = {"directions": dname, "end_radius": rho, "r_plus": rp}
+            for onto in ("lattice", "ball"):
+                _, f = _fractions(d, rho, length, rp, onto)
+                row[f"onto_{onto}"] = dict(zip(keys, np.round(f, 3).tolist()))
+            out["refined_at_that_alpha"].append(row)
+        for rho in rhos:
+            rp = literal_r_plus(1.0, d, rho, length)
+            row = {"directions": dname, "end_radius": rho, "r_plus": rp,
+                   "minimal_r_plus": hub_geometry(1.0, d, np.full(8, rho), np.full(8, length)).r_plus}
+            for onto in ("lattice", "ball"):
+                _, f = _fractions(d, rho, length, rp, onto)
+                row[f"onto_{onto}"] = dict(zip(keys, np.round(f, 3).tolist()))
+            out["literal_r_plus"].append(row)
+    return out
+
+
+# thesis Fig. 9.3: a fine lattice of 138³ groups filtered by two coarse lattices (not given) keeps
+# 1,494,074 beams
+FIG_9_3_BEAMS = 1_494_074
+
+
+def fig_9_3(n: int = 138, steps: int = 24) -> dict:
+    """Fig. 9.3's beam count with the ``hier_lil3`` preset at n³ groups.
+
+    The thesis gives neither coarse lattice, so its count fixes at most one number of a chosen
+    family. The kept beams grow with each radius (a larger coarse element interferes with every
+    ball it did before), so bisections meet the count or end at the step across it: first the
+    medium radius with the coarse balls at the preset's largest radius (12); then, from the
+    medium radius just above that step, the coarse radius; from the coarse radius just below its
+    step, the medium radius again."""
+    def kept(medium: float, coarse: float) -> int:
+        lat = load_lattice("hier_lil3", {"n": n, "medium_radius": medium, "coarse_radius": coarse})
+        return int(len(lat.evaluate().beam_index))
+
+    def bisect(f, lo, hi, tol) -> dict:
+        k_lo, k_hi = f(lo), f(hi)
+        evals = [(lo, k_lo), (hi, k_hi)]
+        while k_lo < FIG_9_3_BEAMS < k_hi and hi - lo > tol and len(evals) < steps + 2:
+            mid = 0.5 * (lo + hi)
+            k = f(mid)
+            evals.append((mid, k))
+            lo, k_lo, hi, k_hi = (mid, k, hi, k_hi) if k < FIG_9_3_BEAMS else (lo, k_lo, mid, k)
+        hit = [x for x, k in evals if k == FIG_9_3_BEAMS]
+        return {"exact": hit[0] if hit else None, "bracket": [lo, hi], "beams": [k_lo, k_hi], "evaluations": evals}
+
+    fine = load_lattice("hier_lil3", {"n": n})
+    out = {"n": n, "fine_beams": fine.beam_count(), "thesis_beams": FIG_9_3_BEAMS,
+           "preset_defaults_beams": int(len(fine.evaluate().beam_index))}
+    out["medium_radius_search"] = med = bisect(lambda m: kept(m, 12.0), 0.2, 2.0, 1e-3)
+    if med["exact"] is None:
+        m = med["bracket"][1]
+        out["coarse_radius_search"] = crs = bisect(lambda c: kept(m, c), 1.0, 12.0, 1e-6)
+        crs["medium_radius"] = m
+        if crs["exact"] is None:  # from the coarse radius just below its step, the medium radius again
+            c = crs["bracket"][0]
+            out["medium_radius_search_2"] = m2 = bisect(lambda x: kept(x, c), m, 2.0, 1e-6)
+            m2["coarse_radius"] = c
+    return out
 
 
 def _hub_volume(tpl) -> float:
@@ -260,8 +384,10 @@ def run(args) -> dict:
     out = {"benchmark": "seeds", "cpus": os.cpu_count(), "threads_ours": 1, "seed": args.seed,
            "table_7_2": rows72, "rangefinder_pure_biq": rangefinder_pure(rows72), "fig_21": fig_21(),
            "fig_21_theirs": FIG_21}
-    if not args.skip_fig21_search:
-        out["fig_21_search"] = fig_21_search()
+    if not args.skip_fig21_definitions:
+        out["fig_21_definitions"] = fig_21_definitions()
+    if not args.skip_fig93:
+        out["fig_9_3"] = fig_9_3()
     if not args.skip_lil:
         out["table_7_1_and_rangefinder_table_1"] = lil_tables(args)
     return out
