@@ -37,8 +37,10 @@ def _similarity_3x4(lin: np.ndarray, move: np.ndarray) -> np.ndarray:
     return np.column_stack([lin, move])
 
 
-def _leaf(m, comp, prim: Prim, balls, unit, segments: int):
-    """The manifold of one primitive from its balls (ca (3,), ra, cb (3,) or None, rb)."""
+def _leaf(m, comp, prim: Prim, balls, unit, segments: int, solids: dict):
+    """The manifold of one primitive from its balls (ca (3,), ra, cb (3,) or None, rb). ``solids``:
+    the nested materials' solids meshed so far (id of their compiled CLG -> manifold), each
+    meshed once and placed in every leaf that carries it."""
     ca, ra, cb, rb = balls
     ball_a = unit.scale([ra] * 3).translate(list(ca))
     if cb is None:
@@ -53,7 +55,9 @@ def _leaf(m, comp, prim: Prim, balls, unit, segments: int):
         raise PleError("a CLG whose material is a fitted field cannot be meshed by manifold3d; "
                        "use `ple clg voxels` (or slices, renders) instead")
     o, rot, f = frame_of(frame, ca[None], np.array([ra]), None if cb is None else cb[None])
-    inner = _solid_manifold(m, sub, segments).transform(_similarity_3x4(rot[0] * f[0], o[0]))
+    if id(sub) not in solids:
+        solids[id(sub)] = _solid_manifold(m, sub, segments, solids)
+    inner = solids[id(sub)].transform(_similarity_3x4(rot[0] * f[0], o[0]))
     return x ^ inner
 
 
@@ -90,11 +94,13 @@ def solid_triangles(comp, segments: int) -> float:
     return sum(chunk_triangles(comp, ci, segments) for ci in range(len(comp.names))) * r.groups
 
 
-def _solid_manifold(m, comp, segments: int, max_bytes: float | None = None):
-    unit = unit_ball(m, segments)
+def check_budget(comp, segments: int, max_bytes: float | None = None) -> None:
+    """Refuse, before any Boolean, a CLG whose mesh would be too large: a chunk of more than
+    ``MAX_TRIANGLES`` estimated triangles, or a solid (nested materials included,
+    ``solid_triangles``) needing more than ``max_bytes``. PleError naming the estimate."""
     r = comp.region if comp.region is not None else comp.lat.region(None)
     groups = r.groups  # counted before the groups are listed: a huge pattern is refused first
-    for ci in range(len(comp.names)):  # estimated before the template chunk is meshed
+    for ci in range(len(comp.names)):
         est = chunk_triangles(comp, ci, segments) * groups
         if est > MAX_TRIANGLES:
             raise PleError(f"chunk {comp.names[ci]!r}: about {est:.3g} triangles exceed the meshing limit "
@@ -103,17 +109,21 @@ def _solid_manifold(m, comp, segments: int, max_bytes: float | None = None):
         total = solid_triangles(comp, segments)
         require(total * CLG_TRIANGLE_BYTES, f"{total:.3g} triangles of the CLG mesh ({groups:,} groups, nested "
                 "materials included)", max_bytes, "use fewer groups or --segments")
+
+
+def _solid_manifold(m, comp, segments: int, solids: dict):
+    unit = unit_ball(m, segments)
     g = comp.groups()
     lin, move, _ = comp.copies(g) if comp.similar else (None, None, None)
     unions = []
     for ci in range(len(comp.names)):
         if comp.similar:  # one template chunk (group 0), placed by M_g ∘ G⁻¹ per copy
-            parts = [_leaf(m, comp, prim, _group0(comp, prim), unit, segments) for prim in comp.leaves[ci]]
+            parts = [_leaf(m, comp, prim, _group0(comp, prim), unit, segments, solids) for prim in comp.leaves[ci]]
             template = _expr(m, comp.trees[ci], parts)
             copies = [template.transform(_similarity_3x4(lin[n], move[n])) for n in range(len(g))]
         else:  # copies are not similar: each from the lattice's own nodes (ple.clg.steady)
             balls = comp.prim_balls(comp.leaves[ci], g)
-            copies = [_expr(m, comp.trees[ci], [_leaf(m, comp, prim, _one(b, n), unit, segments)
+            copies = [_expr(m, comp.trees[ci], [_leaf(m, comp, prim, _one(b, n), unit, segments, solids)
                                                  for prim, b in zip(comp.leaves[ci], balls)]) for n in range(len(g))]
         unions.append(m.Manifold.batch_boolean(copies, m.OpType.Add) if len(copies) > 1 else copies[0])
     return _expr(m, comp.solid, unions)
@@ -140,13 +150,19 @@ def mesh_clg(clg: CLG, segments: int = 32, region=None, max_bytes: float | None 
 
 def mesh_compiled(comp, segments: int = 32, max_bytes: float | None = None):
     """``mesh_clg`` of a compiled CLG (``ple.clg.query.Compiled``, its copies placed as it places them)."""
+    return trimesh.Trimesh(*mesh_arrays(comp, segments, max_bytes), process=False)
+
+
+def mesh_arrays(comp, segments: int = 32, max_bytes: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The CLG solid's mesh as arrays: vertices (V, 3) float64, faces (F, 3) int64 (what a child
+    process sends back, ``ple.program.meshes.mesh_clg_contained``). Budgeted first (``check_budget``)."""
     if segments < 8 or segments > 512:
         raise PleError(f"--segments {segments}: expected 8..512")
     m = _manifold()
-    solid = _solid_manifold(m, comp, segments, max_bytes)
-    out = solid.to_mesh()
+    check_budget(comp, segments, max_bytes)
+    out = _solid_manifold(m, comp, segments, {}).to_mesh()
     verts = np.asarray(out.vert_properties, float)[:, :3]
     faces = np.asarray(out.tri_verts, np.int64)
     if len(faces) == 0:
         raise PleError("the CLG solid is empty: nothing to mesh")
-    return trimesh.Trimesh(verts, faces, process=False)
+    return verts, faces
