@@ -455,3 +455,12 @@ def test_info_on_balls_overlapping_everything_is_bounded(tmp_path):
     if r.returncode == 2:
         assert_clean_failure(r)
     assert r.peak_rss < 2 << 30
+
+
+def test_check_of_balls_overlapping_everything_is_refused_before_testing(tmp_path, capsys):
+    (tmp_path / "big.py").write_text(BIG)
+    args = ["check", tmp_path / "big.py", "--param", "n=8", "--param", "radius=3"]
+    refused(args + ["--region", "0:8,0:8,0:8"], capsys, "candidate pairs", "--max-pairs")  # explicit elements
+    refused(args + ["--max-pairs", "1e5"], capsys, "candidate pairs", "--max-pairs")  # anchors of the steady path
+    refused(args + ["--max-pairs", "nan"], capsys, "--max-pairs")
+    assert run(["check", tmp_path / "big.py", "--param", "n=3", "--param", "radius=3"], capsys)[0] == 1
