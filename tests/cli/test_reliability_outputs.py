@@ -464,3 +464,25 @@ def test_check_of_balls_overlapping_everything_is_refused_before_testing(tmp_pat
     refused(args + ["--max-pairs", "1e5"], capsys, "candidate pairs", "--max-pairs")  # anchors of the steady path
     refused(args + ["--max-pairs", "nan"], capsys, "--max-pairs")
     assert run(["check", tmp_path / "big.py", "--param", "n=3", "--param", "radius=3"], capsys)[0] == 1
+
+
+def test_nested_clg_mesh_is_budgeted_before_any_boolean(tmp_path, capsys):
+    """Nested materials count whole in every leaf carrying one: 14³ groups of the beam-of-beams are
+    refused at once (they reached 2.7 GB under --max-memory 500M), and the estimate bounds the
+    real mesh of 2 × 2 × 2 groups."""
+    from ple.clg.ir import clg_from_dict
+    from ple.clg.query import compiled
+    from ple.meshing.clg import mesh_compiled, solid_triangles
+
+    doc = json.loads((CLG_PRESETS / "beam_of_beams.json").read_text())
+    doc["pattern"]["W"] = {"count": 14, "similarity": {"kind": "translation", "vector": [0, 0, 2]}}
+    for k in "UV":
+        doc["pattern"][k]["count"] = 14
+    (tmp_path / "n.json").write_text(json.dumps(doc))
+    refused(["clg", "mesh", tmp_path / "n.json", "--max-memory", "500M", "--out", tmp_path / "m.stl"], capsys,
+            "triangles", "use fewer groups")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["n.json"]
+    for k in "UVW":
+        doc["pattern"][k]["count"] = 2
+    comp = compiled(clg_from_dict(doc))
+    assert len(mesh_compiled(comp, 16).faces) <= solid_triangles(comp, 16)
