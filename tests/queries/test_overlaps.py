@@ -182,3 +182,22 @@ def test_a_check_of_elements_overlapping_everything_is_refused_before_testing():
         unclean_pairs(lat, path="steady", max_pairs=1e3)
     assert not unclean_pairs(lat, ev)["clean"]  # within the default limit
     assert unclean_pairs(lat, ev, first=True, max_pairs=1)["clean"] is False  # the quick look is bounded anyway
+
+
+def test_beam_pairs_certified_overlapping_agree_with_the_golden_section():
+    """Beam pairs whose axis balls overlap skip the gap search: gaps and overlap flags equal the
+    exact search's (``beam_beam_gap`` of the beams, and of the beams shrunk by the tolerance)."""
+    from ple.queries.overlaps import CLEAN_TOL
+
+    rng = np.random.default_rng(11)
+    n = 4000
+    a1, b1, a2, b2 = (rng.uniform(0, 2, (n, 3)) for _ in range(4))
+    ra1, rb1, ra2, rb2 = (rng.uniform(0.01, 0.4, n) for _ in range(4))
+    ones = np.ones(n, np.int64)
+    gap, over, _ = pair_gaps(ones, a1, ra1, (b1, rb1), ones, a2, ra2, (b2, rb2))
+    tol = CLEAN_TOL * np.max([ra1, rb1, ra2, rb2], axis=0)
+    want_gap = beam_beam_gap(a1, ra1, b1, rb1, a2, ra2, b2, rb2)
+    want_over = (want_gap <= 0) & (beam_beam_gap(a1, ra1 - tol, b1, rb1 - tol, a2, ra2 - tol, b2, rb2 - tol) <= 0)
+    assert 0.2 < over.mean() < 0.9  # both kinds present
+    np.testing.assert_array_equal(over, want_over)
+    np.testing.assert_allclose(gap, want_gap, atol=1e-12)

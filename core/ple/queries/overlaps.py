@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from ..algebra.elements import beam_beam_gap, beam_distance, enclosing_ball, segment_distance
+from ..algebra.elements import beam_beam_gap, beam_distance, enclosing_ball, segment_closest, segment_distance
 from ..algebra.similarity import commute
 from ..errors import PleError
 from ..model.lattice import Evaluation, Lattice
@@ -94,26 +94,44 @@ def pair_gaps(kind_a, ca, ra, ea, kind_b, cb, rb, eb, margin: float = math.inf):
         ee = np.zeros_like(ee)
         ee[near] = True
     if ee.any():
-        args = (ca[ee], ra[ee], ea[0][ee], ea[1][ee], cb[ee], rb[ee], eb[0][ee], eb[1][ee])
-        g = beam_beam_gap(*args)
-        gap[ee] = g
+        rows = np.nonzero(ee)[0]
+        args = (ca[rows], ra[rows], ea[0][rows], ea[1][rows], cb[rows], rb[rows], eb[0][rows], eb[1][rows])
+        # special case: the balls of both beams at their axes' closest points overlap by more than
+        # the tolerance, so the beams overlap (gap 0) without two golden-section searches per pair
+        # (the common case where elements overlap many others)
+        g = np.zeros(len(rows))
+        o = _surely_overlapping(*args, tol[rows])
+        ex = np.nonzero(~o)[0]
+        if len(ex):
+            sub = [x[ex] for x in args]
+            g[ex] = beam_beam_gap(*sub)
+            meet = ex[g[ex] <= 0]
+            if len(meet):  # overlap or touch: the beams shrunk by the tolerance still meet when they overlap
+                shrunk = [x[meet] - (tol[rows][meet] if i % 2 else 0) for i, x in enumerate(args)]
+                o[meet] = beam_beam_gap(*shrunk) <= 0
+        gap[rows], over[rows] = g, o
         meet = g <= 0
-        if meet.any():  # overlap or touch: the beams shrunk by the tolerance still meet when they overlap
-            shrunk = [x[meet] - (tol[ee][meet] if i % 2 else 0) for i, x in enumerate(args)]
-            over_ee = beam_beam_gap(*shrunk) <= 0
-            o = np.zeros(ee.sum(), bool)
-            o[meet] = over_ee
-            over[ee] = o
-            # depth estimate: how far the first beam's axis balls reach into the second beam
-            dep = np.zeros(ee.sum())
+        if meet.any():  # depth estimate: how far the first beam's axis balls reach into the second beam
+            dep = np.zeros(len(rows))
             t = np.linspace(0, 1, 17)[:, None]
             p = args[0][meet][None] + t[..., None] * (args[2][meet] - args[0][meet])[None]
             rr = args[1][meet][None] + t * (args[3][meet] - args[1][meet])[None]
             dep[meet] = np.max(rr - beam_distance(p, args[4][meet][None], args[5][meet][None], args[6][meet][None],
                                                   args[7][meet][None]), axis=0)
-            depth[ee] = dep
+            depth[rows] = dep
     depth = np.where(over, depth, 0.0)
     return gap, over, depth
+
+
+def _surely_overlapping(a1, ra1, b1, rb1, a2, ra2, b2, rb2, tol) -> np.ndarray:
+    """Cone-beam pairs that overlap by more than ``tol``, certified by one ball of each: a cone-beam
+    holds the ball (a + s (b − a), ra + s (rb − ra)) for every s in [0, 1], and at the closest points
+    of the two axes these balls, shrunk by ``tol``, intersect. False means only "not certified"."""
+    s, t = segment_closest(a1, b1, a2, b2)
+    p = a1 + s[:, None] * (b1 - a1)
+    q = a2 + t[:, None] * (b2 - a2)
+    r = ra1 + s * (rb1 - ra1) + ra2 + t * (rb2 - ra2)
+    return np.linalg.norm(p - q, axis=1) < r - 3 * tol
 
 
 # ----- explicit elements --------------------------------------------------------------------------------
@@ -172,18 +190,24 @@ def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float, split: int
     with ``split``, only pairs i < split <= j (boxes of a first set against a second). Each box
     (of the first set) is entered in every cell of a uniform grid (cell: the median box diagonal)
     it overlaps; a pair is reported by the one cell holding the larger of the two lower corners
-    (no duplicates). Yielded in blocks of about PAIR_CHUNK cell entries."""
+    (no duplicates). Yielded in blocks formed from about PAIR_CHUNK candidate pairs."""
     n = len(box_lo)
     if n < 2 or (split is not None and not 0 < split < n):
         return
     blo, bhi, lo, span, dims = _grid(box_lo, box_hi, margin)
-    per = np.prod(span, axis=1)
     first = 0 if split is None else split  # rows looked up in the table of rows [0, split or n)
     key_all, owner_all = _cell_entries(lo, span, dims, np.arange(n if split is None else split))
     sort = np.argsort(key_all, kind="stable")
     table = (key_all[sort], owner_all[sort])
-    bounds = first + np.searchsorted(np.cumsum(per[first:]), np.arange(0, int(per[first:].sum()),
-                                                                        max(1, PAIR_CHUNK // 32)), "right")
+    # blocks of rows forming about PAIR_CHUNK candidates each: a row forms one per entry of every
+    # cell it covers (where elements overlap many others, thousands a row)
+    starts = np.flatnonzero(np.diff(table[0], prepend=table[0][:1] - 1))  # the table is sorted: runs are cells
+    cells, counts = table[0][starts], np.diff(np.append(starts, len(table[0])))
+    key_q, owner_q = (key_all, owner_all) if split is None else _cell_entries(lo, span, dims, np.arange(first, n))
+    pos = np.minimum(np.searchsorted(cells, key_q), max(len(cells) - 1, 0))
+    formed = np.where(cells[pos] == key_q, counts[pos], 0) + 1 if len(cells) else np.ones(len(key_q))
+    cum = np.cumsum(np.bincount(owner_q - first, weights=formed, minlength=n - first))
+    bounds = first + np.searchsorted(cum, np.arange(0, cum[-1], PAIR_CHUNK), "right")
     edges = np.unique(np.concatenate([[first], bounds, [n]]))
     for start, stop in zip(edges[:-1], edges[1:]):
         key, owner = _cell_entries(lo, span, dims, np.arange(start, stop))
