@@ -1,6 +1,6 @@
-"""A signal stops `ple clg mesh` inside a long manifold3d Boolean, nested materials included: the
-Booleans run in a forked child (``ple.program.meshes.mesh_clg_contained``), which the command kills
-on its way out; nothing is left on disk and the user's previous file is intact."""
+"""A signal stops `ple clg mesh` (nested materials included) and `ple skin` inside a long manifold3d
+Boolean: the Booleans run in a forked child (``ple.program.meshes``), which the command kills on its
+way out; nothing is left on disk and the user's previous file is intact."""
 
 from __future__ import annotations
 
@@ -19,7 +19,8 @@ from tests.io.test_reliability_files import default_signals
 
 pytest.importorskip("manifold3d")
 
-PRESET = Path(__file__).resolve().parents[2] / "presets" / "clg" / "beam_of_beams.json"
+ROOT = Path(__file__).resolve().parents[2]
+PRESET = ROOT / "presets" / "clg" / "beam_of_beams.json"
 
 
 def _nested(tmp_path: Path) -> Path:
@@ -32,23 +33,25 @@ def _nested(tmp_path: Path) -> Path:
     return src
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
-def test_signal_during_a_clg_boolean_ends_the_mesh(tmp_path, sig):
-    src = _nested(tmp_path)
+def _interrupt(tmp_path: Path, args: list, sig) -> None:
+    """Run ``ple ARGS --out m.stl`` over a previous m.stl, signal it once its Booleans' child has
+    lived a second (a lattice program's child lives a moment), and check how it ended."""
     out = tmp_path / "m.stl"
     out.write_text("previous")
+    before = sorted(p.name for p in tmp_path.iterdir())
     ple = Path(sys.executable).parent / "ple"
-    proc = subprocess.Popen([str(ple), "clg", "mesh", str(src), "--max-memory", "8G", "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_signals)
+    proc = subprocess.Popen([str(ple), *map(str, args), "--out", str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, preexec_fn=default_signals)
     deadline = time.monotonic() + 120
-    while True:  # the Booleans' child, alive for a second: inside manifold3d by now
+    seen: dict = {}  # child pid -> first seen
+    while True:
         assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read() if proc.poll() else "no child"
-        kids = _children(proc.pid)
-        if kids:
-            child = kids[0]
-            time.sleep(1.0)
-            if os.path.exists(f"/proc/{child}"):
-                break
+        now = time.monotonic()
+        seen = {k: seen.get(k, now) for k in _children(proc.pid)}
+        old = [k for k, t in seen.items() if now - t > 1.0]
+        if old:
+            child = old[0]
+            break
         time.sleep(0.05)
     t0 = time.monotonic()
     proc.send_signal(sig)
@@ -56,9 +59,19 @@ def test_signal_during_a_clg_boolean_ends_the_mesh(tmp_path, sig):
     took = time.monotonic() - t0
     assert proc.returncode == 128 + sig and "interrupted" in err and "Traceback" not in err, err
     assert took < 5, took  # not a benchmark: the Booleans left would take seconds more
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.stl", "nested.json"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
     assert out.read_text() == "previous"
     assert not os.path.exists(f"/proc/{child}") or "Z" in Path(f"/proc/{child}/stat").read_text().rsplit(")", 1)[1]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_signal_during_a_clg_boolean_ends_the_mesh(tmp_path, sig):
+    _interrupt(tmp_path, ["clg", "mesh", _nested(tmp_path), "--max-memory", "8G"], sig)
+
+
+def test_signal_during_a_skin_ends_it(tmp_path):
+    _interrupt(tmp_path, ["skin", "cubic", "--param", "n=8", "--body", ROOT / "presets" / "bracket.stl",
+                          "--thickness", "0.3"], signal.SIGTERM)
 
 
 def test_the_contained_clg_mesh_is_the_in_process_one(tmp_path):
