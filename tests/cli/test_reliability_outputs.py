@@ -467,12 +467,12 @@ def test_check_of_balls_overlapping_everything_is_refused_before_testing(tmp_pat
 
 
 def test_nested_clg_mesh_is_budgeted_before_any_boolean(tmp_path, capsys):
-    """Nested materials count whole in every leaf carrying one: 14³ groups of the beam-of-beams are
-    refused at once (they reached 2.7 GB under --max-memory 500M), and the estimate bounds the
-    real mesh of 2 × 2 × 2 groups."""
+    """14³ groups of the beam-of-beams are refused at once by their leaves alone (they reached
+    2.7 GB under --max-memory 500M); 3³ groups once their nested material is meshed (its bound is
+    several times loose); both estimates, bound and as meshed, bound the real mesh of 2³ groups."""
     from ple.clg.ir import clg_from_dict
     from ple.clg.query import compiled
-    from ple.meshing.clg import mesh_compiled, solid_triangles
+    from ple.meshing.clg import mesh_compiled, nested_materials, solid_triangles
 
     doc = json.loads((CLG_PRESETS / "beam_of_beams.json").read_text())
     doc["pattern"]["W"] = {"count": 14, "similarity": {"kind": "translation", "vector": [0, 0, 2]}}
@@ -480,9 +480,16 @@ def test_nested_clg_mesh_is_budgeted_before_any_boolean(tmp_path, capsys):
         doc["pattern"][k]["count"] = 14
     (tmp_path / "n.json").write_text(json.dumps(doc))
     refused(["clg", "mesh", tmp_path / "n.json", "--max-memory", "500M", "--out", tmp_path / "m.stl"], capsys,
-            "triangles", "use fewer groups")
+            "triangles", "nested materials not counted yet", "use fewer groups")
+    for k in "UVW":
+        doc["pattern"][k]["count"] = 3
+    (tmp_path / "n.json").write_text(json.dumps(doc))
+    refused(["clg", "mesh", tmp_path / "n.json", "--max-memory", "500M", "--out", tmp_path / "m.stl"], capsys,
+            "nested materials as meshed", "use fewer groups")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["n.json"]
     for k in "UVW":
         doc["pattern"][k]["count"] = 2
     comp = compiled(clg_from_dict(doc))
-    assert len(mesh_compiled(comp, 16).faces) <= solid_triangles(comp, 16)
+    real = len(mesh_compiled(comp, 16).faces)
+    (sub,) = nested_materials(comp)
+    assert real <= solid_triangles(comp, 16, {id(sub): len(mesh_compiled(sub, 16).faces)}) <= solid_triangles(comp, 16)

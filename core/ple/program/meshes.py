@@ -11,17 +11,18 @@ from collections.abc import Callable
 import numpy as np
 import trimesh
 
-from ..meshing.clg import check_budget, mesh_arrays
+from ..meshing.clg import check_outer_budget, mesh_arrays
 from .runner import Job
 
 
 def mesh_clg_contained(comp, segments: int, max_bytes: float | None, name: str,
                        memory: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``ple.meshing.clg.mesh_arrays`` of a compiled CLG (``ple.clg.query.Compiled``, nested
-    materials included) in a child process with no time limit. The budget (``check_budget``) is
-    checked first, before the child starts. ``name`` names the source in errors; ``memory``, if
-    given, caps the child's address space. Returns vertices (V, 3) and faces (F, 3)."""
-    check_budget(comp, segments, max_bytes)
+    materials included) in a child process with no time limit. The budget of its leaves
+    (``check_outer_budget``) is checked first, before the child starts; the child checks the
+    rest. ``name`` names the source in errors; ``memory``, if given, caps the child's address
+    space. Returns vertices (V, 3) and faces (F, 3)."""
+    check_outer_budget(comp, segments, max_bytes)
     return Job(lambda: mesh_arrays(comp, segments, max_bytes), name, None, memory, what="the CLG mesh").result()
 
 
