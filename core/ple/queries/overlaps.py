@@ -407,8 +407,8 @@ def _steady(lat: Lattice, margin: float, force: bool = False, max_pairs: float |
         found += [np.concatenate([np.zeros((len(node_hits), 1), np.int64), node_hits[:, 1:]], axis=1),
                   np.concatenate([np.ones((len(beam_hits), 1), np.int64), beam_hits[:, 1:]], axis=1)]
         queries += min(QUERY_CHUNK, n_blocks - s)
-        # every hit is a candidate partner of at least one anchor element: bounded as it grows
-        check_pairs(sum(map(len, found)) / 2, elements, max_pairs)
+        # the hits held (each paired with anchor elements later) are bounded as they arrive
+        check_pairs(sum(map(len, found)), elements, max_pairs)
     hits = np.unique(np.concatenate(found), axis=0) if found else np.zeros((0, 5), np.int64)
     yk = hits[:, 0]
     yi = hits[:, 1:] - np.concatenate([ext, [0]])  # back to the lattice's own indices (possibly outside it)
