@@ -455,3 +455,41 @@ def test_info_on_balls_overlapping_everything_is_bounded(tmp_path):
     if r.returncode == 2:
         assert_clean_failure(r)
     assert r.peak_rss < 2 << 30
+
+
+def test_check_of_balls_overlapping_everything_is_refused_before_testing(tmp_path, capsys):
+    (tmp_path / "big.py").write_text(BIG)
+    args = ["check", tmp_path / "big.py", "--param", "n=8", "--param", "radius=3"]
+    refused(args + ["--region", "0:8,0:8,0:8"], capsys, "candidate pairs", "--max-pairs")  # explicit elements
+    refused(args + ["--max-pairs", "1e5"], capsys, "candidate pairs", "--max-pairs")  # anchors of the steady path
+    refused(args + ["--max-pairs", "nan"], capsys, "--max-pairs")
+    assert run(["check", tmp_path / "big.py", "--param", "n=3", "--param", "radius=3"], capsys)[0] == 1
+
+
+def test_nested_clg_mesh_is_budgeted_before_any_boolean(tmp_path, capsys):
+    """14³ groups of the beam-of-beams are refused at once by their leaves alone (they reached
+    2.7 GB under --max-memory 500M); 3³ groups once their nested material is meshed (its bound is
+    several times loose); both estimates, bound and as meshed, bound the real mesh of 2³ groups."""
+    from ple.clg.ir import clg_from_dict
+    from ple.clg.query import compiled
+    from ple.meshing.clg import mesh_compiled, nested_materials, solid_triangles
+
+    doc = json.loads((CLG_PRESETS / "beam_of_beams.json").read_text())
+    doc["pattern"]["W"] = {"count": 14, "similarity": {"kind": "translation", "vector": [0, 0, 2]}}
+    for k in "UV":
+        doc["pattern"][k]["count"] = 14
+    (tmp_path / "n.json").write_text(json.dumps(doc))
+    refused(["clg", "mesh", tmp_path / "n.json", "--max-memory", "500M", "--out", tmp_path / "m.stl"], capsys,
+            "triangles", "nested materials not counted yet", "use fewer groups")
+    for k in "UVW":
+        doc["pattern"][k]["count"] = 3
+    (tmp_path / "n.json").write_text(json.dumps(doc))
+    refused(["clg", "mesh", tmp_path / "n.json", "--max-memory", "500M", "--out", tmp_path / "m.stl"], capsys,
+            "nested materials as meshed", "use fewer groups")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["n.json"]
+    for k in "UVW":
+        doc["pattern"][k]["count"] = 2
+    comp = compiled(clg_from_dict(doc))
+    real = len(mesh_compiled(comp, 16).faces)
+    (sub,) = nested_materials(comp)
+    assert real <= solid_triangles(comp, 16, {id(sub): len(mesh_compiled(sub, 16).faces)}) <= solid_triangles(comp, 16)

@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 from ple.algebra.elements import beam_beam_gap, beam_distance, segment_distance
 from ple.algebra.similarity import Rotation, Scaling, Screw, Translation
+from ple.errors import PleError
 from ple.filters.stencil import Stencil
 from ple.model.lattice import Lattice
 from ple.program.sources import load_lattice
-from ple.queries.overlaps import KINDS, pair_gaps, unclean_pairs
+from ple.queries.overlaps import KINDS, candidate_pairs, grid_pairs, pair_gaps, unclean_pairs
 
 
 def test_beam_beam_gap_vs_sampling():
@@ -144,3 +145,59 @@ def test_curved_lattice_wrapping_around_vs_all_pairs(turns):
     assert got["path"] == "steady (VW similar)" and got["pairs"] == want
     assert turns < 1 or want["ball_beam"] > 0  # past one turn, balls sit on beams of the next turn
     assert got["min_gap"] == (pytest.approx(gap, rel=1e-9) if gap is not None else None)
+
+
+@pytest.mark.parametrize("split", [None, 23])
+def test_candidate_pairs_count_the_grid_before_pairing(split):
+    """The count is exact against the grid's cells (every two boxes sharing a cell; with a split,
+    a box of each set), and bounds the pairs ``grid_pairs`` yields."""
+    from ple.queries.overlaps import _cell_entries, _grid
+
+    rng = np.random.default_rng(5)
+    lo = rng.uniform(0, 4, (60, 3))
+    hi = lo + rng.uniform(0.1, 1.5, (60, 3))
+    count = candidate_pairs(lo, hi, 0.2, split)
+    _, _, first, span, dims = _grid(lo, hi, 0.2)
+    key, owner = _cell_entries(first, span, dims, np.arange(60))
+    cells: dict = {}
+    for k, o in zip(key.tolist(), owner.tolist()):
+        cells.setdefault(k, []).append(o)
+    want = sum(len(m) * (len(m) - 1) // 2 if split is None else sum(o < split for o in m) * sum(o >= split for o in m)
+               for m in cells.values())
+    assert count == want
+    assert sum(len(i) for i, _ in grid_pairs(lo, hi, 0.2, split)) <= count
+
+
+def test_a_check_of_elements_overlapping_everything_is_refused_before_testing():
+    lat = Lattice()
+    a = lat.add_node((0, 0, 0), 2.5)
+    for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1)]:
+        lat.add_beam(a, a, *off)
+    for d, v in zip("uvw", np.eye(3)):
+        getattr(lat, f"set_{d}")(5, Translation(v))
+    ev = lat.evaluate()
+    with pytest.raises(PleError, match=r"candidate pairs .* --max-pairs"):
+        unclean_pairs(lat, ev, max_pairs=1e4)
+    with pytest.raises(PleError, match=r"candidate pairs .* --max-pairs"):
+        unclean_pairs(lat, path="steady", max_pairs=1e3)
+    assert not unclean_pairs(lat, ev)["clean"]  # within the default limit
+    assert unclean_pairs(lat, ev, first=True, max_pairs=1)["clean"] is False  # the quick look is bounded anyway
+
+
+def test_beam_pairs_certified_overlapping_agree_with_the_golden_section():
+    """Beam pairs whose axis balls overlap skip the gap search: gaps and overlap flags equal the
+    exact search's (``beam_beam_gap`` of the beams, and of the beams shrunk by the tolerance)."""
+    from ple.queries.overlaps import CLEAN_TOL
+
+    rng = np.random.default_rng(11)
+    n = 4000
+    a1, b1, a2, b2 = (rng.uniform(0, 2, (n, 3)) for _ in range(4))
+    ra1, rb1, ra2, rb2 = (rng.uniform(0.01, 0.4, n) for _ in range(4))
+    ones = np.ones(n, np.int64)
+    gap, over, _ = pair_gaps(ones, a1, ra1, (b1, rb1), ones, a2, ra2, (b2, rb2))
+    tol = CLEAN_TOL * np.max([ra1, rb1, ra2, rb2], axis=0)
+    want_gap = beam_beam_gap(a1, ra1, b1, rb1, a2, ra2, b2, rb2)
+    want_over = (want_gap <= 0) & (beam_beam_gap(a1, ra1 - tol, b1, rb1 - tol, a2, ra2 - tol, b2, rb2 - tol) <= 0)
+    assert 0.2 < over.mean() < 0.9  # both kinds present
+    np.testing.assert_array_equal(over, want_over)
+    np.testing.assert_allclose(gap, want_gap, atol=1e-12)

@@ -120,8 +120,18 @@ def beam_beam_gap(a1, ra1, b1, rb1, a2, ra2, b2, rb2) -> np.ndarray:
 
 
 def segment_distance(p1, q1, p2, q2) -> np.ndarray:
-    """Distance between segments [p1, q1] and [p2, q2] (vectorized), by the clamped closest-point
-    parameters of the two lines (parallel segments: the first parameter 0, then clamped)."""
+    """Distance between segments [p1, q1] and [p2, q2] (vectorized), by their closest points
+    (``segment_closest``)."""
+    p1, q1, p2, q2 = (np.asarray(x, float) for x in (p1, q1, p2, q2))
+    s, t = segment_closest(p1, q1, p2, q2)
+    diff = p1 + s[..., None] * (q1 - p1) - (p2 + t[..., None] * (q2 - p2))
+    return np.sqrt(np.sum(diff * diff, axis=-1))
+
+
+def segment_closest(p1, q1, p2, q2) -> tuple[np.ndarray, np.ndarray]:
+    """Parameters (s, t) in [0, 1] of the closest points p1 + s (q1 − p1) and p2 + t (q2 − p2) of
+    segments [p1, q1] and [p2, q2] (vectorized), by the clamped closest-point parameters of the
+    two lines (parallel segments: the first parameter 0, then clamped)."""
     p1, q1, p2, q2 = (np.asarray(x, float) for x in (p1, q1, p2, q2))
     d1, d2, r = q1 - p1, q2 - p2, p1 - p2
     a, e = np.sum(d1 * d1, axis=-1), np.sum(d2 * d2, axis=-1)
@@ -137,5 +147,4 @@ def segment_distance(p1, q1, p2, q2) -> np.ndarray:
     s = np.where(low, np.clip(-c / sa, 0, 1), np.where(high, np.clip((b - c) / sa, 0, 1), s))
     s = np.where(e > 0, s, np.clip(-c / sa, 0, 1))  # the second segment a point: its nearest point on the first
     s = np.where(a > 0, s, 0.0)
-    diff = p1 + s[..., None] * d1 - (p2 + t[..., None] * d2)
-    return np.sqrt(np.sum(diff * diff, axis=-1))
+    return s, t

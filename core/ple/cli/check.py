@@ -17,12 +17,15 @@ def register(sub) -> None:
     p.add_argument("--min-feature", type=float, metavar="MM",
                    help="smallest printable feature: thinnest beam diameter and smallest gap (model units)")
     p.add_argument("--max-slenderness", type=float, metavar="X", help="largest beam length / diameter")
+    p.add_argument("--max-pairs", type=float, metavar="N",
+                   help="most candidate pairs the clean rule tests (default: 256 per element, at least 1e7); "
+                        "counted before testing")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     lat = lattice_from_args(args)
-    report = check_lattice(lat, args.region, args.min_feature, args.max_slenderness)
+    report = check_lattice(lat, args.region, args.min_feature, args.max_slenderness, args.max_pairs)
     if args.json:
         print(strict_json(report, "the check report", indent=1))
     else:

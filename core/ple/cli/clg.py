@@ -6,6 +6,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import trimesh
 
 from ..app.progress import Progress
 from ..clg.grid import check_grid, layer_grid, parse_bounds, voxel_tiles, voxelize_clg
@@ -16,9 +17,9 @@ from ..io.export import export_mesh
 from ..io.files import atomic_path, strict_json
 from ..io.inputs import load_npy
 from ..io.slices import write_pmc_slices
-from ..meshing.clg import mesh_clg
 from ..model.budget import require
 from ..program.clg_sources import run_clg
+from ..program.meshes import mesh_clg_contained
 from .common import add_program_limits, max_memory
 
 
@@ -207,7 +208,8 @@ def run_render(args) -> int:
 
 def run_mesh(args) -> int:
     comp = _load(args)
-    mesh = mesh_clg(comp.clg, segments=args.segments, max_bytes=max_memory(args))
+    verts, faces = mesh_clg_contained(comp, args.segments, max_memory(args), args.source)  # a signal ends it at once
+    mesh = trimesh.Trimesh(verts, faces, process=False)
     export_mesh(mesh, args.out)
     print(f"wrote {args.out}: {len(mesh.faces)} triangles, volume {mesh.volume:.6g}, "
           f"watertight {mesh.is_watertight}")

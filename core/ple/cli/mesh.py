@@ -45,6 +45,7 @@ from ..model.budget import (
     require,
     streamed_stl_bytes,
 )
+from ..program.meshes import mesh_contained
 from .common import add_cluster_args, add_lattice_args, lattice_from_args, max_memory, report_job
 
 MAX_MESH_GROUPS = 20_000_000  # streamed binary STL
@@ -113,7 +114,8 @@ def run(args) -> int:
             raise PleError("--skin makes one solid of shell and lattice: not with --beam-lattice or --check")
         style = args.style if args.style != "balls-beams" else "refined"
         lattice = tessellate(lat, region, style, args.levels, args.segments, cut=False)  # skin cuts and unites
-        mesh = skin(body_of(lat, "--skin"), args.skin, lattice)
+        body = body_of(lat, "--skin")
+        mesh = mesh_contained(lambda: skin(body, args.skin, lattice), args.lattice, "the skin")  # a signal stops it
         info["unclean"] = lattice.metadata.get("ple_unclean")
         n = len(mesh.faces) - export_mesh(mesh, args.out, args.unit)["dropped_faces"]
     elif args.beam_lattice:

@@ -12,6 +12,7 @@ from ..meshing.skin import skin
 from ..meshing.styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS, STYLES
 from ..meshing.tessellate import tessellate
 from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, mesh_triangles, require
+from ..program.meshes import mesh_contained
 from .common import add_lattice_args, lattice_from_args, max_memory
 
 MAX_SKIN_NODES = 2_000_000  # the lattice is meshed in memory before the Booleans
@@ -46,7 +47,8 @@ def run(args) -> int:
             f"{tris:,.3g} triangles ({args.style}) of the lattice to skin", max_memory(args),
             "choose a smaller lattice or --style cnt")
     body = body_of(lat, "ple skin")
-    solid = skin(body, args.skin, tessellate(lat, style=args.style, cut=False), args.edge)
+    solid = mesh_contained(lambda: skin(body, args.skin, tessellate(lat, style=args.style, cut=False), args.edge),
+                           args.lattice, "the skin")  # in a child: a signal ends its Booleans at once
     export_mesh(solid, args.out)
     print(f"wrote {args.out}: {len(solid.faces):,} triangles, volume {solid.volume:.6g}, "
           f"watertight {solid.is_watertight}")

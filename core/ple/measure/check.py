@@ -10,7 +10,7 @@ import numpy as np
 
 from ..errors import PleError
 from ..model.lattice import Evaluation, Lattice
-from ..queries.overlaps import similar_axes, unclean_pairs
+from ..queries.overlaps import PairLimitError, similar_axes, unclean_pairs
 from .integrals import kept_measures, lattice_measures
 from .moments import mass_properties
 
@@ -37,7 +37,10 @@ def is_clean(lat: Lattice, region=None, max_elements: int = QUICK_ELEMENTS) -> b
     lat.validate()
     whole = lat.filter is None and region is None and lat.becots is None
     if whole and all(similar_axes(lat)):
-        return unclean_pairs(lat, path="steady", first=True)["clean"]
+        try:
+            return unclean_pairs(lat, path="steady", first=True)["clean"]
+        except PairLimitError:  # its anchors overlap too many elements for a quick look
+            return None
     r = lat.region(region)
     if (r.groups * len(lat.nodes) + lat.beam_count() * r.groups / max(1, lat.groups)) > max_elements:
         return None
@@ -67,19 +70,22 @@ def _label(ev: Evaluation, kind: str, rows) -> list[dict]:
 
 
 def check_lattice(lat: Lattice, region=None, min_feature: float | None = None,
-                  max_slenderness: float | None = None) -> dict:
+                  max_slenderness: float | None = None, max_pairs: float | None = None) -> dict:
     """{"ok", "filtered", "region", "nodes", "beams", "rules": {name: {"ok", "count", "value",
     "limit", "worst"}}} — see the module doc. ``min_feature`` (model units, e.g. mm) bounds the
-    thinnest beam diameter and the smallest gap; ``max_slenderness`` bounds length / diameter."""
+    thinnest beam diameter and the smallest gap; ``max_slenderness`` bounds length / diameter;
+    ``max_pairs`` the candidate pairs the clean rule may test (``ple.queries.overlaps.check_pairs``,
+    None: its default)."""
     lat.validate()
-    for name, value in (("--min-feature", min_feature), ("--max-slenderness", max_slenderness)):
+    for name, value in (("--min-feature", min_feature), ("--max-slenderness", max_slenderness),
+                        ("--max-pairs", max_pairs)):
         if value is not None and not (np.isfinite(value) and value > 0):
             raise PleError(f"{name} must be a positive number, got {value!r}")
     ev = _evaluation(lat, region)
     rules = {}
     margin = float(min_feature) if min_feature is not None else float(np.median(ev.radius)) if len(ev.radius) else 0.0
     whole = lat.filter is None and region is None and lat.becots is None
-    pairs = unclean_pairs(lat, None if whole else ev, margin=margin)
+    pairs = unclean_pairs(lat, None if whole else ev, margin=margin, max_pairs=max_pairs)
     rules["clean"] = {"ok": pairs["clean"], "count": pairs["unclean_pairs"], "value": pairs["pairs"],
                       "limit": None, "worst": pairs["worst"], "path": pairs["path"]}
     gap = pairs["min_gap"]

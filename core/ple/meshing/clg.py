@@ -37,8 +37,10 @@ def _similarity_3x4(lin: np.ndarray, move: np.ndarray) -> np.ndarray:
     return np.column_stack([lin, move])
 
 
-def _leaf(m, comp, prim: Prim, balls, unit, segments: int):
-    """The manifold of one primitive from its balls (ca (3,), ra, cb (3,) or None, rb)."""
+def _leaf(m, comp, prim: Prim, balls, unit, segments: int, solids: dict):
+    """The manifold of one primitive from its balls (ca (3,), ra, cb (3,) or None, rb). ``solids``:
+    the nested materials' solids meshed so far (id of their compiled CLG -> manifold), each
+    meshed once and placed in every leaf that carries it."""
     ca, ra, cb, rb = balls
     ball_a = unit.scale([ra] * 3).translate(list(ca))
     if cb is None:
@@ -53,7 +55,9 @@ def _leaf(m, comp, prim: Prim, balls, unit, segments: int):
         raise PleError("a CLG whose material is a fitted field cannot be meshed by manifold3d; "
                        "use `ple clg voxels` (or slices, renders) instead")
     o, rot, f = frame_of(frame, ca[None], np.array([ra]), None if cb is None else cb[None])
-    inner = _solid_manifold(m, sub, segments).transform(_similarity_3x4(rot[0] * f[0], o[0]))
+    if id(sub) not in solids:
+        solids[id(sub)] = _solid_manifold(m, sub, segments, solids)
+    inner = solids[id(sub)].transform(_similarity_3x4(rot[0] * f[0], o[0]))
     return x ^ inner
 
 
@@ -69,51 +73,80 @@ def _expr(m, tree, parts):
     return m.Manifold.batch_boolean(vals, m.OpType.Subtract) if len(vals) > 1 else vals[0]
 
 
-def chunk_triangles(comp, ci: int, segments: int) -> float:
+def chunk_triangles(comp, ci: int, segments: int, nested: dict | None = None) -> float:
     """Triangles of chunk ``ci``'s template (one group), bounded from above before anything is
     meshed: a sphere per ball, two per beam (their hull), and each nested material's whole solid
-    (``solid_triangles``) inside every leaf that carries one."""
+    inside every leaf that carries one: its real triangles where ``nested`` (id of its compiled
+    CLG -> triangles) has them, else its bound (``solid_triangles``)."""
     ball = sphere_triangles(segments)
     total = 0.0
     for prim in comp.leaves[ci]:
         total += ball if prim.b is None else 2 * ball
         child = comp.children.get(prim)
         if child is not None and not isinstance(child[0], FieldSolid):
-            total += solid_triangles(child[0], segments)
+            sub = child[0]
+            total += nested[id(sub)] if nested is not None and id(sub) in nested else solid_triangles(sub, segments,
+                                                                                                       nested)
     return total
 
 
-def solid_triangles(comp, segments: int) -> float:
+def solid_triangles(comp, segments: int, nested: dict | None = None) -> float:
     """Triangles of a compiled CLG's solid, bounded from above from its leaves and groups alone
-    (nested materials included): the budget's estimate, before any Boolean runs."""
+    (nested materials included, as ``chunk_triangles`` counts them): the budget's estimate,
+    before any Boolean runs."""
     r = comp.region if comp.region is not None else comp.lat.region(None)
-    return sum(chunk_triangles(comp, ci, segments) for ci in range(len(comp.names))) * r.groups
+    return sum(chunk_triangles(comp, ci, segments, nested) for ci in range(len(comp.names))) * r.groups
 
 
-def _solid_manifold(m, comp, segments: int, max_bytes: float | None = None):
-    unit = unit_ball(m, segments)
+def nested_materials(comp) -> list:
+    """The compiled CLGs of ``comp``'s nested materials (meshable ones, each once), deepest first."""
+    out: list = []
+    for sub, _ in comp.children.values():
+        if not isinstance(sub, FieldSolid) and all(sub is not x for x in out):
+            out += [x for x in nested_materials(sub) if all(x is not y for y in out)] + [sub]
+    return out
+
+
+def check_budget(comp, segments: int, max_bytes: float | None = None, nested: dict | None = None,
+                 counted: str = "nested materials included") -> None:
+    """Refuse, before any Boolean, a CLG whose mesh would be too large: a chunk of more than
+    ``MAX_TRIANGLES`` estimated triangles, or a solid needing more than ``max_bytes``; nested
+    materials count as ``chunk_triangles`` counts them (``counted`` says how, in the message).
+    PleError naming the estimate."""
     r = comp.region if comp.region is not None else comp.lat.region(None)
     groups = r.groups  # counted before the groups are listed: a huge pattern is refused first
-    for ci in range(len(comp.names)):  # estimated before the template chunk is meshed
-        est = chunk_triangles(comp, ci, segments) * groups
+    for ci in range(len(comp.names)):
+        est = chunk_triangles(comp, ci, segments, nested) * groups
         if est > MAX_TRIANGLES:
             raise PleError(f"chunk {comp.names[ci]!r}: about {est:.3g} triangles exceed the meshing limit "
                            f"{MAX_TRIANGLES:.0e}; use fewer groups or --segments")
     if max_bytes is not None:
-        total = solid_triangles(comp, segments)
-        require(total * CLG_TRIANGLE_BYTES, f"{total:.3g} triangles of the CLG mesh ({groups:,} groups, nested "
-                "materials included)", max_bytes, "use fewer groups or --segments")
+        total = solid_triangles(comp, segments, nested)
+        require(total * CLG_TRIANGLE_BYTES, f"{total:.3g} triangles of the CLG mesh ({groups:,} groups, {counted})",
+                max_bytes, "use fewer groups or --segments")
+
+
+def check_outer_budget(comp, segments: int, max_bytes: float | None = None) -> None:
+    """``check_budget`` of the leaves alone, every nested material counted as empty: a lower
+    bound, checked before anything is meshed (``mesh_arrays`` checks the rest as it goes)."""
+    subs = nested_materials(comp)
+    check_budget(comp, segments, max_bytes, {id(sub): 0 for sub in subs},
+                 "nested materials not counted yet" if subs else "no nested materials")
+
+
+def _solid_manifold(m, comp, segments: int, solids: dict):
+    unit = unit_ball(m, segments)
     g = comp.groups()
     lin, move, _ = comp.copies(g) if comp.similar else (None, None, None)
     unions = []
     for ci in range(len(comp.names)):
         if comp.similar:  # one template chunk (group 0), placed by M_g ∘ G⁻¹ per copy
-            parts = [_leaf(m, comp, prim, _group0(comp, prim), unit, segments) for prim in comp.leaves[ci]]
+            parts = [_leaf(m, comp, prim, _group0(comp, prim), unit, segments, solids) for prim in comp.leaves[ci]]
             template = _expr(m, comp.trees[ci], parts)
             copies = [template.transform(_similarity_3x4(lin[n], move[n])) for n in range(len(g))]
         else:  # copies are not similar: each from the lattice's own nodes (ple.clg.steady)
             balls = comp.prim_balls(comp.leaves[ci], g)
-            copies = [_expr(m, comp.trees[ci], [_leaf(m, comp, prim, _one(b, n), unit, segments)
+            copies = [_expr(m, comp.trees[ci], [_leaf(m, comp, prim, _one(b, n), unit, segments, solids)
                                                  for prim, b in zip(comp.leaves[ci], balls)]) for n in range(len(g))]
         unions.append(m.Manifold.batch_boolean(copies, m.OpType.Add) if len(copies) > 1 else copies[0])
     return _expr(m, comp.solid, unions)
@@ -140,13 +173,31 @@ def mesh_clg(clg: CLG, segments: int = 32, region=None, max_bytes: float | None 
 
 def mesh_compiled(comp, segments: int = 32, max_bytes: float | None = None):
     """``mesh_clg`` of a compiled CLG (``ple.clg.query.Compiled``, its copies placed as it places them)."""
+    return trimesh.Trimesh(*mesh_arrays(comp, segments, max_bytes), process=False)
+
+
+def mesh_arrays(comp, segments: int = 32, max_bytes: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The CLG solid's mesh as arrays: vertices (V, 3) float64, faces (F, 3) int64 (what a child
+    process sends back, ``ple.program.meshes.mesh_clg_contained``). Budgeted before any Boolean
+    by its leaves (``check_outer_budget``), each nested material before it is meshed, and the
+    whole solid with the nested materials' real triangles before the rest is meshed."""
     if segments < 8 or segments > 512:
         raise PleError(f"--segments {segments}: expected 8..512")
     m = _manifold()
-    solid = _solid_manifold(m, comp, segments, max_bytes)
-    out = solid.to_mesh()
+    check_outer_budget(comp, segments, max_bytes)
+    # nested materials first, deepest first, each refused by its own estimate before it is meshed;
+    # the solid is then estimated with their real triangles (their bounds are several times loose)
+    solids: dict = {}
+    nested: dict = {}
+    for sub in nested_materials(comp):
+        check_budget(sub, segments, max_bytes, nested)
+        solids[id(sub)] = _solid_manifold(m, sub, segments, solids)
+        nested[id(sub)] = solids[id(sub)].num_tri()
+    if nested:
+        check_budget(comp, segments, max_bytes, nested, "nested materials as meshed")
+    out = _solid_manifold(m, comp, segments, solids).to_mesh()
     verts = np.asarray(out.vert_properties, float)[:, :3]
     faces = np.asarray(out.tri_verts, np.int64)
     if len(faces) == 0:
         raise PleError("the CLG solid is empty: nothing to mesh")
-    return trimesh.Trimesh(verts, faces, process=False)
+    return verts, faces

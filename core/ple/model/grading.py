@@ -66,8 +66,9 @@ class LinearGradient(RadiusField):
 
     def __init__(self, a, b, f0: float = 1.0, f1: float = 2.0) -> None:
         self.a, self.b = Pt(a), Pt(b)
-        self.d = self.b - self.a
-        self.dd = float(self.d @ self.d)
+        with np.errstate(over="ignore", invalid="ignore"):  # points far apart overflow: refused just below
+            self.d = self.b - self.a
+            self.dd = float(self.d @ self.d)
         if not 0 < self.dd < np.inf or not (np.all(np.isfinite(self.a)) and np.all(np.isfinite(self.b))):
             raise PleError("a gradient needs two distinct finite points (their distance squared finite)")
         self.f0, self.f1 = _positive(f0, "gradient factor f0"), _positive(f1, "gradient factor f1")

@@ -285,9 +285,15 @@ class Job:
         return out
 
     def result(self):
-        """Wait for the work to finish; its return value (PleError if it failed)."""
-        while not self.poll(3600.0):
-            pass
+        """Wait for the work to finish; its return value (PleError if it failed). Interrupted
+        while waiting (Ctrl-C, or SIGTERM/SIGHUP unwinding as ``KeyboardInterrupt``), it kills
+        the child before the interruption goes on: a long call in the child never delays it."""
+        try:
+            while not self.poll(3600.0):
+                pass
+        except BaseException:
+            self.cancel()
+            raise
         return self._result
 
     def cancel(self) -> None:

@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from ..algebra.elements import beam_beam_gap, beam_distance, enclosing_ball, segment_distance
+from ..algebra.elements import beam_beam_gap, beam_distance, enclosing_ball, segment_closest, segment_distance
 from ..algebra.similarity import commute
 from ..errors import PleError
 from ..model.lattice import Evaluation, Lattice
@@ -44,6 +44,8 @@ PAIR_CHUNK = 1 << 18  # candidate pairs per vectorized block
 QUERY_CHUNK = 1 << 10  # anchor blocks per RangeFinder batch
 ANCHOR_BLOCK = 4  # anchor groups per block side: one RangeFinder query per block
 KINDS = ("ball_ball", "ball_beam", "beam_beam")
+PAIRS_PER_ELEMENT = 256  # default limit of candidate pairs per element (the presets, clean, have 10–76)
+MIN_PAIR_LIMIT = 10_000_000  # ... and at least this many (at most about a minute of exact tests)
 
 
 def similar_axes(lat: Lattice) -> tuple[bool, bool, bool]:
@@ -92,30 +94,48 @@ def pair_gaps(kind_a, ca, ra, ea, kind_b, cb, rb, eb, margin: float = math.inf):
         ee = np.zeros_like(ee)
         ee[near] = True
     if ee.any():
-        args = (ca[ee], ra[ee], ea[0][ee], ea[1][ee], cb[ee], rb[ee], eb[0][ee], eb[1][ee])
-        g = beam_beam_gap(*args)
-        gap[ee] = g
+        rows = np.nonzero(ee)[0]
+        args = (ca[rows], ra[rows], ea[0][rows], ea[1][rows], cb[rows], rb[rows], eb[0][rows], eb[1][rows])
+        # special case: the balls of both beams at their axes' closest points overlap by more than
+        # the tolerance, so the beams overlap (gap 0) without two golden-section searches per pair
+        # (the common case where elements overlap many others)
+        g = np.zeros(len(rows))
+        o = _surely_overlapping(*args, tol[rows])
+        ex = np.nonzero(~o)[0]
+        if len(ex):
+            sub = [x[ex] for x in args]
+            g[ex] = beam_beam_gap(*sub)
+            meet = ex[g[ex] <= 0]
+            if len(meet):  # overlap or touch: the beams shrunk by the tolerance still meet when they overlap
+                shrunk = [x[meet] - (tol[rows][meet] if i % 2 else 0) for i, x in enumerate(args)]
+                o[meet] = beam_beam_gap(*shrunk) <= 0
+        gap[rows], over[rows] = g, o
         meet = g <= 0
-        if meet.any():  # overlap or touch: the beams shrunk by the tolerance still meet when they overlap
-            shrunk = [x[meet] - (tol[ee][meet] if i % 2 else 0) for i, x in enumerate(args)]
-            over_ee = beam_beam_gap(*shrunk) <= 0
-            o = np.zeros(ee.sum(), bool)
-            o[meet] = over_ee
-            over[ee] = o
-            # depth estimate: how far the first beam's axis balls reach into the second beam
-            dep = np.zeros(ee.sum())
+        if meet.any():  # depth estimate: how far the first beam's axis balls reach into the second beam
+            dep = np.zeros(len(rows))
             t = np.linspace(0, 1, 17)[:, None]
             p = args[0][meet][None] + t[..., None] * (args[2][meet] - args[0][meet])[None]
             rr = args[1][meet][None] + t * (args[3][meet] - args[1][meet])[None]
             dep[meet] = np.max(rr - beam_distance(p, args[4][meet][None], args[5][meet][None], args[6][meet][None],
                                                   args[7][meet][None]), axis=0)
-            depth[ee] = dep
+            depth[rows] = dep
     depth = np.where(over, depth, 0.0)
     return gap, over, depth
 
 
+def _surely_overlapping(a1, ra1, b1, rb1, a2, ra2, b2, rb2, tol) -> np.ndarray:
+    """Cone-beam pairs that overlap by more than ``tol``, certified by one ball of each: a cone-beam
+    holds the ball (a + s (b − a), ra + s (rb − ra)) for every s in [0, 1], and at the closest points
+    of the two axes these balls, shrunk by ``tol``, intersect. False means only "not certified"."""
+    s, t = segment_closest(a1, b1, a2, b2)
+    p = a1 + s[:, None] * (b1 - a1)
+    q = a2 + t[:, None] * (b2 - a2)
+    r = ra1 + s * (rb1 - ra1) + ra2 + t * (rb2 - ra2)
+    return np.linalg.norm(p - q, axis=1) < r - 3 * tol
+
+
 # ----- explicit elements --------------------------------------------------------------------------------
-def _explicit(ev: Evaluation, margin: float, first: bool = False) -> dict:
+def _explicit(ev: Evaluation, margin: float, first: bool = False, max_pairs: float | None = None) -> dict:
     nn, nb = len(ev.radius), len(ev.beam_nodes)
     ends = np.concatenate([np.repeat(np.arange(nn)[:, None], 2, axis=1), ev.beam_nodes]).astype(np.int64)
     kinds = np.concatenate([np.zeros(nn, np.int64), np.ones(nb, np.int64)])
@@ -123,6 +143,8 @@ def _explicit(ev: Evaluation, margin: float, first: bool = False) -> dict:
     ca, ra, cb, rb = ev.center[ends[:, 0]], ev.radius[ends[:, 0]], ev.center[ends[:, 1]], ev.radius[ends[:, 1]]
     box_lo = np.minimum(ca - ra[:, None], cb - rb[:, None])
     box_hi = np.maximum(ca + ra[:, None], cb + rb[:, None])
+    if not first:  # the quick look stops at its first unclean block: bounded without an estimate
+        check_pairs(candidate_pairs(box_lo, box_hi, margin), nn + nb, max_pairs)
     result = _Collector(margin)
     for i, j in non_incident_pairs(ends, kinds, box_lo, box_hi, ev.beam_nodes, margin):
         ia, ib = ends[i], ends[j]
@@ -168,24 +190,24 @@ def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float, split: int
     with ``split``, only pairs i < split <= j (boxes of a first set against a second). Each box
     (of the first set) is entered in every cell of a uniform grid (cell: the median box diagonal)
     it overlaps; a pair is reported by the one cell holding the larger of the two lower corners
-    (no duplicates). Yielded in blocks of about PAIR_CHUNK cell entries."""
+    (no duplicates). Yielded in blocks formed from about PAIR_CHUNK candidate pairs."""
     n = len(box_lo)
     if n < 2 or (split is not None and not 0 < split < n):
         return
-    blo, bhi = box_lo - margin / 2, box_hi + margin / 2
-    h = max(float(np.median(np.max(bhi - blo, axis=1))), 1e-12)
-    origin = blo.min(axis=0)
-    lo = np.floor((blo - origin) / h).astype(np.int64)
-    hi = np.floor((bhi - origin) / h).astype(np.int64)
-    dims = hi.max(axis=0) + 1
-    span = hi - lo + 1
-    per = np.prod(span, axis=1)
+    blo, bhi, lo, span, dims = _grid(box_lo, box_hi, margin)
     first = 0 if split is None else split  # rows looked up in the table of rows [0, split or n)
     key_all, owner_all = _cell_entries(lo, span, dims, np.arange(n if split is None else split))
     sort = np.argsort(key_all, kind="stable")
     table = (key_all[sort], owner_all[sort])
-    bounds = first + np.searchsorted(np.cumsum(per[first:]), np.arange(0, int(per[first:].sum()),
-                                                                        max(1, PAIR_CHUNK // 32)), "right")
+    # blocks of rows forming about PAIR_CHUNK candidates each: a row forms one per entry of every
+    # cell it covers (where elements overlap many others, thousands a row)
+    starts = np.flatnonzero(np.diff(table[0], prepend=table[0][:1] - 1))  # the table is sorted: runs are cells
+    cells, counts = table[0][starts], np.diff(np.append(starts, len(table[0])))
+    key_q, owner_q = (key_all, owner_all) if split is None else _cell_entries(lo, span, dims, np.arange(first, n))
+    pos = np.minimum(np.searchsorted(cells, key_q), max(len(cells) - 1, 0))
+    formed = np.where(cells[pos] == key_q, counts[pos], 0) + 1 if len(cells) else np.ones(len(key_q))
+    cum = np.cumsum(np.bincount(owner_q - first, weights=formed, minlength=n - first))
+    bounds = first + np.searchsorted(cum, np.arange(0, cum[-1], PAIR_CHUNK), "right")
     edges = np.unique(np.concatenate([[first], bounds, [n]]))
     for start, stop in zip(edges[:-1], edges[1:]):
         key, owner = _cell_entries(lo, span, dims, np.arange(start, stop))
@@ -202,6 +224,53 @@ def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float, split: int
         near = np.all((blo[i] <= bhi[j]) & (blo[j] <= bhi[i]), axis=1)
         if near.any():
             yield i[near], j[near]
+
+
+def _grid(box_lo, box_hi, margin: float):
+    """The uniform grid of ``grid_pairs``: boxes grown by margin / 2 (blo, bhi (E, 3)), the first
+    cell (E, 3) and the number of cells (E, 3) each covers, and the grid's cells per axis (3,)."""
+    blo, bhi = box_lo - margin / 2, box_hi + margin / 2
+    h = max(float(np.median(np.max(bhi - blo, axis=1))), 1e-12)
+    origin = blo.min(axis=0)
+    lo = np.floor((blo - origin) / h).astype(np.int64)
+    hi = np.floor((bhi - origin) / h).astype(np.int64)
+    return blo, bhi, lo, hi - lo + 1, hi.max(axis=0) + 1
+
+
+def candidate_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float, split: int | None = None) -> int:
+    """How many candidate pairs ``grid_pairs`` will enumerate for these boxes (E, 3), counted from
+    its grid's cells alone before any pair is formed: in each cell, every two of its boxes (with
+    ``split``, every box of the first set with every box of the second). The work of the clean
+    check grows with it; an upper bound of the pairs it tests exactly."""
+    n = len(box_lo)
+    if n < 2 or (split is not None and not 0 < split < n):
+        return 0
+    _, _, lo, span, dims = _grid(box_lo, box_hi, margin)
+    key, owner = _cell_entries(lo, span, dims, np.arange(n))
+    if split is None:
+        c = np.unique(key, return_counts=True)[1].astype(np.float64)
+        return int(np.sum(c * (c - 1) / 2))
+    first = owner < split
+    cells, inverse = np.unique(key, return_inverse=True)
+    a = np.bincount(inverse.reshape(-1)[first], minlength=len(cells)).astype(np.float64)
+    b = np.bincount(inverse.reshape(-1)[~first], minlength=len(cells)).astype(np.float64)
+    return int(a @ b)
+
+
+class PairLimitError(PleError):
+    """A clean check refused for its candidate pairs (``check_pairs``)."""
+
+
+def check_pairs(pairs: float, elements: int, max_pairs: float | None) -> None:
+    """Refuse a clean check whose candidate pairs exceed ``max_pairs`` (None: the default, at
+    least ``MIN_PAIR_LIMIT`` and ``PAIRS_PER_ELEMENT`` per element). Elements that all overlap
+    each other make their pairs grow with the square of their number."""
+    limit = max(MIN_PAIR_LIMIT, PAIRS_PER_ELEMENT * elements) if max_pairs is None else max_pairs
+    if pairs > limit:
+        raise PairLimitError(f"the clean check would test about {pairs:.3g} candidate pairs of elements "
+                       f"({pairs / max(elements, 1):.3g} per element of {elements:,}; estimated before testing), "
+                       f"more than the limit {limit:.3g}: its elements overlap many others; check a smaller "
+                       "--region, or raise the limit with --max-pairs")
 
 
 def _cell_entries(lo, span, dims, rows):
@@ -290,7 +359,7 @@ def _elements_at(lat: Lattice, kind, idx):
     return ca, ra, (cb, rb), nodes
 
 
-def _steady(lat: Lattice, margin: float, force: bool = False):
+def _steady(lat: Lattice, margin: float, force: bool = False, max_pairs: float | None = None):
     sim = similar_axes(lat)
     rch = reach(lat)
     counts = np.array(lat.counts)
@@ -338,6 +407,8 @@ def _steady(lat: Lattice, margin: float, force: bool = False):
         found += [np.concatenate([np.zeros((len(node_hits), 1), np.int64), node_hits[:, 1:]], axis=1),
                   np.concatenate([np.ones((len(beam_hits), 1), np.int64), beam_hits[:, 1:]], axis=1)]
         queries += min(QUERY_CHUNK, n_blocks - s)
+        # the hits held (each paired with anchor elements later) are bounded as they arrive
+        check_pairs(sum(map(len, found)), elements, max_pairs)
     hits = np.unique(np.concatenate(found), axis=0) if found else np.zeros((0, 5), np.int64)
     yk = hits[:, 0]
     yi = hits[:, 1:] - np.concatenate([ext, [0]])  # back to the lattice's own indices (possibly outside it)
@@ -348,6 +419,8 @@ def _steady(lat: Lattice, margin: float, force: bool = False):
     xdata = (ca, ra, (cb, rb), nodes)
     cen, rad = np.concatenate([qc, hc]), np.concatenate([qr, hr])
     n_anchor_el = len(qc)
+    check_pairs(candidate_pairs(cen - rad[:, None], cen + rad[:, None], search, split=n_anchor_el), elements,
+                max_pairs)
     for qa, hb in grid_pairs(cen - rad[:, None], cen + rad[:, None], search, split=n_anchor_el):
         hb = hb - n_anchor_el
         if len(qa):
@@ -432,7 +505,7 @@ def _first_orientation(rep, counts, xk, xi, yk, yi) -> np.ndarray:
 
 # ----- public API -----------------------------------------------------------------------------------------
 def unclean_pairs(lat: Lattice, ev: Evaluation | None = None, margin: float = 0.0, path: str = "auto",
-                  first: bool = False) -> dict:
+                  first: bool = False, max_pairs: float | None = None) -> dict:
     """Unclean pairs of a lattice, or of the elements ``ev`` (an evaluation of it: a region, or the
     kept part of a filtered lattice): {"clean", "unclean_pairs", "pairs" per kind, "worst" offenders
     (kind, depth, count of similar copies, both elements as {"ball"|"beam": [i, j, k, n|pattern]}),
@@ -440,17 +513,19 @@ def unclean_pairs(lat: Lattice, ev: Evaluation | None = None, margin: float = 0.
     "path"}. Without ``ev``: the whole unfiltered program (``path`` "auto" takes the steady path
     when it applies, "explicit" evaluates the lattice). ``first``: explicit elements stop at the
     first block of candidate pairs holding an unclean pair (only "clean" is then complete: the
-    quick answer, bounded in time and memory when everything overlaps everything)."""
+    quick answer, bounded in time and memory when everything overlaps everything). Otherwise the
+    candidate pairs are counted before they are tested (``candidate_pairs``) and more than
+    ``max_pairs`` (None: ``check_pairs``'s default, which grows with the elements) is a PleError."""
     lat.validate()
     if path not in ("auto", "steady", "explicit"):
         raise PleError(f"unclean-pair path {path!r}: expected auto, steady or explicit")
     if ev is None and path != "explicit" and lat.becots is None:
-        out = _steady(lat, float(margin), force=path == "steady")
+        out = _steady(lat, float(margin), force=path == "steady", max_pairs=max_pairs)
         if out is not None:
             return out
     if ev is None:
         ev = lat.evaluate()
-    return _explicit(ev, float(margin), first)
+    return _explicit(ev, float(margin), first, max_pairs)
 
 
 def is_clean(lat: Lattice, ev: Evaluation | None = None) -> bool:

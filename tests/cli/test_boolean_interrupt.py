@@ -1,0 +1,87 @@
+"""A signal stops `ple clg mesh` (nested materials included) and `ple skin` inside a long manifold3d
+Boolean: the Booleans run in a forked child (``ple.program.meshes``), which the command kills on its
+way out; nothing is left on disk and the user's previous file is intact."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.cli.test_mesh_union_interrupt import _children
+from tests.io.test_reliability_files import default_signals
+
+pytest.importorskip("manifold3d")
+
+ROOT = Path(__file__).resolve().parents[2]
+PRESET = ROOT / "presets" / "clg" / "beam_of_beams.json"
+
+
+def _nested(tmp_path: Path) -> Path:
+    """The beam-of-beams preset (a nested material in every beam) on 3 × 3 × 3 groups: seconds of
+    Booleans, a few hundred MB."""
+    doc = json.loads(PRESET.read_text())
+    doc["pattern"]["W"] = {"count": 3, "similarity": {"kind": "translation", "vector": [0, 0, 2]}}
+    src = tmp_path / "nested.json"
+    src.write_text(json.dumps(doc))
+    return src
+
+
+def _interrupt(tmp_path: Path, args: list, sig) -> None:
+    """Run ``ple ARGS --out m.stl`` over a previous m.stl, signal it once its Booleans' child has
+    lived a second (a lattice program's child lives a moment), and check how it ended."""
+    out = tmp_path / "m.stl"
+    out.write_text("previous")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    ple = Path(sys.executable).parent / "ple"
+    proc = subprocess.Popen([str(ple), *map(str, args), "--out", str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, preexec_fn=default_signals)
+    deadline = time.monotonic() + 120
+    seen: dict = {}  # child pid -> first seen
+    while True:
+        assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read() if proc.poll() else "no child"
+        now = time.monotonic()
+        seen = {k: seen.get(k, now) for k in _children(proc.pid)}
+        old = [k for k, t in seen.items() if now - t > 1.0]
+        if old:
+            child = old[0]
+            break
+        time.sleep(0.05)
+    t0 = time.monotonic()
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    took = time.monotonic() - t0
+    assert proc.returncode == 128 + sig and "interrupted" in err and "Traceback" not in err, err
+    assert took < 5, took  # not a benchmark: the Booleans left would take seconds more
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    assert out.read_text() == "previous"
+    assert not os.path.exists(f"/proc/{child}") or "Z" in Path(f"/proc/{child}/stat").read_text().rsplit(")", 1)[1]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_signal_during_a_clg_boolean_ends_the_mesh(tmp_path, sig):
+    _interrupt(tmp_path, ["clg", "mesh", _nested(tmp_path), "--max-memory", "8G"], sig)
+
+
+def test_signal_during_a_skin_ends_it(tmp_path):
+    _interrupt(tmp_path, ["skin", "cubic", "--param", "n=8", "--body", ROOT / "presets" / "bracket.stl",
+                          "--thickness", "0.3"], signal.SIGTERM)
+
+
+def test_the_contained_clg_mesh_is_the_in_process_one(tmp_path):
+    from ple.clg.ir import clg_from_dict
+    from ple.clg.query import compiled
+    from ple.meshing.clg import mesh_arrays
+    from ple.program.meshes import mesh_clg_contained
+
+    comp = compiled(clg_from_dict(json.loads(PRESET.read_text())))
+    v, f = mesh_clg_contained(comp, 16, None, "beam_of_beams")
+    w, g = mesh_arrays(comp, 16)
+    key = lambda v, f: sorted(map(tuple, v[f].reshape(-1, 9).round(12)))  # noqa: E731 - face order may differ
+    assert key(v, f) == key(w, g)
