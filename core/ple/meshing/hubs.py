@@ -55,6 +55,7 @@ from .chocc import (
     tie_broken,
 )
 from .fillet import filleted
+from .selfcheck import self_intersections
 from .weld import collapse_short_edges, follows_trace, ordered_short, sorted_edges
 
 BATCH_VERTICES = 1 << 21  # vertices of one batch's largest array level (bounds the batch's memory)
@@ -273,7 +274,7 @@ def hub_template(center, radius, neighbor_centers, neighbor_radii, style: str, l
     rings = [rings[s] for s in range(hub.slots)]
     disk_centres = dirs * axial[:, None]
     caps = _caps(rings, len(verts))
-    if hub.pulled and not star_shaped(np.concatenate([verts, disk_centres]), faces, caps):
+    if folded(np.concatenate([verts, disk_centres]), faces, caps, hub.pulled):
         hub.clean = False  # folded: left to a local union (``ple.meshing.unions``)
     return HubTemplate(np.concatenate([verts, disk_centres]) + center, faces, rings, caps, hub)
 
@@ -286,6 +287,21 @@ def star_shaped(verts: np.ndarray, faces: np.ndarray, caps: list) -> bool:
     f = np.concatenate([np.asarray(faces).reshape(-1, 3), *[np.asarray(c).reshape(-1, 3) for c in caps]])
     t = verts[f]
     return bool(np.all(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])) > 0))
+
+
+def folded(verts: np.ndarray, faces: np.ndarray, caps: list, pulled: bool) -> bool:
+    """Whether a closed hub mesh (vertices relative to its centre, faces, cap fans) may meet
+    itself, so that its junction is left to a local union. A star-shaped mesh (``star_shaped``)
+    is embedded. A junction of pulled circles must be star-shaped; any other is tested exactly
+    (``selfcheck.self_intersections``) when it is not: a refined hub whose beams leave it at
+    very different angles (a filter that removes some of them) can fold where its projection
+    onto the balls and cones turns back."""
+    if star_shaped(verts, faces, caps):
+        return False
+    if pulled:
+        return True
+    f = np.concatenate([np.asarray(faces).reshape(-1, 3), *[np.asarray(c).reshape(-1, 3) for c in caps]])
+    return len(self_intersections(verts, f, workers=1)) > 0
 
 
 # ----- batches ----------------------------------------------------------------------------
@@ -642,7 +658,7 @@ def _batch_templates(out, rep, surface, hubs, centers, radii, dirs, nbr, lengths
                       batch.points[k], batch.cors, rep.chocc.twin, rep.chocc.rings, rep.chocc.ring_corridors)
             hub = HubGeometry(float(radii[g]), float(rp[k]), dirs[g], nbr[g], lengths[g], c, dirs.shape[1],
                               bool(geo.clean[g]), batch.alphas[k], batch.tris, rho[k] if geo.pulled[g] else None)
-            if hub.pulled and not star_shaped(np.concatenate([verts[k], disk[k]]), fk, caps[id(fk)]):
+            if folded(np.concatenate([verts[k], disk[k]]), fk, caps[id(fk)], hub.pulled):
                 hub.clean = False  # folded: as ``hub_template``
             out[g] = HubTemplate(allv[k], fk, rk[:dirs.shape[1]], caps[id(fk)], hub)
     return ties
