@@ -39,7 +39,7 @@ class Session:
     trust_file: str = ""  # the .blend the trusts were given in (a file saved under a new name carries them)
     busy: bool = False  # the add-on itself writes to a rig: its update callbacks stay quiet
     reports: list = field(default_factory=list)  # messages of live editing for the Info editor
-    object_count: int = 0  # objects in the scene at the last update (fewer: parts of a deleted rig may be left)
+    object_count: int | None = None  # objects in the scene at the last update (None: not yet counted)
     caches: dict = field(default_factory=dict)  # a feature's cache by name (bodies, CLGs, Möbius lattices)
 
     @contextmanager
@@ -62,7 +62,7 @@ class Session:
         """After undo, redo or loading a file: positions are then not user moves."""
         self.states.clear()
         self.owner.clear()
-        self.object_count = 0
+        self.object_count = None
 
     def forget_trust_of_other_files(self, path: str) -> None:
         if path != self.trust_file:

@@ -139,9 +139,12 @@ def rigs_in_updates(objects) -> list:
 
 
 def check_removed(scene) -> None:
-    """After objects left the scene: remove the parts of rigs whose lattice object is gone."""
+    """After the scene's objects changed in number: remove the parts of rigs whose lattice object
+    is gone. Any change counts, not only fewer objects: a rig built and its lattice object deleted
+    with no update in between (by a script, say) leaves more objects than the last update saw.
+    None: not counted since a load, undo or redo."""
     n = len(scene.objects)
-    if n < SESSION.object_count:
+    if SESSION.object_count is not None and n != SESSION.object_count:
         sync.remove_orphans()
         n = len(scene.objects)
     SESSION.object_count = n

@@ -1,7 +1,10 @@
 """The add-on's tests share one headless Blender per test run: the zip is built once (offline: the
 wheels come from ``build/wheels``, filled by ``make wheels``) and installed once into a worker
 process (``blender_worker.py``) that runs the cases one after the other, each from a clean state.
-A case whose point is a fresh start runs in a process of its own (``fresh=True``)."""
+Under xdist (``make test``: ``-n 2 --dist loadfile``) each test process that runs add-on test
+files has a worker of its own, kept from one add-on file to the next (the files are collected
+first, one after the other). A case whose point is a fresh start runs in a process of its own
+(``fresh=True``)."""
 
 from __future__ import annotations
 

@@ -25,7 +25,8 @@ from test_addon import (  # noqa: F401 - bpy-side helpers the cases use
 CASES = ["becots_redraw", "becots_apply_presets", "becots_named_return", "becots_round_trip",
          "cumulative_off_then_counts", "lil_follows_coarse", "absurd_counts", "region_budget",
          "move_before_run_program", "trust_survives_rename", "shift_d_copy", "duplicate_operator",
-         "delete_root", "remove_operator", "cursor", "frame_precision", "apply_in_branch", "poll",
+         "delete_root", "scripted_rig_deleted", "remove_operator", "cursor", "frame_precision",
+         "apply_in_branch", "poll",
          "program_time_limit", "tessellate_budget", "bake", "materials_and_sizes", "render_colours",
          "program_file", "menu_keymap_prefs", "tessellate_steps", "live_errors_reported", "trust_per_file",
          "refusal_stays_until_next_edit", "reenabled_addon_edits_live", "reload_keeps_slider_values"]
@@ -436,6 +437,23 @@ def case_delete_root():
         update()
         assert len(_rig_objects()) == n_keep, [o.name for o in _rig_objects()]
         assert ple_ext.rig.model.parts(keep) and keep.ple.status == ""
+
+
+def case_scripted_rig_deleted():
+    """A rig built by a script (no operator: no update between building it and deleting it) whose
+    lattice object is then deleted: its parts go with it at the next update, as after a delete of a
+    rig the updates saw being built (the parts stayed when only fewer objects than last counted
+    made the add-on look for them)."""
+    keep = new_rig("cubic", region=(2, 2, 2))
+    n_keep = len(_rig_objects())
+    text = bpy.data.texts.new("scripted.py")
+    text.write(core.program.presets.preset_path("fig6_3").read_text())
+    rig = ple_ext.rig.sync.create(bpy.context, "scripted", text, region=(2, 2, 2))
+    assert len(_rig_objects()) > n_keep
+    bpy.data.objects.remove(rig)
+    update()
+    assert len(_rig_objects()) == n_keep, [o.name for o in _rig_objects()]
+    assert ple_ext.rig.model.parts(keep) and keep.ple.status == ""
 
 
 def case_remove_operator():

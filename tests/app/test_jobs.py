@@ -193,7 +193,7 @@ def test_lil_count_cli_on_a_real_cluster(tmp_path, cluster, capsys):
 def test_parts_of_an_unclean_lattice_carry_its_unions(tmp_path):
     from ple.io.export import write_mesh
 
-    name, params = "becots_annulus", []  # at its defaults every hub is unclean
+    name, params = "becots_annulus", ["nu=2"]  # every hub is unclean (as at its defaults, 8 rows of 36)
     job = mesh_job(name, params, "cnt", box_groups=1)
     assert "united with manifold3d" in job.settings["unclean"] and len(job.parts) == 1
     assert run_job(job, str(tmp_path / "parts"), "sync", progress=False)["written"] == 1
@@ -205,7 +205,7 @@ def test_parts_of_an_unclean_lattice_carry_its_unions(tmp_path):
 
     mesh = trimesh.load(tmp_path / "all.stl")
     ref = tessellate(load_lattice(name, params), None, "cnt")
-    assert len(ref.metadata["ple_unclean"].nodes) > 0
+    assert len(ref.metadata["ple_unclean"].nodes) == 2 * 36
     assert mesh.is_watertight and np.isclose(mesh.volume, ref.volume, rtol=1e-5)
     clean = mesh_job("octet", ["n=2"], "cnt", box_groups=1)  # a clean lattice keeps its boxes
     assert clean.settings["unclean"] is None and len(clean.parts) == 8
