@@ -88,6 +88,22 @@ def test_fixture_region_with_t_junctions_meshes():
         assert mesh.is_watertight and mesh.is_winding_consistent and np.isfinite(mesh.vertices).all(), style
 
 
+def test_folded_refined_hubs_of_the_fixture_go_to_unions():
+    """Column i = 3 of the attached lattice: LiL leaves hubs whose refined surface turns back on
+    itself (no separating plane is needed: one hub's faces meet each other). Such a junction is
+    not star-shaped and the exact check finds its folds (``hubs.folded``), so it is left to a
+    local union: the region's refined mesh is closed and has no self-intersecting pair (it had
+    135 at two levels)."""
+    from ple.meshing.selfcheck import self_intersections
+
+    lat = load_ir(DATA / "issue_lil_two_balls.json")
+    mesh = tessellate(lat, "2:5,0:5,0:2", style="refined", levels=2)
+    rep = mesh.metadata["ple_unclean"]
+    assert rep.shrunk_hubs > 0  # the folded junctions, now unclean
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    assert mesh.is_watertight and mesh.is_winding_consistent and len(self_intersections(v, f)) == 0
+
+
 # ----- coplanar and antipodal beam directions --------------------------------------------------
 def test_square_grid_cross_t_and_l_junctions():
     """A one-layer square grid: cross hubs (4 coplanar beams: four circles on one supporting
