@@ -300,7 +300,7 @@ def plot_unclean(d) -> Path | None:
     fig, ax = plt.subplots(figsize=(8, 3.6))
     x = range(len(rows))
     ax.bar([i - 0.2 for i in x], ours, 0.4, label="ple mesh (CPU s)", color="#4a7ab0")
-    ax.bar([i + 0.2 for i in x], base, 0.4, label="one manifold3d union (CPU s; hatched: stopped)", color="#999",
+    ax.bar([i + 0.2 for i in x], base, 0.4, label="one manifold3d union (CPU s; hatched: lower bound)", color="#999",
            hatch=None)
     for i, r in enumerate(rows):
         if "cpu_seconds" not in r["manifold3d_union"]:
