@@ -47,7 +47,7 @@ from ..meshing.tessellate import (
 from ..meshing.unclean import UncleanReport
 from ..meshing.weld import grid_spacing
 from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, mesh_triangles
-from ..model.lattice import Lattice
+from ..model.lattice import Lattice, Region
 from ..program.sources import load_lattice
 
 CHILD = r"""
@@ -209,8 +209,6 @@ def _block_union(name: str, n: int, args) -> dict:
     got = _run(UNION, [name, n, m], args.union_timeout, args.union_memory * 1e9)
     if "cpu_seconds" not in got:
         return {"block": m, "block_union": got}
-    from ..model.lattice import Region  # noqa: PLC0415
-
     lat = case_lattice(name, n)
     whole, block = lat.evaluate(lat.region()), lat.evaluate(Region(0, m, 0, m, 0, m))
     ratio = (len(whole.center) + len(whole.beam_nodes)) / (len(block.center) + len(block.beam_nodes))
