@@ -317,6 +317,38 @@ def plot_unclean(d) -> Path | None:
     return out
 
 
+def presets_section(d) -> list[str]:
+    """Every preset with its defaults in every closed style (``ple bench presets``)."""
+    rows = d.get("rows", [])
+    styles = list(dict.fromkeys(r["style"] for r in rows))
+    verdict = "All meshed." if d.get("all_meshed") else "Failures below."
+    out = ["## Every preset, every style (`ple bench presets`)", "",
+           "`ple mesh NAME --style STYLE` with the preset's defaults, each in a fresh process (CPU seconds of the "
+           f"command; `ple info` beside it as the baseline). {verdict}"
+           + (f" {d['note']}." if d.get("note") else ""), "",
+           "| preset | `ple info` | " + " | ".join(styles) + " |", "|---|---|" + "---|" * len(styles)]
+    by = {}
+    for r in rows:
+        by.setdefault(r["preset"], {})[r["style"]] = r
+    for name, cells in by.items():
+        info = next(iter(cells.values())).get("info_seconds")
+        line = [name, "–" if info is None else f"{info:.1f} s"]
+        for st in styles:
+            r = cells.get(st)
+            if r is None:
+                line.append("–")
+            elif "timeout" in r:
+                line.append(f"stopped at {r['timeout']:.0f} s")
+            elif r.get("exit") != 0:
+                line.append(f"exit {r['exit']}: {r.get('last', '')[:80]}")
+            else:
+                tris = r.get("triangles")
+                line.append(f"{r['cpu_seconds']:.1f} s" + (f", {tris:,} tri" if tris else "")
+                            + (" (unions)" if r.get("unclean") and "local union" in r["unclean"] else ""))
+        out.append("| " + " | ".join(line) + " |")
+    return out + ["", "Raw JSON: `benchmarks/results/presets.json`.", ""]
+
+
 def startup_section(d) -> list[str]:
     rows = d.get("startup") or d.get("commands")
     if not rows:
@@ -374,6 +406,9 @@ def write_report() -> Path:
     if unclean:
         plot_unclean(unclean)
         lines += unclean_section(unclean)
+    presets = _load("presets")
+    if presets:
+        lines += presets_section(presets)
     for title, name, d in (("BeCOTS RangeFinder", "becots", becots), ("Lazy evaluation", "eval", ev)):
         if d:
             lines += generic_section(title, name, d)
