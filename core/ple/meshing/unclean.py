@@ -313,9 +313,10 @@ def on_grid(vertices, faces, grid: float, centers, reach: float, pinned=None,
     d, _ = tree.query(v, distance_upper_bound=reach + COLLAPSE_GRIDS * grid)
     keep = np.isfinite(d)[f].any(axis=1)
     if rings:  # the ring polygons go: their faces (slivers once the ring is on the grid) are not checked
-        ring_of = np.full(len(v), -1, np.int64)
-        for r, ring in enumerate(rings):
-            ring_of[_rows_in(v, snap(np.asarray(ring, float).reshape(-1, 3), grid))] = r
+        pts = [snap(np.asarray(ring, float).reshape(-1, 3), grid) for ring in rings]
+        rid = np.repeat(np.arange(len(pts)), [len(x) for x in pts])
+        at = match_rows(v, np.concatenate(pts))  # one search for every ring (not one per ring)
+        ring_of = np.where(at >= 0, rid[np.maximum(at, 0)], -1)
         fr = ring_of[f]
         keep &= ~((fr[:, 0] >= 0) & (fr[:, 0] == fr[:, 1]) & (fr[:, 1] == fr[:, 2]))
     near = np.flatnonzero(keep)
