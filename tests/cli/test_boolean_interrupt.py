@@ -9,12 +9,11 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
-from tests.cli.test_mesh_union_interrupt import _children
+from tests.cli.test_mesh_union_interrupt import interrupt_once_a_child_lives
 from tests.io.test_reliability_files import default_signals
 
 pytest.importorskip("manifold3d")
@@ -42,23 +41,7 @@ def _interrupt(tmp_path: Path, args: list, sig) -> None:
     ple = Path(sys.executable).parent / "ple"
     proc = subprocess.Popen([str(ple), *map(str, args), "--out", str(out)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, preexec_fn=default_signals)
-    deadline = time.monotonic() + 120
-    seen: dict = {}  # child pid -> first seen
-    while True:
-        assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read() if proc.poll() else "no child"
-        now = time.monotonic()
-        seen = {k: seen.get(k, now) for k in _children(proc.pid)}
-        old = [k for k, t in seen.items() if now - t > 1.0]
-        if old:
-            child = old[0]
-            break
-        time.sleep(0.05)
-    t0 = time.monotonic()
-    proc.send_signal(sig)
-    _, err = proc.communicate(timeout=60)
-    took = time.monotonic() - t0
-    assert proc.returncode == 128 + sig and "interrupted" in err and "Traceback" not in err, err
-    assert took < 5, took  # not a benchmark: the Booleans left would take seconds more
+    child = interrupt_once_a_child_lives(proc, sig, 120)
     assert sorted(p.name for p in tmp_path.iterdir()) == before
     assert out.read_text() == "previous"
     assert not os.path.exists(f"/proc/{child}") or "Z" in Path(f"/proc/{child}/stat").read_text().rsplit(")", 1)[1]

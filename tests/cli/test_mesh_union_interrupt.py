@@ -38,6 +38,29 @@ def _children(pid: int) -> list[int]:
     return out
 
 
+def interrupt_once_a_child_lives(proc, sig, wait: float) -> int:
+    """Send ``sig`` to ``proc`` once one of its children has lived a second (within ``wait``
+    seconds), and check that it ends within 5 s as interrupted (128 + sig, no traceback).
+    Returns that child's pid."""
+    deadline = time.monotonic() + wait
+    seen: dict = {}  # child pid -> first seen
+    while True:
+        assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read() if proc.poll() else "no child"
+        now = time.monotonic()
+        seen = {k: seen.get(k, now) for k in _children(proc.pid)}
+        old = [k for k, t in seen.items() if now - t > 1.0]
+        if old:
+            break
+        time.sleep(0.05)
+    t0 = time.monotonic()
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    took = time.monotonic() - t0
+    assert proc.returncode == 128 + sig and "interrupted" in err and "Traceback" not in err, err
+    assert took < 5, took  # not a benchmark: the work left would take seconds to minutes more
+    return old[0]
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_signal_during_a_union_ends_the_mesh(tmp_path, sig):
     src = tmp_path / "thick.py"
@@ -47,24 +70,7 @@ def test_signal_during_a_union_ends_the_mesh(tmp_path, sig):
     ple = Path(sys.executable).parent / "ple"
     proc = subprocess.Popen([str(ple), "mesh", str(src), "--style", "cnt", "--workers", "1", "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_signals)
-    deadline = time.monotonic() + 180
-    seen: dict = {}  # child pid -> first seen: the union's child lives for minutes, the program's for a moment
-    while True:
-        assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read() if proc.poll() else "no child"
-        now = time.monotonic()
-        kids = _children(proc.pid)
-        seen = {k: seen.get(k, now) for k in kids}
-        old = [k for k, t in seen.items() if now - t > 1.0]
-        if old:
-            child = old[0]
-            break
-        time.sleep(0.05)
-    t0 = time.monotonic()
-    proc.send_signal(sig)
-    _, err = proc.communicate(timeout=60)
-    took = time.monotonic() - t0
-    assert proc.returncode == 128 + sig and "interrupted" in err and "Traceback" not in err, err
-    assert took < 5, took  # not a benchmark: the union itself would run for minutes
+    child = interrupt_once_a_child_lives(proc, sig, 180)  # the union's child lives for minutes, the program's a moment
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.stl", "thick.py"]
     assert out.read_text() == "previous"
     assert not os.path.exists(f"/proc/{child}") or "Z" in Path(f"/proc/{child}/stat").read_text().rsplit(")", 1)[1]
