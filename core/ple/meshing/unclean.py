@@ -278,8 +278,7 @@ def separated(a, b, margin) -> np.ndarray:
 MAX_REPAIR_ROUNDS = 12
 
 
-def on_grid(vertices, faces, grid: float, centers, reach: float, pinned=None,
-            rings=None) -> tuple[np.ndarray, np.ndarray]:
+def on_grid(vertices, faces, grid: float, centers, reach: float, rings=None) -> tuple[np.ndarray, np.ndarray]:
     """A closed, self-intersection-free mesh moved onto the float32 grid ``grid`` so that it stays
     so: its edges under ``COLLAPSE_GRIDS`` grid steps are collapsed in 64 bits (link condition),
     the vertices snapped and welded (``ple.meshing.weld.weld``); then, on the faces with a corner within
@@ -290,14 +289,15 @@ def on_grid(vertices, faces, grid: float, centers, reach: float, pinned=None,
     onto one of its grid vertices, and so is the shortest edge of every cap flatter than
     ``COLLAPSE_GRIDS`` grid steps. The exact check on the grid has the last word (PleError if it
     finds any pair). Returns (vertices on the grid, faces).
-    ``pinned`` (K, 3): points that are vertices of the mesh and must stay (a local union's rings,
-    shared with the fast path): no collapse removes them, and they come back at their own
-    coordinates (on the grid they are where the fast path's writer puts its own). ``rings``: the
-    pinned points as a list of rings (each (k, 3)) whose polygons the caller removes (a local
-    union opened along them): faces with every corner on one ring are left out of the checks."""
+    ``rings``: rings of points (each (k, 3)) that are vertices of the mesh and must stay (a local
+    union's rings, shared with the fast path): no collapse removes them, and they come back at
+    their own coordinates (on the grid they are where the fast path's writer puts its own). The
+    caller removes their polygons (the union is opened along them): faces with every corner on
+    one ring are left out of the checks."""
     v = np.asarray(vertices, float)
     f = np.asarray(faces, np.int64)
-    pinned = np.zeros((0, 3)) if pinned is None else np.asarray(pinned, float).reshape(-1, 3)
+    rings = [np.asarray(r, float).reshape(-1, 3) for r in (rings or [])]
+    pinned = np.concatenate(rings) if rings else np.zeros((0, 3))
     fixed = _rows_in(v, pinned)
     for _ in range(MAX_REPAIR_ROUNDS):
         e = sorted_edges(f, len(v))
@@ -313,12 +313,7 @@ def on_grid(vertices, faces, grid: float, centers, reach: float, pinned=None,
     d, _ = tree.query(v, distance_upper_bound=reach + COLLAPSE_GRIDS * grid)
     keep = np.isfinite(d)[f].any(axis=1)
     if rings:  # the ring polygons go: their faces (slivers once the ring is on the grid) are not checked
-        pts = [snap(np.asarray(ring, float).reshape(-1, 3), grid) for ring in rings]
-        rid = np.repeat(np.arange(len(pts)), [len(x) for x in pts])
-        at = match_rows(v, np.concatenate(pts))  # one search for every ring (not one per ring)
-        ring_of = np.where(at >= 0, rid[np.maximum(at, 0)], -1)
-        fr = ring_of[f]
-        keep &= ~((fr[:, 0] >= 0) & (fr[:, 0] == fr[:, 1]) & (fr[:, 1] == fr[:, 2]))
+        keep &= ~on_one_ring(f, ring_of_vertices(v, [snap(r, grid) for r in rings]))
     near = np.flatnonzero(keep)
     tested = carry = None  # the faces of the last probe and its pairs (vertex id triples)
     for _ in range(MAX_REPAIR_ROUNDS):
@@ -360,6 +355,22 @@ def on_grid(vertices, faces, grid: float, centers, reach: float, pinned=None,
         for i in np.flatnonzero(_rows_in(v, snap(pinned, grid))):
             v[i] = key[tuple(v[i].tolist())]
     return v, remap[f]
+
+
+def ring_of_vertices(v: np.ndarray, rings: list) -> np.ndarray:
+    """For each vertex (V, 3) the index of the ring (of ``rings``, each (k, 3)) it is a point of
+    (exactly), or -1: one search for every ring's points."""
+    sizes = [len(r) for r in rings]
+    if not sum(sizes):
+        return np.full(len(v), -1, np.int64)
+    at = match_rows(v, np.concatenate([np.asarray(r, float).reshape(-1, 3) for r in rings]))
+    return np.where(at >= 0, np.repeat(np.arange(len(rings)), sizes)[np.maximum(at, 0)], -1)
+
+
+def on_one_ring(faces: np.ndarray, ring_of: np.ndarray) -> np.ndarray:
+    """Which faces (F, 3) have every corner on one ring (``ring_of_vertices``): its polygon."""
+    fr = ring_of[faces]
+    return (fr[:, 0] >= 0) & (fr[:, 0] == fr[:, 1]) & (fr[:, 1] == fr[:, 2])
 
 
 def _rows_in(v: np.ndarray, points: np.ndarray) -> np.ndarray:

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import PleError
-from .unclean import BALL_TURNS, SPHERE_SEGMENTS, match_rows, on_grid
+from .unclean import BALL_TURNS, SPHERE_SEGMENTS, match_rows, on_grid, on_one_ring, ring_of_vertices
 
 UNION_TRIANGLE_BYTES = 600  # peak bytes per input triangle of a manifold3d union and its repair (measured, rounded up)
 
@@ -226,10 +226,9 @@ def _unite_once(manifold3d, unit, cluster, center, radius, beam_nodes, rings, gr
     out = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add).to_mesh64()
     v = np.asarray(out.vert_properties[:, :3], float)
     f = np.asarray(out.tri_verts, np.int64)
-    ring_pts = np.concatenate(pinned) if pinned else np.zeros((0, 3))
     centre = v.mean(axis=0) if len(v) else np.zeros(3)
     reach = float(np.linalg.norm(v - centre, axis=1).max()) if len(v) else 0.0
-    v, f = on_grid(v, f, grid, centre[None], reach, pinned=ring_pts, rings=pinned)
+    v, f = on_grid(v, f, grid, centre[None], reach, rings=pinned)
     return _open_rings(v, f, pinned, keys)
 
 
@@ -239,13 +238,11 @@ def _open_rings(v, f, rings: list, keys: list):
     (``RingTouchedError`` naming the first ring that is not, by its key of ``keys``)."""
     if not rings:
         return v, f
-    pts = np.concatenate([np.asarray(r, float).reshape(-1, 3) for r in rings])
-    sizes = [len(np.asarray(r).reshape(-1, 3)) for r in rings]
-    rid = np.repeat(np.arange(len(rings)), sizes)
-    at = match_rows(v, pts)
-    ring_of = np.where(at >= 0, rid[np.maximum(at, 0)], -1)
-    fr = ring_of[f]
-    f = f[~((fr[:, 0] >= 0) & (fr[:, 0] == fr[:, 1]) & (fr[:, 1] == fr[:, 2]))]
+    rings = [np.asarray(r, float).reshape(-1, 3) for r in rings]
+    pts = np.concatenate(rings)
+    sizes = [len(r) for r in rings]
+    ring_of = ring_of_vertices(v, rings)
+    f = f[~on_one_ring(f, ring_of)]
     n = max(len(v), 1)
     d = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
     d = d[~np.isin(d[:, 0] * n + d[:, 1], d[:, 1] * n + d[:, 0])]  # directed edges without their reverse
