@@ -372,10 +372,14 @@ class _Tessellator:
         for k, s in enumerate(sets):
             at = 0
             for h, ids in s:
-                out[k, at:at + len(ids)] = self.tpl_list[int(tids[h])][0].vertices[ids] @ m[h, :3, :3].T + m[h, :3, 3]
+                out[k, at:at + len(ids)] = self._placed(tids, m, h, ids)
                 at += len(ids)
             out[k, at:] = out[k, at - 1]
         return out
+
+    def _placed(self, tids, m, h: int, ids=slice(None)) -> np.ndarray:
+        """Vertices ``ids`` of hub row h's template, placed by its similarity m[h]."""
+        return self.tpl_list[int(tids[h])][0].vertices[ids] @ m[h, :3, :3].T + m[h, :3, 3]
 
     def _hubs_meet(self, tids, m, pairs, chunk: int = 2048) -> np.ndarray:
         """Which hub pairs (P, 2 rows) have meshes that meet where the file holds them: each hub's
@@ -389,9 +393,8 @@ class _Tessellator:
 
         def hub(h):
             if h not in placed:
-                tpl = self.tpl_list[int(tids[h])][0]
-                v = np.round((tpl.vertices @ m[h, :3, :3].T + m[h, :3, 3]) / g)  # grid steps, whole numbers
-                placed[h] = (v, np.asarray(tpl.faces, np.int64))
+                v = np.round(self._placed(tids, m, h) / g)  # grid steps, whole numbers
+                placed[h] = (v, np.asarray(self.tpl_list[int(tids[h])][0].faces, np.int64))
             return placed[h]
 
         for lo in range(0, len(pairs), chunk):

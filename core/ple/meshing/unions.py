@@ -296,14 +296,14 @@ class ShapeCache:
         bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
         hubs = np.sort(np.asarray(cluster.hubs, np.int64))
         order = {int(h): k for k, h in enumerate(hubs.tolist())}
-        ring_keys = [(int(j), e) for j in np.sort(cluster.beams).tolist() for e in (0, 1)
-                     if int(bn[j, e]) not in order]
+        beams = np.sort(np.asarray(cluster.beams, np.int64)).tolist()
+        ring_keys = [(j, e) for j in beams for e in (0, 1) if int(bn[j, e]) not in order]
         pts = [c[hubs]] + [np.asarray(rings[k], float) for k in ring_keys]
         pts = np.concatenate(pts) if pts else np.zeros((0, 3))
         if not len(pts):
             return None, None, ring_keys
         anchor = pts[0]
-        ends = [order.get(int(bn[j, e]), -1) for j in np.sort(cluster.beams).tolist() for e in (0, 1)]
+        ends = [order.get(int(bn[j, e]), -1) for j in beams for e in (0, 1)]
         q = self.grid * SHAPE_QUANTUM
         body = np.round(np.concatenate([(pts - anchor).ravel() / q, np.asarray(radius, float)[hubs] / q]))
         sizes = [len(hubs)] + [len(rings[k]) for k in ring_keys] + ends
