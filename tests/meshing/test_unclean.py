@@ -269,10 +269,10 @@ def test_neighbouring_pulled_hubs_apart_by_their_meshes(style, monkeypatch):
     seen = {}
     hulls_only = unclean._pulled_neighbours
 
-    def spy(pulled, bn, points, margin, meet=None):
+    def spy(pulled, bn, points, margin, meet=None, steady=None):
         seen["hulls"] = len(hulls_only(pulled, bn, points, margin))
         seen["meshes"] = len(hulls_only(pulled, bn, points, margin, meet))
-        return hulls_only(pulled, bn, points, margin, meet)
+        return hulls_only(pulled, bn, points, margin, meet, steady)
 
     monkeypatch.setattr(unclean, "_pulled_neighbours", spy)
     mesh = tessellate(lat, region, style)
@@ -294,3 +294,62 @@ def test_hubs_meet_sees_a_hub_meet_itself():
     hubs = np.arange(len(tids))
     assert tess._hubs_meet(tids, m, np.stack([hubs, hubs], 1)).all()
     assert not tess._hubs_meet(tids, m, np.asarray(ev.beam_nodes, np.int64)).any()
+
+
+def test_hubs_meet_in_a_batch_as_pair_by_pair():
+    """``_hubs_meet`` tests many pairs in one exact check; each answer equals that of the pair
+    alone (its two hubs placed and rounded to the grid, every face against every face)."""
+    from ple.meshing.tessellate import _Tessellator
+
+    lat = short_beam_lattice(4)
+    tess = _Tessellator(lat, lat.region(), "cnt", 0, 16, grid=2.0**-20)
+    ev = lat.evaluate(lat.region())
+    tids, m, _, _ = tess.instances(np.asarray(ev.node_index, np.int64))
+    rng = np.random.default_rng(3)
+    hubs = rng.integers(0, len(tids), 40)
+    pairs = np.concatenate([np.stack([hubs, hubs], 1), np.asarray(ev.beam_nodes, np.int64)[:60],
+                            rng.integers(0, len(tids), (40, 2))])
+    pairs = pairs[rng.permutation(len(pairs))]
+    batch = tess._hubs_meet(tids, m, pairs, chunk=32)
+
+    def alone(a, b):
+        v, f = [], []
+        for h in (a, b):
+            tpl = tess.tpl_list[int(tids[h])][0]
+            f.append(np.asarray(tpl.faces, np.int64) + sum(len(x) for x in v))
+            v.append(np.round((tpl.vertices @ m[h, :3, :3].T + m[h, :3, 3]) / tess.grid))
+        owner = np.repeat([0, 1], [len(f[0]), len(f[1])])
+        hits = self_intersections(np.concatenate(v), np.concatenate(f))
+        return bool((owner[hits[:, 0]] != owner[hits[:, 1]]).any())
+
+    assert batch.tolist() == [alone(a, b) for a, b in pairs.tolist()]
+    assert batch.any() and not batch.all()
+
+
+def test_steady_anchors_prove_their_copies_apart(monkeypatch):
+    """On a curved region with steady layers, neighbouring pulled junctions are tested in the
+    anchor layer only: the junctions still sent to unions are a subset of those the pair-by-pair
+    test sends, and the pairs only the anchors proved apart do not meet (their meshes, exact)."""
+    import ple.meshing.unclean as unclean
+    from ple.meshing.tessellate import _Tessellator
+    from ple.model.lattice import Region
+
+    lat, region = case_lattice("curved", 40), Region(30, 33, 8, 11, 0, 12)
+    seen = {}
+    pulled_neighbours = unclean._pulled_neighbours
+
+    def spy(pulled, bn, points, margin, meet=None, steady=None):
+        assert steady is not None
+        seen["steady"] = pulled_neighbours(pulled, bn, points, margin, None, steady)
+        seen["alone"] = pulled_neighbours(pulled, bn, points, margin, None, None)
+        return seen["steady"]
+
+    monkeypatch.setattr(unclean, "_pulled_neighbours", spy)
+    tess = _Tessellator(lat, region, "cnt", 0, 16)
+    tess.find_unclean()
+    key = lambda p: set(map(tuple, np.asarray(p).tolist()))  # noqa: E731
+    assert len(seen["alone"]) > 20 and key(seen["steady"]) <= key(seen["alone"])
+    only = np.array(sorted(key(seen["alone"]) - key(seen["steady"])), np.int64).reshape(-1, 2)
+    ev = lat.evaluate(region)
+    tids, m, _, _ = tess.instances(np.asarray(ev.node_index, np.int64))
+    assert not tess._hubs_meet(tids, m, only).any()

@@ -230,6 +230,9 @@ class _Tessellator:
         # slots of template node n: (pattern, +1 outgoing | -1 incoming)
         self.slots = [[(p, 1) for p, b in enumerate(lat.beams) if b.n1 == n]
                       + [(p, -1) for p, b in enumerate(lat.beams) if b.n2 == n] for n in range(nn)]
+        # each beam-pattern's slot at its source node and at its target node
+        self.beam_slots = np.array([[self.slots[b.n1].index((p, 1)), self.slots[b.n2].index((p, -1))]
+                                    for p, b in enumerate(lat.beams)], np.int64).reshape(-1, 2)
         self.templates: dict = {}
         self.tpl_list: list = []  # (template, slot map) by template id; only appended to
         self.table = TemplateTable()  # their vertices and faces, for box assembly
@@ -246,6 +249,10 @@ class _Tessellator:
         fmin = float(np.min(lat.group_factors(corners[:, 0], corners[:, 1], corners[:, 2])))
         self.min_edge = COLLAPSE_GRIDS * self.grid / fmin
         self.hulls: dict = {}  # template id -> ids of its vertices on their convex hull
+        # vertex-id lists of templates (hull, or the ring at a slot), flattened (``_vertex_lists``)
+        self.id_lists = np.zeros(0, np.int64)
+        self.list_at = np.zeros(0, np.int64)
+        self.list_size = np.zeros(0, np.int64)
         self.excluded = None  # sorted linear keys of nodes meshed elsewhere (``ple.meshing.unions``)
         self.excluded_beams = None  # sorted keys (source node key · patterns + pattern) of beams meshed elsewhere
         # hub templates of a box are built by ``workers`` processes (the CHoCC per topology is Python
@@ -351,35 +358,64 @@ class _Tessellator:
     def _element_points(self, idx, tids, m, beam_nodes, pattern, elements) -> np.ndarray:
         """Vertices (K, P, 3) whose convex hulls hold the meshes of ``elements`` (rows of the
         region's nodes, then N + rows of its beams; ``find_unclean``'s numbering): a hub's
-        template hull vertices, a beam's two contact rings, placed by their hubs' similarities.
-        Rows shorter than P repeat their last point (the hull is unchanged)."""
+        template hull vertices, a beam's two contact rings, placed by their hubs' similarities
+        as the boxes place them (``assembly.place``). Rows shorter than P repeat their last point
+        (the hull is unchanged)."""
         n = len(idx)
-        elements = np.asarray(elements, np.int64)
-        sets: list = [None] * len(elements)  # (hub rows, template vertex ids) per element
-        for k, e in enumerate(elements.tolist()):
-            if e < n:
-                sets[k] = ((e, self._hull_ids(int(tids[e]))),)
-            else:
-                x, y = beam_nodes[e - n]
-                p = int(pattern[e - n])
-                ends = []
-                for h, sign in ((x, 1), (y, -1)):
-                    tpl, slot_of = self.tpl_list[int(tids[h])]
-                    ends.append((h, np.asarray(tpl.rings[slot_of[self.slots[int(idx[h, 3])].index((p, sign))]])))
-                sets[k] = tuple(ends)
-        size = max(sum(len(v) for _, v in s) for s in sets)
-        out = np.empty((len(elements), size, 3))
-        for k, s in enumerate(sets):
-            at = 0
-            for h, ids in s:
-                out[k, at:at + len(ids)] = self._placed(tids, m, h, ids)
-                at += len(ids)
-            out[k, at:] = out[k, at - 1]
-        return out
+        e = np.asarray(elements, np.int64)
+        beam = e >= n
+        b = e[beam] - n
+        # segments (element k, hub row, vertex list): a hub's hull, or a beam's ring at either end
+        k = np.concatenate([np.flatnonzero(~beam), np.flatnonzero(beam), np.flatnonzero(beam)])
+        hub = np.concatenate([e[~beam], beam_nodes[b, 0], beam_nodes[b, 1]])
+        slot = np.concatenate([np.full(int((~beam).sum()), -1), self.beam_slots[pattern[b], 0],
+                               self.beam_slots[pattern[b], 1]])
+        second = np.repeat([False, False, True], [int((~beam).sum()), len(b), len(b)])
+        rows, pos = np.unique(hub, return_inverse=True)
+        verts, start = self._placed_hubs(tids, m, rows)
+        first_id, size = self._vertex_lists(tids[hub], slot)
+        length = np.zeros(len(e), np.int64)
+        length[k[~second]] = size[~second]
+        offset = np.where(second, length[k], 0)
+        np.add.at(length, k[second], size[second])
+        j = np.arange(int(size.sum())) - np.repeat(np.cumsum(size) - size, size)
+        src = np.repeat(start[pos.reshape(-1)], size) + self.id_lists[np.repeat(first_id, size) + j]
+        out = np.empty((len(e), int(length.max(initial=1)), 3))
+        out[np.repeat(k, size), np.repeat(offset, size) + j] = verts[src]
+        last = np.minimum(np.arange(out.shape[1]), np.maximum(length, 1)[:, None] - 1)
+        return np.take_along_axis(out, last[..., None], axis=1)
 
-    def _placed(self, tids, m, h: int, ids=slice(None)) -> np.ndarray:
-        """Vertices ``ids`` of hub row h's template, placed by its similarity m[h]."""
-        return self.tpl_list[int(tids[h])][0].vertices[ids] @ m[h, :3, :3].T + m[h, :3, 3]
+    def _placed_hubs(self, tids, m, rows) -> tuple[np.ndarray, np.ndarray]:
+        """Every vertex of the hubs ``rows`` placed as the boxes place them (``assembly.place``):
+        (vertices (V, 3), first vertex of each row (R,))."""
+        table = self.table.snapshot()
+        counts = table[2][tids[rows], 2]
+        start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        verts = np.empty((int(counts.sum()), 3))
+        place(table, tids[rows], start, m[rows], verts)
+        return verts, start
+
+    def _vertex_lists(self, t: np.ndarray, slot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where the vertex ids of template t (S,) at ring slot (S,) (-1: the template's hull
+        vertices) start in ``self.id_lists``, and how many there are: (start (S,), size (S,))."""
+        width = max((len(x) for x in self.slots), default=0) + 1
+        code = t * width + slot + 1
+        if len(self.list_at) <= code.max(initial=-1):
+            grown = np.full(2 * int(code.max()) + 2, -1, np.int64)
+            grown[:len(self.list_at)] = self.list_at
+            self.list_at, self.list_size = grown, np.resize(self.list_size, len(grown))
+        new = np.unique(code[self.list_at[code] < 0])
+        if len(new):
+            lists = []
+            for c in new.tolist():
+                tt, s = divmod(c, width)
+                tpl, slot_of = self.tpl_list[tt]
+                lists.append(self._hull_ids(tt) if s == 0 else np.asarray(tpl.rings[slot_of[s - 1]], np.int64))
+            sizes = np.array([len(x) for x in lists], np.int64)
+            self.list_at[new] = len(self.id_lists) + np.cumsum(sizes) - sizes
+            self.list_size[new] = sizes
+            self.id_lists = np.concatenate([self.id_lists, *lists])
+        return self.list_at[code], self.list_size[code]
 
     def _hubs_meet(self, tids, m, pairs, chunk: int = 2048) -> np.ndarray:
         """Which hub pairs (P, 2 rows) have meshes that meet where the file holds them: each hub's
@@ -389,37 +425,43 @@ class _Tessellator:
         whole power of two of grid steps (exact in float64)."""
         g = self.grid
         out = np.zeros(len(pairs), bool)
-        placed: dict = {}
-
-        def hub(h):
-            if h not in placed:
-                v = np.round(self._placed(tids, m, h) / g)  # grid steps, whole numbers
-                placed[h] = (v, np.asarray(self.tpl_list[int(tids[h])][0].faces, np.int64))
-            return placed[h]
-
         for lo in range(0, len(pairs), chunk):
-            part = pairs[lo:lo + chunk]
-            sides = [[hub(int(h)) for h in p] for p in part.tolist()]
-            span = max(float(np.ptp(np.concatenate([v for v, _ in s]), axis=0).max()) for s in sides)
-            step = 2.0 ** math.ceil(math.log2(span + 4.0))
-            verts, faces, owner, at = [], [], [], 0
-            for k, s in enumerate(sides):
-                boxes = [(v.min(axis=0) - 1, v.max(axis=0) + 1) for v, _ in s]
-                for side, (v, f) in enumerate(s):
-                    t = v[f]
-                    lo_b, hi_b = boxes[1 - side]
-                    near = np.all((t.max(axis=1) >= lo_b) & (t.min(axis=1) <= hi_b), axis=1)
-                    if not near.any():
-                        continue
-                    verts.append(v + np.array([k * step, 0.0, 0.0]))
-                    faces.append(f[near] + at)
-                    owner.append(np.full(int(near.sum()), 2 * k + side))
-                    at += len(v)
-            if not faces:
+            part = np.asarray(pairs[lo:lo + chunk], np.int64)
+            rows, pos = np.unique(part, return_inverse=True)
+            pos = pos.reshape(-1, 2)
+            verts, vstart = self._placed_hubs(tids, m, rows)
+            verts = np.round(verts / g)  # grid steps, whole numbers
+            vcount = np.diff(np.append(vstart, len(verts)))
+            box_lo, box_hi = np.minimum.reduceat(verts, vstart), np.maximum.reduceat(verts, vstart)
+            tpl, tpos = np.unique(tids[rows], return_inverse=True)
+            tf = [np.asarray(self.tpl_list[t][0].faces, np.int64) for t in tpl.tolist()]
+            fcount = np.array([len(f) for f in tf], np.int64)[tpos]
+            fstart = (np.cumsum([len(f) for f in tf]) - [len(f) for f in tf])[tpos]
+            # (pair k, side) as 2k + side: the faces of that side's hub near the other's box
+            side, other = pos.reshape(-1), pos[:, ::-1].reshape(-1)
+            nf = fcount[side]
+            owner = np.repeat(np.arange(len(side)), nf)
+            local = np.concatenate(tf)[np.repeat(fstart[side], nf) + np.arange(int(nf.sum()))
+                                       - np.repeat(np.cumsum(nf) - nf, nf)]
+            tri = verts[vstart[side][owner][:, None] + local]
+            near = (np.all(tri.max(axis=1) >= box_lo[other][owner] - 1, axis=1)
+                    & np.all(tri.min(axis=1) <= box_hi[other][owner] + 1, axis=1))
+            if not near.any():
                 continue
-            owner = np.concatenate(owner)
-            hits = self_intersections(np.concatenate(verts), np.concatenate(faces), workers=1)
-            oa, ob = owner[hits[:, 0]], owner[hits[:, 1]]
+            # every (pair, side) with a near face takes its hub's vertices, its pair moved along x
+            # by a whole power of two of grid steps beyond the chunk's largest pair
+            span = float((np.maximum(box_hi[pos[:, 0]], box_hi[pos[:, 1]])
+                          - np.minimum(box_lo[pos[:, 0]], box_lo[pos[:, 1]])).max())
+            step = 2.0 ** math.ceil(math.log2(span + 4.0))
+            nv = np.zeros(len(side), np.int64)
+            nv[owner[near]] = vcount[side[owner[near]]]
+            vbase = np.cumsum(nv) - nv
+            vowner = np.repeat(np.arange(len(side)), nv)
+            v = verts[vstart[side][vowner] + np.arange(int(nv.sum())) - vbase[vowner]]
+            v[:, 0] += (vowner // 2) * step
+            o = owner[near]
+            hits = self_intersections(v, local[near] + vbase[o][:, None], workers=1)
+            oa, ob = o[hits[:, 0]], o[hits[:, 1]]
             cross = (oa // 2 == ob // 2) & (oa != ob)
             out[lo + oa[cross] // 2] = True
         return out

@@ -146,7 +146,7 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
             found.append(copied)
     close = 0
     if pulled is not None:
-        near = _pulled_neighbours(np.asarray(pulled, bool).reshape(-1), bn, points, margin, meet)
+        near = _pulled_neighbours(np.asarray(pulled, bool).reshape(-1), bn, points, margin, meet, steady)
         bad[near.reshape(-1)] = True
         close = len(near)
         found.append(near)
@@ -165,28 +165,63 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
                          shrunk_mask, r_plus=rp)
 
 
-def _pulled_neighbours(pulled, bn, points, margin: float, meet=None) -> np.ndarray:
+def _pulled_neighbours(pulled, bn, points, margin: float, meet=None, steady=None) -> np.ndarray:
     """Pairs (P, 2) of neighbouring hubs (beams ``bn`` (M, 2) with a ``pulled`` end) whose
-    junction hulls are not proven apart (``separated``) and, with ``meet``, whose meshes meet."""
+    junction hulls are not proven apart (``separated``) and, with ``meet``, whose meshes meet.
+    ``steady`` (``find_unclean``'s): a pair inside layers [a, b) whose copy in layer a (its
+    anchor) is proven apart by margin / shrink is apart (its hulls are a similar image, at least
+    shrink times the size); only the others are looked at."""
     pairs = np.unique(np.sort(bn[pulled[bn[:, 0]] | pulled[bn[:, 1]]], axis=1), axis=0)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     if points is None or not len(pairs):
         return pairs
     apart = np.zeros(len(pairs), bool)
+    todo = np.ones(len(pairs), bool)
+    if steady is not None:
+        node_index, ka, kb, shrink = steady
+        idx = np.asarray(node_index, np.int64)
+        layer = idx[:, 2][pairs]
+        kmin = layer.min(axis=1)
+        inside = (kmin >= ka) & (layer.max(axis=1) < kb)
+        anchor = inside & (kmin == ka)
+        apart[anchor] = _hulls_apart(pairs[anchor], points, margin / shrink)
+        copy = np.flatnonzero(inside & (kmin > ka))
+        dims = idx.max(axis=0) + 1
+        key = ((idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]) * dims[3] + idx[:, 3]
+        step = np.int64(dims[3])
+        total = np.int64(len(key) and key.max() + 1)
+
+        def pair_key(rows, shift):
+            return (key[rows[:, 0]] - shift * step) * total + key[rows[:, 1]] - shift * step
+
+        proven = np.sort(pair_key(pairs[anchor & apart], 0))
+        at = np.searchsorted(proven, pair_key(pairs[copy], kmin[copy] - ka))
+        apart[copy] = proven[np.minimum(at, len(proven) - 1)] == pair_key(pairs[copy], kmin[copy] - ka) \
+            if len(proven) else False
+        todo = ~anchor & ~apart
+    rest = np.flatnonzero(todo)
+    apart[rest] = _hulls_apart(pairs[rest], points, margin)
+    if meet is not None and not apart.all():
+        rest = np.flatnonzero(~apart)
+        apart[rest] = ~meet(pairs[rest])
+    return pairs[~apart]
+
+
+def _hulls_apart(pairs, points, margin: float) -> np.ndarray:
+    """Which neighbouring hub pairs (P, 2) have junction hulls (``points``) proven more than
+    ``margin`` apart: first across the beam (the plane normal to the line of centres between the
+    two disks), then by ``separated``."""
+    apart = np.zeros(len(pairs), bool)
     for lo in range(0, len(pairs), SEPARATION_CHUNK):
         part = pairs[lo:lo + SEPARATION_CHUNK]
         pa, pb = points(part[:, 0]), points(part[:, 1])
-        # first across the beam: the plane normal to the line of centres between the two disks
         u = pb.mean(axis=1) - pa.mean(axis=1)
         gap = np.einsum("kpi,ki->kp", pb, u).min(axis=1) - np.einsum("kpi,ki->kp", pa, u).max(axis=1)
         across = gap > margin * np.linalg.norm(u, axis=1)
         rest = np.flatnonzero(~across)
         across[rest] = separated(pa[rest], pb[rest], margin)
         apart[lo:lo + len(part)] = across
-    if meet is not None and not apart.all():
-        rest = np.flatnonzero(~apart)
-        apart[rest] = ~meet(pairs[rest])
-    return pairs[~apart]
+    return apart
 
 
 def _query_pairs(ends, kinds, lo, hi, bn, query):
