@@ -170,7 +170,8 @@ def _pulled_neighbours(pulled, bn, points, margin: float, meet=None, steady=None
     junction hulls are not proven apart (``separated``) and, with ``meet``, whose meshes meet.
     ``steady`` (``find_unclean``'s): a pair inside layers [a, b) whose copy in layer a (its
     anchor) is proven apart by margin / shrink is apart (its hulls are a similar image, at least
-    shrink times the size); only the others are looked at."""
+    shrink times the size); only the others are looked at (with ``meet``, the copies of an anchor
+    that was not proven apart on their meshes only)."""
     pairs = np.unique(np.sort(bn[pulled[bn[:, 0]] | pulled[bn[:, 1]]], axis=1), axis=0)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     if points is None or not len(pairs):
@@ -184,7 +185,7 @@ def _pulled_neighbours(pulled, bn, points, margin: float, meet=None, steady=None
         kmin = layer.min(axis=1)
         inside = (kmin >= ka) & (layer.max(axis=1) < kb)
         anchor = inside & (kmin == ka)
-        apart[anchor] = _hulls_apart(pairs[anchor], points, margin / shrink)
+        apart[anchor] = _hulls_apart(pairs[anchor], points, margin / shrink, meet is not None)
         copy = np.flatnonzero(inside & (kmin > ka))
         dims = idx.max(axis=0) + 1
         key = ((idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]) * dims[3] + idx[:, 3]
@@ -198,19 +199,21 @@ def _pulled_neighbours(pulled, bn, points, margin: float, meet=None, steady=None
         at = np.searchsorted(proven, pair_key(pairs[copy], kmin[copy] - ka))
         apart[copy] = proven[np.minimum(at, len(proven) - 1)] == pair_key(pairs[copy], kmin[copy] - ka) \
             if len(proven) else False
-        todo = ~anchor & ~apart
+        # a copy of an anchor whose hulls were not proven apart goes to the mesh test at once (with
+        # ``meet``): its hulls are a similar image of the anchor's
+        todo = ~inside if meet is not None else ~anchor & ~apart
     rest = np.flatnonzero(todo)
-    apart[rest] = _hulls_apart(pairs[rest], points, margin)
+    apart[rest] = _hulls_apart(pairs[rest], points, margin, meet is not None)
     if meet is not None and not apart.all():
         rest = np.flatnonzero(~apart)
         apart[rest] = ~meet(pairs[rest])
     return pairs[~apart]
 
 
-def _hulls_apart(pairs, points, margin: float) -> np.ndarray:
+def _hulls_apart(pairs, points, margin: float, meet: bool = False) -> np.ndarray:
     """Which neighbouring hub pairs (P, 2) have junction hulls (``points``) proven more than
     ``margin`` apart: first across the beam (the plane normal to the line of centres between the
-    two disks), then by ``separated``."""
+    two disks), then by ``separated`` (fewer steps when the meshes are tested next: ``meet``)."""
     apart = np.zeros(len(pairs), bool)
     for lo in range(0, len(pairs), SEPARATION_CHUNK):
         part = pairs[lo:lo + SEPARATION_CHUNK]
@@ -219,7 +222,7 @@ def _hulls_apart(pairs, points, margin: float) -> np.ndarray:
         gap = np.einsum("kpi,ki->kp", pb, u).min(axis=1) - np.einsum("kpi,ki->kp", pa, u).max(axis=1)
         across = gap > margin * np.linalg.norm(u, axis=1)
         rest = np.flatnonzero(~across)
-        across[rest] = separated(pa[rest], pb[rest], margin)
+        across[rest] = separated(pa[rest], pb[rest], margin, MEETING_STEPS if meet else SEPARATION_STEPS)
         apart[lo:lo + len(part)] = across
     return apart
 
@@ -278,21 +281,23 @@ def _mark_copies(bad, ends, top, kb: int, node_index, kinds, bn) -> np.ndarray:
 SEPARATION_GRIDS = 8  # hulls this many output grid steps apart stay apart after two roundings of each vertex
 SEPARATION_STEPS = 64  # Frank–Wolfe steps before a pair is left unclean (warped n = 70: at most 4 needed)
 SEPARATION_CHUNK = 4096  # pairs whose vertex sets are held at once
+MEETING_STEPS = 16  # Frank–Wolfe steps for neighbouring junctions, whose meshes are tested next (``meet``)
 
 
-def separated(a, b, margin) -> np.ndarray:
+def separated(a, b, margin, steps: int = SEPARATION_STEPS) -> np.ndarray:
     """Which pairs of point sets a (K, P, 3), b (K, Q, 3) have convex hulls lying more than
     ``margin`` apart: a direction x with min(b·x) - max(a·x) > margin |x| is sought by
     Frank–Wolfe steps towards the point of conv(b - a) nearest the origin (support points of the
     Minkowski difference, exact line search). True is a proof (the plane normal to x separates
-    them); False means none was found in SEPARATION_STEPS steps, or the hulls meet."""
+    them); False means none was found in ``steps`` steps, or the hulls meet (x, a point
+    of conv(b - a), is no longer than the margin: they are not that far apart)."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     k = len(a)
     margin = np.broadcast_to(np.asarray(margin, float), (k,))
     out = np.zeros(k, bool)
     x = b.mean(axis=1) - a.mean(axis=1)
     live = np.arange(k)
-    for _ in range(SEPARATION_STEPS):
+    for _ in range(steps):
         if not len(live):
             break
         xa = x[live]
@@ -306,7 +311,7 @@ def separated(a, b, margin) -> np.ndarray:
         den = np.einsum("ki,ki->k", dx, dx)
         g = np.clip(np.einsum("ki,ki->k", xa, dx) / np.where(den > 0, den, 1.0), 0.0, 1.0)
         x[live] = xa - g[:, None] * dx
-        live = live[~ok & (den > 0) & (norm > 0)]
+        live = live[~ok & (den > 0) & (norm > margin[live])]  # |x| bounds the distance from above
     return out
 
 
