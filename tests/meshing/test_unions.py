@@ -15,7 +15,7 @@ from ple.meshing.tessellate import _Tessellator, tessellate
 from ple.meshing.unions import clusters
 from ple.model.lattice import Lattice
 
-pytest.importorskip("manifold3d")
+manifold3d = pytest.importorskip("manifold3d")
 
 
 def crossing(n: int, curved: bool, radius: float = 0.1) -> Lattice:
@@ -124,3 +124,60 @@ def test_copies_of_a_cluster_take_its_union_exactly(curved, monkeypatch):
     v, f = np.asarray(whole.vertices), np.asarray(whole.faces)
     assert whole.is_watertight and whole.is_winding_consistent and len(self_intersections(v, f)) == 0
     assert whole.volume == pytest.approx(plain.volume, rel=1e-7)
+
+
+def _tangent_setup(seed):
+    rng = np.random.default_rng(seed)
+    c1, c2 = rng.uniform(-1, 1, 3), rng.uniform(-1, 1, 3)
+    length = float(np.linalg.norm(c2 - c1))
+    r1, r2 = rng.uniform(0.1, 0.45) * length, rng.uniform(0.1, 0.45) * length
+    return c1, c2, r1, r2, length
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_beam_points_lie_on_the_tangent_cone(seed):
+    """Two balls: every tangent point is on its (scaled) sphere and the line joining the two
+    circles' points is normal to both radii (the outer tangent cone). A ball and a ring: the
+    segment from each ring point to its tangent point is normal to the radius there."""
+    from ple.meshing.unions import TANGENT_SCALE, _unit_vertices, beam_points
+
+    _unit_vertices(manifold3d)
+    c1, c2, r1, r2, _ = _tangent_setup(seed)
+    p = beam_points([r1, r2], np.stack([c1, c2]))
+    t1, t2 = np.split(p, 2)
+    assert np.allclose(np.linalg.norm(t1 - c1, axis=1), r1 * TANGENT_SCALE)
+    assert np.allclose(np.linalg.norm(t2 - c2, axis=1), r2 * TANGENT_SCALE)
+    assert np.allclose(np.einsum("ij,ij->i", t2 - t1, t1 - c1), 0, atol=1e-12)
+    assert np.allclose(np.einsum("ij,ij->i", t2 - t1, t2 - c2), 0, atol=1e-12)
+    a = (c2 - c1) / np.linalg.norm(c2 - c1)
+    e = np.cross(a, [0.3, 0.5, 0.7])
+    e /= np.linalg.norm(e)
+    f = np.cross(a, e)
+    ang = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    ring = c2 + r2 * (np.cos(ang)[:, None] * e + np.sin(ang)[:, None] * f)
+    q = beam_points([r1, ring], np.stack([c1, c2]))
+    assert np.array_equal(q[:12], ring)
+    tangent = q[12:24]
+    assert np.allclose(np.linalg.norm(tangent - c1, axis=1), r1 * TANGENT_SCALE)
+    assert np.allclose(np.einsum("ij,ij->i", ring - tangent, tangent - c1), 0, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_beam_hull_of_two_balls_has_the_closed_form_volume(seed):
+    """Two balls and their beam united (polygonal balls, tangent points) hold the volume of the
+    hull of the two exact balls: two spherical caps and the frustum between the tangent circles."""
+    from ple.meshing.unions import _unit_vertices, beam_points, unit_ball
+
+    unit = unit_ball(manifold3d)
+    _unit_vertices(manifold3d)
+    c1, c2, r1, r2, length = _tangent_setup(seed)
+    parts = [unit.scale([r, r, r]).translate(list(c)) for c, r in ((c1, r1), (c2, r2))]
+    parts.append(manifold3d.Manifold.hull_points(beam_points([r1, r2], np.stack([c1, c2]))))
+    got = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add).volume()
+    cos_t = (r1 - r2) / length
+    sin_t = np.sqrt(1 - cos_t**2)
+    rho1, rho2 = r1 * sin_t, r2 * sin_t
+    h = length + (r2 - r1) * cos_t
+    cap = lambda r, hh: np.pi * hh * hh * (3 * r - hh) / 3  # noqa: E731
+    exact = cap(r1, r1 * (1 + cos_t)) + np.pi * h * (rho1**2 + rho1 * rho2 + rho2**2) / 3 + cap(r2, r2 * (1 - cos_t))
+    assert abs(got / exact - 1) < 0.005

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..algebra.vectors import perpendicular_frames
 from ..errors import PleError
 from .unclean import BALL_TURNS, SPHERE_SEGMENTS, match_rows, on_grid, on_one_ring, ring_of_vertices
 
@@ -132,6 +133,61 @@ def _unit_vertices(manifold3d) -> np.ndarray:
     return _UNIT["v"]
 
 
+# a SPHERE_SEGMENTS-gon of this circumradius has the area of the unit circle: a beam's circles of
+# tangent points, scaled so, give it the cross-section of the exact beam (as ``unit_ball`` its volume)
+TANGENT_SCALE = float(np.sqrt(2 * np.pi / (SPHERE_SEGMENTS * np.sin(2 * np.pi / SPHERE_SEGMENTS))))
+
+
+def beam_points(ends, centers) -> np.ndarray | None:
+    """Points whose convex hull is a cluster's beam outside its balls (§3: a beam is the hull of
+    its two balls): ``ends`` two items, each a ball (radius float: its polygonal ball is
+    ``unit_ball`` scaled, centre in ``centers``) or a ring (k, 3). The hull of a ball and the rest
+    is the ball and the cone tangent to it, so the ball enters the hull by its tangent points
+    only, ``SPHERE_SEGMENTS`` of them around the beam on a sphere scaled by ``TANGENT_SCALE``:
+    the hull shares no vertex or face with the ball, which a union handles several times faster
+    than coincident ones. Two balls: the outer tangent cone of both, ``SPHERE_SEGMENTS`` points
+    per circle. A ball and a ring: the tangent point of each ring point, in its meridian plane,
+    and a circle of them for the ring's mean profile. None: the beam lies inside a ball."""
+    rings = [np.asarray(e, float).reshape(-1, 3) for e in ends if not np.isscalar(e)]
+    balls = [(np.asarray(c, float), float(e) * TANGENT_SCALE) for e, c in zip(ends, centers) if np.isscalar(e)]
+    if not balls:
+        return np.concatenate(rings)
+    if len(balls) == 2:
+        (c1, r1), (c2, r2) = balls
+        axis = c2 - c1
+        length = float(np.linalg.norm(axis))
+        if length <= abs(r1 - r2):
+            return None
+        a = axis / length
+        cos_t = (r1 - r2) / length  # the outer tangent's normal makes this angle with the axis
+        sin_t = np.sqrt(max(1.0 - cos_t * cos_t, 0.0))
+        e1, e2 = perpendicular_frames(a)
+        ang = 2 * np.pi * np.arange(SPHERE_SEGMENTS) / SPHERE_SEGMENTS
+        n = cos_t * a + sin_t * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2)
+        return np.concatenate([c1 + r1 * n, c2 + r2 * n])
+    (c, r), ring = balls[0], rings[0]
+    w = ring - c
+    a = w.mean(axis=0)
+    a = a / np.linalg.norm(a)
+    x = w @ a
+    radial = w - x[:, None] * a
+    y = np.linalg.norm(radial, axis=1)
+    e = radial / np.where(y > 0, y, 1.0)[:, None]
+    d = np.hypot(x, y)
+    out = d > r  # a ring point inside the ball adds nothing to the ball
+    if not out.any():
+        return None
+    phi = np.arctan2(y, x) + np.arccos(np.clip(r / np.where(out, d, r), -1.0, 1.0))  # outer tangent, §3
+    tangent = c + r * (np.cos(phi)[:, None] * a + np.sin(phi)[:, None] * e)
+    # and between the ring's meridians, the tangent circle of the ring's mean profile (a ring may
+    # have fewer points than the ball has segments)
+    mean = np.arctan2(y[out].mean(), x[out].mean()) + np.arccos(min(r / np.hypot(y[out].mean(), x[out].mean()), 1.0))
+    e1, e2 = perpendicular_frames(a)
+    ang = 2 * np.pi * np.arange(SPHERE_SEGMENTS) / SPHERE_SEGMENTS
+    circle = c + r * (np.cos(mean) * a + np.sin(mean) * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2))
+    return np.concatenate([ring, tangent[out & (y > 0)], circle])
+
+
 def _turned(points: np.ndarray, turns) -> np.ndarray:
     """Unit-ball vertices turned by Euler angles ``turns`` (fractions of a full turn, (3,))."""
     out = points
@@ -218,8 +274,10 @@ def _unite_once(manifold3d, unit, cluster, center, radius, beam_nodes, rings, gr
     keys = sorted(k for k in rings if int(bn[k[0], k[1]]) not in own)  # the rings shared with the fast path
     pinned = [rings[k] for k in keys]
     for j in cluster.beams.tolist():
-        ends = [ball(int(bn[j, e])) if int(bn[j, e]) in own else rings[(j, e)] for e in (0, 1)]
-        parts.append(manifold3d.Manifold.hull_points(np.concatenate(ends)))
+        x = [int(bn[j, e]) for e in (0, 1)]
+        pts = beam_points([float(rad[x[e]]) if x[e] in own else rings[(j, e)] for e in (0, 1)], c[x])
+        if pts is not None:
+            parts.append(manifold3d.Manifold.hull_points(pts))
     for p in parts:
         if p.status() != manifold3d.Error.NoError or p.is_empty():
             raise PleError("a beam of an unclean cluster has no volume (its two ends are flat)")
