@@ -181,3 +181,71 @@ def test_beam_hull_of_two_balls_has_the_closed_form_volume(seed):
     cap = lambda r, hh: np.pi * hh * hh * (3 * r - hh) / 3  # noqa: E731
     exact = cap(r1, r1 * (1 + cos_t)) + np.pi * h * (rho1**2 + rho1 * rho2 + rho2**2) / 3 + cap(r2, r2 * (1 - cos_t))
     assert abs(got / exact - 1) < 0.005
+
+
+@pytest.mark.parametrize("style, levels", [("cnt", 0), ("refined", 4)])
+def test_clusters_cut_across_free_beams_mesh_their_union(style, levels, monkeypatch):
+    """A cubic 5³ with half its hubs unclean at random (as if shrunk): neighbouring unclean hubs
+    form clusters, and each is cut across its free beams, so every union holds one hub. The
+    pieces meet the fast path at contact rings and each other at cut rings: one closed, oriented
+    mesh, free of self-intersections (exact), with the volume of the clusters united whole; the
+    refined one holds the lattice's volume (Monte Carlo)."""
+    import ple.meshing.tessellate as tessellate_module
+    import trimesh
+    from ple.bench.unclean import case_lattice
+    from ple.meshing.tessellate import build_with_unions
+    from ple.meshing.unclean import UncleanReport
+
+    lat = case_lattice("tenth", 5)
+    ev = lat.evaluate(lat.region())
+    shrunk = np.random.default_rng(5).random(len(ev.center)) < 0.5
+    report = UncleanReport(np.flatnonzero(shrunk), 0, int(shrunk.sum()), 0, 0, np.zeros((0, 2), np.int64), shrunk)
+    assert max(len(c.hubs) for c in clusters(report, ev.beam_nodes)) > 4
+    united = []
+    real = tessellate_module.unite_stoppable
+
+    def spy(cluster, *args):
+        united.append(cluster)
+        return real(cluster, *args)
+
+    def mesh():
+        tess = _Tessellator(lat, lat.region(), style, levels, 16, grid=2.0**-18)
+        return trimesh.Trimesh(*build_with_unions(tess, lat.evaluate(lat.region()), report), process=False)
+
+    monkeypatch.setattr(tessellate_module, "unite_stoppable", spy)
+    cut = mesh()
+    assert united and max(len(c.hubs) for c in united) == 1 and any(len(c.halves) for c in united)
+    v, f = np.asarray(cut.vertices), np.asarray(cut.faces)
+    assert cut.is_watertight and cut.is_winding_consistent
+    assert len(self_intersections(v, f)) == 0
+    monkeypatch.setattr(tessellate_module, "split", lambda *args: None)
+    assert abs(cut.volume / mesh().volume - 1) < 1e-3
+    if style == "refined":
+        est, err = monte_carlo_volume(lat, lat.region(), samples=400_000, seed=3)
+        assert abs(cut.volume - est) <= 4 * err and abs(cut.volume / est - 1) < 0.01
+
+
+def test_a_cut_ring_lies_on_the_beams_tangent_cone():
+    """The cut ring of a beam between two balls: centred on the axis halfway along the bare part,
+    normal to it, on the outer tangent cone of the two (scaled) balls."""
+    from ple.meshing.unions import TANGENT_SCALE, _cut_ring
+
+    c = np.array([[0.0, 0.0, 0.0], [2.0, 1.0, 0.5]])
+    rad = np.array([0.3, 0.2])
+    bn = np.array([[0, 1]])
+    ring = _cut_ring(0, c, rad, bn, np.array([0]), 0.0)
+    length = float(np.linalg.norm(c[1]))
+    a = c[1] / length
+    centre = ring.mean(axis=0)
+    assert np.allclose(np.cross(centre, a), 0, atol=1e-12)  # on the axis
+    assert np.allclose((ring - centre) @ a, 0, atol=1e-12)  # normal to it
+    r1, r2 = rad * TANGENT_SCALE
+    cos_t = (r1 - r2) / length
+    p = float(centre @ a)
+    # the outer tangent line, in a meridian plane: it touches ball 1 at angle t from the axis
+    t1 = np.array([r1 * cos_t, r1 * np.sqrt(1 - cos_t**2)])
+    t2 = np.array([length + r2 * cos_t, r2 * np.sqrt(1 - cos_t**2)])
+    expect = t1[1] + (t2[1] - t1[1]) * (p - t1[0]) / (t2[0] - t1[0])
+    assert np.allclose(np.linalg.norm(ring - centre, axis=1), expect)
+    bare = (rad[0] * 1.02, length - rad[1] * 1.02)
+    assert bare[0] < p < bare[1]

@@ -162,7 +162,8 @@ def write_tenth(lat, out, style: str, levels: int, fraction: float = 0.1, seed: 
     cl = leave_to_unions(tess, ev, report)
     pool = RecordPool()
     encode = lambda chunk: stl_chunk(chunk, grid, pool)  # noqa: E731
-    chunks = [map(encode, union_pieces(tess, ev, cl)), iter_triangles(lat, r, style, lv, sg, _tess=tess, encode=encode)]
+    chunks = [map(encode, union_pieces(tess, ev, cl, report)),
+              iter_triangles(lat, r, style, lv, sg, _tess=tess, encode=encode)]
     tris = write_stl(out, itertools.chain(*chunks), header=stl_header("mm"), pool=pool)
     return tris, report, stream_estimate(lat, style, levels, report)
 

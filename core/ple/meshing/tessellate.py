@@ -52,7 +52,7 @@ from .skin import clip_bodies, clip_to_bodies
 from .styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS
 from .styles import style as style_named
 from .unclean import SEPARATION_GRIDS, find_unclean
-from .unions import Cluster, RingTouchedError, ShapeCache, clusters, piece_estimate, unite_stoppable
+from .unions import CUT, Cluster, RingTouchedError, ShapeCache, clusters, piece_estimate, split, unite_stoppable
 from .weld import COLLAPSE_GRIDS, grid_spacing, weld
 
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
@@ -906,7 +906,7 @@ def build_with_unions(tess: _Tessellator, ev, report) -> tuple[np.ndarray, np.nd
     local unions, welded where they share their rings' vertices, put on the output grid (the
     mesh every float32 file of it holds)."""
     cl = leave_to_unions(tess, ev, report)
-    pieces = list(union_pieces(tess, ev, cl))  # first: a cluster may grow into the fast path's hubs
+    pieces = list(union_pieces(tess, ev, cl, report))  # first: a cluster may grow into the fast path's hubs
     v, f = weld_chunks([tess.build(tess.region), *pieces])
     v, f, _ = weld(v, f, tess.grid)  # on the float32 grid, as every file holds it
     return v, f
@@ -915,14 +915,15 @@ def build_with_unions(tess: _Tessellator, ev, report) -> tuple[np.ndarray, np.nd
 MAX_CLUSTER_GROWTH = 16  # times a cluster takes in the clean junctions whose rings its union touched
 
 
-def union_pieces(tess: _Tessellator, ev, cl: list, chunk: int = 512):
+def union_pieces(tess: _Tessellator, ev, cl: list, report=None, chunk: int = 512):
     """The meshes (vertices, faces) of the clusters ``cl`` (``leave_to_unions``), one by one: each
     open along the contact rings it shares with the fast path, whose vertices it takes from the
     hub templates placed as the boxes place them (``assembly.place``), ``chunk`` clusters' rings
     at a time. A union that touches one of its rings (something of the cluster reaches that
     clean junction) takes the junction's hub in as a ball, with its beams (merging any cluster
     that holds one), and the fast path leaves them out too: so the pieces are held until every
-    cluster is settled, and drawn before the boxes are built."""
+    cluster is settled, and drawn before the boxes are built. With ``report`` (``leave_to_unions``'),
+    a cluster is first cut across its free beams into smaller unions (``unions.split``)."""
     idx = np.asarray(ev.node_index, np.int64)
     bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
     pattern = np.asarray(ev.beam_index, np.int64)[:, 3]
@@ -936,6 +937,10 @@ def union_pieces(tess: _Tessellator, ev, cl: list, chunk: int = 512):
             batch = [c, *itertools.islice(pending, chunk - 1)]
             rings_of.update(zip(map(id, batch), _cluster_rings(tess, idx, bn, pattern, batch)))
         rg = rings_of.pop(id(c))
+        pieces = None if report is None else _split_pieces(tess, ev, report, c, rg, cache)
+        if pieces is not None:
+            done[id(c)] = (c, pieces)
+            continue
         for _ in range(MAX_CLUSTER_GROWTH):
             key, anchor, ring_keys = cache.key(c, ev.center, ev.radius, bn, rg)
             piece = cache.get(key, anchor, ring_keys, rg)
@@ -959,9 +964,35 @@ def union_pieces(tess: _Tessellator, ev, cl: list, chunk: int = 512):
         else:
             raise PleError(f"an unclean cluster of {len(c.hubs):,} hubs and {len(c.beams):,} beams keeps "
                            "touching the clean junctions around it")
-        done[id(c)] = (c, piece)
-    for _, piece in done.values():
-        yield piece
+        done[id(c)] = (c, [piece])
+    for _, pieces in done.values():
+        yield from pieces
+
+
+def _split_pieces(tess: _Tessellator, ev, report, c, rings: dict, cache: ShapeCache):
+    """The pieces of cluster c cut across its free beams (``unions.split``), each united (or a
+    copy from ``cache``); None when c is not cut, or when a piece's union touches one of its rings
+    (then c is united whole, where a touched clean junction is taken in)."""
+    cut = split(c, report, ev.center, ev.radius, ev.beam_nodes, SEPARATION_GRIDS * tess.grid)
+    if cut is None:
+        return None
+    parts, cut_rings = cut
+    bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
+    pieces = []
+    for part in parts:
+        own = set(part.hubs.tolist())
+        rg = {k: r for k, r in rings.items() if k[0] in set(part.beams.tolist()) and int(bn[k]) not in own}
+        rg.update({(j, CUT): cut_rings[(j, CUT)] for j, _ in part.halves.tolist()})
+        key, anchor, ring_keys = cache.key(part, ev.center, ev.radius, bn, rg)
+        piece = cache.get(key, anchor, ring_keys, rg)
+        if piece is None:
+            try:
+                piece = unite_stoppable(part, ev.center, ev.radius, bn, rg, tess.grid)
+            except RingTouchedError:
+                return None
+            cache.put(key, anchor, ring_keys, rg, piece)
+        pieces.append(piece)
+    return pieces
 
 
 def _cluster_rings(tess: _Tessellator, idx, bn, pattern, part: list) -> list:
@@ -1169,6 +1200,6 @@ def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: in
     if report is None or not len(report.nodes):
         return report, boxes
     cl = leave_to_unions(tess, ev, report)  # before the first box: the boxes leave the clusters' rings open
-    pieces = union_pieces(tess, ev, cl)
+    pieces = union_pieces(tess, ev, cl, report)
     # the pieces first: a cluster that grows takes hubs from the boxes, which are built after it
     return report, itertools.chain(pieces if encode is None else map(encode, pieces), boxes)

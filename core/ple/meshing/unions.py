@@ -26,10 +26,11 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..algebra.elements import segment_distance
 from ..algebra.vectors import perpendicular_frames
 from ..errors import PleError
 from .unclean import BALL_TURNS, SPHERE_SEGMENTS, match_rows, on_grid, on_one_ring, ring_of_vertices
@@ -49,12 +50,18 @@ class RingTouchedError(PleError):
         return RingTouchedError, (str(self), self.ring)
 
 
+CUT = 2  # the end of a ring key (beam row, CUT) naming the ring where a cluster's beam is cut
+
+
 @dataclass
 class Cluster:
-    """One local union: hubs (rows of the evaluation) meshed as balls, beams (rows) as hulls."""
+    """One local union: hubs (rows of the evaluation) meshed as balls, beams (rows) as hulls,
+    and halves (H, 2: beam row, end 0|1) of beams cut across (``split``): the hull of the ball
+    at that end and the beam's cut ring, whose key in the rings is (beam row, CUT)."""
 
     hubs: np.ndarray
     beams: np.ndarray
+    halves: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
 
 
 def clusters(report, beam_nodes, center=None, radius=None) -> list:
@@ -100,6 +107,117 @@ def clusters(report, beam_nodes, center=None, radius=None) -> list:
     return [Cluster(c[c < n], c[c >= n] - n) for c in np.split(order, cuts)]
 
 
+CUT_BOUND = 1.02  # a polygonal ball, or a beam's polygon, lies within this times its radius (unit_ball: 1.0036)
+
+
+def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 0.0):
+    """A cluster cut across some of its beams into smaller ones, or None (no cut, or one piece).
+
+    A beam between two hubs of the cluster that overlaps nothing it does not share a ball with
+    (it is in none of ``report``'s element pairs) is cut by the plane normal to it halfway along
+    its bare part, when each half clears what the other end brings (§3: a beam is the hull of its
+    two balls; the half at a ball is the hull of that ball and the cut ring): the other end's ball
+    and its other beams, each taken as a capsule (segment, radius × ``CUT_BOUND``), the half as
+    the capsule of its frustum, more than ``margin`` apart. Everything else a half could meet
+    shares no ball with the beam and is in a pair with it, so it is not cut. The pieces are the
+    connected groups of hubs, beams and halves (pairs and incidences); a beam whose halves land in
+    one piece stays whole. Returns (clusters, cut rings {(beam row, CUT): (SPHERE_SEGMENTS, 3)}):
+    each ring lies on the tangent cone of the beam, and both halves' unions take it as their
+    rim, so they meet exactly there."""
+    hubs = np.asarray(cluster.hubs, np.int64)
+    if len(hubs) < 2 or len(cluster.halves):
+        return None
+    c, rad = np.asarray(center, float), np.asarray(radius, float)
+    bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
+    n = len(report.shrunk)
+    beams = np.asarray(cluster.beams, np.int64)
+    pairs = np.asarray(report.element_pairs, np.int64).reshape(-1, 2)
+    paired = np.unique(pairs[pairs >= n] - n)
+    ends = bn[beams]
+    inner = np.isin(ends, hubs).all(axis=1) & (ends[:, 0] != ends[:, 1]) & ~np.isin(beams, paired)
+    rings: dict = {}
+    for j in beams[inner].tolist():
+        cut = _cut_ring(j, c, rad, bn, beams, margin)
+        if cut is not None:
+            rings[(j, CUT)] = cut
+    if not rings:
+        return None
+    cut = np.array(sorted(j for j, _ in rings), np.int64)
+    whole = np.setdiff1d(beams, cut)
+    halves = np.stack([np.repeat(cut, 2), np.tile([0, 1], len(cut))], axis=1)
+    # elements: hubs, whole beams, halves; edges: pairs inside the cluster, incidences
+    names = {("h", int(h)): k for k, h in enumerate(hubs.tolist())}
+    names.update({("b", int(j)): len(names) + k for k, j in enumerate(whole.tolist())})
+    names.update({("c", int(j), int(e)): len(names) + k for k, (j, e) in enumerate(halves.tolist())})
+    edges = []
+    for a, b in pairs.tolist():
+        na = names.get(("h", a) if a < n else ("b", a - n))
+        nb = names.get(("h", b) if b < n else ("b", b - n))
+        if na is not None and nb is not None:
+            edges.append((na, nb))
+    for j in whole.tolist():
+        edges += [(names[("b", j)], names[("h", int(x))]) for x in bn[j] if ("h", int(x)) in names]
+    for j, e in halves.tolist():
+        edges.append((names[("c", j, e)], names[("h", int(bn[j, e]))]))
+    from scipy.sparse import coo_matrix  # noqa: PLC0415 - optional package
+    from scipy.sparse.csgraph import connected_components  # noqa: PLC0415
+
+    e = np.asarray(edges, np.int64).reshape(-1, 2)
+    count, label = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])),
+                                                   shape=(len(names), len(names))), directed=False)
+    if count == 1:
+        return None
+    out = []
+    for g in range(count):
+        hs = np.array([h for (kind, *rest), k in names.items() if kind == "h" and label[k] == g
+                       for h in rest], np.int64)
+        bs = [j for (kind, *rest), k in names.items() if kind == "b" and label[k] == g for j in rest]
+        hv = [tuple(rest) for (kind, *rest), k in names.items() if kind == "c" and label[k] == g]
+        both = {j for j, e in hv if (j, 1 - e) in hv}  # both halves here: the beam stays whole
+        bs += sorted(both)
+        hv = [(j, x) for j, x in hv if j not in both]
+        out.append(Cluster(hs, np.array(sorted(bs), np.int64), np.array(hv, np.int64).reshape(-1, 2)))
+    used = {j for piece in out for j, _ in piece.halves.tolist()}
+    return out, {k: r for k, r in rings.items() if k[0] in used}
+
+
+def _cut_ring(j: int, c, rad, bn, beams, margin: float):
+    """The cut ring of beam j (``split``), or None when its halves do not clear the other end."""
+    x, y = (int(v) for v in bn[j])
+    axis = c[y] - c[x]
+    length = float(np.linalg.norm(axis))
+    rx, ry = rad[x] * TANGENT_SCALE, rad[y] * TANGENT_SCALE
+    if length <= abs(rx - ry):
+        return None
+    a = axis / length
+    cos_t = (rx - ry) / length
+    sin_t = np.sqrt(max(1.0 - cos_t * cos_t, 0.0))
+    px, py = rx * cos_t, length + ry * cos_t  # the tangent circles' positions along the axis, radii ρ
+    rho_x, rho_y = rx * sin_t, ry * sin_t
+    lo, hi = max(px, rad[x] * CUT_BOUND), min(py, length - rad[y] * CUT_BOUND)
+    if hi <= lo:
+        return None
+    p = 0.5 * (lo + hi)
+    rho = rho_x + (rho_y - rho_x) * (p - px) / (py - px)
+    for near, start, stop, r_half in ((x, p, py, max(rho, rho_y)), (y, px, p, max(rho_x, rho))):
+        # the other end's half (its frustum) against `near`'s ball and its other beams
+        s0, s1 = c[x] + start * a, c[x] + stop * a
+        r_half *= CUT_BOUND
+        others = beams[(bn[beams] == near).any(axis=1) & (beams != j)]
+        if len(others):
+            o = bn[others]
+            reach = np.maximum(rad[o[:, 0]], rad[o[:, 1]]) * CUT_BOUND
+            d = segment_distance(s0[None], s1[None], c[o[:, 0]], c[o[:, 1]])
+            if np.any(d <= reach + r_half + margin):
+                return None
+        gap = segment_distance(s0[None], s1[None], c[near][None], c[near][None])[0]
+        if gap <= rad[near] * CUT_BOUND + r_half + margin:
+            return None
+    e1, e2 = perpendicular_frames(a)
+    ang = 2 * np.pi * np.arange(SPHERE_SEGMENTS) / SPHERE_SEGMENTS
+    return c[x] + p * a + rho * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2)
+
+
 def excluded(report, beam_nodes) -> tuple[np.ndarray, np.ndarray]:
     """Hub rows (E) and beam rows (B) the clusters of ``report`` mesh: the fast path leaves them out."""
     cl = clusters(report, beam_nodes)
@@ -112,7 +230,7 @@ def piece_estimate(cluster: Cluster) -> tuple[int, int]:
     """(input triangles, peak bytes) of a cluster's union, from above: a polygonal ball per hub,
     a hull per beam of at most two balls' vertices (a contact ring has fewer than a ball)."""
     ball = 2 * SPHERE_SEGMENTS * (SPHERE_SEGMENTS // 2)
-    tris = (len(cluster.hubs) + 2 * len(cluster.beams)) * ball
+    tris = (len(cluster.hubs) + 2 * len(cluster.beams) + 2 * len(cluster.halves)) * ball
     return tris, tris * UNION_TRIANGLE_BYTES
 
 
@@ -271,11 +389,17 @@ def _unite_once(manifold3d, unit, cluster, center, radius, beam_nodes, rings, gr
         return u * rad[x] + c[x]
 
     parts = [manifold3d.Manifold.hull_points(ball(int(x))) for x in cluster.hubs]
-    keys = sorted(k for k in rings if int(bn[k[0], k[1]]) not in own)  # the rings shared with the fast path
+    # the rings shared with the fast path, and the cut rings shared with the other halves' unions
+    keys = sorted(k for k in rings if k[1] == CUT or int(bn[k[0], k[1]]) not in own)
     pinned = [rings[k] for k in keys]
     for j in cluster.beams.tolist():
         x = [int(bn[j, e]) for e in (0, 1)]
         pts = beam_points([float(rad[x[e]]) if x[e] in own else rings[(j, e)] for e in (0, 1)], c[x])
+        if pts is not None:
+            parts.append(manifold3d.Manifold.hull_points(pts))
+    for j, e in cluster.halves.tolist():
+        x = int(bn[j, e])
+        pts = beam_points([float(rad[x]), rings[(j, CUT)]], c[[x, x]])
         if pts is not None:
             parts.append(manifold3d.Manifold.hull_points(pts))
     for p in parts:
@@ -355,16 +479,18 @@ class ShapeCache:
         hubs = np.sort(np.asarray(cluster.hubs, np.int64))
         order = {int(h): k for k, h in enumerate(hubs.tolist())}
         beams = np.sort(np.asarray(cluster.beams, np.int64)).tolist()
-        ring_keys = [(j, e) for j in beams for e in (0, 1) if int(bn[j, e]) not in order]
+        halves = sorted(map(tuple, np.asarray(cluster.halves, np.int64).reshape(-1, 2).tolist()))
+        ring_keys = ([(j, e) for j in beams for e in (0, 1) if int(bn[j, e]) not in order]
+                     + [(j, CUT) for j, _ in halves])
         pts = [c[hubs]] + [np.asarray(rings[k], float) for k in ring_keys]
         pts = np.concatenate(pts) if pts else np.zeros((0, 3))
         if not len(pts):
             return None, None, ring_keys
         anchor = pts[0]
-        ends = [order.get(int(bn[j, e]), -1) for j in beams for e in (0, 1)]
+        ends = [order.get(int(bn[j, e]), -1) for j in beams for e in (0, 1)] + [order[int(bn[j, e])] for j, e in halves]
         q = self.grid * SHAPE_QUANTUM
         body = np.round(np.concatenate([(pts - anchor).ravel() / q, np.asarray(radius, float)[hubs] / q]))
-        sizes = [len(hubs)] + [len(rings[k]) for k in ring_keys] + ends
+        sizes = [len(hubs), len(halves)] + [len(rings[k]) for k in ring_keys] + ends
         return (np.asarray(sizes, np.int64).tobytes(), body.tobytes()), anchor, ring_keys
 
     def get(self, key, anchor, ring_keys, rings: dict):
