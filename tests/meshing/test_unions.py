@@ -134,45 +134,40 @@ def _tangent_setup(seed):
     return c1, c2, r1, r2, length
 
 
-@pytest.mark.parametrize("seed", range(5))
-def test_beam_points_lie_on_the_tangent_cone(seed):
-    """Two balls: every tangent point is on its (scaled) sphere and the line joining the two
-    circles' points is normal to both radii (the outer tangent cone). A ball and a ring: the
-    segment from each ring point to its tangent point is normal to the radius there."""
-    from ple.meshing.unions import TANGENT_SCALE, _unit_vertices, beam_points
+@pytest.mark.parametrize("seed", range(6))
+def test_a_beam_takes_its_balls_caps_only(seed):
+    """A beam's hull takes of each ball only the cap in front of its tangent circle: with the
+    balls, it is the same solid as the hull of the whole balls (and of a ring), by volume."""
+    from ple.meshing.unions import _unit_vertices, beam_points, unit_ball
 
-    _unit_vertices(manifold3d)
+    unit = _unit_vertices(manifold3d)
     c1, c2, r1, r2, _ = _tangent_setup(seed)
-    p = beam_points([r1, r2], np.stack([c1, c2]))
-    t1, t2 = np.split(p, 2)
-    assert np.allclose(np.linalg.norm(t1 - c1, axis=1), r1 * TANGENT_SCALE)
-    assert np.allclose(np.linalg.norm(t2 - c2, axis=1), r2 * TANGENT_SCALE)
-    assert np.allclose(np.einsum("ij,ij->i", t2 - t1, t1 - c1), 0, atol=1e-12)
-    assert np.allclose(np.einsum("ij,ij->i", t2 - t1, t2 - c2), 0, atol=1e-12)
+    b1, b2 = unit * r1 + c1, unit * r2 + c2
     a = (c2 - c1) / np.linalg.norm(c2 - c1)
     e = np.cross(a, [0.3, 0.5, 0.7])
     e /= np.linalg.norm(e)
-    f = np.cross(a, e)
-    ang = np.linspace(0, 2 * np.pi, 12, endpoint=False)
-    ring = c2 + r2 * (np.cos(ang)[:, None] * e + np.sin(ang)[:, None] * f)
-    q = beam_points([r1, ring], np.stack([c1, c2]))
-    assert np.array_equal(q[:12], ring)
-    tangent = q[12:24]
-    assert np.allclose(np.linalg.norm(tangent - c1, axis=1), r1 * TANGENT_SCALE)
-    assert np.allclose(np.einsum("ij,ij->i", ring - tangent, tangent - c1), 0, atol=1e-12)
+    ring = c2 + r2 * (np.cos(np.arange(12) / 2)[:, None] * e + np.sin(np.arange(12) / 2)[:, None] * np.cross(a, e))
+    balls = [unit_ball(manifold3d).scale([r, r, r]).translate(list(c)) for c, r in ((c1, r1), (c2, r2))]
+    for ends, centers, solids in (([b1, b2], [c1, c2], balls), ([b1, ring], [c1, None], balls[:1])):
+        caps = beam_points(ends, centers)
+        assert len(caps) < sum(len(x) for x in ends)
+        whole = manifold3d.Manifold.hull_points(np.concatenate(ends))
+        got = manifold3d.Manifold.batch_boolean([*solids, manifold3d.Manifold.hull_points(caps)], manifold3d.OpType.Add)
+        want = manifold3d.Manifold.batch_boolean([*solids, whole], manifold3d.OpType.Add)
+        assert abs(got.volume() / want.volume() - 1) < 1e-9
 
 
 @pytest.mark.parametrize("seed", range(5))
 def test_beam_hull_of_two_balls_has_the_closed_form_volume(seed):
-    """Two balls and their beam united (polygonal balls, tangent points) hold the volume of the
+    """Two balls and their beam united (polygonal balls, their caps' hull) hold the volume of the
     hull of the two exact balls: two spherical caps and the frustum between the tangent circles."""
     from ple.meshing.unions import _unit_vertices, beam_points, unit_ball
 
     unit = unit_ball(manifold3d)
-    _unit_vertices(manifold3d)
+    v = _unit_vertices(manifold3d)
     c1, c2, r1, r2, length = _tangent_setup(seed)
     parts = [unit.scale([r, r, r]).translate(list(c)) for c, r in ((c1, r1), (c2, r2))]
-    parts.append(manifold3d.Manifold.hull_points(beam_points([r1, r2], np.stack([c1, c2]))))
+    parts.append(manifold3d.Manifold.hull_points(beam_points([v * r1 + c1, v * r2 + c2], [c1, c2])))
     got = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add).volume()
     cos_t = (r1 - r2) / length
     sin_t = np.sqrt(1 - cos_t**2)
@@ -188,8 +183,8 @@ def test_clusters_cut_across_free_beams_mesh_their_union(style, levels, monkeypa
     """A cubic 5³ with half its hubs unclean at random (as if shrunk): neighbouring unclean hubs
     form clusters, and each is cut across its free beams, so every union holds one hub. The
     pieces meet the fast path at contact rings and each other at cut rings: one closed, oriented
-    mesh, free of self-intersections (exact), with the volume of the clusters united whole; the
-    refined one holds the lattice's volume (Monte Carlo)."""
+    mesh, free of self-intersections (exact), with the volume of the clusters united whole (to the
+    cut rings' own polygons); the refined one holds the lattice's volume (Monte Carlo)."""
     import ple.meshing.tessellate as tessellate_module
     import trimesh
     from ple.bench.unclean import case_lattice
@@ -219,7 +214,7 @@ def test_clusters_cut_across_free_beams_mesh_their_union(style, levels, monkeypa
     assert cut.is_watertight and cut.is_winding_consistent
     assert len(self_intersections(v, f)) == 0
     monkeypatch.setattr(tessellate_module, "split", lambda *args: None)
-    assert abs(cut.volume / mesh().volume - 1) < 1e-3
+    assert abs(cut.volume / mesh().volume - 1) < 5e-3  # the cut rings are polygons of their own
     if style == "refined":
         est, err = monte_carlo_volume(lat, lat.region(), samples=400_000, seed=3)
         assert abs(cut.volume - est) <= 4 * err and abs(cut.volume / est - 1) < 0.01
@@ -227,13 +222,13 @@ def test_clusters_cut_across_free_beams_mesh_their_union(style, levels, monkeypa
 
 def test_a_cut_ring_lies_on_the_beams_tangent_cone():
     """The cut ring of a beam between two balls: centred on the axis halfway along the bare part,
-    normal to it, on the outer tangent cone of the two (scaled) balls."""
+    normal to it, on the outer tangent cone of the two balls (radii scaled so that the ring's
+    polygon has the exact circle's area)."""
     from ple.meshing.unions import TANGENT_SCALE, _cut_ring
 
     c = np.array([[0.0, 0.0, 0.0], [2.0, 1.0, 0.5]])
     rad = np.array([0.3, 0.2])
-    bn = np.array([[0, 1]])
-    ring = _cut_ring(0, c, rad, bn, np.array([0]), 0.0)
+    ring = _cut_ring(0, c, rad, np.array([[0, 1]]), np.array([0]), 0.0)
     length = float(np.linalg.norm(c[1]))
     a = c[1] / length
     centre = ring.mean(axis=0)
@@ -242,10 +237,9 @@ def test_a_cut_ring_lies_on_the_beams_tangent_cone():
     r1, r2 = rad * TANGENT_SCALE
     cos_t = (r1 - r2) / length
     p = float(centre @ a)
-    # the outer tangent line, in a meridian plane: it touches ball 1 at angle t from the axis
+    # the outer tangent line in a meridian plane, through the two tangent points
     t1 = np.array([r1 * cos_t, r1 * np.sqrt(1 - cos_t**2)])
     t2 = np.array([length + r2 * cos_t, r2 * np.sqrt(1 - cos_t**2)])
     expect = t1[1] + (t2[1] - t1[1]) * (p - t1[0]) / (t2[0] - t1[0])
     assert np.allclose(np.linalg.norm(ring - centre, axis=1), expect)
-    bare = (rad[0] * 1.02, length - rad[1] * 1.02)
-    assert bare[0] < p < bare[1]
+    assert rad[0] * 1.02 < p < length - rad[1] * 1.02

@@ -52,7 +52,18 @@ from .skin import clip_bodies, clip_to_bodies
 from .styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS
 from .styles import style as style_named
 from .unclean import SEPARATION_GRIDS, find_unclean
-from .unions import CUT, Cluster, RingTouchedError, ShapeCache, clusters, piece_estimate, split, unite_stoppable
+from .unions import (
+    BATCH_TRIANGLES,
+    CUT,
+    Cluster,
+    RingTouchedError,
+    ShapeCache,
+    clusters,
+    piece_estimate,
+    split,
+    unite_batch,
+    unite_stoppable,
+)
 from .weld import COLLAPSE_GRIDS, grid_spacing, weld
 
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
@@ -923,50 +934,114 @@ def union_pieces(tess: _Tessellator, ev, cl: list, report=None, chunk: int = 512
     clean junction) takes the junction's hub in as a ball, with its beams (merging any cluster
     that holds one), and the fast path leaves them out too: so the pieces are held until every
     cluster is settled, and drawn before the boxes are built. With ``report`` (``leave_to_unions``'),
-    a cluster is first cut across its free beams into smaller unions (``unions.split``)."""
-    idx = np.asarray(ev.node_index, np.int64)
-    bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
-    pattern = np.asarray(ev.beam_index, np.int64)[:, 3]
-    pending = deque(cl)
-    done: dict = {}  # id -> (cluster, piece): held until every cluster is settled (a later one may grow into it)
-    rings_of: dict = {}
-    cache = ShapeCache(tess.grid)  # copies of a cluster's shape take its piece, moved (steady lattices)
-    while pending:
-        c = pending.popleft()
-        if id(c) not in rings_of:  # this cluster and the next ones' rings, placed at once
-            batch = [c, *itertools.islice(pending, chunk - 1)]
-            rings_of.update(zip(map(id, batch), _cluster_rings(tess, idx, bn, pattern, batch)))
-        rg = rings_of.pop(id(c))
-        pieces = None if report is None else _split_pieces(tess, ev, report, c, rg, cache)
-        if pieces is not None:
-            done[id(c)] = (c, pieces)
-            continue
+    a cluster is first cut across its free beams into smaller unions (``unions.split``). Small
+    clusters are united in batches (``unions.unite_batch``), copies of a shape from its piece
+    (``unions.ShapeCache``)."""
+    yield from _UnionQueue(tess, ev, cl, report, chunk).run()
+
+
+MAX_BATCHED = BATCH_TRIANGLES // 8  # clusters up to this estimate (input triangles) are united in batches
+
+
+class _UnionQueue:
+    """The clusters of ``union_pieces`` on their way to pieces: pending, batched, settled."""
+
+    def __init__(self, tess: _Tessellator, ev, cl: list, report, chunk: int):
+        self.tess, self.ev, self.report, self.chunk = tess, ev, report, chunk
+        self.idx = np.asarray(ev.node_index, np.int64)
+        self.bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
+        self.pattern = np.asarray(ev.beam_index, np.int64)[:, 3]
+        self.pending = deque(cl)
+        self.done: dict = {}  # id -> (cluster, pieces), held until all are settled (a later one may grow into it)
+        self.rings_of: dict = {}
+        self.cache = ShapeCache(tess.grid)  # copies of a cluster's shape take its piece, moved (steady lattices)
+        self.batch: list = []  # (cluster, rings, key, anchor, ring keys) to unite at once
+        self.waiting: list = []  # (cluster, rings): copies of a batched shape, settled after the batch
+        self.unsettled: list = []  # clusters of a flushed batch not settled yet
+        self.gone: set = set()  # ids of clusters merged into a grown one
+
+    def run(self):
+        while self.pending:
+            c = self.pending.popleft()
+            rg = self._rings(c)
+            pieces = None if self.report is None else _split_pieces(self.tess, self.ev, self.report, c, rg, self.cache)
+            if pieces is not None:
+                self.done[id(c)] = (c, pieces)
+                continue
+            key, anchor, ring_keys = self.cache.key(c, self.ev.center, self.ev.radius, self.bn, rg)
+            piece = self.cache.get(key, anchor, ring_keys, rg)
+            if piece is not None:
+                self.done[id(c)] = (c, [piece])
+            elif rg and piece_estimate(c)[0] <= MAX_BATCHED:
+                if key is not None and any(key == b[2] for b in self.batch):
+                    self.waiting.append((c, rg))
+                    continue
+                self.batch.append((c, rg, key, anchor, ring_keys))
+                if sum(piece_estimate(b[0])[0] for b in self.batch) >= BATCH_TRIANGLES:
+                    self._flush()
+            else:
+                self._flush()
+                self._settle(c, rg)
+        self._flush()
+        for _, pieces in self.done.values():
+            yield from pieces
+
+    def _rings(self, c) -> dict:
+        if id(c) not in self.rings_of:  # this cluster and the next ones' rings, placed at once
+            part = [c, *itertools.islice(self.pending, self.chunk - 1)]
+            self.rings_of.update(zip(map(id, part), _cluster_rings(self.tess, self.idx, self.bn, self.pattern, part)))
+        return self.rings_of.pop(id(c))
+
+    def _flush(self) -> None:
+        """Unite the batch; its failures and the copies waiting for it are settled one by one."""
+        if not self.batch:
+            return
+        batch, self.batch = self.batch, []
+        ev = self.ev
+        pieces = [None] if len(batch) == 1 else unite_batch([b[0] for b in batch], ev.center, ev.radius, self.bn,
+                                                            [b[1] for b in batch], self.tess.grid)
+        for (c, rg, key, anchor, ring_keys), piece in zip(batch, pieces):
+            if piece is not None:
+                self.cache.put(key, anchor, ring_keys, rg, piece)
+                self.done[id(c)] = (c, [piece])
+            else:
+                self.unsettled.append((c, rg))
+        self.unsettled += self.waiting
+        self.waiting = []
+        while self.unsettled:
+            c, rg = self.unsettled.pop(0)
+            if id(c) not in self.gone:
+                self._settle(c, rg)
+
+    def _settle(self, c, rg) -> None:
+        """One cluster's piece: a copy, or its union, grown while it touches clean junctions."""
+        bn, idx, pattern = self.bn, self.idx, self.pattern
         for _ in range(MAX_CLUSTER_GROWTH):
-            key, anchor, ring_keys = cache.key(c, ev.center, ev.radius, bn, rg)
-            piece = cache.get(key, anchor, ring_keys, rg)
+            key, anchor, ring_keys = self.cache.key(c, self.ev.center, self.ev.radius, bn, rg)
+            piece = self.cache.get(key, anchor, ring_keys, rg)
             if piece is not None:
                 break
             try:
-                piece = unite_stoppable(c, ev.center, ev.radius, bn, rg, tess.grid)
-                cache.put(key, anchor, ring_keys, rg, piece)
+                piece = unite_stoppable(c, self.ev.center, self.ev.radius, bn, rg, self.tess.grid)
+                self.cache.put(key, anchor, ring_keys, rg, piece)
                 break
             except RingTouchedError as exc:
-                others = list(pending) + [d for d, _ in done.values()]
+                others = (list(self.pending) + [d for d, _ in self.unsettled if id(d) not in self.gone]
+                          + [d for d, _ in self.done.values()])
                 c, merged = _grown(c, [int(bn[j, e]) for j, e in exc.ring], bn, others)
                 gone = {id(p) for p in merged}
-                pending = deque(q for q in pending if id(q) not in gone)
+                self.gone |= gone
+                self.pending = deque(q for q in self.pending if id(q) not in gone)
                 for g in gone:
-                    rings_of.pop(g, None)
-                    done.pop(g, None)
-                tess.exclude_more(idx[c.hubs], np.concatenate([idx[bn[c.beams, 0], :3], pattern[c.beams, None]],
-                                                              axis=1))
-                rg = _cluster_rings(tess, idx, bn, pattern, [c])[0]
+                    self.rings_of.pop(g, None)
+                    self.done.pop(g, None)
+                self.tess.exclude_more(idx[c.hubs], np.concatenate([idx[bn[c.beams, 0], :3],
+                                                                    pattern[c.beams, None]], axis=1))
+                rg = _cluster_rings(self.tess, idx, bn, pattern, [c])[0]
         else:
             raise PleError(f"an unclean cluster of {len(c.hubs):,} hubs and {len(c.beams):,} beams keeps "
                            "touching the clean junctions around it")
-        done[id(c)] = (c, [piece])
-    for _, pieces in done.values():
-        yield from pieces
+        self.done[id(c)] = (c, [piece])
 
 
 def _split_pieces(tess: _Tessellator, ev, report, c, rings: dict, cache: ShapeCache):

@@ -251,59 +251,40 @@ def _unit_vertices(manifold3d) -> np.ndarray:
     return _UNIT["v"]
 
 
-# a SPHERE_SEGMENTS-gon of this circumradius has the area of the unit circle: a beam's circles of
-# tangent points, scaled so, give it the cross-section of the exact beam (as ``unit_ball`` its volume)
+# a SPHERE_SEGMENTS-gon of this circumradius has the area of the unit circle (a cut ring's, so
+# that the beam keeps the cross-section of the exact one, as ``unit_ball`` its volume)
 TANGENT_SCALE = float(np.sqrt(2 * np.pi / (SPHERE_SEGMENTS * np.sin(2 * np.pi / SPHERE_SEGMENTS))))
+CAP_ROWS = 2  # rows of a ball's vertices beyond the tangent circle that its beams' hulls take in
 
 
-def beam_points(ends, centers) -> np.ndarray | None:
-    """Points whose convex hull is a cluster's beam outside its balls (§3: a beam is the hull of
-    its two balls): ``ends`` two items, each a ball (radius float: its polygonal ball is
-    ``unit_ball`` scaled, centre in ``centers``) or a ring (k, 3). The hull of a ball and the rest
-    is the ball and the cone tangent to it, so the ball enters the hull by its tangent points
-    only, ``SPHERE_SEGMENTS`` of them around the beam on a sphere scaled by ``TANGENT_SCALE``:
-    the hull shares no vertex or face with the ball, which a union handles several times faster
-    than coincident ones. Two balls: the outer tangent cone of both, ``SPHERE_SEGMENTS`` points
-    per circle. A ball and a ring: the tangent point of each ring point, in its meridian plane,
-    and a circle of them for the ring's mean profile. None: the beam lies inside a ball."""
-    rings = [np.asarray(e, float).reshape(-1, 3) for e in ends if not np.isscalar(e)]
-    balls = [(np.asarray(c, float), float(e) * TANGENT_SCALE) for e, c in zip(ends, centers) if np.isscalar(e)]
-    if not balls:
-        return np.concatenate(rings)
-    if len(balls) == 2:
-        (c1, r1), (c2, r2) = balls
-        axis = c2 - c1
-        length = float(np.linalg.norm(axis))
-        if length <= abs(r1 - r2):
-            return None
-        a = axis / length
-        cos_t = (r1 - r2) / length  # the outer tangent's normal makes this angle with the axis
-        sin_t = np.sqrt(max(1.0 - cos_t * cos_t, 0.0))
-        e1, e2 = perpendicular_frames(a)
-        ang = 2 * np.pi * np.arange(SPHERE_SEGMENTS) / SPHERE_SEGMENTS
-        n = cos_t * a + sin_t * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2)
-        return np.concatenate([c1 + r1 * n, c2 + r2 * n])
-    (c, r), ring = balls[0], rings[0]
-    w = ring - c
-    a = w.mean(axis=0)
-    a = a / np.linalg.norm(a)
-    x = w @ a
-    radial = w - x[:, None] * a
-    y = np.linalg.norm(radial, axis=1)
-    e = radial / np.where(y > 0, y, 1.0)[:, None]
-    d = np.hypot(x, y)
-    out = d > r  # a ring point inside the ball adds nothing to the ball
-    if not out.any():
-        return None
-    phi = np.arctan2(y, x) + np.arccos(np.clip(r / np.where(out, d, r), -1.0, 1.0))  # outer tangent, §3
-    tangent = c + r * (np.cos(phi)[:, None] * a + np.sin(phi)[:, None] * e)
-    # and between the ring's meridians, the tangent circle of the ring's mean profile (a ring may
-    # have fewer points than the ball has segments)
-    mean = np.arctan2(y[out].mean(), x[out].mean()) + np.arccos(min(r / np.hypot(y[out].mean(), x[out].mean()), 1.0))
-    e1, e2 = perpendicular_frames(a)
-    ang = 2 * np.pi * np.arange(SPHERE_SEGMENTS) / SPHERE_SEGMENTS
-    circle = c + r * (np.cos(mean) * a + np.sin(mean) * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2))
-    return np.concatenate([ring, tangent[out & (y > 0)], circle])
+def beam_points(ends, centers) -> np.ndarray:
+    """Points whose convex hull, with the balls, is a cluster's beam (§3: a beam is the hull of
+    its two balls): ``ends`` two items, each a ball's vertices (P, 3) (its centre in ``centers``)
+    or a ring (k, 3), told apart by ``centers`` (None for a ring). A ball enters by its cap only:
+    the vertices within ``CAP_ROWS`` rows of segments behind the circle where the beam's tangent
+    cone touches it. The hull with the whole ball is the ball and that cap's hull, so the union is
+    the same, and the fewer vertices the beams of one ball share, the faster the Boolean."""
+    pts = [np.asarray(e, float).reshape(-1, 3) for e in ends]
+    mids = [np.asarray(c, float) if c is not None else p.mean(axis=0) for p, c in zip(pts, centers)]
+    axis = mids[1] - mids[0]
+    length = float(np.linalg.norm(axis))
+    if length == 0 or all(c is None for c in centers):
+        return np.concatenate(pts)
+    a = axis / length
+    reach = [float(np.linalg.norm(p - m, axis=1).max()) for p, m in zip(pts, mids)]
+    out = []
+    for e, (p, c) in enumerate(zip(pts, centers)):
+        if c is None:
+            out.append(p)
+            continue
+        toward = a if e == 0 else -a
+        # the tangent circle of the outer cone of the two ends (each as its bounding sphere)
+        cos_t = np.clip((reach[e] - reach[1 - e]) / length, -1.0, 1.0)
+        angle = np.arccos(cos_t) + CAP_ROWS * 2 * np.pi / SPHERE_SEGMENTS
+        w = p - mids[e]
+        cos_v = (w @ toward) / np.maximum(np.linalg.norm(w, axis=1), 1e-300)
+        out.append(p[cos_v >= np.cos(min(angle, np.pi))])
+    return np.concatenate(out)
 
 
 def _turned(points: np.ndarray, turns) -> np.ndarray:
@@ -357,6 +338,14 @@ def _child(send, *args) -> None:
         send.close()
 
 
+def _manifold3d():
+    try:
+        import manifold3d
+    except ImportError as exc:  # pragma: no cover - a runtime dependency of unclean meshing
+        raise PleError("meshing an unclean lattice needs manifold3d (pip install manifold3d)") from exc
+    return manifold3d
+
+
 def unite_cluster(cluster: Cluster, center, radius, beam_nodes, rings: dict, grid: float):
     """The mesh of one cluster (vertices (V, 3), faces (F, 3)), open along the rings it shares
     with clean junctions. ``rings``: (beam row, end 0|1) -> ring vertices (k, 3) in world
@@ -364,21 +353,81 @@ def unite_cluster(cluster: Cluster, center, radius, beam_nodes, rings: dict, gri
     cluster's beams that is not one of its hubs. Tries the balls as they are, then each turned
     its own way (identical balls give symmetric lattices coplanar faces that a Boolean may leave
     overlapping)."""
-    try:
-        import manifold3d
-    except ImportError as exc:  # pragma: no cover - a runtime dependency of unclean meshing
-        raise PleError("meshing an unclean lattice needs manifold3d (pip install manifold3d)") from exc
-    unit = _unit_vertices(manifold3d)
+    manifold3d = _manifold3d()
     last = None
     for turns in (None, BALL_TURNS):
         try:
-            return _unite_once(manifold3d, unit, cluster, center, radius, beam_nodes, rings, grid, turns)
+            v, f, keys = _united(manifold3d, cluster, center, radius, beam_nodes, rings, turns)
+            centre = v.mean(axis=0) if len(v) else np.zeros(3)
+            reach = float(np.linalg.norm(v - centre, axis=1).max()) if len(v) else 0.0
+            pinned = [rings[k] for k in keys]
+            v, f = on_grid(v, f, grid, centre[None], reach, rings=pinned)
+            return _open_rings(v, f, pinned, keys)
         except PleError as exc:
             last = exc
     raise last
 
 
-def _unite_once(manifold3d, unit, cluster, center, radius, beam_nodes, rings, grid, turns):
+BATCH_TRIANGLES = 100_000  # input triangles of the small clusters put on the grid and checked at once
+
+
+def unite_batch(batch: list, center, radius, beam_nodes, rings: list, grid: float) -> list:
+    """``unite_cluster`` for many small clusters at once (``batch``, each with its ``rings``, at
+    least one): each is united on its own, then all are put on the grid, checked and opened in one
+    ``on_grid`` and one ``_open_rings`` (their cost is mostly per call), and split again by the
+    connected pieces of the result, each found by its ring vertices. Returns a piece per cluster,
+    or None for every cluster when anything fails (then each is united alone)."""
+    manifold3d = _manifold3d()
+    vs, fs, keys, centres, at = [], [], [], [], 0
+    try:
+        for k, (c, rg) in enumerate(zip(batch, rings)):
+            v, f, ks = _united(manifold3d, c, center, radius, beam_nodes, rg, None)
+            if not ks or not len(f):
+                return [None] * len(batch)
+            vs.append(v)
+            fs.append(f + at)
+            at += len(v)
+            keys += [(k, key) for key in ks]
+            centres.append(v.mean(axis=0))
+        v, f = np.concatenate(vs), np.concatenate(fs)
+        centres = np.asarray(centres)
+        reach = max(float(np.linalg.norm(x - y, axis=1).max()) for x, y in zip(vs, centres))
+        pinned = [rings[k][key] for k, key in keys]
+        v, f = on_grid(v, f, grid, centres, reach, rings=pinned)
+        v, f = _open_rings(v, f, pinned, keys)
+    except PleError:
+        return [None] * len(batch)
+    from scipy.sparse import coo_matrix  # noqa: PLC0415 - optional package
+    from scipy.sparse.csgraph import connected_components  # noqa: PLC0415
+
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
+    _, label = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(v), len(v))),
+                                    directed=False)
+    ids = match_rows(np.concatenate(pinned), v)
+    if (ids < 0).any():
+        return [None] * len(batch)
+    ring_owner = np.repeat([k for k, _ in keys], [len(r) for r in pinned])
+    piece_of = np.full(len(batch), -1, np.int64)
+    piece_of[ring_owner] = label[ids]
+    whose = np.full(int(label.max()) + 1, -1, np.int64)
+    whose[label[ids]] = ring_owner
+    if len(np.unique(piece_of)) != len(batch) or (whose[label[ids]] != ring_owner).any() or (whose < 0).any():
+        return [None] * len(batch)  # a piece without rings, or two clusters in one piece
+    out = []
+    face_label = label[f[:, 0]]
+    for k in range(len(batch)):
+        fk = f[face_label == piece_of[k]]
+        used = np.unique(fk)
+        remap = np.full(len(v), -1, np.int64)
+        remap[used] = np.arange(len(used))
+        out.append((v[used], remap[fk]))
+    return out
+
+
+def _united(manifold3d, cluster, center, radius, beam_nodes, rings, turns):
+    """The Boolean union of a cluster's balls and beams (manifold3d): (vertices, faces, the keys
+    of its rings: those shared with the fast path, and its cut rings)."""
+    unit = _unit_vertices(manifold3d)
     c = np.asarray(center, float)
     rad = np.asarray(radius, float)
     bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
@@ -391,27 +440,19 @@ def _unite_once(manifold3d, unit, cluster, center, radius, beam_nodes, rings, gr
     parts = [manifold3d.Manifold.hull_points(ball(int(x))) for x in cluster.hubs]
     # the rings shared with the fast path, and the cut rings shared with the other halves' unions
     keys = sorted(k for k in rings if k[1] == CUT or int(bn[k[0], k[1]]) not in own)
-    pinned = [rings[k] for k in keys]
     for j in cluster.beams.tolist():
         x = [int(bn[j, e]) for e in (0, 1)]
-        pts = beam_points([float(rad[x[e]]) if x[e] in own else rings[(j, e)] for e in (0, 1)], c[x])
-        if pts is not None:
-            parts.append(manifold3d.Manifold.hull_points(pts))
+        parts.append(manifold3d.Manifold.hull_points(beam_points(
+            [ball(x[e]) if x[e] in own else rings[(j, e)] for e in (0, 1)],
+            [c[x[e]] if x[e] in own else None for e in (0, 1)])))
     for j, e in cluster.halves.tolist():
         x = int(bn[j, e])
-        pts = beam_points([float(rad[x]), rings[(j, CUT)]], c[[x, x]])
-        if pts is not None:
-            parts.append(manifold3d.Manifold.hull_points(pts))
+        parts.append(manifold3d.Manifold.hull_points(beam_points([ball(x), rings[(j, CUT)]], [c[x], None])))
     for p in parts:
         if p.status() != manifold3d.Error.NoError or p.is_empty():
             raise PleError("a beam of an unclean cluster has no volume (its two ends are flat)")
     out = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add).to_mesh64()
-    v = np.asarray(out.vert_properties[:, :3], float)
-    f = np.asarray(out.tri_verts, np.int64)
-    centre = v.mean(axis=0) if len(v) else np.zeros(3)
-    reach = float(np.linalg.norm(v - centre, axis=1).max()) if len(v) else 0.0
-    v, f = on_grid(v, f, grid, centre[None], reach, rings=pinned)
-    return _open_rings(v, f, pinned, keys)
+    return np.asarray(out.vert_properties[:, :3], float), np.asarray(out.tri_verts, np.int64), keys
 
 
 def _open_rings(v, f, rings: list, keys: list):
