@@ -22,7 +22,7 @@ are unchanged since 2019-07). Its measurements, recomputed here from the paper's
   ``TriangleMesh.volume(centre)`` on ``toTriangleMesh()``, which keeps triangles only).
 
 ``fig_21_readings`` computes the three rows under the sketch's choices and with each choice
-changed in turn.
+changed in turn; ``ple bench fig21`` prints it (``ple bench seeds`` includes it).
 """
 
 from __future__ import annotations
@@ -32,8 +32,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..algebra.elements import beam_distance
-from ..meshing.achocc import contact_circles, inflated_radius
+from ..meshing.achocc import contact_circles, hub_geometry, inflated_radius
 from ..meshing.chocc import Chocc, chocc, corridor_mesh, sampled_segments
+from ..meshing.hubs import hub_template
 
 AUTHORS_BALL = 20.0
 # each beam: the other ball's centre and a point on its sphere (the sketch's point-set files)
@@ -266,10 +267,27 @@ def centre_in_cnt(j: Junction) -> bool:
     return len(visible_faces(chocc(j.normals, j.alphas))) == 0
 
 
+def ple_hub_meshes(j: Junction) -> dict:
+    """The project's own hub meshes (``hub_template``: its CNT, refinement and off-centre fix)
+    of junction ``j`` asked for S⁺ of radius ``j.r_plus``: r⁺ and whether the junction is clean
+    to it, and the four fractions closed by the caps and without them."""
+    geometry = hub_geometry(j.radius, j.dirs, j.other_radii, j.lengths, r_plus_min=j.r_plus)
+    ball = chopped_ball_volume(geometry.r_plus, geometry.alphas)
+    out = {"r_plus": geometry.r_plus, "clean": geometry.clean, "closed": {}, "without_disks": {}}
+    for col, style, levels in zip(COLUMNS, ("chocc", "cnt", "refined", "refined"), (1, 1, 1, 2)):
+        t = hub_template(np.zeros(3), j.radius, j.dirs * j.lengths[:, None], j.other_radii, style, levels, 256,
+                         target=lambda _: geometry)
+        out["without_disks"][col] = signed_volume(t.vertices, t.faces) / ball
+        out["closed"][col] = signed_volume(t.vertices, np.concatenate([t.faces, *t.caps])) / ball
+    return out
+
+
 def fig_21_readings() -> dict:
     """The three rows of Fig. 21 under the sketch's choices (``sketch``) and with one choice
     changed at a time: the refined meshes closed by their disks; r⁺ the minimal one (× 1.0001);
-    for the adjusted row, the centre's containment tested after the point circle is added."""
+    for the adjusted row, the centre's containment tested after the point circle is added; and
+    the project's own hub meshes of the same junctions (its off-centre fix always applies, so
+    the middle row has none)."""
     rows = []
     for row, (name, fix, theirs) in FIG_21.items():
         out = {"row": row, "junction": name, "theirs": theirs}
@@ -286,5 +304,15 @@ def fig_21_readings() -> dict:
                 out["closed_refined"] = fractions(j, contains, closed=True)
                 if fix:
                     out["containment_after_fix"] = fractions(j, centre_in_cnt(j))
+                if fix or contains:
+                    out["ple_hub_meshes"] = ple_hub_meshes(authors_junction(name, inflation))
         rows.append(out)
     return {"rows": rows, "columns": list(COLUMNS)}
+
+
+def add_arguments(p) -> None:
+    """No options: the junctions are the authors'."""
+
+
+def run(args) -> dict:
+    return {"benchmark": "fig21", **fig_21_readings()}
