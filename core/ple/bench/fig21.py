@@ -245,10 +245,11 @@ def chocc_volume(c: Chocc, r_plus: float, segments: int = 1024) -> float:
     return signed_volume(m.vertices * r_plus, np.concatenate([m.faces, m.disk_faces()]))
 
 
-def fractions(j: Junction, contains: bool, closed: bool = False) -> dict:
+def fractions(j: Junction, contains: bool, closed: bool = False, onto_ball: bool = False) -> dict:
     """Fig. 21's four fractions of junction ``j``: CHoCC, CNT, CNT refined once and twice and
-    projected (both ways if ``contains``: the centre lay in the CNT before any point circle),
-    the refined volumes without their disks as the sketch measures them, or with (``closed``)."""
+    projected (both ways if ``contains``: the centre lay in the CNT before any point circle;
+    ``onto_ball``: onto the ball's sphere alone), the refined volumes without their disks as
+    the sketch measures them, or with (``closed``)."""
     c = chocc(j.normals, j.alphas)
     unit, faces, circle = cnt(c)
     verts = unit * j.r_plus
@@ -258,9 +259,14 @@ def fractions(j: Junction, contains: bool, closed: bool = False) -> dict:
                    + disk_volume(verts, circle, j)) / ball}
     for levels in (1, 2):
         v, tris, ci = refine(verts, faces, circle, j, levels)
-        v = project(v, j, contains)
+        v = v / np.linalg.norm(v, axis=1, keepdims=True) * j.radius if onto_ball else project(v, j, contains)
         out[f"refined_{levels}"] = (signed_volume(v, tris) + (disk_volume(v, ci, j) if closed else 0.0)) / ball
     return out
+
+
+def agrees(ours: float, theirs: float) -> bool:
+    """Whether ``ours`` is the paper's 3-decimal figure, truncated or rounded."""
+    return bool(np.floor(ours * 1000 + 1e-9) / 1000 == theirs or round(ours, 3) == theirs)
 
 
 def centre_in_cnt(j: Junction) -> bool:
@@ -284,10 +290,11 @@ def ple_hub_meshes(j: Junction) -> dict:
 
 def fig_21_readings() -> dict:
     """The three rows of Fig. 21 under the sketch's choices (``sketch``) and with one choice
-    changed at a time: the refined meshes closed by their disks; r⁺ the minimal one (× 1.0001);
-    for the adjusted row, the centre's containment tested after the point circle is added; and
-    the project's own hub meshes of the same junctions (its off-centre fix always applies, so
-    the middle row has none)."""
+    changed at a time: the refined meshes closed by their disks; new vertices projected onto the
+    ball alone; every fraction over the whole S⁺ instead of the chopped ball; r⁺ the minimal one
+    (× 1.0001); for the adjusted row, the centre's containment tested after the point circle is
+    added; and the project's own hub meshes of the same junctions (its off-centre fix always
+    applies, so the middle row has none)."""
     rows = []
     for row, (name, fix, theirs) in FIG_21.items():
         out = {"row": row, "junction": name, "theirs": theirs}
@@ -302,10 +309,15 @@ def fig_21_readings() -> dict:
                 out.update(r_plus=j.r_plus, centre_in_cnt=contains, beams=len(j.dirs),
                            other_radii=j.other_radii.round(2).tolist(), lengths=j.lengths.round(2).tolist())
                 out["closed_refined"] = fractions(j, contains, closed=True)
+                out["onto_ball"] = fractions(j, contains, onto_ball=True)
+                whole = chopped_ball_volume(j.r_plus, j.alphas) / (4.0 / 3.0 * np.pi * j.r_plus**3)
+                out["over_whole_s_plus"] = {k: v * whole for k, v in out["sketch"].items()}
                 if fix:
                     out["containment_after_fix"] = fractions(j, centre_in_cnt(j))
                 if fix or contains:
                     out["ple_hub_meshes"] = ple_hub_meshes(authors_junction(name, inflation))
+        readings = [k for k, v in out.items() if isinstance(v, dict) and set(v) == set(COLUMNS) and k != "theirs"]
+        out["agrees"] = {k: [c for c in COLUMNS if agrees(out[k][c], theirs[c])] for k in readings}
         rows.append(out)
     return {"rows": rows, "columns": list(COLUMNS)}
 
