@@ -113,3 +113,20 @@ def test_disks_close_the_refined_mesh(name, fix):
     m = trimesh.Trimesh(np.concatenate([v, extra]), np.concatenate([tris, *fans]), process=True)
     assert m.is_watertight
     assert np.isclose(m.volume, fig21.signed_volume(v, tris) + fig21.disk_volume(v, ci, j), rtol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["8 beams", "4 beams"])
+def test_actual_junction_is_the_manifold3d_volume(name):
+    """The Monte Carlo fraction of the hub inside the chopped ball against manifold3d's exact
+    Boolean of the same solids (spheres of 96 segments, beams their hulls)."""
+    manifold3d = pytest.importorskip("manifold3d")
+    m = manifold3d.Manifold
+    j = fig21.authors_junction(name)
+    ball = m.sphere(j.radius, 96)
+    hub = m.batch_boolean([m.batch_hull([ball, m.sphere(rho, 96).translate(tuple(u * length))])
+                           for u, length, rho in zip(j.dirs, j.lengths, j.other_radii)], manifold3d.OpType.Add)
+    region = m.sphere(j.r_plus, 96)
+    for n, a in zip(j.normals, j.alphas):
+        region = region.trim_by_plane(tuple(-n), -j.r_plus * np.cos(a))  # keeps n·x ≤ r⁺ cos α
+    f, two_sigma = fig21.actual_fraction(j, points=400_000)
+    assert abs(f - (hub ^ region).volume() / region.volume()) < 1.5 * two_sigma

@@ -266,6 +266,16 @@ def fractions(j: Junction, contains: bool, closed: bool = False, onto_ball: bool
     return out
 
 
+def actual_fraction(j: Junction, points: int = 1_200_000, seed: int = 0) -> tuple[float, float]:
+    """The junction's own volume, which §6 says refinement approaches ("the actual value"): the
+    hub (ball and beams) inside the chopped ball, as a fraction of it, by Monte Carlo over
+    ``points`` uniform points of S⁺'s cube. Returns the fraction and twice its standard error."""
+    p = np.random.default_rng(seed).uniform(-j.r_plus, j.r_plus, (points, 3))
+    p = p[(np.linalg.norm(p, axis=1) <= j.r_plus) & np.all(p @ j.normals.T <= j.r_plus * np.cos(j.alphas), axis=1)]
+    f = float(np.mean(j.signed_distance(p) <= 0))
+    return f, 2 * float(np.sqrt(f * (1 - f) / len(p)))
+
+
 def agrees(ours: float, theirs: float) -> bool:
     """Whether ``ours`` is the paper's 3-decimal figure, truncated or rounded."""
     return bool(np.floor(ours * 1000 + 1e-9) / 1000 == theirs or round(ours, 3) == theirs)
@@ -296,7 +306,7 @@ def fig_21_readings() -> dict:
     ball alone; every fraction over the whole S⁺ instead of the chopped ball; r⁺ the minimal one
     (× 1.0001); for the adjusted row, the centre's containment tested after the point circle is
     added; and the project's own hub meshes of the same junctions (its off-centre fix always
-    applies, so the middle row has none)."""
+    applies, so the middle row has none). Beside them, the actual junction's fraction."""
     rows = []
     for row, (name, fix, theirs) in FIG_21.items():
         out = {"row": row, "junction": name, "theirs": theirs}
@@ -308,8 +318,10 @@ def fig_21_readings() -> dict:
                 j = with_point_circle(j)
             out[reading] = fractions(j, contains)
             if reading == "sketch":
+                actual, two_sigma = actual_fraction(j)
                 out.update(r_plus=j.r_plus, centre_in_cnt=contains, beams=len(j.dirs),
-                           other_radii=j.other_radii.round(2).tolist(), lengths=j.lengths.round(2).tolist())
+                           other_radii=j.other_radii.round(2).tolist(), lengths=j.lengths.round(2).tolist(),
+                           actual_junction=actual, actual_junction_two_sigma=two_sigma)
                 out["closed_refined"] = fractions(j, contains, closed=True)
                 out["onto_ball"] = fractions(j, contains, onto_ball=True)
                 whole = chopped_ball_volume(j.r_plus, j.alphas) / (4.0 / 3.0 * np.pi * j.r_plus**3)
