@@ -10,11 +10,9 @@
   forced; timed on ``--lil-sample`` fine nodes and extrapolated to all. The semi-regular case
   runs at the thesis' 75³ (Fig. 7.9) and at the paper's 64³ (Fig. 12), each beside its source.
 - Fig. 21 (CHoCC paper): junction volume fractions of CHoCC, CNT and the 1- and 2-level refined
-  hubs relative to the chopped inflated ball, for two junctions like the figure's (its beams
-  are not given); ``fig_21_definitions`` recomputes the top row from §5–6's definitions, one
-  figure number inverted and none searched: the columns that depend on the caps alone, the cap
-  angle the figure's CHoCC column implies and the CNT it then predicts, the refined columns at that angle
-  projected onto the lattice and onto the ball, and r⁺ read literally from §5.
+  hubs relative to the chopped inflated ball, recomputed on the authors' own junctions under
+  the paper's definitions as their sketch measures them, and with each choice changed in turn
+  (``ple.bench.fig21``).
 - Fig. 9.3 (thesis): the beam count of a compound LiL at 138³ on the ``hier_lil3`` preset,
   searched over its medium and coarse radii (the thesis gives neither coarse lattice).
 - Table 7.1 by the thesis' own method (two BIQs per fine beam): ``ple bench lil``.
@@ -27,13 +25,12 @@ import time
 
 import numpy as np
 
-from ..meshing.achocc import hub_geometry
-from ..meshing.hubs import hub_template
 from ..program.sources import load_lattice
 from ..queries.biq import _naive_hits
 from ..queries.rangefinder import PATH_ORDER, cached_plan, lattice_hits
 from ._baselines import Elements, naive_hits
 from .biq import protocol_queries
+from .fig21 import fig_21_readings
 
 # thesis Table 7.2: seconds for 100 BIQs, one thread (i7-7700K, Java)
 TABLE_7_2 = {"thesis_regular": {"naive": 55.2, "uv": 1.60, "u": 0.0558, "1": 0.00586},
@@ -58,10 +55,6 @@ LIL_CASES = [
     ("semi-regular 64³ / 8³", "thesis_regular", {"n": 64}, "lil_semiregular_coarse", {},
      "RangeFinder Table 1 (min)", {"naive": 19.10, "uv": 5.87}),
 ]
-# CHoCC paper Fig. 21: fractions of the chopped inflated ball's volume
-FIG_21 = {"8 beams, even": {"chocc": 0.893, "cnt": 0.816, "refined_1": 0.300, "refined_2": 0.292},
-          "4 beams, centre outside the CNT": {"chocc": 0.230, "cnt": 0.179, "refined_1": 0.057, "refined_2": 0.047},
-          "4 beams, CNT adjusted": {"chocc": 0.387, "cnt": 0.349, "refined_1": 0.126, "refined_2": 0.134}}
 
 
 def add_arguments(p) -> None:
@@ -70,8 +63,6 @@ def add_arguments(p) -> None:
     p.add_argument("--lil-sample", type=int, default=20000, help="fine nodes timed per LiL path (default 20000)")
     p.add_argument("--lil-naive-sample", type=int, default=200, help="fine nodes timed on the naive LiL path")
     p.add_argument("--skip-lil", action="store_true", help="only Table 7.2, pure BIQs and Fig. 21")
-    p.add_argument("--skip-fig21-definitions", action="store_true",
-                   help="skip Fig. 21 recomputed from the paper's definitions (~1 min)")
     p.add_argument("--skip-fig93", action="store_true", help="skip Fig. 9.3's beam count at 138³ (~4–6 min)")
     p.add_argument("--seed", type=int, default=2024)
 
@@ -155,169 +146,6 @@ def lil_tables(args) -> list[dict]:
     return rows
 
 
-def _fig21_hubs() -> dict:
-    """Junctions like Fig. 21's rows 1 and 3: 8 even beams; 4 beams on one side with the hub
-    adjusted to contain the centre (ours always adjust: row 2, unadjusted, has no counterpart)."""
-    cube = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
-    side = np.array([[1, 0.35, 0.35], [1, -0.35, 0.35], [1, 0.35, -0.35], [1, -0.35, -0.35]], float)
-    return {"8 beams, even": (cube, 0.45), "4 beams, CNT adjusted": (side, 0.3)}
-
-
-def fig_21() -> list[dict]:
-    rows = []
-    for name, (dirs, beam_r) in _fig21_hubs().items():
-        d = dirs / np.linalg.norm(dirs, axis=1)[:, None]
-        s = len(d)
-        length = np.full(s, 6.0)
-        hub = hub_geometry(1.0, d, np.full(s, beam_r), length)
-        chopped = _chopped_ball_volume(hub)
-        vol = {}
-        for style, levels in (("cnt", 0), ("refined", 1), ("refined", 2)):
-            tpl = hub_template(np.zeros(3), 1.0, d * length[:, None], np.full(s, beam_r), style, max(levels, 1), 16)
-            v = _hub_volume(tpl)
-            vol["cnt" if style == "cnt" else f"refined_{levels}"] = v / chopped
-        vol["chocc"] = _hub_volume(hub_template(np.zeros(3), 1.0, d * length[:, None], np.full(s, beam_r),
-                                                "chocc", 1, 256)) / chopped
-        rows.append({"junction": name, "beams": s, "beam_radius": beam_r, "r_plus": hub.r_plus,
-                     "point_circles_added": int(len(hub.chocc.normals) - hub.slots), "ours": vol})
-    return rows
-
-
-def _antiprism() -> np.ndarray:
-    """The square antiprism with all edges equal (the 8 most evenly spread directions)."""
-    th = np.arctan(np.sqrt(4 / np.sqrt(2)))  # square side = slant edge: tan² θ = 2√2
-    k = np.arange(8) * np.pi / 4
-    z = np.where(np.arange(8) % 2 == 0, np.cos(th), -np.cos(th))
-    return np.stack([np.sin(th) * np.cos(k), np.sin(th) * np.sin(k), z], axis=1)
-
-
-class _BallOnly:
-    """A hub whose refined vertices are projected onto its ball alone, not onto its beams."""
-
-    def __init__(self, hub):
-        self.hub = hub
-
-    def __getattr__(self, name):
-        return getattr(self.hub, name)
-
-    def exit_distance(self, u):
-        return np.full(len(u), self.hub.radius)
-
-
-def _fractions(d, rho, length, r_plus, onto) -> tuple[float, list[float]]:
-    """r⁺ and the CHoCC, CNT, 1- and 2-level fractions of one junction (ball radius 1)."""
-    s = len(d)
-    ln, rr = np.full(s, float(length)), np.full(s, float(rho))
-
-    def target(hub):
-        grown = hub_geometry(1.0, d, rr, ln, r_plus_min=r_plus)
-        return _BallOnly(grown) if onto == "ball" else grown
-
-    hub = target(None)
-    chopped = _chopped_ball_volume(hub)
-    out = [_hub_volume(hub_template(np.zeros(3), 1.0, d * ln[:, None], rr, style, lv, 128, target=target)) / chopped
-           for style, lv in (("chocc", 1), ("cnt", 1), ("refined", 1), ("refined", 2))]
-    return hub.r_plus, out
-
-
-def _directions() -> dict:
-    """The two 8-direction sets that spread beams evenly: cube corners (the BCC centre node's
-    beams) and the square antiprism."""
-    cube = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float) / np.sqrt(3)
-    return {"cube corners": cube, "square antiprism": _antiprism()}
-
-
-def literal_r_plus(radius: float, dirs, other_radius: float, length: float) -> float:
-    """r⁺ of §5 read literally: the farthest crossing of *any* two profile lines of two incident
-    beams (each beam has two in the plane of the axes), behind the centre or not. Our
-    ``inflated_radius`` keeps only the facing profiles' crossing in front of the ball."""
-    s = (radius - other_radius) / length
-    c = np.sqrt(1 - s * s)
-    best = float(radius)
-    for a, b in zip(*np.triu_indices(len(dirs), 1)):
-        ct = float(np.clip(dirs[a] @ dirs[b], -1, 1))
-        st = np.sqrt(1 - ct * ct)
-        if st < 1e-9:
-            continue
-        for s1 in (1.0, -1.0):
-            for s2 in (1.0, -1.0):  # profile k: n_k . p = r in the 2D frame (x along beam a)
-                n = np.array([[s, s1 * c], [s * ct + s2 * c * st, s * st - s2 * c * ct]])
-                if abs(np.linalg.det(n)) > 1e-12:
-                    best = max(best, float(np.linalg.norm(np.linalg.solve(n, [radius, radius]))))
-    return best
-
-
-def _chocc_fraction(d, rho, length, r_plus) -> tuple[float, float]:
-    """(cap half-angle, CHoCC / chopped ball) of one junction (ball radius 1)."""
-    s = len(d)
-    ln, rr = np.full(s, float(length)), np.full(s, float(rho))
-    hub = hub_geometry(1.0, d, rr, ln, r_plus_min=r_plus)
-    v = _hub_volume(hub_template(np.zeros(3), 1.0, d * ln[:, None], rr, "chocc", 1, 128,
-                                 target=lambda _: hub_geometry(1.0, d, rr, ln, r_plus_min=r_plus)))
-    return float(hub.alphas[0]), v / _chopped_ball_volume(hub)
-
-
-def _r_plus_for(d, rho, length, goal, value) -> float:
-    """Bisection on r⁺ (≥ the minimal one): the r⁺ where ``value(r⁺)`` (decreasing) meets ``goal``."""
-    lo = hub_geometry(1.0, d, np.full(len(d), rho), np.full(len(d), length)).r_plus
-    hi = 4.0 * lo
-    for _ in range(24):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if value(mid) > goal else (lo, mid)
-    return 0.5 * (lo + hi)
-
-
-def fig_21_definitions(rhos=(0.5, 1.0, 2.0, 4.0), length: float = 20.0) -> dict:
-    """Fig. 21's top row recomputed from §5–6's definitions; of the figure's numbers only the CHoCC
-    column is used (inverted to a cap angle), no grid is searched.
-
-    1. ``stated``: the minimal r⁺ (the definition) for each direction set and beam end radius ρ
-       (ball 1, other ball at ``length``): neighbouring caps touch, so the CHoCC and CNT columns
-       depend on the directions only, not on the beams the paper does not give.
-    2. ``caps_for_chocc``: the one cap half-angle α at which the CHoCC column is the figure's
-       0.893 (CHoCC and CNT depend on the caps alone), and the CNT column it then *predicts*.
-    3. ``refined_at_that_alpha``: at that α, every ρ, the refined columns with new vertices
-       projected onto the lattice (§6) and onto the ball alone; the figure's 0.300 / 0.292 lies
-       below every lattice projection.
-    4. ``literal_r_plus``: r⁺ from every crossing of two beams' profile lines (a literal reading
-       of §5), and the four columns it gives.
-    """
-    theirs = FIG_21["8 beams, even"]
-    out = {"theirs": theirs, "stated": [], "caps_for_chocc": [], "refined_at_that_alpha": [], "literal_r_plus": []}
-    keys = ("chocc", "cnt", "refined_1", "refined_2")
-    for dname, d in _directions().items():
-        for rho in rhos:
-            r_plus, f = _fractions(d, rho, length, 0.0, "lattice")
-            out["stated"].append({"directions": dname, "end_radius": rho, "r_plus": r_plus,
-                                  "ours": dict(zip(keys, np.round(f, 3).tolist()))})
-        rp = _r_plus_for(d, 1.0, length, theirs["chocc"], lambda x, d=d: _chocc_fraction(d, 1.0, length, x)[1])
-        alpha = _chocc_fraction(d, 1.0, length, rp)[0]
-        minimal = hub_geometry(1.0, d, np.full(8, 1.0), np.full(8, length))
-        _, f = _fractions(d, 1.0, length, rp, "lattice")
-        out["caps_for_chocc"].append({"directions": dname, "alpha_deg": float(np.degrees(alpha)),
-                                      "alpha_deg_at_minimal_r_plus": float(np.degrees(minimal.alphas[0])),
-                                      "chocc": round(f[0], 3), "cnt_predicted": round(f[1], 3),
-                                      "cnt_theirs": theirs["cnt"]})
-        for rho in rhos:
-            rp = _r_plus_for(d, rho, length, alpha,
-                             lambda x, d=d, rho=rho: float(hub_geometry(1.0, d, np.full(8, rho), np.full(8, length),
-                                                          r_plus_min=x).alphas[0]))
-            row = {"directions": dname, "end_radius": rho, "r_plus": rp}
-            for onto in ("lattice", "ball"):
-                _, f = _fractions(d, rho, length, rp, onto)
-                row[f"onto_{onto}"] = dict(zip(keys, np.round(f, 3).tolist()))
-            out["refined_at_that_alpha"].append(row)
-        for rho in rhos:
-            rp = literal_r_plus(1.0, d, rho, length)
-            row = {"directions": dname, "end_radius": rho, "r_plus": rp,
-                   "minimal_r_plus": hub_geometry(1.0, d, np.full(8, rho), np.full(8, length)).r_plus}
-            for onto in ("lattice", "ball"):
-                _, f = _fractions(d, rho, length, rp, onto)
-                row[f"onto_{onto}"] = dict(zip(keys, np.round(f, 3).tolist()))
-            out["literal_r_plus"].append(row)
-    return out
-
-
 # thesis Fig. 9.3: a fine lattice of 138³ groups filtered by two coarse lattices (not given) keeps
 # 1,494,074 beams
 FIG_9_3_BEAMS = 1_494_074
@@ -362,30 +190,10 @@ def fig_9_3(n: int = 138, steps: int = 24) -> dict:
     return out
 
 
-def _hub_volume(tpl) -> float:
-    """Volume of a hub mesh closed by its cap disks (divergence theorem)."""
-    faces = np.concatenate([tpl.faces] + list(tpl.caps))
-    v = tpl.vertices[faces]
-    return float(np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0)
-
-
-def _chopped_ball_volume(hub) -> float:
-    """The inflated ball of radius r⁺ minus the caps cut off by the beams' contact planes."""
-    rp = hub.r_plus
-    v = 4.0 / 3.0 * np.pi * rp**3
-    for a in hub.alphas[:hub.slots]:
-        h = rp * (1 - np.cos(a))  # cap height beyond the contact plane
-        v -= np.pi * h * h * (3 * rp - h) / 3.0
-    return float(v)
-
-
 def run(args) -> dict:
     rows72 = table_7_2(args)
     out = {"benchmark": "seeds", "cpus": os.cpu_count(), "threads_ours": 1, "seed": args.seed,
-           "table_7_2": rows72, "rangefinder_pure_biq": rangefinder_pure(rows72), "fig_21": fig_21(),
-           "fig_21_theirs": FIG_21}
-    if not args.skip_fig21_definitions:
-        out["fig_21_definitions"] = fig_21_definitions()
+           "table_7_2": rows72, "rangefinder_pure_biq": rangefinder_pure(rows72), "fig_21": fig_21_readings()}
     if not args.skip_fig93:
         out["fig_9_3"] = fig_9_3()
     if not args.skip_lil:
