@@ -52,8 +52,7 @@ def query(lat: Lattice, centers, radii, method: str = "auto", beams: bool = True
         node_hits, beam_hits = _naive_hits(lat, c, r, beams)
         path = "naive"
     elif pullback.fits(lat) and (not beams or cached_plan(lat).path == "uv"):
-        node_hits, beam_hits = pullback.query(lat, c, r, beams)
-        path = "pullback"
+        return _kept(lat, pullback.query(lat, c, r, beams))
     else:
         node_hits, beam_hits, path = lattice_hits(lat, c, r)
         if not beams:

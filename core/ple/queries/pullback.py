@@ -30,12 +30,20 @@ import numpy as np
 
 from ..algebra.elements import TOUCH_TOL, ball_beam_interfere, enclosing_ball
 from ..model.lattice import Lattice
+from .hits import BIQResults, split_hits
 from .plans import cached
-from .rangefinder import _expand, _frame_balls, _to_frame, ball_extents, cached_plan, candidate_range
+from .rangefinder import (MAX_WRAP_STEPS, RANGE_SLACK, _expand, _frame_balls, _to_frame, ball_extents, cached_plan,
+                          candidate_range)
+
+try:  # the compiled form (setup.py, optional): every query at once, the numpy form's hits
+    from . import _pullback as _compiled
+except ImportError:  # not built (no C compiler): the numpy form
+    _compiled = None
 
 MAX_SLAB_BALLS = 1 << 21  # base-slab balls × W powers kept by one plan; larger lattices use lattice_hits
 MARGIN = 1e-9  # relative widening of search radii: rounding never loses a touching element
 MAX_CLEARANCE_CELLS = 1 << 20  # cells of the base slab's clearance grid
+MAX_KEY = 1 << 62  # hit keys ((i nv + j) nw + k) · max(nn, patterns) of the compiled form stay below
 
 
 @dataclass
@@ -60,6 +68,7 @@ class _Plan:
     grow: float
     pats: np.ndarray  # (P, 5) n1, n2, di, dj, dk
     clearance: _Clearance
+    kernel: tuple | None = None  # the compiled form's arrays (``_kernel_arrays``), None: the numpy form
 
 
 @dataclass
@@ -94,9 +103,10 @@ class _Clearance:
 
     def lower_bound(self, y: np.ndarray) -> np.ndarray:
         """(m,) lower bounds on the distance from points y (m, 3) to the nearest node centre."""
-        cell = np.floor((y - self.lo) / self.size).astype(np.int64)
-        for a in range(3):
+        cell = np.floor((y - self.lo) / self.size)
+        for a in range(3):  # clamped as floats: a far point's cell index never overflows
             np.clip(cell[:, a], 0, self.shape[a] - 1, out=cell[:, a])
+        cell = cell.astype(np.int64)
         return self.bound[(cell[:, 0] * self.shape[1] + cell[:, 1]) * self.shape[2] + cell[:, 2]]
 
 
@@ -152,8 +162,58 @@ def build(lat: Lattice) -> _Plan:
             cb, rb = slab[db][0][ends], slab[db][1][ends]
             beam_r = max(beam_r, float(np.max(np.maximum(enclosing_ball(ca, ra, cb, rb)[1], np.maximum(ra, rb)))))
     fw = lat.W.factor
-    return _Plan((mu, mv, mw), ext_w, ext_v, ext_u, _inverse_rows(lat.W, nw), _inverse_rows(lat.V, nv), slab,
-                 float(r0.max()), beam_r, max(1.0, fw ** (nw - 1)), pats, _Clearance.of(c0.reshape(-1, 3)))
+    pl = _Plan((mu, mv, mw), ext_w, ext_v, ext_u, _inverse_rows(lat.W, nw), _inverse_rows(lat.V, nv), slab,
+               float(r0.max()), beam_r, max(1.0, fw ** (nw - 1)), pats, _Clearance.of(c0.reshape(-1, 3)))
+    if _compiled is not None and nu * nv * nw * max(nn, len(pats), 1) < MAX_KEY:
+        pl.kernel = _kernel_arrays(pl)
+    return pl
+
+
+# the compiled form's layout of one row map (``_pullback.c``: M_*), MAP_WIDTH doubles
+MAP_WIDTH = 32
+EXT_KEYS = ("t", "d", "r")  # the order of a template's extents, two doubles each
+
+
+def _packed_map(m) -> np.ndarray:
+    row = np.zeros(MAP_WIDTH)
+    row[0] = m.count
+    if m.a is not None:
+        row[1], row[2:5], row[5], row[6] = 1.0, m.a, m.origin @ m.a, np.linalg.norm(m.a)
+    if m.log_d is not None:
+        row[7], row[8], row[9:12] = 1.0, m.log_d, m.fixed
+    if m.theta is not None:
+        row[12], row[13], row[14:17], row[17:20], row[20:23] = 1.0, m.theta, m.axis, m.point, m.ref
+        row[23:26], row[26] = np.cross(m.axis, m.ref), m.period
+    return row
+
+
+def _packed_extents(ext: dict, count: int) -> np.ndarray:
+    """(count, 6) template extents [t_s, t_e, d_s, d_e, r_s, r_e] (zeros for a map absent)."""
+    out = np.zeros((count, 2 * len(EXT_KEYS)))
+    for col, key in enumerate(EXT_KEYS):
+        if key in ext:
+            out[:, 2 * col], out[:, 2 * col + 1] = ext[key]
+    return out
+
+
+def _kernel_arrays(pl: _Plan) -> tuple:
+    """The plan as the compiled form reads it: maps, extents, inverse powers of W and V, the
+    slab under each W power (balls (S, nu, nv, nn, 4)) with a slot per power, the clearance
+    bounds and the beam-patterns."""
+    reach = max(abs(d) for d in pl.slab)
+    slot = np.full(2 * reach + 1, -1, np.int64)
+    balls = []
+    for s, (d, (c, r)) in enumerate(sorted(pl.slab.items())):
+        slot[d + reach] = s
+        balls.append(np.concatenate([c, r[..., None]], axis=-1))
+    nn = pl.slab[0][1].shape[2]
+    (wm, wf), (vm, vf) = pl.w_inv, pl.v_inv
+    return (np.concatenate([_packed_map(m) for m in pl.maps]), _packed_extents(pl.ext_w, 1),
+            _packed_extents(pl.ext_v, 1), _packed_extents(pl.ext_u, nn), np.ascontiguousarray(wm.reshape(-1, 12)),
+            np.ascontiguousarray(wf, dtype=float), np.ascontiguousarray(vm.reshape(-1, 12)),
+            np.ascontiguousarray(vf, dtype=float),
+            np.ascontiguousarray(np.stack(balls)), slot, np.ascontiguousarray(pl.clearance.bound, dtype=float),
+            np.ascontiguousarray(pl.pats, dtype=np.int64))
 
 
 def cached_pullback(lat: Lattice) -> _Plan:
@@ -161,21 +221,47 @@ def cached_pullback(lat: Lattice) -> _Plan:
 
 
 def _pull(rows: tuple, p: np.ndarray, x: np.ndarray, r: np.ndarray):
-    """Apply S**-p (rows from ``_inverse_rows``) to balls (x (m, 3), r (m,))."""
+    """Apply S**-p (rows from ``_inverse_rows``) to balls (x (m, 3), r (m,)), each coordinate
+    summed ((m0 x0 + m1 x1) + m2 x2) + m3 as the compiled form does."""
     m, f = rows[0][p], rows[1][p]
-    return np.einsum("nab,nb->na", m[:, :, :3], x) + m[:, :, 3], r * f
+    return (m[:, :, 0] * x[:, None, 0] + m[:, :, 1] * x[:, None, 1] + m[:, :, 2] * x[:, None, 2] + m[:, :, 3],
+            r * f)
 
 
-def query(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True):
-    """Hits (qid, i, j, k, n) of nodes and (qid, i, j, k, pattern) of beams (empty when
-    ``beams`` is False), int64 arrays (N, 5), for query balls c (q, 3), r (q,) in world
-    coordinates. Requires ``fits(lat)``."""
+def query(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True) -> BIQResults:
+    """Per query ball (c (q, 3), r (q,), world coordinates), its node hits and, unless ``beams``
+    is False, its beam hits (path "pullback"): the compiled form when it is built and its keys
+    fit in int64, else the numpy form (the same hits, tested). Requires ``fits(lat)``."""
+    pl = cached_pullback(lat)
+    if pl.kernel is None:
+        return split_hits(len(c), *_query_numpy(lat, c, r, beams), "pullback")
+    qc, qr = _to_frame(lat, c, r)
+    h = _margin(pl, beams)
+    params = np.array([h, h * pl.grow, pl.beam_r * (1 + MARGIN), 1 + MARGIN, TOUCH_TOL, RANGE_SLACK, MAX_WRAP_STEPS,
+                       *pl.clearance.lo, pl.clearance.size, *pl.clearance.shape])
+    nodes, node_ends, beam_rows, beam_ends = _compiled.query(
+        (*lat.counts, len(lat.nodes)), *pl.kernel, params, np.ascontiguousarray(qc, dtype=float),
+        np.ascontiguousarray(qr, dtype=float), beams)
+    as_rows = lambda b: np.frombuffer(b, np.int64).reshape(-1, 4)  # noqa: E731
+    return BIQResults(as_rows(nodes), np.frombuffer(node_ends, np.int64), as_rows(beam_rows),
+                      np.frombuffer(beam_ends, np.int64), "pullback")
+
+
+def _margin(pl: _Plan, beams: bool) -> float:
+    """Slab-frame margin around node centres: the largest node radius, or with beams the
+    largest enclosing radius of a beam when that is larger."""
+    return max(pl.node_r, pl.beam_r if beams and len(pl.pats) else 0.0)
+
+
+def _query_numpy(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True):
+    """The numpy form of ``query``: hits (qid, i, j, k, n) of nodes and (qid, i, j, k, pattern)
+    of beams (empty when ``beams`` is False), int64 arrays (N, 5), unsorted."""
     pl = cached_pullback(lat)
     mu, mv, mw = pl.maps
     nu, nv, nw = lat.counts
     nn = len(lat.nodes)
     qc, qr = _to_frame(lat, c, r)
-    h = max(pl.node_r, pl.beam_r if beams and len(pl.pats) else 0.0)  # slab-frame margin around node centres
+    h = _margin(pl, beams)
     # 1. k: W-map of the query, widened by the margin at the largest scale of W**k
     lo, hi = candidate_range(mw, pl.ext_w, ball_extents(mw, qc, (qr + h * pl.grow) * (1 + MARGIN)), (len(qc),))
     qid, k = _expand(lo, hi)
@@ -195,7 +281,7 @@ def query(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True):
     s, jj = row[r2], j[r2]  # s: rows of (y, rho), the query in the base slab's frame
     c0, r0 = pl.slab[0]
     d = c0[i, jj, n] - y[s]
-    dist2 = np.einsum("na,na->n", d, d)
+    dist2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
     rq = rho[s]
     rr = rq + r0[i, jj, n]
     hit = dist2 <= rr * rr * (1 + TOUCH_TOL) + TOUCH_TOL * TOUCH_TOL

@@ -1,0 +1,450 @@
+/* The pulled-back BIQ of ple.queries.pullback, compiled: every query ball at once, decision for
+ * decision the numpy form (``pullback._query_numpy``).
+ *
+ * Per query ball (in the lattice frame): the candidate range of k by the W-map (§7.1.2, the
+ * query widened by the slab margin at the largest scale of W**k); per k the query pulled back by
+ * the table row W**-k, kept if the clearance grid lets it reach the base slab; the candidate
+ * range of j by the V-map of the pulled query; per j the query pulled back by V**-j and, per
+ * template node, the candidate range of i by the U-map. The exact tests run on those candidates
+ * in the frame of W**-k: ball-ball for nodes, and, with beams, ball-cone-beam for the beams at
+ * every candidate node close enough (a beam found from both ends counts once).
+ *
+ * The same IEEE operations in the same order as the numpy form's exact tests and pulls (built
+ * with -ffp-contract=off: no fused multiply-adds), so the same hits come out. Candidate ranges
+ * may differ from numpy's in the last bit of an extent (libm against numpy's loops); every range
+ * is widened by RANGE_SLACK and is conservative either way, the exact tests decide. Each query's
+ * hits come out sorted (i, j, k, n|pattern) and distinct, with per-query bounds. The GIL is
+ * released.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* one row map (rangefinder.RowMap) as packed by pullback._packed: MAP_WIDTH doubles */
+enum {
+    M_COUNT, M_HAS_T, M_A, M_OA = M_A + 3, M_NA, M_HAS_D, M_LOG_D, M_F, M_HAS_R = M_F + 3, M_THETA, M_AXIS,
+    M_POINT = M_AXIS + 3, M_REF = M_POINT + 3, M_SIDE = M_REF + 3, M_PERIOD = M_SIDE + 3, MAP_WIDTH = 32
+};
+/* extents of one template: [t_s, t_e, d_s, d_e, r_s, r_e] */
+enum { X_T = 0, X_D = 2, X_R = 4, EXT_WIDTH = 6 };
+/* scalar parameters */
+enum { P_H, P_HG, P_BEAM_REACH, P_WIDEN, P_TOUCH, P_SLACK, P_WRAPS, P_CLO, P_CSIZE = P_CLO + 3, P_CSHAPE, NPARAM = P_CSHAPE + 3 };
+
+typedef struct {
+    int64_t *v;
+    Py_ssize_t n, cap;
+} Vec;
+
+static int push(Vec *a, int64_t x) {
+    if (a->n == a->cap) {
+        Py_ssize_t cap = a->cap ? 2 * a->cap : 1024;
+        int64_t *v = realloc(a->v, cap * sizeof(int64_t));
+        if (!v)
+            return -1;
+        a->v = v;
+        a->cap = cap;
+    }
+    a->v[a->n++] = x;
+    return 0;
+}
+
+/* ---- extents and candidate ranges (rangefinder.ball_extents, candidate_range) ---- */
+
+/* the R-frame of a point: its angle about the map's axis and its distance from it */
+static void r_frame(const double *m, const double *c, double *dist, double *phi) {
+    double rel[3] = {c[0] - m[M_POINT], c[1] - m[M_POINT + 1], c[2] - m[M_POINT + 2]};
+    double along = rel[0] * m[M_AXIS] + rel[1] * m[M_AXIS + 1] + rel[2] * m[M_AXIS + 2];
+    double perp[3] = {rel[0] - along * m[M_AXIS], rel[1] - along * m[M_AXIS + 1], rel[2] - along * m[M_AXIS + 2]};
+    *dist = sqrt(perp[0] * perp[0] + perp[1] * perp[1] + perp[2] * perp[2]);
+    double y = perp[0] * m[M_SIDE] + perp[1] * m[M_SIDE + 1] + perp[2] * m[M_SIDE + 2];
+    double x = perp[0] * m[M_REF] + perp[1] * m[M_REF + 1] + perp[2] * m[M_REF + 2];
+    *phi = atan2(y, x);
+}
+
+/* extents of the ball (c, r) under each map of m (those it has) */
+static void ball_extents(const double *m, const double *c, double r, double *q) {
+    if (m[M_HAS_T] != 0.0) {
+        double x = c[0] * m[M_A] + c[1] * m[M_A + 1] + c[2] * m[M_A + 2];
+        x -= m[M_OA];
+        double w = r * m[M_NA];
+        q[X_T] = x - w;
+        q[X_T + 1] = x + w;
+    }
+    if (m[M_HAS_D] != 0.0) {
+        double d[3] = {c[0] - m[M_F], c[1] - m[M_F + 1], c[2] - m[M_F + 2]};
+        double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+        double near = dist - r, far = dist + r;
+        double a = (near > 0 ? log(near) : -INFINITY) / m[M_LOG_D], b = log(far) / m[M_LOG_D];
+        q[X_D] = fmin(a, b);
+        q[X_D + 1] = fmax(a, b);
+    }
+    if (m[M_HAS_R] != 0.0) {
+        double dist, phi;
+        r_frame(m, c, &dist, &phi);
+        double mid = phi / m[M_THETA];
+        if (dist <= r) { /* special case: the axis meets the ball, full range */
+            q[X_R] = -INFINITY;
+            q[X_R + 1] = INFINITY;
+        } else {
+            double s = r / dist;
+            double h = asin(s < 0 ? 0 : (s > 1 ? 1 : s)) / fabs(m[M_THETA]);
+            q[X_R] = mid - h;
+            q[X_R + 1] = mid + h;
+        }
+    }
+}
+
+/* narrow [lo, hi] to the hull of its integers lying in some wrap [α + mP, β + mP] (§7.1.5) */
+static void rotation_range(double period, int wraps, double alpha, double beta, double *lo, double *hi) {
+    double l0 = *lo, h0 = *hi;
+    if (!(isfinite(alpha) && isfinite(beta) && beta - alpha < period - 1e-12 && l0 <= h0))
+        return;
+    double new_lo = INFINITY, new_hi = -INFINITY, m = ceil((l0 - beta) / period);
+    int todo = 1;
+    for (int s = 0; s < wraps && todo; s++, m += 1) {
+        double cand = fmax(l0, ceil(alpha + m * period));
+        if (cand <= floor(beta + m * period)) {
+            new_lo = cand;
+            todo = 0;
+        } else if (!(cand <= h0)) {
+            todo = 0;
+        }
+    }
+    if (todo)
+        new_lo = l0; /* unresolved after many wraps: keep the conservative bound */
+    m = floor((h0 - alpha) / period);
+    todo = 1;
+    for (int s = 0; s < wraps && todo; s++, m -= 1) {
+        double cand = fmin(h0, floor(beta + m * period));
+        if (cand >= ceil(alpha + m * period)) {
+            new_hi = cand;
+            todo = 0;
+        } else if (!(cand >= l0)) {
+            todo = 0;
+        }
+    }
+    if (todo)
+        new_hi = h0;
+    if (!isfinite(new_lo) || !isfinite(new_hi)) {
+        new_lo = 1.0;
+        new_hi = 0.0;
+    }
+    *lo = new_lo;
+    *hi = new_hi;
+}
+
+/* integer candidate range [lo, hi] of a row (empty when hi < lo) from template extents t and
+ * query extents q (§7.1.2 theorem, §7.1.6); NaN gives no information (fmax / fmin) */
+static void candidate_range(const double *m, const double *t, const double *q, double slack, int wraps, int64_t *lo,
+                            int64_t *hi) {
+    double l = 0.0, h = m[M_COUNT] - 1.0;
+    for (int key = 0; key < 2; key++) {
+        if (m[key == 0 ? M_HAS_T : M_HAS_D] == 0.0)
+            continue;
+        int x = key == 0 ? X_T : X_D;
+        double a = q[x] - t[x + 1];
+        a -= slack;
+        l = fmax(l, ceil(a));
+        double b = q[x + 1] - t[x];
+        b += slack;
+        h = fmin(h, floor(b));
+    }
+    if (m[M_HAS_R] != 0.0)
+        rotation_range(m[M_PERIOD], wraps, q[X_R] - t[X_R + 1] - slack, q[X_R + 1] - t[X_R] + slack, &l, &h);
+    l = fmin(l, m[M_COUNT]);
+    h = fmax(h, -1.0);
+    *lo = (int64_t)l;
+    *hi = (int64_t)h;
+}
+
+/* ---- exact tests (algebra.elements) ---- */
+
+/* S**-p applied to a point by its 3x4 row block: ((m0 x0 + m1 x1) + m2 x2) + m3 per row */
+static inline void pull(const double *m, const double *x, double *y) {
+    for (int a = 0; a < 3; a++)
+        y[a] = m[4 * a] * x[0] + m[4 * a + 1] * x[1] + m[4 * a + 2] * x[2] + m[4 * a + 3];
+}
+
+/* does ball (q, rq) meet cone-beam hull(ball(a, ra), ball(b, rb))? (ball_beam_interfere) */
+static int ball_beam(const double *p, double rq, const double *a, double ra, const double *b, double rb, double tol) {
+    double ab[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+    double length = sqrt(ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2]);
+    double safe = length > 0 ? length : 1.0;
+    double e[3] = {ab[0] / safe, ab[1] / safe, ab[2] / safe};
+    double ap[3] = {p[0] - a[0], p[1] - a[1], p[2] - a[2]};
+    double x = ap[0] * e[0] + ap[1] * e[1] + ap[2] * e[2];
+    double y = sqrt(fmax(ap[0] * ap[0] + ap[1] * ap[1] + ap[2] * ap[2] - x * x, 0.0));
+    double s = (ra - rb) / safe;
+    s = s < -1.0 ? -1.0 : (s > 1.0 ? 1.0 : s);
+    double c = sqrt(1.0 - s * s);
+    double u = c * x - s * y;
+    double da = sqrt(x * x + y * y) - ra;
+    double xl = x - length;
+    double db = sqrt(xl * xl + y * y) - rb;
+    double side = s * x + c * y - ra;
+    double dist = u <= 0 ? da : (u >= c * length ? db : side);
+    if (length + rb <= ra) /* special case: one ball contains the other, the hull is the bigger */
+        dist = da;
+    else if (length + ra <= rb)
+        dist = db;
+    double scale = fmax(fmax(ra, rb), rq);
+    return dist <= rq + tol * scale;
+}
+
+static int cmp64(const void *a, const void *b) {
+    int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* sort keys v[from:n) and drop repeats; returns the new n */
+static Py_ssize_t sort_unique(int64_t *v, Py_ssize_t from, Py_ssize_t n) {
+    if (n - from < 2)
+        return n;
+    if (n - from <= 16) { /* insertion sort: most queries have a few hits */
+        for (Py_ssize_t i = from + 1; i < n; i++) {
+            int64_t x = v[i];
+            Py_ssize_t j = i;
+            while (j > from && v[j - 1] > x) {
+                v[j] = v[j - 1];
+                j--;
+            }
+            v[j] = x;
+        }
+    } else {
+        qsort(v + from, n - from, sizeof(int64_t), cmp64);
+    }
+    Py_ssize_t w = from + 1;
+    for (Py_ssize_t i = from + 1; i < n; i++)
+        if (v[i] != v[w - 1])
+            v[w++] = v[i];
+    return w;
+}
+
+typedef struct {
+    const double *maps, *ext_w, *ext_v, *ext_u, *w_rows, *w_fac, *v_rows, *v_fac, *slabs, *bound, *par;
+    const int64_t *slot, *pats;
+    int64_t nu, nv, nw, nn, np, reach; /* reach: largest |dk|, slot has 2 reach + 1 entries */
+} Plan;
+
+/* the ball (centre, radius) of node (i, j, n) of the base slab under W**d: 4 doubles */
+static inline const double *slab_ball(const Plan *p, int64_t d, int64_t i, int64_t j, int64_t n) {
+    return p->slabs + 4 * (((p->slot[d + p->reach] * p->nu + i) * p->nv + j) * p->nn + n);
+}
+
+static double clearance(const Plan *p, const double *y) {
+    const double *par = p->par;
+    int64_t cell[3];
+    for (int a = 0; a < 3; a++) {
+        double f = floor((y[a] - par[P_CLO + a]) / par[P_CSIZE]);
+        double top = par[P_CSHAPE + a] - 1.0;
+        cell[a] = (int64_t)(f < 0 ? 0 : (f > top ? top : f));
+    }
+    return p->bound[(cell[0] * (int64_t)par[P_CSHAPE + 1] + cell[1]) * (int64_t)par[P_CSHAPE + 2] + cell[2]];
+}
+
+/* the beams at candidate node (i, j, k, n), found in the frame of W**-k, against (y, rho) */
+static int beams_at(const Plan *p, int64_t i, int64_t j, int64_t k, int64_t n, const double *y, double rho,
+                    Vec *out) {
+    const double tol = p->par[P_TOUCH];
+    for (int64_t b = 0; b < p->np; b++) {
+        const int64_t *pt = p->pats + 5 * b;
+        int64_t n1 = pt[0], n2 = pt[1], di = pt[2], dj = pt[3], dk = pt[4];
+        for (int at_from = 1; at_from >= 0; at_from--) {
+            if (n != (at_from ? n1 : n2))
+                continue;
+            int64_t ai = at_from ? i : i - di, aj = at_from ? j : j - dj, ak = at_from ? k : k - dk;
+            if (ai < 0 || ai + di < 0 || ai >= p->nu || ai + di >= p->nu || aj < 0 || aj + dj < 0 || aj >= p->nv ||
+                aj + dj >= p->nv || ak < 0 || ak + dk < 0 || ak >= p->nw || ak + dk >= p->nw)
+                continue;
+            const double *a = slab_ball(p, at_from ? 0 : -dk, ai, aj, n1);
+            const double *e = slab_ball(p, at_from ? dk : 0, ai + di, aj + dj, n2);
+            if (ball_beam(y, rho, a, a[3], e, e[3], tol) &&
+                push(out, (((ai * p->nv + aj) * p->nw + ak) * p->np) + b) < 0)
+                return -1;
+        }
+    }
+    return 0;
+}
+
+/* every query: node keys ((i nv + j) nw + k) nn + n and beam keys (... ) np + pattern, sorted and
+ * distinct per query, with the end of each query's keys */
+static int run(const Plan *p, const double *qc, const double *qr, Py_ssize_t nq, int beams, Vec *nodes,
+               int64_t *node_end, Vec *bk, int64_t *beam_end) {
+    const double *par = p->par;
+    const double *mu = p->maps, *mv = p->maps + MAP_WIDTH, *mw = p->maps + 2 * MAP_WIDTH;
+    const double widen = par[P_WIDEN], slack = par[P_SLACK], touch = par[P_TOUCH], h = par[P_H];
+    const int wraps = (int)par[P_WRAPS];
+    double qx[EXT_WIDTH];
+    for (Py_ssize_t t = 0; t < nq; t++) {
+        const double *c = qc + 3 * t;
+        Py_ssize_t n0 = nodes->n, b0 = bk->n;
+        int64_t klo, khi;
+        ball_extents(mw, c, (qr[t] + par[P_HG]) * widen, qx);
+        candidate_range(mw, p->ext_w, qx, slack, wraps, &klo, &khi);
+        for (int64_t k = klo; k <= khi; k++) {
+            double y[3];
+            pull(p->w_rows + 12 * k, c, y);
+            double rho = qr[t] * p->w_fac[k];
+            double reach = (rho + h) * widen;
+            if (!(clearance(p, y) <= reach)) /* W**-k B misses the base slab */
+                continue;
+            int64_t jlo, jhi;
+            ball_extents(mv, y, reach, qx);
+            candidate_range(mv, p->ext_v, qx, slack, wraps, &jlo, &jhi);
+            for (int64_t j = jlo; j <= jhi; j++) {
+                double z[3];
+                pull(p->v_rows + 12 * j, y, z);
+                ball_extents(mu, z, reach * p->v_fac[j], qx);
+                for (int64_t n = 0; n < p->nn; n++) {
+                    int64_t ilo, ihi;
+                    candidate_range(mu, p->ext_u + EXT_WIDTH * n, qx, slack, wraps, &ilo, &ihi);
+                    for (int64_t i = ilo; i <= ihi; i++) {
+                        const double *s = slab_ball(p, 0, i, j, n);
+                        double d0 = s[0] - y[0], d1 = s[1] - y[1], d2 = s[2] - y[2];
+                        double dist2 = d0 * d0 + d1 * d1 + d2 * d2;
+                        double rr = rho + s[3];
+                        if (dist2 <= rr * rr * (1 + touch) + touch * touch &&
+                            push(nodes, ((i * p->nv + j) * p->nw + k) * p->nn + n) < 0)
+                            return -1;
+                        if (beams) {
+                            double near = rho + par[P_BEAM_REACH];
+                            if (dist2 <= near * near && beams_at(p, i, j, k, n, y, rho, bk) < 0)
+                                return -1;
+                        }
+                    }
+                }
+            }
+        }
+        nodes->n = sort_unique(nodes->v, n0, nodes->n);
+        bk->n = sort_unique(bk->v, b0, bk->n);
+        node_end[t] = nodes->n;
+        beam_end[t] = bk->n;
+    }
+    return 0;
+}
+
+/* ---- Python ---- */
+
+typedef struct {
+    Py_buffer b;
+    int held;
+} Buf;
+
+static int take(PyObject *o, Buf *buf, char kind, Py_ssize_t count, const char *what) {
+    buf->held = 0;
+    if (PyObject_GetBuffer(o, &buf->b, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0)
+        return -1;
+    buf->held = 1;
+    const char *fmt = buf->b.format[0] == '<' || buf->b.format[0] == '=' ? buf->b.format + 1 : buf->b.format;
+    int ok = fmt[1] == 0 && buf->b.itemsize == 8 && (kind == 'd' ? fmt[0] == 'd' : strchr("qlQL", fmt[0]) != NULL);
+    if (!ok || (count >= 0 && buf->b.len != count * 8)) {
+        PyErr_Format(PyExc_TypeError, "%s: wrong dtype or size", what);
+        return -1;
+    }
+    return 0;
+}
+
+/* the rows (i, j, k, x) of keys as a bytearray of int64 (m, 4) */
+static PyObject *rows_of(const Vec *v, int64_t nv, int64_t nw, int64_t nx) {
+    PyObject *out = PyByteArray_FromStringAndSize(NULL, v->n * 4 * (Py_ssize_t)sizeof(int64_t));
+    if (!out)
+        return NULL;
+    int64_t *r = (int64_t *)PyByteArray_AS_STRING(out);
+    for (Py_ssize_t a = 0; a < v->n; a++) {
+        int64_t key = v->v[a];
+        r[4 * a + 3] = key % nx;
+        key /= nx;
+        r[4 * a + 2] = key % nw;
+        key /= nw;
+        r[4 * a + 1] = key % nv;
+        r[4 * a] = key / nv;
+    }
+    return out;
+}
+
+/* query(counts (nu, nv, nw, nn), maps, ext_w, ext_v, ext_u, w_rows, w_fac, v_rows, v_fac, slabs, slot,
+ *       bound, pats, params, qc, qr, beams) -> (node rows, node ends, beam rows, beam ends) */
+static PyObject *query(PyObject *self, PyObject *args) {
+    int64_t nu, nv, nw, nn;
+    PyObject *o[15];
+    int beams;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "(LLLL)OOOOOOOOOOOOOOOp", &nu, &nv, &nw, &nn, &o[0], &o[1], &o[2], &o[3], &o[4],
+                          &o[5], &o[6], &o[7], &o[8], &o[9], &o[10], &o[11], &o[12], &o[13], &o[14], &beams))
+        return NULL;
+    Buf b[15];
+    memset(b, 0, sizeof(b));
+    const char *names[15] = {"maps", "ext_w", "ext_v", "ext_u", "w_rows", "w_fac", "v_rows", "v_fac",
+                             "slabs", "slot", "bound", "pats", "params", "qc", "qr"};
+    Py_ssize_t sizes[15] = {3 * MAP_WIDTH, EXT_WIDTH, EXT_WIDTH, EXT_WIDTH * nn, 12 * nw, nw, 12 * nv, nv,
+                            -1, -1, -1, -1, NPARAM, -1, -1};
+    const char *kinds = "dddddddddqdqddd";
+    PyObject *res = NULL;
+    int bad = nu < 1 || nv < 1 || nw < 1 || nn < 1;
+    for (int a = 0; a < 15 && !bad; a++)
+        bad = take(o[a], &b[a], kinds[a], sizes[a], names[a]) < 0;
+    if (!bad) {
+        Plan p = {b[0].b.buf, b[1].b.buf, b[2].b.buf, b[3].b.buf, b[4].b.buf, b[5].b.buf, b[6].b.buf, b[7].b.buf,
+                  b[8].b.buf, b[10].b.buf, b[12].b.buf, b[9].b.buf, b[11].b.buf, nu, nv, nw, nn,
+                  b[11].b.len / 40, (b[9].b.len / 8 - 1) / 2};
+        Py_ssize_t nq = b[14].b.len / 8, slabs = b[8].b.len / (32 * nu * nv * nn);
+        const double *par = p.par;
+        Py_ssize_t cells = (Py_ssize_t)(par[P_CSHAPE] * par[P_CSHAPE + 1] * par[P_CSHAPE + 2]);
+        bad = b[13].b.len != 3 * nq * 8 || b[9].b.len % 16 != 8 || b[11].b.len % 40 != 0 ||
+              b[8].b.len != slabs * 32 * nu * nv * nn || b[10].b.len != cells * 8 || !(par[P_CSIZE] > 0);
+        for (int64_t s = 0; s < 2 * p.reach + 1 && !bad; s++)
+            bad = p.slot[s] < -1 || p.slot[s] >= slabs;
+        for (int64_t a = 0; a < p.np && !bad; a++) {
+            const int64_t *pt = p.pats + 5 * a;
+            bad = pt[0] < 0 || pt[0] >= nn || pt[1] < 0 || pt[1] >= nn || pt[4] < -p.reach || pt[4] > p.reach ||
+                  p.slot[p.reach + pt[4]] < 0 || p.slot[p.reach - pt[4]] < 0;
+        }
+        bad = bad || p.slot[p.reach] < 0;
+        if (bad) {
+            PyErr_SetString(PyExc_ValueError, "query: plan arrays of inconsistent sizes");
+        } else {
+            Vec nodes = {NULL, 0, 0}, bk = {NULL, 0, 0};
+            int64_t *ends = malloc((2 * nq + 1) * sizeof(int64_t));
+            int status = -1;
+            if (ends) {
+                Py_BEGIN_ALLOW_THREADS
+                status = run(&p, b[13].b.buf, b[14].b.buf, nq, beams, &nodes, ends, &bk, ends + nq);
+                Py_END_ALLOW_THREADS
+            }
+            if (status < 0) {
+                PyErr_NoMemory();
+            } else {
+                PyObject *nr = rows_of(&nodes, nv, nw, nn), *br = rows_of(&bk, nv, nw, p.np ? p.np : 1);
+                PyObject *ne = PyBytes_FromStringAndSize((const char *)ends, nq * (Py_ssize_t)sizeof(int64_t));
+                PyObject *be = PyBytes_FromStringAndSize((const char *)(ends + nq), nq * (Py_ssize_t)sizeof(int64_t));
+                if (nr && br && ne && be)
+                    res = PyTuple_Pack(4, nr, ne, br, be);
+                Py_XDECREF(nr);
+                Py_XDECREF(br);
+                Py_XDECREF(ne);
+                Py_XDECREF(be);
+            }
+            free(ends);
+            free(nodes.v);
+            free(bk.v);
+        }
+    }
+    for (int a = 0; a < 15; a++)
+        if (b[a].held)
+            PyBuffer_Release(&b[a].b);
+    return res;
+}
+
+static PyMethodDef methods[] = {
+    {"query", query, METH_VARARGS,
+     "query(counts, maps, ext_w, ext_v, ext_u, w_rows, w_fac, v_rows, v_fac, slabs, slot, bound, pats, params, qc, "
+     "qr, beams) -> (node rows, node ends, beam rows, beam ends): the pulled-back BIQ of every query ball."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_pullback", "Compiled pulled-back BIQ.", -1, methods};
+
+PyMODINIT_FUNC PyInit__pullback(void) { return PyModule_Create(&module); }
