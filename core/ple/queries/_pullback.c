@@ -31,7 +31,10 @@ enum {
 /* extents of one template: [t_s, t_e, d_s, d_e, r_s, r_e] */
 enum { X_T = 0, X_D = 2, X_R = 4, EXT_WIDTH = 6 };
 /* scalar parameters */
-enum { P_H, P_HG, P_BEAM_REACH, P_WIDEN, P_TOUCH, P_SLACK, P_WRAPS, P_CLO, P_CSIZE = P_CLO + 3, P_CSHAPE, NPARAM = P_CSHAPE + 3 };
+enum {
+    P_H, P_HG, P_BEAM_REACH, P_WIDEN, P_TOUCH, P_SLACK, P_WRAPS, P_CLO, P_CHI = P_CLO + 3, P_CSIZE = P_CHI + 3, P_CSTEP,
+    P_CSHAPE, NPARAM = P_CSHAPE + 3
+};
 
 typedef struct {
     int64_t *v;
@@ -224,7 +227,9 @@ static Py_ssize_t sort_unique(int64_t *v, Py_ssize_t from, Py_ssize_t n) {
 }
 
 typedef struct {
-    const double *maps, *ext_w, *ext_v, *ext_u, *w_rows, *w_fac, *v_rows, *v_fac, *slabs, *bound, *par;
+    const double *maps, *ext_w, *ext_v, *ext_u, *w_rows, *w_fac, *v_rows, *v_fac, *slabs;
+    const uint8_t *bound;
+    const double *par;
     const int64_t *slot, *pats;
     int64_t nu, nv, nw, nn, np, reach; /* reach: largest |dk|, slot has 2 reach + 1 entries */
 } Plan;
@@ -234,15 +239,20 @@ static inline const double *slab_ball(const Plan *p, int64_t d, int64_t i, int64
     return p->slabs + 4 * (((p->slot[d + p->reach] * p->nu + i) * p->nv + j) * p->nn + n);
 }
 
+/* a lower bound on the distance from y to the base slab's node centres (pullback._Clearance) */
 static double clearance(const Plan *p, const double *y) {
     const double *par = p->par;
     int64_t cell[3];
+    double d[3];
     for (int a = 0; a < 3; a++) {
         double f = floor((y[a] - par[P_CLO + a]) / par[P_CSIZE]);
         double top = par[P_CSHAPE + a] - 1.0;
         cell[a] = (int64_t)(f < 0 ? 0 : (f > top ? top : f));
+        d[a] = y[a] - fmin(fmax(y[a], par[P_CLO + a]), par[P_CHI + a]);
     }
-    return p->bound[(cell[0] * (int64_t)par[P_CSHAPE + 1] + cell[1]) * (int64_t)par[P_CSHAPE + 2] + cell[2]];
+    double b = p->bound[(cell[0] * (int64_t)par[P_CSHAPE + 1] + cell[1]) * (int64_t)par[P_CSHAPE + 2] + cell[2]] *
+               par[P_CSTEP];
+    return sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2] + b * b);
 }
 
 /* the beams at candidate node (i, j, k, n), found in the frame of W**-k, against (y, rho) */
@@ -284,12 +294,28 @@ static int run(const Plan *p, const double *qc, const double *qr, Py_ssize_t nq,
         int64_t klo, khi;
         ball_extents(mw, c, (qr[t] + par[P_HG]) * widen, qx);
         candidate_range(mw, p->ext_w, qx, slack, wraps, &klo, &khi);
+        /* The distance to the slab is 1-Lipschitz and W**-k moves the pulled centre by
+         * |W**-(k+1) c - W**-k c| = s**-k |W**-1 c - c|: after a clearance looked up at k0, the
+         * k whose centre lies within that clearance less the path travelled since are skipped. */
+        double stride = 0.0, room = -INFINITY, travel = 0.0;
+        if (klo <= khi && p->nw > 1) {
+            double c1[3];
+            pull(p->w_rows + 12, c, c1);
+            double d0 = c1[0] - c[0], d1 = c1[1] - c[1], d2 = c1[2] - c[2];
+            stride = sqrt(d0 * d0 + d1 * d1 + d2 * d2);
+        }
         for (int64_t k = klo; k <= khi; k++) {
-            double y[3];
-            pull(p->w_rows + 12 * k, c, y);
             double rho = qr[t] * p->w_fac[k];
             double reach = (rho + h) * widen;
-            if (!(clearance(p, y) <= reach)) /* W**-k B misses the base slab */
+            if (k > klo)
+                travel += stride * p->w_fac[k - 1];
+            if (travel * widen + reach < room)
+                continue;
+            double y[3];
+            pull(p->w_rows + 12 * k, c, y);
+            room = clearance(p, y);
+            travel = 0.0;
+            if (!(room <= reach)) /* W**-k B misses the base slab */
                 continue;
             int64_t jlo, jhi;
             ball_extents(mv, y, reach, qx);
@@ -339,8 +365,10 @@ static int take(PyObject *o, Buf *buf, char kind, Py_ssize_t count, const char *
         return -1;
     buf->held = 1;
     const char *fmt = buf->b.format[0] == '<' || buf->b.format[0] == '=' ? buf->b.format + 1 : buf->b.format;
-    int ok = fmt[1] == 0 && buf->b.itemsize == 8 && (kind == 'd' ? fmt[0] == 'd' : strchr("qlQL", fmt[0]) != NULL);
-    if (!ok || (count >= 0 && buf->b.len != count * 8)) {
+    int ok = fmt[1] == 0 && (kind == 'd'   ? fmt[0] == 'd' && buf->b.itemsize == 8
+                             : kind == 'q' ? strchr("qlQL", fmt[0]) != NULL && buf->b.itemsize == 8
+                                           : fmt[0] == 'B' && buf->b.itemsize == 1);
+    if (!ok || (count >= 0 && buf->b.len != count * buf->b.itemsize)) {
         PyErr_Format(PyExc_TypeError, "%s: wrong dtype or size", what);
         return -1;
     }
@@ -381,7 +409,7 @@ static PyObject *query(PyObject *self, PyObject *args) {
                              "slabs", "slot", "bound", "pats", "params", "qc", "qr"};
     Py_ssize_t sizes[15] = {3 * MAP_WIDTH, EXT_WIDTH, EXT_WIDTH, EXT_WIDTH * nn, 12 * nw, nw, 12 * nv, nv,
                             -1, -1, -1, -1, NPARAM, -1, -1};
-    const char *kinds = "dddddddddqdqddd";
+    const char *kinds = "dddddddddqBqddd";
     PyObject *res = NULL;
     int bad = nu < 1 || nv < 1 || nw < 1 || nn < 1;
     for (int a = 0; a < 15 && !bad; a++)
@@ -394,7 +422,7 @@ static PyObject *query(PyObject *self, PyObject *args) {
         const double *par = p.par;
         Py_ssize_t cells = (Py_ssize_t)(par[P_CSHAPE] * par[P_CSHAPE + 1] * par[P_CSHAPE + 2]);
         bad = b[13].b.len != 3 * nq * 8 || b[9].b.len % 16 != 8 || b[11].b.len % 40 != 0 ||
-              b[8].b.len != slabs * 32 * nu * nv * nn || b[10].b.len != cells * 8 || !(par[P_CSIZE] > 0);
+              b[8].b.len != slabs * 32 * nu * nv * nn || b[10].b.len != cells || !(par[P_CSIZE] > 0);
         for (int64_t s = 0; s < 2 * p.reach + 1 && !bad; s++)
             bad = p.slot[s] < -1 || p.slot[s] >= slabs;
         for (int64_t a = 0; a < p.np && !bad; a++) {

@@ -32,8 +32,16 @@ from ..algebra.elements import TOUCH_TOL, ball_beam_interfere, enclosing_ball
 from ..model.lattice import Lattice
 from .hits import BIQResults, split_hits
 from .plans import cached
-from .rangefinder import (MAX_WRAP_STEPS, RANGE_SLACK, _expand, _frame_balls, _to_frame, ball_extents, cached_plan,
-                          candidate_range)
+from .rangefinder import (
+    MAX_WRAP_STEPS,
+    RANGE_SLACK,
+    _expand,
+    _frame_balls,
+    _to_frame,
+    ball_extents,
+    cached_plan,
+    candidate_range,
+)
 
 try:  # the compiled form (setup.py, optional): every query at once, the numpy form's hits
     from . import _pullback as _compiled
@@ -43,6 +51,7 @@ except ImportError:  # not built (no C compiler): the numpy form
 MAX_SLAB_BALLS = 1 << 21  # base-slab balls × W powers kept by one plan; larger lattices use lattice_hits
 MARGIN = 1e-9  # relative widening of search radii: rounding never loses a touching element
 MAX_CLEARANCE_CELLS = 1 << 20  # cells of the base slab's clearance grid
+CLEARANCE_CELLS = 8  # clearances beyond this many cells are stored as this many
 MAX_KEY = 1 << 62  # hit keys ((i nv + j) nw + k) · max(nn, patterns) of the compiled form stay below
 
 
@@ -74,15 +83,18 @@ class _Plan:
 @dataclass
 class _Clearance:
     """A lower bound on the distance from any point to the base slab's node centres: a grid over
-    their bounding box (corner ``lo``, cell ``size``, ``shape``) holding per cell the distance
-    from its centre to the nearest node centre minus the cell's half-diagonal. For a point y and
-    its projection y' onto the box, every centre s in the box has |y - s| >= |y' - s| (the box is
-    convex) >= the bound of the cell holding y'."""
+    their bounding box (corner ``lo``, cell ``size``, ``shape``, far corner ``hi``) holding per
+    cell the distance from its centre to the nearest node centre minus the cell's half-diagonal,
+    rounded down to whole ``step``s (one byte a cell: the grid stays in cache). For a point y and
+    its projection y' onto the grid's box, every centre s in the box has |y - s|² >= |y - y'|² +
+    |y' - s|² (the box is convex) and |y' - s| >= the bound of the cell holding y'."""
 
     lo: np.ndarray
+    hi: np.ndarray
     size: float
+    step: float
     shape: tuple
-    bound: np.ndarray  # (cells,) flat, C order
+    bound: np.ndarray  # (cells,) uint8, C order: the bound in steps
 
     @classmethod
     def of(cls, pts: np.ndarray) -> _Clearance:
@@ -97,17 +109,23 @@ class _Clearance:
         axes = [lo[a] + (np.arange(shape[a]) + 0.5) * size for a in range(3)]
         centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
         half = 0.5 * size * np.sqrt(3.0)
-        dist = tree.query(centres, distance_upper_bound=8 * size)[0]  # inf beyond: a bound all the same
-        bound = np.where(np.isfinite(dist), dist, 8 * size) - half
-        return cls(lo, size, shape, bound)
+        cap, step = CLEARANCE_CELLS * size, CLEARANCE_CELLS * size / 255
+        dist = tree.query(centres, distance_upper_bound=cap)[0]  # inf beyond: a bound all the same
+        bound = np.maximum(np.where(np.isfinite(dist), dist, cap) - half, 0.0)
+        steps = np.minimum(np.floor(bound / step), 255)
+        steps -= steps * step > bound  # rounding of the division never raises a bound
+        return cls(lo, lo + np.array(shape) * size, size, step, shape, steps.astype(np.uint8))
 
     def lower_bound(self, y: np.ndarray) -> np.ndarray:
-        """(m,) lower bounds on the distance from points y (m, 3) to the nearest node centre."""
+        """(m,) lower bounds on the distance from points y (m, 3) to the nearest node centre,
+        computed as the compiled form does."""
         cell = np.floor((y - self.lo) / self.size)
         for a in range(3):  # clamped as floats: a far point's cell index never overflows
             np.clip(cell[:, a], 0, self.shape[a] - 1, out=cell[:, a])
         cell = cell.astype(np.int64)
-        return self.bound[(cell[:, 0] * self.shape[1] + cell[:, 1]) * self.shape[2] + cell[:, 2]]
+        b = self.bound[(cell[:, 0] * self.shape[1] + cell[:, 1]) * self.shape[2] + cell[:, 2]] * self.step
+        d = y - np.minimum(np.maximum(y, self.lo), self.hi)  # outside the box: its distance adds
+        return np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2] + b * b)
 
 
 def fits(lat: Lattice) -> bool:
@@ -212,7 +230,7 @@ def _kernel_arrays(pl: _Plan) -> tuple:
             _packed_extents(pl.ext_v, 1), _packed_extents(pl.ext_u, nn), np.ascontiguousarray(wm.reshape(-1, 12)),
             np.ascontiguousarray(wf, dtype=float), np.ascontiguousarray(vm.reshape(-1, 12)),
             np.ascontiguousarray(vf, dtype=float),
-            np.ascontiguousarray(np.stack(balls)), slot, np.ascontiguousarray(pl.clearance.bound, dtype=float),
+            np.ascontiguousarray(np.stack(balls)), slot, pl.clearance.bound,
             np.ascontiguousarray(pl.pats, dtype=np.int64))
 
 
@@ -237,8 +255,9 @@ def query(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True) -> BIQ
         return split_hits(len(c), *_query_numpy(lat, c, r, beams), "pullback")
     qc, qr = _to_frame(lat, c, r)
     h = _margin(pl, beams)
+    cl = pl.clearance
     params = np.array([h, h * pl.grow, pl.beam_r * (1 + MARGIN), 1 + MARGIN, TOUCH_TOL, RANGE_SLACK, MAX_WRAP_STEPS,
-                       *pl.clearance.lo, pl.clearance.size, *pl.clearance.shape])
+                       *cl.lo, *cl.hi, cl.size, cl.step, *cl.shape])
     nodes, node_ends, beam_rows, beam_ends = _compiled.query(
         (*lat.counts, len(lat.nodes)), *pl.kernel, params, np.ascontiguousarray(qc, dtype=float),
         np.ascontiguousarray(qr, dtype=float), beams)
