@@ -14,7 +14,8 @@ from ple.algebra.similarity import Rotation, Scaling, Screw, Similarity, Swirl, 
 from ple.cli.main import main
 from ple.model.lattice import Lattice
 from ple.program.sources import load_lattice
-from ple.queries import biq
+from ple.queries import biq, rangefinder
+from ple.queries.hits import _unique_rows, split_hits
 from ple.queries.rangefinder import cached_plan, row_candidates
 
 KINDS = ("translation", "rotation", "scaling", "screw", "swirl")
@@ -243,3 +244,38 @@ def test_cli_biq(tmp_path, capsys):
         assert main(["biq", "bcc", "--queries", str(tmp_path / "bad.npy"), "--out", str(bad_out)]) == 2
         assert not bad_out.exists()
     assert "queries" in capsys.readouterr().err
+
+
+def u_path_lattices(rng):
+    """Lattices on which the O(ū) path runs (detected, or forced below the O(1) path): the
+    cylindrical case (its i-sheets culled by the common axis), the O(1) cases, placed ones, the
+    thesis presets and random lattices of every kind whose detected path is not the general one."""
+    lats = [lattice_of("u"), lattice_of("1"), lattice_of("1-polar"),
+            load_lattice("thesis_cylindrical", ["nu=3", "nv=12", "nw=3"]), load_lattice("thesis_regular", ["n=4"]),
+            load_lattice("lil_cylindrical_coarse")]
+    placed = lattice_of("u")
+    placed.set_placement(Swirl(0.7, [1, 1, 0], [0.5, 0, 2], 1.3))
+    lats.append(placed)
+    while len(lats) < 14:
+        lat = random_lattice(rng, [KINDS[int(x)] for x in rng.integers(0, len(KINDS), 3)])
+        if cached_plan(lat).path != "uv":
+            lats.append(lat)
+    return lats
+
+
+@pytest.mark.skipif(rangefinder._compiled is None, reason="the compiled RangeFinder is not built")
+def test_compiled_u_path_equals_its_numpy_form(monkeypatch):
+    """Bit for bit: the compiled O(ū) path's hits, row for row, equal the numpy form's, and the
+    naive path's."""
+    rng = np.random.default_rng(31)
+    for lat in u_path_lattices(rng):
+        for scale in (0.5, 4.0):
+            c, r = random_queries(rng, lat, 40, scale)
+            got = rangefinder.lattice_hits(lat, c, r, path="u")
+            with monkeypatch.context() as m:
+                m.setattr(rangefinder, "_compiled", None)
+                want = rangefinder.lattice_hits(lat, c, r, path="u")
+            assert got[2] == want[2] == "u"
+            for a, b in zip(got[:2], want[:2]):
+                assert np.array_equal(_unique_rows(a), _unique_rows(b))
+            assert_same(biq.query(lat, c, r, "naive"), split_hits(len(c), got[0], got[1], "u"))

@@ -35,24 +35,22 @@ from .plans import cached
 from .rangefinder import (
     MAX_WRAP_STEPS,
     RANGE_SLACK,
+    _compiled,
     _expand,
     _frame_balls,
+    _packed_extents,
+    _packed_map,
     _to_frame,
     ball_extents,
     cached_plan,
     candidate_range,
+    compiled_fits,
 )
-
-try:  # the compiled form (setup.py, optional): every query at once, the numpy form's hits
-    from . import _pullback as _compiled
-except ImportError:  # not built (no C compiler): the numpy form
-    _compiled = None
 
 MAX_SLAB_BALLS = 1 << 21  # base-slab balls × W powers kept by one plan; larger lattices use lattice_hits
 MARGIN = 1e-9  # relative widening of search radii: rounding never loses a touching element
 MAX_CLEARANCE_CELLS = 1 << 20  # cells of the base slab's clearance grid
 CLEARANCE_CELLS = 8  # clearances beyond this many cells are stored as this many
-MAX_KEY = 1 << 62  # hit keys ((i nv + j) nw + k) · max(nn, patterns) of the compiled form stay below
 
 
 @dataclass
@@ -182,36 +180,9 @@ def build(lat: Lattice) -> _Plan:
     fw = lat.W.factor
     pl = _Plan((mu, mv, mw), ext_w, ext_v, ext_u, _inverse_rows(lat.W, nw), _inverse_rows(lat.V, nv), slab,
                float(r0.max()), beam_r, max(1.0, fw ** (nw - 1)), pats, _Clearance.of(c0.reshape(-1, 3)))
-    if _compiled is not None and nu * nv * nw * max(nn, len(pats), 1) < MAX_KEY:
+    if compiled_fits(lat):
         pl.kernel = _kernel_arrays(pl)
     return pl
-
-
-# the compiled form's layout of one row map (``_pullback.c``: M_*), MAP_WIDTH doubles
-MAP_WIDTH = 32
-EXT_KEYS = ("t", "d", "r")  # the order of a template's extents, two doubles each
-
-
-def _packed_map(m) -> np.ndarray:
-    row = np.zeros(MAP_WIDTH)
-    row[0] = m.count
-    if m.a is not None:
-        row[1], row[2:5], row[5], row[6] = 1.0, m.a, m.origin @ m.a, np.linalg.norm(m.a)
-    if m.log_d is not None:
-        row[7], row[8], row[9:12] = 1.0, m.log_d, m.fixed
-    if m.theta is not None:
-        row[12], row[13], row[14:17], row[17:20], row[20:23] = 1.0, m.theta, m.axis, m.point, m.ref
-        row[23:26], row[26] = np.cross(m.axis, m.ref), m.period
-    return row
-
-
-def _packed_extents(ext: dict, count: int) -> np.ndarray:
-    """(count, 6) template extents [t_s, t_e, d_s, d_e, r_s, r_e] (zeros for a map absent)."""
-    out = np.zeros((count, 2 * len(EXT_KEYS)))
-    for col, key in enumerate(EXT_KEYS):
-        if key in ext:
-            out[:, 2 * col], out[:, 2 * col + 1] = ext[key]
-    return out
 
 
 def _kernel_arrays(pl: _Plan) -> tuple:
@@ -258,7 +229,7 @@ def query(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True) -> BIQ
     cl = pl.clearance
     params = np.array([h, h * pl.grow, pl.beam_r * (1 + MARGIN), 1 + MARGIN, TOUCH_TOL, RANGE_SLACK, MAX_WRAP_STEPS,
                        *cl.lo, *cl.hi, cl.size, cl.step, *cl.shape])
-    nodes, node_ends, beam_rows, beam_ends = _compiled.query(
+    nodes, node_ends, beam_rows, beam_ends = _compiled.pullback(
         (*lat.counts, len(lat.nodes)), *pl.kernel, params, np.ascontiguousarray(qc, dtype=float),
         np.ascontiguousarray(qr, dtype=float), beams)
     as_rows = lambda b: np.frombuffer(b, np.int64).reshape(-1, 4)  # noqa: E731

@@ -1,20 +1,27 @@
-/* The pulled-back BIQ of ple.queries.pullback, compiled: every query ball at once, decision for
- * decision the numpy form (``pullback._query_numpy``).
+/* RangeFinder BIQs of ple.queries, compiled: every query ball at once, decision for decision the
+ * numpy forms, in two entry points.
  *
- * Per query ball (in the lattice frame): the candidate range of k by the W-map (§7.1.2, the
- * query widened by the slab margin at the largest scale of W**k); per k the query pulled back by
- * the table row W**-k, kept if the clearance grid lets it reach the base slab; the candidate
- * range of j by the V-map of the pulled query; per j the query pulled back by V**-j and, per
- * template node, the candidate range of i by the U-map. The exact tests run on those candidates
- * in the frame of W**-k: ball-ball for nodes, and, with beams, ball-cone-beam for the beams at
- * every candidate node close enough (a beam found from both ends counts once).
+ * ``pullback`` (``pullback._query_numpy``): per query ball (in the lattice frame), the candidate
+ * range of k by the W-map (§7.1.2, the query widened by the slab margin at the largest scale of
+ * W**k); per k the query pulled back by the table row W**-k, kept if the clearance grid lets it
+ * reach the base slab; the candidate range of j by the V-map of the pulled query; per j the
+ * query pulled back by V**-j and, per template node, the candidate range of i by the U-map. The
+ * exact tests run on those candidates in the frame of W**-k: ball-ball for nodes, and, with
+ * beams, ball-cone-beam for the beams at every candidate node close enough (a beam found from
+ * both ends counts once).
  *
- * The same IEEE operations in the same order as the numpy form's exact tests and pulls (built
+ * ``u_path`` (the O(ū) path of §7.3.1, ``rangefinder._u_candidates`` then ``_exact``): per query
+ * ball and U index i, the V and W candidate ranges of the i-sheet's group ball, the sheet
+ * skipped when its distance band to a common axis misses the query's; per (j, k) in those
+ * ranges, the group ball moved by W**k V**j tested against the query; then each element's own
+ * V and W ranges, and the exact tests on elements placed by the cached powers of U, V and W.
+ *
+ * The same IEEE operations in the same order as the numpy forms' exact tests and pulls (built
  * with -ffp-contract=off: no fused multiply-adds), so the same hits come out. Candidate ranges
- * may differ from numpy's in the last bit of an extent (libm against numpy's loops); every range
- * is widened by RANGE_SLACK and is conservative either way, the exact tests decide. Each query's
- * hits come out sorted (i, j, k, n|pattern) and distinct, with per-query bounds. The GIL is
- * released.
+ * and culling tests may differ from numpy's in the last bit (libm against numpy's loops); all
+ * are widened (RANGE_SLACK, the culling slack) and conservative either way, the exact tests
+ * decide. Each query's hits come out sorted (i, j, k, n|pattern) and distinct, with per-query
+ * ends. The GIL is released.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -352,6 +359,111 @@ static int run(const Plan *p, const double *qc, const double *qr, Py_ssize_t nq,
     return 0;
 }
 
+/* ---- the O(ū) path ---- */
+
+typedef struct {
+    const double *maps, *gext_v, *gext_w, *ext_v, *ext_w, *gc, *gr, *axis, *band, *rows[3], *fac[3], *tc, *tr, *par;
+    const int64_t *pats;
+    int64_t nu, nv, nw, nn, np, reach, has_axis;
+} UPlan;
+
+/* node (i, j, k, n) placed by the cached powers: W**k V**j U**i of template ball n */
+static void place(const UPlan *p, const int64_t *ijk, int64_t n, double *c, double *r) {
+    double x[3] = {p->tc[3 * n], p->tc[3 * n + 1], p->tc[3 * n + 2]};
+    *r = p->tr[n];
+    for (int a = 0; a < 3; a++) {
+        int64_t row = ijk[a] + p->reach;
+        pull(p->rows[a] + 12 * row, x, c);
+        memcpy(x, c, sizeof(x));
+        *r *= p->fac[a][row];
+    }
+}
+
+static int u_run(const UPlan *p, const double *qc, const double *qr, Py_ssize_t nq, Vec *nodes, int64_t *node_end,
+                 Vec *bk, int64_t *beam_end) {
+    const double *mv = p->maps + MAP_WIDTH, *mw = p->maps + 2 * MAP_WIDTH;
+    const double touch = p->par[0], slack = p->par[1];
+    const int wraps = (int)p->par[2];
+    const int64_t ne = p->nn + p->np;
+    int64_t *er = malloc(4 * (ne ? ne : 1) * sizeof(int64_t)); /* per element: V range, W range */
+    if (!er)
+        return -1;
+    double qv[EXT_WIDTH], qw[EXT_WIDTH];
+    for (Py_ssize_t t = 0; t < nq; t++) {
+        const double *c = qc + 3 * t;
+        Py_ssize_t n0 = nodes->n, b0 = bk->n;
+        ball_extents(mv, c, qr[t], qv);
+        ball_extents(mw, c, qr[t], qw);
+        double rho = 0.0, qrr = qr[t] * (1 + 1e-9) + 1e-12;
+        if (p->has_axis) {
+            const double *pt = p->axis, *dir = p->axis + 3;
+            double rel[3] = {c[0] - pt[0], c[1] - pt[1], c[2] - pt[2]};
+            double along = rel[0] * dir[0] + rel[1] * dir[1] + rel[2] * dir[2];
+            double d0 = rel[0] - along * dir[0], d1 = rel[1] - along * dir[1], d2 = rel[2] - along * dir[2];
+            rho = sqrt(d0 * d0 + d1 * d1 + d2 * d2);
+        }
+        for (int64_t i = 0; i < p->nu; i++) {
+            if (p->has_axis && (rho + qrr < p->band[2 * i] * (1 - 1e-9) || rho - qrr > p->band[2 * i + 1] * (1 + 1e-9)))
+                continue; /* the i-sheet's distance band to the common axis misses the query's */
+            int64_t jlo, jhi, klo, khi;
+            candidate_range(mv, p->gext_v + EXT_WIDTH * i, qv, slack, wraps, &jlo, &jhi);
+            candidate_range(mw, p->gext_w + EXT_WIDTH * i, qw, slack, wraps, &klo, &khi);
+            if (jhi < jlo || khi < klo)
+                continue;
+            for (int64_t e = 0; e < ne; e++) {
+                candidate_range(mv, p->ext_v + EXT_WIDTH * (i * ne + e), qv, slack, wraps, er + 4 * e, er + 4 * e + 1);
+                candidate_range(mw, p->ext_w + EXT_WIDTH * (i * ne + e), qw, slack, wraps, er + 4 * e + 2,
+                                er + 4 * e + 3);
+            }
+            for (int64_t j = jlo; j <= jhi; j++) {
+                double gv[3];
+                pull(p->rows[1] + 12 * (j + p->reach), p->gc + 3 * i, gv);
+                for (int64_t k = klo; k <= khi; k++) {
+                    double g[3];
+                    pull(p->rows[2] + 12 * (k + p->reach), gv, g);
+                    double gr = p->gr[i] * (p->fac[1][j + p->reach] * p->fac[2][k + p->reach]) * (1 + 1e-9) + 1e-12;
+                    double d0 = g[0] - c[0], d1 = g[1] - c[1], d2 = g[2] - c[2], rr = gr + qr[t];
+                    if (!(d0 * d0 + d1 * d1 + d2 * d2 <= rr * rr * (1 + touch) + touch * touch))
+                        continue; /* the moved group ball misses the query */
+                    int64_t ijk[3] = {i, j, k};
+                    for (int64_t e = 0; e < ne; e++) {
+                        const int64_t *x = er + 4 * e;
+                        if (j < x[0] || j > x[1] || k < x[2] || k > x[3])
+                            continue;
+                        double ca[4], cb[4];
+                        if (e < p->nn) {
+                            place(p, ijk, e, ca, ca + 3);
+                            double e0 = ca[0] - c[0], e1 = ca[1] - c[1], e2 = ca[2] - c[2], rn = ca[3] + qr[t];
+                            if (e0 * e0 + e1 * e1 + e2 * e2 <= rn * rn * (1 + touch) + touch * touch &&
+                                push(nodes, ((i * p->nv + j) * p->nw + k) * p->nn + e) < 0)
+                                goto fail;
+                            continue;
+                        }
+                        const int64_t *pt = p->pats + 5 * (e - p->nn);
+                        int64_t to[3] = {i + pt[2], j + pt[3], k + pt[4]};
+                        if (to[0] < 0 || to[0] >= p->nu || to[1] < 0 || to[1] >= p->nv || to[2] < 0 || to[2] >= p->nw)
+                            continue;
+                        place(p, ijk, pt[0], ca, ca + 3);
+                        place(p, to, pt[1], cb, cb + 3);
+                        if (ball_beam(c, qr[t], ca, ca[3], cb, cb[3], touch) &&
+                            push(bk, ((i * p->nv + j) * p->nw + k) * p->np + (e - p->nn)) < 0)
+                            goto fail;
+                    }
+                }
+            }
+        }
+        nodes->n = sort_unique(nodes->v, n0, nodes->n);
+        bk->n = sort_unique(bk->v, b0, bk->n);
+        node_end[t] = nodes->n;
+        beam_end[t] = bk->n;
+    }
+    free(er);
+    return 0;
+fail:
+    free(er);
+    return -1;
+}
+
 /* ---- Python ---- */
 
 typedef struct {
@@ -393,9 +505,51 @@ static PyObject *rows_of(const Vec *v, int64_t nv, int64_t nw, int64_t nx) {
     return out;
 }
 
-/* query(counts (nu, nv, nw, nn), maps, ext_w, ext_v, ext_u, w_rows, w_fac, v_rows, v_fac, slabs, slot,
- *       bound, pats, params, qc, qr, beams) -> (node rows, node ends, beam rows, beam ends) */
-static PyObject *query(PyObject *self, PyObject *args) {
+/* (node rows, node ends, beam rows, beam ends) of a finished run: the 4-tuple both entry points
+ * return; frees the keys and the ends */
+static PyObject *results(int status, Vec *nodes, Vec *bk, int64_t *ends, Py_ssize_t nq, int64_t nv, int64_t nw,
+                         int64_t nn, int64_t np) {
+    PyObject *res = NULL;
+    if (status < 0) {
+        PyErr_NoMemory();
+    } else {
+        PyObject *nr = rows_of(nodes, nv, nw, nn), *br = rows_of(bk, nv, nw, np ? np : 1);
+        PyObject *ne = PyBytes_FromStringAndSize((const char *)ends, nq * (Py_ssize_t)sizeof(int64_t));
+        PyObject *be = PyBytes_FromStringAndSize((const char *)(ends + nq), nq * (Py_ssize_t)sizeof(int64_t));
+        if (nr && br && ne && be)
+            res = PyTuple_Pack(4, nr, ne, br, be);
+        Py_XDECREF(nr);
+        Py_XDECREF(br);
+        Py_XDECREF(ne);
+        Py_XDECREF(be);
+    }
+    free(ends);
+    free(nodes->v);
+    free(bk->v);
+    return res;
+}
+
+static void release_all(Buf *b, int n) {
+    for (int a = 0; a < n; a++)
+        if (b[a].held)
+            PyBuffer_Release(&b[a].b);
+}
+
+/* the buffers of ``n`` arguments, each of kind kinds[a] ('d' float64, 'q' int64, 'B' uint8) and,
+ * where sizes[a] >= 0, of that many items; -1 (and every buffer released) on error */
+static int take_all(PyObject **o, Buf *b, int n, const char *kinds, const Py_ssize_t *sizes, const char **names) {
+    memset(b, 0, n * sizeof(Buf));
+    for (int a = 0; a < n; a++)
+        if (take(o[a], &b[a], kinds[a], sizes[a], names[a]) < 0) {
+            release_all(b, a + 1);
+            return -1;
+        }
+    return 0;
+}
+
+/* pullback(counts (nu, nv, nw, nn), maps, ext_w, ext_v, ext_u, w_rows, w_fac, v_rows, v_fac, slabs, slot,
+ *          bound, pats, params, qc, qr, beams) -> (node rows, node ends, beam rows, beam ends) */
+static PyObject *pullback(PyObject *self, PyObject *args) {
     int64_t nu, nv, nw, nn;
     PyObject *o[15];
     int beams;
@@ -403,76 +557,117 @@ static PyObject *query(PyObject *self, PyObject *args) {
     if (!PyArg_ParseTuple(args, "(LLLL)OOOOOOOOOOOOOOOp", &nu, &nv, &nw, &nn, &o[0], &o[1], &o[2], &o[3], &o[4],
                           &o[5], &o[6], &o[7], &o[8], &o[9], &o[10], &o[11], &o[12], &o[13], &o[14], &beams))
         return NULL;
+    if (nu < 1 || nv < 1 || nw < 1 || nn < 1) {
+        PyErr_SetString(PyExc_ValueError, "pullback: empty counts");
+        return NULL;
+    }
     Buf b[15];
-    memset(b, 0, sizeof(b));
     const char *names[15] = {"maps", "ext_w", "ext_v", "ext_u", "w_rows", "w_fac", "v_rows", "v_fac",
                              "slabs", "slot", "bound", "pats", "params", "qc", "qr"};
     Py_ssize_t sizes[15] = {3 * MAP_WIDTH, EXT_WIDTH, EXT_WIDTH, EXT_WIDTH * nn, 12 * nw, nw, 12 * nv, nv,
                             -1, -1, -1, -1, NPARAM, -1, -1};
-    const char *kinds = "dddddddddqBqddd";
+    if (take_all(o, b, 15, "dddddddddqBqddd", sizes, names) < 0)
+        return NULL;
     PyObject *res = NULL;
-    int bad = nu < 1 || nv < 1 || nw < 1 || nn < 1;
-    for (int a = 0; a < 15 && !bad; a++)
-        bad = take(o[a], &b[a], kinds[a], sizes[a], names[a]) < 0;
-    if (!bad) {
-        Plan p = {b[0].b.buf, b[1].b.buf, b[2].b.buf, b[3].b.buf, b[4].b.buf, b[5].b.buf, b[6].b.buf, b[7].b.buf,
-                  b[8].b.buf, b[10].b.buf, b[12].b.buf, b[9].b.buf, b[11].b.buf, nu, nv, nw, nn,
-                  b[11].b.len / 40, (b[9].b.len / 8 - 1) / 2};
-        Py_ssize_t nq = b[14].b.len / 8, slabs = b[8].b.len / (32 * nu * nv * nn);
-        const double *par = p.par;
-        Py_ssize_t cells = (Py_ssize_t)(par[P_CSHAPE] * par[P_CSHAPE + 1] * par[P_CSHAPE + 2]);
-        bad = b[13].b.len != 3 * nq * 8 || b[9].b.len % 16 != 8 || b[11].b.len % 40 != 0 ||
+    Plan p = {b[0].b.buf, b[1].b.buf, b[2].b.buf, b[3].b.buf, b[4].b.buf, b[5].b.buf, b[6].b.buf, b[7].b.buf,
+              b[8].b.buf, b[10].b.buf, b[12].b.buf, b[9].b.buf, b[11].b.buf, nu, nv, nw, nn,
+              b[11].b.len / 40, (b[9].b.len / 8 - 1) / 2};
+    Py_ssize_t nq = b[14].b.len / 8, slabs = b[8].b.len / (32 * nu * nv * nn);
+    const double *par = p.par;
+    Py_ssize_t cells = (Py_ssize_t)(par[P_CSHAPE] * par[P_CSHAPE + 1] * par[P_CSHAPE + 2]);
+    int bad = b[13].b.len != 3 * nq * 8 || b[9].b.len % 16 != 8 || b[11].b.len % 40 != 0 ||
               b[8].b.len != slabs * 32 * nu * nv * nn || b[10].b.len != cells || !(par[P_CSIZE] > 0);
-        for (int64_t s = 0; s < 2 * p.reach + 1 && !bad; s++)
-            bad = p.slot[s] < -1 || p.slot[s] >= slabs;
-        for (int64_t a = 0; a < p.np && !bad; a++) {
-            const int64_t *pt = p.pats + 5 * a;
-            bad = pt[0] < 0 || pt[0] >= nn || pt[1] < 0 || pt[1] >= nn || pt[4] < -p.reach || pt[4] > p.reach ||
-                  p.slot[p.reach + pt[4]] < 0 || p.slot[p.reach - pt[4]] < 0;
-        }
-        bad = bad || p.slot[p.reach] < 0;
-        if (bad) {
-            PyErr_SetString(PyExc_ValueError, "query: plan arrays of inconsistent sizes");
-        } else {
-            Vec nodes = {NULL, 0, 0}, bk = {NULL, 0, 0};
-            int64_t *ends = malloc((2 * nq + 1) * sizeof(int64_t));
-            int status = -1;
-            if (ends) {
-                Py_BEGIN_ALLOW_THREADS
-                status = run(&p, b[13].b.buf, b[14].b.buf, nq, beams, &nodes, ends, &bk, ends + nq);
-                Py_END_ALLOW_THREADS
-            }
-            if (status < 0) {
-                PyErr_NoMemory();
-            } else {
-                PyObject *nr = rows_of(&nodes, nv, nw, nn), *br = rows_of(&bk, nv, nw, p.np ? p.np : 1);
-                PyObject *ne = PyBytes_FromStringAndSize((const char *)ends, nq * (Py_ssize_t)sizeof(int64_t));
-                PyObject *be = PyBytes_FromStringAndSize((const char *)(ends + nq), nq * (Py_ssize_t)sizeof(int64_t));
-                if (nr && br && ne && be)
-                    res = PyTuple_Pack(4, nr, ne, br, be);
-                Py_XDECREF(nr);
-                Py_XDECREF(br);
-                Py_XDECREF(ne);
-                Py_XDECREF(be);
-            }
-            free(ends);
-            free(nodes.v);
-            free(bk.v);
-        }
+    for (int64_t s = 0; s < 2 * p.reach + 1 && !bad; s++)
+        bad = p.slot[s] < -1 || p.slot[s] >= slabs;
+    for (int64_t a = 0; a < p.np && !bad; a++) {
+        const int64_t *pt = p.pats + 5 * a;
+        bad = pt[0] < 0 || pt[0] >= nn || pt[1] < 0 || pt[1] >= nn || pt[4] < -p.reach || pt[4] > p.reach ||
+              p.slot[p.reach + pt[4]] < 0 || p.slot[p.reach - pt[4]] < 0;
     }
-    for (int a = 0; a < 15; a++)
-        if (b[a].held)
-            PyBuffer_Release(&b[a].b);
+    if (bad || p.slot[p.reach] < 0) {
+        PyErr_SetString(PyExc_ValueError, "pullback: plan arrays of inconsistent sizes");
+    } else {
+        Vec nodes = {NULL, 0, 0}, bk = {NULL, 0, 0};
+        int64_t *ends = malloc((2 * nq + 1) * sizeof(int64_t));
+        int status = -1;
+        if (ends) {
+            Py_BEGIN_ALLOW_THREADS
+            status = run(&p, b[13].b.buf, b[14].b.buf, nq, beams, &nodes, ends, &bk, ends + nq);
+            Py_END_ALLOW_THREADS
+        }
+        res = results(status, &nodes, &bk, ends, nq, nv, nw, nn, p.np);
+    }
+    release_all(b, 15);
+    return res;
+}
+
+/* u_path(counts (nu, nv, nw, nn), reach, maps, gext_v, gext_w, ext_v, ext_w, gc, gr, axis, band, u_rows, u_fac,
+ *        v_rows, v_fac, w_rows, w_fac, tc, tr, pats, params, qc, qr) -> (node rows, node ends, beam rows,
+ *        beam ends) */
+static PyObject *u_path(PyObject *self, PyObject *args) {
+    int64_t nu, nv, nw, nn, reach;
+    PyObject *o[21];
+    (void)self;
+    if (!PyArg_ParseTuple(args, "(LLLL)LOOOOOOOOOOOOOOOOOOOOO", &nu, &nv, &nw, &nn, &reach, &o[0], &o[1], &o[2],
+                          &o[3], &o[4], &o[5], &o[6], &o[7], &o[8], &o[9], &o[10], &o[11], &o[12], &o[13], &o[14],
+                          &o[15], &o[16], &o[17], &o[18], &o[19], &o[20]))
+        return NULL;
+    if (nu < 1 || nv < 1 || nw < 1 || nn < 1 || reach < 0) {
+        PyErr_SetString(PyExc_ValueError, "u_path: empty counts");
+        return NULL;
+    }
+    Buf b[21];
+    const char *names[21] = {"maps", "gext_v", "gext_w", "ext_v", "ext_w", "gc", "gr", "axis", "band", "u_rows",
+                             "u_fac", "v_rows", "v_fac", "w_rows", "w_fac", "tc", "tr", "pats", "params", "qc", "qr"};
+    Py_ssize_t sizes[21] = {3 * MAP_WIDTH, EXT_WIDTH * nu, EXT_WIDTH * nu, -1, -1, 3 * nu, nu, -1, -1,
+                            12 * (nu + 2 * reach), nu + 2 * reach, 12 * (nv + 2 * reach), nv + 2 * reach,
+                            12 * (nw + 2 * reach), nw + 2 * reach, 3 * nn, nn, -1, 3, -1, -1};
+    if (take_all(o, b, 21, "dddddddddddddddddqddd", sizes, names) < 0)
+        return NULL;
+    PyObject *res = NULL;
+    int64_t np = b[17].b.len / 40, ne = nn + np, has_axis = b[7].b.len == 6 * 8;
+    Py_ssize_t nq = b[20].b.len / 8;
+    const int64_t *pats = b[17].b.buf;
+    int bad = b[17].b.len % 40 != 0 || b[3].b.len != EXT_WIDTH * nu * ne * 8 || b[4].b.len != b[3].b.len ||
+              (has_axis ? b[8].b.len != 2 * nu * 8 : b[7].b.len != 0) || b[19].b.len != 3 * nq * 8;
+    for (int64_t a = 0; a < np && !bad; a++) {
+        const int64_t *pt = pats + 5 * a;
+        bad = pt[0] < 0 || pt[0] >= nn || pt[1] < 0 || pt[1] >= nn;
+        for (int x = 2; x < 5 && !bad; x++)
+            bad = pt[x] < -reach || pt[x] > reach;
+    }
+    if (bad) {
+        PyErr_SetString(PyExc_ValueError, "u_path: plan arrays of inconsistent sizes");
+    } else {
+        UPlan p = {b[0].b.buf, b[1].b.buf, b[2].b.buf, b[3].b.buf, b[4].b.buf, b[5].b.buf, b[6].b.buf, b[7].b.buf,
+                   b[8].b.buf, {b[9].b.buf, b[11].b.buf, b[13].b.buf}, {b[10].b.buf, b[12].b.buf, b[14].b.buf},
+                   b[15].b.buf, b[16].b.buf, b[18].b.buf, pats, nu, nv, nw, nn, np, reach, has_axis};
+        Vec nodes = {NULL, 0, 0}, bk = {NULL, 0, 0};
+        int64_t *ends = malloc((2 * nq + 1) * sizeof(int64_t));
+        int status = -1;
+        if (ends) {
+            Py_BEGIN_ALLOW_THREADS
+            status = u_run(&p, b[19].b.buf, b[20].b.buf, nq, &nodes, ends, &bk, ends + nq);
+            Py_END_ALLOW_THREADS
+        }
+        res = results(status, &nodes, &bk, ends, nq, nv, nw, nn, np);
+    }
+    release_all(b, 21);
     return res;
 }
 
 static PyMethodDef methods[] = {
-    {"query", query, METH_VARARGS,
-     "query(counts, maps, ext_w, ext_v, ext_u, w_rows, w_fac, v_rows, v_fac, slabs, slot, bound, pats, params, qc, "
-     "qr, beams) -> (node rows, node ends, beam rows, beam ends): the pulled-back BIQ of every query ball."},
+    {"pullback", pullback, METH_VARARGS,
+     "pullback(counts, maps, ext_w, ext_v, ext_u, w_rows, w_fac, v_rows, v_fac, slabs, slot, bound, pats, params, "
+     "qc, qr, beams) -> (node rows, node ends, beam rows, beam ends): the pulled-back BIQ of every query ball."},
+    {"u_path", u_path, METH_VARARGS,
+     "u_path(counts, reach, maps, gext_v, gext_w, ext_v, ext_w, gc, gr, axis, band, u_rows, u_fac, v_rows, v_fac, "
+     "w_rows, w_fac, tc, tr, pats, params, qc, qr) -> (node rows, node ends, beam rows, beam ends): the O(u) path "
+     "of every query ball."},
     {NULL, NULL, 0, NULL},
 };
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_pullback", "Compiled pulled-back BIQ.", -1, methods};
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_rangefinder", "Compiled RangeFinder BIQs.", -1,
+                                    methods};
 
-PyMODINIT_FUNC PyInit__pullback(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__rangefinder(void) { return PyModule_Create(&module); }
