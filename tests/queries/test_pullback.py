@@ -12,7 +12,7 @@ from ple.algebra.similarity import Swirl
 from ple.bench.curved import curved_lattice
 from ple.cli.main import main
 from ple.program.sources import load_lattice
-from ple.queries import biq, pullback
+from ple.queries import biq, pullback, rangefinder
 from ple.queries.hits import _unique_rows, split_hits
 from ple.queries.rangefinder import cached_plan
 from test_biq import KINDS, brute_force, lattice_of, random_lattice, random_queries
@@ -142,7 +142,7 @@ def test_unique_rows_is_numpys_unique():
         assert np.array_equal(_unique_rows(a), np.unique(a, axis=0).reshape(-1, 5))
 
 
-compiled = pytest.mark.skipif(pullback._compiled is None, reason="the compiled pulled-back query is not built")
+compiled = pytest.mark.skipif(rangefinder._compiled is None, reason="the compiled pulled-back query is not built")
 
 
 def numpy_form(lat, c, r, beams):
@@ -183,7 +183,7 @@ def test_the_numpy_form_answers_when_the_compiled_one_is_absent(monkeypatch):
     lat = load_lattice("thesis_warped", {"n": 8})
     rng = np.random.default_rng(23)
     c, r = near_node_queries(rng, lat, 40, 3.0)
-    monkeypatch.setattr(pullback, "_compiled", None)
+    monkeypatch.setattr(rangefinder, "_compiled", None)
     assert pullback.cached_pullback(lat).kernel is None
     assert_beams_match_brute_force(lat, c, r)
 
