@@ -43,8 +43,10 @@ def biq_section(d) -> list[str]:
                 "`scipy.spatial.cKDTree` over the ball centres (nodes only) or over the centres and the beam "
                 "midpoints (nodes and beams), asks it once for all queries and tests the candidates exactly, "
                 "vectorized in numpy. PLE evaluates nothing: its first call builds a per-lattice plan from the base "
-                f"slab (path `{kd['path']}`, `ple.queries.pullback`). Query times are the best of "
-                f"{kd['repeat']} warm runs of all queries, in the same process.", "",
+                f"slab (path `{kd['path']}`, `ple.queries.pullback`, {kd.get('form', 'numpy')} form). Query "
+                f"times are the best of {kd['repeat']} warm runs of all queries, in the same process"
+                + (f", load average {kd['load_average_1min']:.1f} on {d['cpus']} cores" if "load_average_1min" in kd
+                   else "") + ".", "",
                 "| mode | PLE | PLE first call (plan) | tree, queries | tree build | evaluation | PLE vs tree, per "
                 "query | same hits |", "|---|---|---|---|---|---|---|---|"]
         for mode, label in (("nodes_only", "nodes only"), ("nodes_and_beams", "nodes and beams")):
