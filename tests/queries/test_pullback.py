@@ -4,6 +4,7 @@ then distance tests) on random, curved and warped lattices, with and without a p
 
 from __future__ import annotations
 
+import argparse
 import json
 
 import numpy as np
@@ -201,3 +202,14 @@ def test_results_are_a_sequence_of_per_query_views():
     assert sum(len(x.nodes) for x in res) == len(res.nodes)
     with pytest.raises(IndexError):
         res[25]
+
+
+def test_kdtree_bench_row_finds_the_trees_hits(monkeypatch):
+    """``ple bench biq``'s KD-tree comparison: PLE (nodes only, nodes and beams) and the prebuilt
+    cKDTree with its exact tests give the same hits, on a small warped lattice."""
+    from ple.bench import biq as bench_biq
+
+    monkeypatch.setattr(bench_biq, "load_lattice", lambda name: load_lattice(name, {"n": 12}))
+    row = bench_biq.kdtree_row(argparse.Namespace(tree_lattice="thesis_warped", tree_queries=300, repeat=1, seed=5))
+    assert row["nodes_only"]["same_hits"] and row["nodes_and_beams"]["same_hits"]
+    assert row["node_hits"] > 0 and row["beam_hits"] > 0 and row["path"] == "pullback"
