@@ -246,36 +246,40 @@ def test_cli_biq(tmp_path, capsys):
     assert "queries" in capsys.readouterr().err
 
 
-def u_path_lattices(rng):
-    """Lattices on which the O(ū) path runs (detected, or forced below the O(1) path): the
-    cylindrical case (its i-sheets culled by the common axis), the O(1) cases, placed ones, the
-    thesis presets and random lattices of every kind whose detected path is not the general one."""
+def path_lattices(rng, path):
+    """Lattices on which a path runs (detected, or forced below a faster path): the cylindrical
+    case (its i-sheets culled by the common axis), the O(1) cases, placed ones, the thesis
+    presets and random lattices of every kind (for O(ū), those whose detected path is not the
+    general one); for O(ūv̄) also the wrapping cases and the warped preset."""
     lats = [lattice_of("u"), lattice_of("1"), lattice_of("1-polar"),
             load_lattice("thesis_cylindrical", ["nu=3", "nv=12", "nw=3"]), load_lattice("thesis_regular", ["n=4"]),
             load_lattice("lil_cylindrical_coarse")]
+    if path == "uv":
+        lats += [lattice_of("wrap"), lattice_of("wrap-swirl"), load_lattice("thesis_warped", ["n=6"])]
     placed = lattice_of("u")
     placed.set_placement(Swirl(0.7, [1, 1, 0], [0.5, 0, 2], 1.3))
     lats.append(placed)
-    while len(lats) < 14:
+    while len(lats) < 16:
         lat = random_lattice(rng, [KINDS[int(x)] for x in rng.integers(0, len(KINDS), 3)])
-        if cached_plan(lat).path != "uv":
+        if path == "uv" or cached_plan(lat).path != "uv":
             lats.append(lat)
     return lats
 
 
 @pytest.mark.skipif(rangefinder._compiled is None, reason="the compiled RangeFinder is not built")
-def test_compiled_u_path_equals_its_numpy_form(monkeypatch):
-    """Bit for bit: the compiled O(ū) path's hits, row for row, equal the numpy form's, and the
-    naive path's."""
-    rng = np.random.default_rng(31)
-    for lat in u_path_lattices(rng):
+@pytest.mark.parametrize("path", ["u", "uv"])
+def test_compiled_paths_equal_their_numpy_forms(monkeypatch, path):
+    """Bit for bit: the compiled O(ū) and O(ūv̄) paths' hits, row for row, equal their numpy
+    forms', and the naive path's."""
+    rng = np.random.default_rng(31 + len(path))
+    for lat in path_lattices(rng, path):
         for scale in (0.5, 4.0):
             c, r = random_queries(rng, lat, 40, scale)
-            got = rangefinder.lattice_hits(lat, c, r, path="u")
+            got = rangefinder.lattice_hits(lat, c, r, path=path)
             with monkeypatch.context() as m:
                 m.setattr(rangefinder, "_compiled", None)
-                want = rangefinder.lattice_hits(lat, c, r, path="u")
-            assert got[2] == want[2] == "u"
+                want = rangefinder.lattice_hits(lat, c, r, path=path)
+            assert got[2] == want[2] == path
             for a, b in zip(got[:2], want[:2]):
                 assert np.array_equal(_unique_rows(a), _unique_rows(b))
-            assert_same(biq.query(lat, c, r, "naive"), split_hits(len(c), got[0], got[1], "u"))
+            assert_same(biq.query(lat, c, r, "naive"), split_hits(len(c), got[0], got[1], path))

@@ -1,5 +1,5 @@
 /* RangeFinder BIQs of ple.queries, compiled: every query ball at once, decision for decision the
- * numpy forms, in two entry points.
+ * numpy forms, in three entry points.
  *
  * ``pullback`` (``pullback._query_numpy``): per query ball (in the lattice frame), the candidate
  * range of k by the W-map (§7.1.2, the query widened by the slab margin at the largest scale of
@@ -15,6 +15,11 @@
  * skipped when its distance band to a common axis misses the query's; per (j, k) in those
  * ranges, the group ball moved by W**k V**j tested against the query; then each element's own
  * V and W ranges, and the exact tests on elements placed by the cached powers of U, V and W.
+ *
+ * ``uv_path`` (the O(ūv̄) path of §7.3, ``rangefinder._uv_candidates`` then ``_exact``): per query
+ * ball, blocks of W-rows whose bounding ball moved by W**k meets the query for some k of the
+ * block's W range; in those, each W-row (i, j) whose group ball moved by W**k meets it, for k
+ * in the row's range; then each element's own W range and the same exact tests.
  *
  * The same IEEE operations in the same order as the numpy forms' exact tests and pulls (built
  * with -ffp-contract=off: no fused multiply-adds), so the same hits come out. Candidate ranges
@@ -361,10 +366,16 @@ static int run(const Plan *p, const double *qc, const double *qr, Py_ssize_t nq,
 
 /* ---- the O(ū) path ---- */
 
+/* The tables of the O(ū) and O(ūv̄) paths. O(ū): per U index i the group ball (gc, gr) of
+ * (i, 0, 0) with its V and W extents (gext_v, gext_w) and each element's (ext_v, ext_w, (nu, E)).
+ * O(ūv̄): per W-row (i, j) = row i nv + j its group ball and W extents (gc, gr, gext_w, ext_w);
+ * blocks of W-rows with bounding balls (kc, kr), their W extents (kext) and rows (order[starts[b]
+ * .. starts[b + 1]]). Both: cached powers of U, V, W (rows, fac, from -reach) and the template. */
 typedef struct {
     const double *maps, *gext_v, *gext_w, *ext_v, *ext_w, *gc, *gr, *axis, *band, *rows[3], *fac[3], *tc, *tr, *par;
-    const int64_t *pats;
-    int64_t nu, nv, nw, nn, np, reach, has_axis;
+    const double *kc, *kr, *kext;
+    const int64_t *pats, *order, *starts;
+    int64_t nu, nv, nw, nn, np, reach, has_axis, nb;
 } UPlan;
 
 /* node (i, j, k, n) placed by the cached powers: W**k V**j U**i of template ball n */
@@ -377,6 +388,42 @@ static void place(const UPlan *p, const int64_t *ijk, int64_t n, double *c, doub
         memcpy(x, c, sizeof(x));
         *r *= p->fac[a][row];
     }
+}
+
+/* the exact test of element e (node e < nn, else beam-pattern e - nn) of group (i, j, k) against
+ * the query ball (c, rq); a hit's key goes to nodes or bk */
+static int exact(const UPlan *p, int64_t i, int64_t j, int64_t k, int64_t e, const double *c, double rq, Vec *nodes,
+                 Vec *bk) {
+    const double touch = p->par[0];
+    int64_t ijk[3] = {i, j, k};
+    double ca[4], cb[4];
+    if (e < p->nn) {
+        place(p, ijk, e, ca, ca + 3);
+        double e0 = ca[0] - c[0], e1 = ca[1] - c[1], e2 = ca[2] - c[2], rn = ca[3] + rq;
+        if (e0 * e0 + e1 * e1 + e2 * e2 <= rn * rn * (1 + touch) + touch * touch)
+            return push(nodes, ((i * p->nv + j) * p->nw + k) * p->nn + e);
+        return 0;
+    }
+    const int64_t *pt = p->pats + 5 * (e - p->nn);
+    int64_t to[3] = {i + pt[2], j + pt[3], k + pt[4]};
+    if (to[0] < 0 || to[0] >= p->nu || to[1] < 0 || to[1] >= p->nv || to[2] < 0 || to[2] >= p->nw)
+        return 0;
+    place(p, ijk, pt[0], ca, ca + 3);
+    place(p, to, pt[1], cb, cb + 3);
+    if (ball_beam(c, rq, ca, ca[3], cb, cb[3], touch))
+        return push(bk, ((i * p->nv + j) * p->nw + k) * p->np + (e - p->nn));
+    return 0;
+}
+
+/* does the ball (x, r) moved by W**k meet the query ball (c, rq)? (the culling levels' test,
+ * radius widened by 1e-9 relative and 1e-12) */
+static int moved_meets(const UPlan *p, const double *x, double r, int64_t k, const double *c, double rq) {
+    const double touch = p->par[0];
+    double g[3];
+    pull(p->rows[2] + 12 * (k + p->reach), x, g);
+    double d0 = g[0] - c[0], d1 = g[1] - c[1], d2 = g[2] - c[2];
+    double rr = r * p->fac[2][k + p->reach] * (1 + 1e-9) + 1e-12 + rq;
+    return d0 * d0 + d1 * d1 + d2 * d2 <= rr * rr * (1 + touch) + touch * touch;
 }
 
 static int u_run(const UPlan *p, const double *qc, const double *qr, Py_ssize_t nq, Vec *nodes, int64_t *node_end,
@@ -425,30 +472,66 @@ static int u_run(const UPlan *p, const double *qc, const double *qr, Py_ssize_t 
                     double d0 = g[0] - c[0], d1 = g[1] - c[1], d2 = g[2] - c[2], rr = gr + qr[t];
                     if (!(d0 * d0 + d1 * d1 + d2 * d2 <= rr * rr * (1 + touch) + touch * touch))
                         continue; /* the moved group ball misses the query */
-                    int64_t ijk[3] = {i, j, k};
                     for (int64_t e = 0; e < ne; e++) {
                         const int64_t *x = er + 4 * e;
-                        if (j < x[0] || j > x[1] || k < x[2] || k > x[3])
-                            continue;
-                        double ca[4], cb[4];
-                        if (e < p->nn) {
-                            place(p, ijk, e, ca, ca + 3);
-                            double e0 = ca[0] - c[0], e1 = ca[1] - c[1], e2 = ca[2] - c[2], rn = ca[3] + qr[t];
-                            if (e0 * e0 + e1 * e1 + e2 * e2 <= rn * rn * (1 + touch) + touch * touch &&
-                                push(nodes, ((i * p->nv + j) * p->nw + k) * p->nn + e) < 0)
-                                goto fail;
-                            continue;
-                        }
-                        const int64_t *pt = p->pats + 5 * (e - p->nn);
-                        int64_t to[3] = {i + pt[2], j + pt[3], k + pt[4]};
-                        if (to[0] < 0 || to[0] >= p->nu || to[1] < 0 || to[1] >= p->nv || to[2] < 0 || to[2] >= p->nw)
-                            continue;
-                        place(p, ijk, pt[0], ca, ca + 3);
-                        place(p, to, pt[1], cb, cb + 3);
-                        if (ball_beam(c, qr[t], ca, ca[3], cb, cb[3], touch) &&
-                            push(bk, ((i * p->nv + j) * p->nw + k) * p->np + (e - p->nn)) < 0)
+                        if (j >= x[0] && j <= x[1] && k >= x[2] && k <= x[3] &&
+                            exact(p, i, j, k, e, c, qr[t], nodes, bk) < 0)
                             goto fail;
                     }
+                }
+            }
+        }
+        nodes->n = sort_unique(nodes->v, n0, nodes->n);
+        bk->n = sort_unique(bk->v, b0, bk->n);
+        node_end[t] = nodes->n;
+        beam_end[t] = bk->n;
+    }
+    free(er);
+    return 0;
+fail:
+    free(er);
+    return -1;
+}
+
+/* the O(ūv̄) path: blocks of W-rows culled by their moved bounding balls, then each W-row's group
+ * ball, then each element's W range, then the exact tests (rangefinder._uv_candidates, _exact) */
+static int uv_run(const UPlan *p, const double *qc, const double *qr, Py_ssize_t nq, Vec *nodes, int64_t *node_end,
+                  Vec *bk, int64_t *beam_end) {
+    const double *mw = p->maps + 2 * MAP_WIDTH;
+    const double slack = p->par[1];
+    const int wraps = (int)p->par[2];
+    const int64_t ne = p->nn + p->np;
+    int64_t *er = malloc(2 * (ne ? ne : 1) * sizeof(int64_t)); /* per element: W range */
+    if (!er)
+        return -1;
+    double qw[EXT_WIDTH];
+    for (Py_ssize_t t = 0; t < nq; t++) {
+        const double *c = qc + 3 * t;
+        Py_ssize_t n0 = nodes->n, b0 = bk->n;
+        ball_extents(mw, c, qr[t], qw);
+        for (int64_t b = 0; b < p->nb; b++) {
+            int64_t lo, hi, k;
+            candidate_range(mw, p->kext + EXT_WIDTH * b, qw, slack, wraps, &lo, &hi);
+            for (k = lo; k <= hi; k++)
+                if (moved_meets(p, p->kc + 3 * b, p->kr[b], k, c, qr[t]))
+                    break;
+            if (k > hi) /* W**k of the block's ball misses the query for every k in its range */
+                continue;
+            for (int64_t a = p->starts[b]; a < p->starts[b + 1]; a++) {
+                int64_t row = p->order[a], i = row / p->nv, j = row % p->nv, ready = 0;
+                candidate_range(mw, p->gext_w + EXT_WIDTH * row, qw, slack, wraps, &lo, &hi);
+                for (k = lo; k <= hi; k++) {
+                    if (!moved_meets(p, p->gc + 3 * row, p->gr[row], k, c, qr[t]))
+                        continue;
+                    if (!ready) { /* each element's own W range, once per row */
+                        for (int64_t e = 0; e < ne; e++)
+                            candidate_range(mw, p->ext_w + EXT_WIDTH * (row * ne + e), qw, slack, wraps, er + 2 * e,
+                                            er + 2 * e + 1);
+                        ready = 1;
+                    }
+                    for (int64_t e = 0; e < ne; e++)
+                        if (k >= er[2 * e] && k <= er[2 * e + 1] && exact(p, i, j, k, e, c, qr[t], nodes, bk) < 0)
+                            goto fail;
                 }
             }
         }
@@ -641,7 +724,8 @@ static PyObject *u_path(PyObject *self, PyObject *args) {
     } else {
         UPlan p = {b[0].b.buf, b[1].b.buf, b[2].b.buf, b[3].b.buf, b[4].b.buf, b[5].b.buf, b[6].b.buf, b[7].b.buf,
                    b[8].b.buf, {b[9].b.buf, b[11].b.buf, b[13].b.buf}, {b[10].b.buf, b[12].b.buf, b[14].b.buf},
-                   b[15].b.buf, b[16].b.buf, b[18].b.buf, pats, nu, nv, nw, nn, np, reach, has_axis};
+                   b[15].b.buf, b[16].b.buf, b[18].b.buf, NULL, NULL, NULL, pats, NULL, NULL, nu, nv, nw, nn, np,
+                   reach, has_axis, 0};
         Vec nodes = {NULL, 0, 0}, bk = {NULL, 0, 0};
         int64_t *ends = malloc((2 * nq + 1) * sizeof(int64_t));
         int status = -1;
@@ -656,6 +740,68 @@ static PyObject *u_path(PyObject *self, PyObject *args) {
     return res;
 }
 
+/* uv_path(counts (nu, nv, nw, nn), reach, maps, gext_w, ext_w, gc, gr, kc, kr, kext, order, starts, u_rows, u_fac,
+ *         v_rows, v_fac, w_rows, w_fac, tc, tr, pats, params, qc, qr) -> (node rows, node ends, beam rows,
+ *         beam ends) */
+static PyObject *uv_path(PyObject *self, PyObject *args) {
+    int64_t nu, nv, nw, nn, reach;
+    PyObject *o[22];
+    (void)self;
+    if (!PyArg_ParseTuple(args, "(LLLL)LOOOOOOOOOOOOOOOOOOOOOO", &nu, &nv, &nw, &nn, &reach, &o[0], &o[1], &o[2],
+                          &o[3], &o[4], &o[5], &o[6], &o[7], &o[8], &o[9], &o[10], &o[11], &o[12], &o[13], &o[14],
+                          &o[15], &o[16], &o[17], &o[18], &o[19], &o[20], &o[21]))
+        return NULL;
+    if (nu < 1 || nv < 1 || nw < 1 || nn < 1 || reach < 0) {
+        PyErr_SetString(PyExc_ValueError, "uv_path: empty counts");
+        return NULL;
+    }
+    Buf b[22];
+    const char *names[22] = {"maps", "gext_w", "ext_w", "gc", "gr", "kc", "kr", "kext", "order", "starts", "u_rows",
+                             "u_fac", "v_rows", "v_fac", "w_rows", "w_fac", "tc", "tr", "pats", "params", "qc", "qr"};
+    Py_ssize_t rows = nu * nv;
+    Py_ssize_t sizes[22] = {3 * MAP_WIDTH, EXT_WIDTH * rows, -1, 3 * rows, rows, -1, -1, -1, rows, -1,
+                            12 * (nu + 2 * reach), nu + 2 * reach, 12 * (nv + 2 * reach), nv + 2 * reach,
+                            12 * (nw + 2 * reach), nw + 2 * reach, 3 * nn, nn, -1, 3, -1, -1};
+    if (take_all(o, b, 22, "ddddddddqqddddddddqddd", sizes, names) < 0)
+        return NULL;
+    PyObject *res = NULL;
+    int64_t np = b[18].b.len / 40, ne = nn + np, nb = b[6].b.len / 8;
+    Py_ssize_t nq = b[21].b.len / 8;
+    const int64_t *pats = b[18].b.buf, *order = b[8].b.buf, *starts = b[9].b.buf;
+    int bad = b[18].b.len % 40 != 0 || b[2].b.len != EXT_WIDTH * rows * ne * 8 || b[5].b.len != 3 * nb * 8 ||
+              b[7].b.len != EXT_WIDTH * nb * 8 || b[9].b.len != (nb + 1) * 8 || b[20].b.len != 3 * nq * 8 ||
+              starts[0] != 0 || starts[nb] != rows;
+    for (int64_t a = 0; a < nb && !bad; a++)
+        bad = starts[a + 1] < starts[a];
+    for (Py_ssize_t a = 0; a < rows && !bad; a++)
+        bad = order[a] < 0 || order[a] >= rows;
+    for (int64_t a = 0; a < np && !bad; a++) {
+        const int64_t *pt = pats + 5 * a;
+        bad = pt[0] < 0 || pt[0] >= nn || pt[1] < 0 || pt[1] >= nn;
+        for (int x = 2; x < 5 && !bad; x++)
+            bad = pt[x] < -reach || pt[x] > reach;
+    }
+    if (bad) {
+        PyErr_SetString(PyExc_ValueError, "uv_path: plan arrays of inconsistent sizes");
+    } else {
+        UPlan p = {b[0].b.buf, NULL, b[1].b.buf, NULL, b[2].b.buf, b[3].b.buf, b[4].b.buf, NULL, NULL,
+                   {b[10].b.buf, b[12].b.buf, b[14].b.buf}, {b[11].b.buf, b[13].b.buf, b[15].b.buf}, b[16].b.buf,
+                   b[17].b.buf, b[19].b.buf, b[5].b.buf, b[6].b.buf, b[7].b.buf, pats, order, starts, nu, nv, nw, nn,
+                   np, reach, 0, nb};
+        Vec nodes = {NULL, 0, 0}, bk = {NULL, 0, 0};
+        int64_t *ends = malloc((2 * nq + 1) * sizeof(int64_t));
+        int status = -1;
+        if (ends) {
+            Py_BEGIN_ALLOW_THREADS
+            status = uv_run(&p, b[20].b.buf, b[21].b.buf, nq, &nodes, ends, &bk, ends + nq);
+            Py_END_ALLOW_THREADS
+        }
+        res = results(status, &nodes, &bk, ends, nq, nv, nw, nn, np);
+    }
+    release_all(b, 22);
+    return res;
+}
+
 static PyMethodDef methods[] = {
     {"pullback", pullback, METH_VARARGS,
      "pullback(counts, maps, ext_w, ext_v, ext_u, w_rows, w_fac, v_rows, v_fac, slabs, slot, bound, pats, params, "
@@ -663,6 +809,10 @@ static PyMethodDef methods[] = {
     {"u_path", u_path, METH_VARARGS,
      "u_path(counts, reach, maps, gext_v, gext_w, ext_v, ext_w, gc, gr, axis, band, u_rows, u_fac, v_rows, v_fac, "
      "w_rows, w_fac, tc, tr, pats, params, qc, qr) -> (node rows, node ends, beam rows, beam ends): the O(u) path "
+     "of every query ball."},
+    {"uv_path", uv_path, METH_VARARGS,
+     "uv_path(counts, reach, maps, gext_w, ext_w, gc, gr, kc, kr, kext, order, starts, u_rows, u_fac, v_rows, v_fac, "
+     "w_rows, w_fac, tc, tr, pats, params, qc, qr) -> (node rows, node ends, beam rows, beam ends): the O(uv) path "
      "of every query ball."},
     {NULL, NULL, 0, NULL},
 };

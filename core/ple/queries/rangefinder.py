@@ -599,34 +599,42 @@ def compiled_fits(lat: Lattice) -> bool:
     return _compiled is not None and nu * nv * nw * max(len(lat.nodes), len(lat.beams), 1) < MAX_KEY
 
 
-def _u_kernel(lat: Lattice, pl: _Plan) -> tuple:
-    """The O(ū) path's tables as ``_rangefinder.u_path`` reads them (cached on the plan)."""
-    if "kernel_u" not in pl.tables:
+def _path_kernel(lat: Lattice, pl: _Plan) -> tuple:
+    """The O(ū) or O(ūv̄) path's tables as ``_rangefinder.u_path`` / ``uv_path`` read them:
+    (reach of the cached powers, arrays), cached on the plan."""
+    if "kernel" not in pl.tables:
         t = _templates(lat, pl)
-        nu = lat.counts[0]
-        axis = np.concatenate(t["axis"]) if "axis" in t else np.zeros(0)
-        band = np.stack(t["rho"], axis=1) if "axis" in t else np.zeros(0)
-        rows = [x for reach, m, f in _power_rows(lat, pl) for x in (m.reshape(-1, 12), f)]
+        nu, nv = lat.counts[:2]
         ne = pl.elements
-        pl.tables["kernel_u"] = (
-            _power_rows(lat, pl)[0][0],
-            np.concatenate([_packed_map(m) for m in pl.maps]), _packed_extents(t["gext_v"], nu),
-            _packed_extents(t["gext_w"], nu), _packed_extents(t["ext_v"], nu * ne),
-            _packed_extents(t["ext_w"], nu * ne), np.ascontiguousarray(t["gc"], dtype=float),
-            np.ascontiguousarray(t["gr"], dtype=float), np.ascontiguousarray(axis, dtype=float),
-            np.ascontiguousarray(band, dtype=float), *(np.ascontiguousarray(x, dtype=float) for x in rows),
-            np.ascontiguousarray(lat.template_centers, dtype=float),
-            np.ascontiguousarray(lat.template_radii, dtype=float), _pattern_table(lat),
-            np.array([TOUCH_TOL, RANGE_SLACK, MAX_WRAP_STEPS], dtype=float))
-    return pl.tables["kernel_u"]
+        f64 = lambda x: np.ascontiguousarray(x, dtype=float)  # noqa: E731
+        powers = [f64(x) for _, m, f in _power_rows(lat, pl) for x in (m.reshape(-1, 12), f)]
+        tail = (*powers, f64(lat.template_centers), f64(lat.template_radii), _pattern_table(lat),
+                np.array([TOUCH_TOL, RANGE_SLACK, MAX_WRAP_STEPS], dtype=float))
+        maps = np.concatenate([_packed_map(m) for m in pl.maps])
+        if pl.path == "u":
+            axis = np.concatenate(t["axis"]) if "axis" in t else np.zeros(0)
+            band = np.stack(t["rho"], axis=1) if "axis" in t else np.zeros(0)
+            arrays = (maps, _packed_extents(t["gext_v"], nu), _packed_extents(t["gext_w"], nu),
+                      _packed_extents(t["ext_v"], nu * ne), _packed_extents(t["ext_w"], nu * ne), f64(t["gc"]),
+                      f64(t["gr"]), f64(axis), f64(band), *tail)
+        else:
+            nb = len(t["kr"])
+            arrays = (maps, _packed_extents(t["gext"], nu * nv), _packed_extents(t["ext"], nu * nv * ne),
+                      f64(t["gc"]), f64(t["gr"]), f64(t["kc"]), f64(t["kr"]), _packed_extents(t["kext"], nb),
+                      np.ascontiguousarray(t["order"], dtype=np.int64),
+                      np.ascontiguousarray(t["starts"], dtype=np.int64), *tail)
+        pl.tables["kernel"] = (_power_rows(lat, pl)[0][0], arrays)
+    return pl.tables["kernel"]
 
 
-def _u_hits_compiled(lat: Lattice, pl: _Plan, qc: np.ndarray, qr: np.ndarray):
-    """The O(ū) path and its exact tests, compiled: node hits and beam hits (qid, i, j, k, x)."""
-    reach, *arrays = _u_kernel(lat, pl)
-    nodes, node_ends, beams, beam_ends = _compiled.u_path(
-        (*lat.counts, len(lat.nodes)), reach, *arrays, np.ascontiguousarray(qc, dtype=float),
-        np.ascontiguousarray(qr, dtype=float))
+def _hits_compiled(lat: Lattice, pl: _Plan, qc: np.ndarray, qr: np.ndarray):
+    """The O(ū) or O(ūv̄) path and its exact tests, compiled: node hits and beam hits (qid, i,
+    j, k, x)."""
+    reach, arrays = _path_kernel(lat, pl)
+    run = _compiled.u_path if pl.path == "u" else _compiled.uv_path
+    nodes, node_ends, beams, beam_ends = run((*lat.counts, len(lat.nodes)), reach, *arrays,
+                                             np.ascontiguousarray(qc, dtype=float),
+                                             np.ascontiguousarray(qr, dtype=float))
     return _with_qid(nodes, node_ends), _with_qid(beams, beam_ends)
 
 
@@ -712,8 +720,8 @@ def lattice_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, path: str | None = 
         pl = pl.forced.setdefault(path, _Plan(path, pl.maps, pl.elements))
     qc, qr = _to_frame(lat, c, r)
     fast = not graded and max(lat.counts) <= MAX_POWER_TABLE  # cached powers know no field
-    if pl.path == "u" and fast and compiled_fits(lat):
-        return *_u_hits_compiled(lat, pl, qc, qr), pl.path
+    if pl.path in ("u", "uv") and fast and compiled_fits(lat):
+        return *_hits_compiled(lat, pl, qc, qr), pl.path
     node_parts, beam_parts = [], []
     for s in range(0, len(qc), QUERY_BATCH):
         cand = _candidates(search, pl, qc[s:s + QUERY_BATCH], qr[s:s + QUERY_BATCH])
