@@ -455,13 +455,7 @@ static int u_run(const UPlan *p, const double *qc, const double *qr, Py_ssize_t 
             int64_t jlo, jhi, klo, khi;
             candidate_range(mv, p->gext_v + EXT_WIDTH * i, qv, slack, wraps, &jlo, &jhi);
             candidate_range(mw, p->gext_w + EXT_WIDTH * i, qw, slack, wraps, &klo, &khi);
-            if (jhi < jlo || khi < klo)
-                continue;
-            for (int64_t e = 0; e < ne; e++) {
-                candidate_range(mv, p->ext_v + EXT_WIDTH * (i * ne + e), qv, slack, wraps, er + 4 * e, er + 4 * e + 1);
-                candidate_range(mw, p->ext_w + EXT_WIDTH * (i * ne + e), qw, slack, wraps, er + 4 * e + 2,
-                                er + 4 * e + 3);
-            }
+            int ready = 0;
             for (int64_t j = jlo; j <= jhi; j++) {
                 double gv[3];
                 pull(p->rows[1] + 12 * (j + p->reach), p->gc + 3 * i, gv);
@@ -472,6 +466,13 @@ static int u_run(const UPlan *p, const double *qc, const double *qr, Py_ssize_t 
                     double d0 = g[0] - c[0], d1 = g[1] - c[1], d2 = g[2] - c[2], rr = gr + qr[t];
                     if (!(d0 * d0 + d1 * d1 + d2 * d2 <= rr * rr * (1 + touch) + touch * touch))
                         continue; /* the moved group ball misses the query */
+                    for (int64_t e = 0; e < ne && !ready; e++) { /* each element's own ranges, once per i */
+                        candidate_range(mv, p->ext_v + EXT_WIDTH * (i * ne + e), qv, slack, wraps, er + 4 * e,
+                                        er + 4 * e + 1);
+                        candidate_range(mw, p->ext_w + EXT_WIDTH * (i * ne + e), qw, slack, wraps, er + 4 * e + 2,
+                                        er + 4 * e + 3);
+                    }
+                    ready = 1;
                     for (int64_t e = 0; e < ne; e++) {
                         const int64_t *x = er + 4 * e;
                         if (j >= x[0] && j <= x[1] && k >= x[2] && k <= x[3] &&
