@@ -40,7 +40,7 @@ consumers:
 	@test -d $(GLTF_VALIDATOR) || { command -v npm >/dev/null && npm install -s --prefix $(VENV)/node gltf-validator; } \
 	  || echo "warning: could not install gltf-validator with npm (its tests will skip)"
 
-$(STAMP): pyproject.toml setup.py core/ple/io/_stlcodec.c core/ple/meshing/_assemble.c core/ple/meshing/_selfcheck.c | syslibs consumers
+$(STAMP): pyproject.toml setup.py core/ple/io/_stlcodec.c core/ple/meshing/_assemble.c core/ple/meshing/_selfcheck.c core/ple/queries/_rangefinder.c | syslibs consumers
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) is required (bpy 5.0.1 needs Python 3.11)"; exit 2; }
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install $(PIP_FLAGS) --upgrade pip

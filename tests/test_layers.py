@@ -24,7 +24,7 @@ OPTIONAL = {"scipy", "manifold3d", "PIL", "lib3mf", "bpy", "mathutils", "addon_u
             "resource"}  # resource: POSIX only (the runner falls back where it is missing)
 QUERY_DISPATCHER = "ple.queries.biq"
 # optional C extensions (setup.py), imported in a try
-COMPILED = {"ple.io._stlcodec", "ple.meshing._assemble", "ple.meshing._selfcheck"}
+COMPILED = {"ple.io._stlcodec", "ple.meshing._assemble", "ple.meshing._selfcheck", "ple.queries._rangefinder"}
 DOOR_NAMES = re.compile(r"\bple\.(cli|bench)\b|\bple_addon\b|\btools\.\w")  # also in strings (subprocess)
 WRITES = {"write_text", "write_bytes", "savez", "savez_compressed", "save", "tofile", "export", "dump"}
 

@@ -14,7 +14,8 @@ from ple.algebra.similarity import Rotation, Scaling, Screw, Similarity, Swirl, 
 from ple.cli.main import main
 from ple.model.lattice import Lattice
 from ple.program.sources import load_lattice
-from ple.queries import biq
+from ple.queries import biq, rangefinder
+from ple.queries.hits import _unique_rows, split_hits
 from ple.queries.rangefinder import cached_plan, row_candidates
 
 KINDS = ("translation", "rotation", "scaling", "screw", "swirl")
@@ -243,3 +244,42 @@ def test_cli_biq(tmp_path, capsys):
         assert main(["biq", "bcc", "--queries", str(tmp_path / "bad.npy"), "--out", str(bad_out)]) == 2
         assert not bad_out.exists()
     assert "queries" in capsys.readouterr().err
+
+
+def path_lattices(rng, path):
+    """Lattices on which a path runs (detected, or forced below a faster path): the cylindrical
+    case (its i-sheets culled by the common axis), the O(1) cases, placed ones, the thesis
+    presets and random lattices of every kind (for O(ū), those whose detected path is not the
+    general one); for O(ūv̄) also the wrapping cases and the warped preset."""
+    lats = [lattice_of("u"), lattice_of("1"), lattice_of("1-polar"),
+            load_lattice("thesis_cylindrical", ["nu=3", "nv=12", "nw=3"]), load_lattice("thesis_regular", ["n=4"]),
+            load_lattice("lil_cylindrical_coarse")]
+    if path == "uv":
+        lats += [lattice_of("wrap"), lattice_of("wrap-swirl"), load_lattice("thesis_warped", ["n=6"])]
+    placed = lattice_of("u")
+    placed.set_placement(Swirl(0.7, [1, 1, 0], [0.5, 0, 2], 1.3))
+    lats.append(placed)
+    while len(lats) < 16:
+        lat = random_lattice(rng, [KINDS[int(x)] for x in rng.integers(0, len(KINDS), 3)])
+        if path == "uv" or cached_plan(lat).path != "uv":
+            lats.append(lat)
+    return lats
+
+
+@pytest.mark.skipif(rangefinder._compiled is None, reason="the compiled RangeFinder is not built")
+@pytest.mark.parametrize("path", ["u", "uv"])
+def test_compiled_paths_equal_their_numpy_forms(monkeypatch, path):
+    """Bit for bit: the compiled O(ū) and O(ūv̄) paths' hits, row for row, equal their numpy
+    forms', and the naive path's."""
+    rng = np.random.default_rng(31 + len(path))
+    for lat in path_lattices(rng, path):
+        for scale in (0.5, 4.0):
+            c, r = random_queries(rng, lat, 40, scale)
+            got = rangefinder.lattice_hits(lat, c, r, path=path)
+            with monkeypatch.context() as m:
+                m.setattr(rangefinder, "_compiled", None)
+                want = rangefinder.lattice_hits(lat, c, r, path=path)
+            assert got[2] == want[2] == path
+            for a, b in zip(got[:2], want[:2]):
+                assert np.array_equal(_unique_rows(a), _unique_rows(b))
+            assert_same(biq.query(lat, c, r, "naive"), split_hits(len(c), got[0], got[1], path))

@@ -4,6 +4,7 @@ then distance tests) on random, curved and warped lattices, with and without a p
 
 from __future__ import annotations
 
+import argparse
 import json
 
 import numpy as np
@@ -12,8 +13,8 @@ from ple.algebra.similarity import Swirl
 from ple.bench.curved import curved_lattice
 from ple.cli.main import main
 from ple.program.sources import load_lattice
-from ple.queries import biq, pullback
-from ple.queries.hits import _unique_rows
+from ple.queries import biq, pullback, rangefinder
+from ple.queries.hits import _unique_rows, split_hits
 from ple.queries.rangefinder import cached_plan
 from test_biq import KINDS, brute_force, lattice_of, random_lattice, random_queries
 
@@ -140,3 +141,75 @@ def test_unique_rows_is_numpys_unique():
     for n in (0, 1, 2, 40, 3000):
         a = rng.integers(-2, 3, (n, 5))
         assert np.array_equal(_unique_rows(a), np.unique(a, axis=0).reshape(-1, 5))
+
+
+compiled = pytest.mark.skipif(rangefinder._compiled is None, reason="the compiled pulled-back query is not built")
+
+
+def numpy_form(lat, c, r, beams):
+    return split_hits(len(c), *pullback._query_numpy(lat, c, r, beams), "pullback")
+
+
+@compiled
+@pytest.mark.parametrize("beams", [False, True])
+def test_compiled_form_equals_the_numpy_form(beams):
+    """Bit for bit: the same rows, in the same order, with the same per-query ends, on random
+    steady lattices of every kind, curved and warped ones, placed or not, at many query sizes."""
+    rng = np.random.default_rng(21 + beams)
+    lats = [random_lattice(rng, kinds, counts=(4, 5, 6)) for kinds in
+            [(k, k, k) for k in KINDS] + [("screw", "swirl", "rotation"), ("swirl", "translation", "scaling")]]
+    lats += [curved_lattice(9), load_lattice("thesis_warped", {"n": 9}), lattice_of("wrap-swirl")]
+    placed = curved_lattice(7)
+    placed.set_placement(Swirl(0.4, [1, 0.5, 0], [2, 0, 1], 1.7))
+    for lat in [*lats, placed]:
+        assert pullback.fits(lat) and pullback.cached_pullback(lat).kernel is not None
+        for c, r in (random_queries(rng, lat, 50, 0.5), random_queries(rng, lat, 50, 4.0),
+                     near_node_queries(rng, lat, 50, 3.0), (np.zeros((0, 3)), np.zeros(0))):
+            got, want = pullback.query(lat, c, r, beams), numpy_form(lat, c, r, beams)
+            for name in ("nodes", "node_ends", "beams", "beam_ends"):
+                assert np.array_equal(getattr(got, name), getattr(want, name)), name
+            assert beams or len(got.beams) == 0
+
+
+@compiled
+def test_compiled_form_equals_brute_force_on_warped_lattices():
+    rng = np.random.default_rng(22)
+    for lat in (load_lattice("thesis_warped", {"n": 10}), curved_lattice(10)):
+        for c, r in (random_queries(rng, lat, 80, 2.0), near_node_queries(rng, lat, 80, 3.0)):
+            assert_nodes_match_brute_force(lat, c, r)
+            assert_beams_match_brute_force(lat, c, r)
+
+
+def test_the_numpy_form_answers_when_the_compiled_one_is_absent(monkeypatch):
+    lat = load_lattice("thesis_warped", {"n": 8})
+    rng = np.random.default_rng(23)
+    c, r = near_node_queries(rng, lat, 40, 3.0)
+    monkeypatch.setattr(rangefinder, "_compiled", None)
+    assert pullback.cached_pullback(lat).kernel is None
+    assert_beams_match_brute_force(lat, c, r)
+
+
+def test_results_are_a_sequence_of_per_query_views():
+    lat = curved_lattice(6)
+    rng = np.random.default_rng(24)
+    c, r = near_node_queries(rng, lat, 25, 3.0)
+    res = biq.query(lat, c, r)
+    listed = list(res)
+    assert len(res) == len(listed) == 25
+    for t in range(-25, 25):
+        assert np.array_equal(res[t].nodes, listed[t].nodes) and np.array_equal(res[t].beams, listed[t].beams)
+    assert [x.nodes.tolist() for x in res[3:9:2]] == [x.nodes.tolist() for x in listed[3:9:2]]
+    assert sum(len(x.nodes) for x in res) == len(res.nodes)
+    with pytest.raises(IndexError):
+        res[25]
+
+
+def test_kdtree_bench_row_finds_the_trees_hits(monkeypatch):
+    """``ple bench biq``'s KD-tree comparison: PLE (nodes only, nodes and beams) and the prebuilt
+    cKDTree with its exact tests give the same hits, on a small warped lattice."""
+    from ple.bench import biq as bench_biq
+
+    monkeypatch.setattr(bench_biq, "load_lattice", lambda name: load_lattice(name, {"n": 12}))
+    row = bench_biq.kdtree_row(argparse.Namespace(tree_lattice="thesis_warped", tree_queries=300, repeat=1, seed=5))
+    assert row["nodes_only"]["same_hits"] and row["nodes_and_beams"]["same_hits"]
+    assert row["node_hits"] > 0 and row["beam_hits"] > 0 and row["path"] == "pullback"

@@ -11,7 +11,8 @@
   ``biq.query(..., beams=False)`` and ``biq.query(...)``; 1,000 BIQs, half uniform in the
   bounds (radii 90–110 % of the mean radius), half at random nodes plus noise with 3× the
   node's radius. The tree's evaluation and build times are shown beside its query times; PLE
-  evaluates nothing (its first call builds the per-lattice plan, shown separately).
+  evaluates nothing (its first call builds the per-lattice plan, shown separately). ``form``
+  says whether the compiled pulled-back query answered (``ple.queries._rangefinder``) or numpy.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import time
 import numpy as np
 
 from ..program.sources import load_lattice
+from ..queries import pullback
 from ..queries.biq import query
 from ..queries.plans import forget
 from ._baselines import CentreTree, Elements, ElementTree, naive_hits
@@ -147,6 +149,8 @@ def kdtree_row(args) -> dict:
             "speedup_vs_tree": t_tree_both / t_both,
             "same_hits": _same(out["both"], el.node_index, el.beam_index, tbn, tbb),
         },
+        "form": "compiled" if pullback.cached_pullback(lat).kernel is not None else "numpy",
+        "load_average_1min": os.getloadavg()[0],
         "note": "times are the best of `repeat` warm runs of all queries; the tree's evaluation and build are "
                 "not in its query times, PLE's plan is not in its (first_call_ms: the first call, plan included)",
     }

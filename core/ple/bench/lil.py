@@ -3,9 +3,11 @@
 Cases (fine: 2 balls, 14 beam-patterns; coarse: 1 ball, 3 beam-patterns):
 regular 75³ vs regular 9³, cylindrical 32×128×128 vs 5×17×9, regular 64³ vs semi-regular 8³.
 ``--thesis-sample`` runs thesis §7.4's own method beside ours: two BIQs per valid fine beam
-(one per end ball) against the coarse lattice, every RangeFinder path and the naive one, on a
-process pool (``--workers``), timed on a random sample of fine beams and extrapolated to all of
-them; per BIQ it is set beside Table 7.1's time × 8 threads / (2 × beams).
+(one per end ball) against the coarse lattice, every RangeFinder path (the thesis' O(1), O(ū),
+O(ūv̄), and the pulled-back query, ``ple.queries.pullback``, which answers the same general case
+as O(ūv̄)) and the naive one, on a process pool (``--workers``), timed on a random sample of fine
+beams and extrapolated to all of them (``--thesis-full`` paths on every beam); per BIQ it is set
+beside Table 7.1's time × 8 threads / (2 × beams).
 ``--big`` also streams a LiL over a fine lattice of at least 10⁸ beams in a subprocess and
 reports its peak memory (the child's VmHWM; its ru_maxrss is reported too).
 """
@@ -28,6 +30,7 @@ from ..filters.base import FilteredLattice
 from ..filters.implicit import FourierField, ImplicitFilter, TPMSField, sample_grid
 from ..filters.lil import lil
 from ..program.sources import load_lattice
+from ..queries import pullback
 from ..queries.biq import query
 from ..queries.rangefinder import PATH_ORDER, cached_plan, lattice_hits
 from ._timing import best_of
@@ -84,7 +87,8 @@ def add_arguments(p) -> None:
                    help="fine beams timed by the thesis' method, two BIQs each (default 20000; 0 skips)")
     p.add_argument("--thesis-naive-sample", type=int, default=200, help="fine beams timed on the naive path")
     p.add_argument("--thesis-full", default="1",
-                   help="paths run on every fine beam, not a sample (comma list of 1,u,uv; default 1; '' none)")
+                   help="paths run on every fine beam, not a sample (comma list of 1,u,uv,pullback; default 1; "
+                        "'' none)")
     p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1), help="processes (default 2)")
     p.add_argument("--seed", type=int, default=2024)
 
@@ -242,10 +246,12 @@ def _biq_chunk(job) -> tuple[float, float, int]:
     what one thread of its own would take, wall seconds include waiting for a core."""
     coarse_name, cparams, c, r, path = job
     coarse = load_lattice(coarse_name, cparams)
-    if path == "naive":  # every coarse element per query (ple.biq.query's naive method)
-        query(coarse, c[:1], r[:1], method="naive")
+    if path in ("naive", "pullback"):  # every coarse element per query, or the pulled-back query
+        run = (lambda c, r: query(coarse, c, r, method="naive")) if path == "naive" else (
+            lambda c, r: pullback.query(coarse, c, r))
+        run(c[:1], r[:1])
         t0, p0 = time.perf_counter(), time.process_time()
-        found = query(coarse, c, r, method="naive")
+        found = run(c, r)
         sec, cpu = time.perf_counter() - t0, time.process_time() - p0
         return sec, cpu, sum(bool(len(q.nodes) or len(q.beams)) for q in found)
     lattice_hits(coarse, c[:1], r[:1], path=path)
@@ -272,7 +278,8 @@ def thesis_method_rows(sample: int, naive_sample: int, workers: int, seed: int, 
             biqs = 2 * beams
             ours = {}
             best = cached_plan(coarse).path
-            for path in list(PATH_ORDER[PATH_ORDER.index(best):]) + ["naive"]:
+            general = ["pullback"] if pullback.fits(coarse) else []
+            for path in list(PATH_ORDER[PATH_ORDER.index(best):]) + general + ["naive"]:
                 if path == "naive":  # the same beams' first ones, both ends
                     m = min(naive_sample, len(idx) // 2)
                     pc = np.concatenate([c[:m], c[len(idx) // 2:len(idx) // 2 + m]])

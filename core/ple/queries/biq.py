@@ -18,6 +18,7 @@ or even found as a candidate.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,9 +35,10 @@ NAIVE_QUERY_BATCH = 256
 
 
 # ----- public API ------------------------------------------------------------------------------
-def query(lat: Lattice, centers, radii, method: str = "auto", beams: bool = True) -> list[BIQResult]:
+def query(lat: Lattice, centers, radii, method: str = "auto", beams: bool = True) -> Sequence[BIQResult]:
     """Per query ball, the nodes and beams of ``lat`` it interferes with (see module doc);
-    with ``beams=False`` the nodes only."""
+    with ``beams=False`` the nodes only. A sequence of BIQResult, one per ball (``BIQResults``
+    on the steady paths: flat hit rows, each query's result made when read)."""
     c, r = check_queries(centers, radii)
     lat.validate()
     if method not in ("auto", "naive", "rangefinder"):
@@ -52,8 +54,7 @@ def query(lat: Lattice, centers, radii, method: str = "auto", beams: bool = True
         node_hits, beam_hits = _naive_hits(lat, c, r, beams)
         path = "naive"
     elif pullback.fits(lat) and (not beams or cached_plan(lat).path == "uv"):
-        node_hits, beam_hits = pullback.query(lat, c, r, beams)
-        path = "pullback"
+        return _kept(lat, pullback.query(lat, c, r, beams))
     else:
         node_hits, beam_hits, path = lattice_hits(lat, c, r)
         if not beams:
@@ -61,7 +62,7 @@ def query(lat: Lattice, centers, radii, method: str = "auto", beams: bool = True
     return _kept(lat, split_hits(len(c), node_hits, beam_hits, path))
 
 
-def _nodes_only(results: list[BIQResult], beams: bool) -> list[BIQResult]:
+def _nodes_only(results: Sequence[BIQResult], beams: bool) -> Sequence[BIQResult]:
     if beams:
         return results
     return [BIQResult(x.nodes, x.beams[:0], x.path) for x in results]
@@ -78,7 +79,7 @@ def any_hit(lat: Lattice, centers, radii) -> np.ndarray:
     return lattice_any(lat, c, r)
 
 
-def _group_map_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, method: str) -> list[BIQResult]:
+def _group_map_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, method: str) -> Sequence[BIQResult]:
     """Groups placed by a map: the Möbius RangeFinder (``ple.queries.mobius_rangefinder``) where
     its pre-image lattice exists, with the naive path for the queries it leaves; otherwise every
     element is tested, O(elements) per query, and the path names why."""
@@ -96,7 +97,7 @@ def _group_map_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, method: str) -> 
     return split_hits(len(c), node_hits, beam_hits, f"mobius ({path})")
 
 
-def _kept(lat: Lattice, results: list[BIQResult]) -> list[BIQResult]:
+def _kept(lat: Lattice, results: Sequence[BIQResult]) -> Sequence[BIQResult]:
     """Hits of a filtered lattice: a node the filter removed is never a hit, nor a beam with a
     removed end (thesis §9); the filter is asked once for all hits of all queries."""
     if lat.filter is None or not results:

@@ -3,6 +3,7 @@ lists; shared by every query backend and the dispatcher in ``ple.queries.biq``."
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,18 +43,47 @@ def check_queries(centers, radii) -> tuple[np.ndarray, np.ndarray]:
     return c, r
 
 
-def split_hits(q: int, node_hits, beam_hits, path: str) -> list[BIQResult]:
+class BIQResults(Sequence):
+    """The BIQResult of every query ball, over flat hit rows: ``nodes`` (N, 4) and ``beams``
+    (M, 4) int64, each query's rows contiguous, sorted and distinct, ``node_ends`` /
+    ``beam_ends`` (q,) the end of each query's rows. A query's BIQResult (views of the flat rows)
+    is made when it is asked for, so answering many queries costs no Python object per query."""
+
+    __slots__ = ("nodes", "beams", "node_ends", "beam_ends", "path")
+
+    def __init__(self, nodes: np.ndarray, node_ends: np.ndarray, beams: np.ndarray, beam_ends: np.ndarray,
+                 path: str):
+        self.nodes, self.node_ends, self.beams, self.beam_ends, self.path = nodes, node_ends, beams, beam_ends, path
+
+    def __len__(self) -> int:
+        return len(self.node_ends)
+
+    def __getitem__(self, t):
+        if isinstance(t, slice):
+            return [self[x] for x in range(*t.indices(len(self)))]
+        q = len(self)
+        if not -q <= t < q:
+            raise IndexError(f"query {t} of {q}")
+        t %= q
+        n0 = self.node_ends[t - 1] if t else 0
+        b0 = self.beam_ends[t - 1] if t else 0
+        return BIQResult(self.nodes[n0:self.node_ends[t]], self.beams[b0:self.beam_ends[t]], self.path)
+
+    def __iter__(self):
+        nb = [0, *self.node_ends.tolist()]
+        bb = [0, *self.beam_ends.tolist()]
+        for t in range(len(self)):
+            yield BIQResult(self.nodes[nb[t]:nb[t + 1]], self.beams[bb[t]:bb[t + 1]], self.path)
+
+
+def split_hits(q: int, node_hits, beam_hits, path: str) -> BIQResults:
     """Turn hit arrays (qid, i, j, k, x) into per-query sorted BIQResults."""
-    out = []
     parts = []
     for hits in (node_hits, beam_hits):
         hits = _unique_rows(np.asarray(hits, dtype=np.int64).reshape(-1, 5))
-        bounds = np.searchsorted(hits[:, 0], np.arange(q + 1))
-        parts.append((hits[:, 1:], bounds))
-    (nh, nb), (bh, bb) = parts
-    for t in range(q):
-        out.append(BIQResult(nh[nb[t]:nb[t + 1]], bh[bb[t]:bb[t + 1]], path))
-    return out
+        parts.append((np.ascontiguousarray(hits[:, 1:]), np.searchsorted(hits[:, 0], np.arange(1, q + 1))))
+    (nh, ne), (bh, be) = parts
+    return BIQResults(nh, ne, bh, be, path)
 
 
 def _unique_rows(hits: np.ndarray) -> np.ndarray:

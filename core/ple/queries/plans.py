@@ -7,8 +7,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TypeVar
 
-import numpy as np
-
 from ..model.lattice import Lattice
 
 PLANS_ATTR = "_query_plans"  # slot on the Lattice object: {backend: (key, plan, keepalive)}
@@ -16,15 +14,15 @@ T = TypeVar("T")
 
 
 def lattice_key(lat: Lattice) -> tuple:
-    """Everything a plan depends on: counts, similarities, template balls, beam-patterns, the
-    BeCOTS description and the group map (their objects are kept alive with the plan, so their
-    ids stay unique)."""
-    mats = tuple(np.round(s.matrix, 15).tobytes() for s in (lat.U, lat.V, lat.W, lat.placement))
+    """Everything a plan depends on: counts, similarities (frozen values: equal parameters, equal
+    keys), template balls, beam-patterns, the BeCOTS description and the group map (their
+    objects are kept alive with the plan, so their ids stay unique)."""
     info = lat.becots
     becots = (id(info), id(getattr(info, "field", None)), getattr(info, "counts", None),
               getattr(info, "closed", None), id(getattr(info, "stack", None)))
-    return (lat.counts, mats, lat.template_centers.tobytes(), lat.template_radii.tobytes(),
-            tuple((b.n1, b.n2, b.di, b.dj, b.dk) for b in lat.beams), becots, id(lat.group_map))
+    return (lat.counts, (lat.U, lat.V, lat.W, lat.placement), lat.template_centers.tobytes(),
+            lat.template_radii.tobytes(), tuple((b.n1, b.n2, b.di, b.dj, b.dk) for b in lat.beams), becots,
+            id(lat.group_map))
 
 
 def cached(lat: Lattice, backend: str, build: Callable[[Lattice], T]) -> T:

@@ -20,6 +20,12 @@ of a or of b (the radius of the enclosing ball, ``enclosing_ball``); a query bal
 meets a beam therefore has an end centre within ρ + R of y, R the largest such radius of the
 slab's beams. The node search runs on node centres with that margin, and the candidate beams
 are the beams at the nodes found, tested exactly.
+
+Two forms give the same hits row for row (tested): the compiled one (``_rangefinder.pullback``,
+all query balls in one call) and numpy (``_query_numpy``). The compiled one also skips clearance
+look-ups that cannot matter: the distance to the slab's centres is 1-Lipschitz, and W**-k moves
+the pulled centre by s**-k |W**-1 c - c| from k to k + 1, so after a clearance looked up at k0,
+every k whose travelled path plus reach stays below it has no node within reach.
 """
 
 from __future__ import annotations
@@ -30,12 +36,27 @@ import numpy as np
 
 from ..algebra.elements import TOUCH_TOL, ball_beam_interfere, enclosing_ball
 from ..model.lattice import Lattice
+from .hits import BIQResults, split_hits
 from .plans import cached
-from .rangefinder import _expand, _frame_balls, _to_frame, ball_extents, cached_plan, candidate_range
+from .rangefinder import (
+    MAX_WRAP_STEPS,
+    RANGE_SLACK,
+    _compiled,
+    _expand,
+    _frame_balls,
+    _packed_extents,
+    _packed_map,
+    _to_frame,
+    ball_extents,
+    cached_plan,
+    candidate_range,
+    compiled_fits,
+)
 
 MAX_SLAB_BALLS = 1 << 21  # base-slab balls × W powers kept by one plan; larger lattices use lattice_hits
 MARGIN = 1e-9  # relative widening of search radii: rounding never loses a touching element
 MAX_CLEARANCE_CELLS = 1 << 20  # cells of the base slab's clearance grid
+CLEARANCE_CELLS = 8  # clearances beyond this many cells are stored as this many
 
 
 @dataclass
@@ -60,20 +81,24 @@ class _Plan:
     grow: float
     pats: np.ndarray  # (P, 5) n1, n2, di, dj, dk
     clearance: _Clearance
+    kernel: tuple | None = None  # the compiled form's arrays (``_kernel_arrays``), None: the numpy form
 
 
 @dataclass
 class _Clearance:
     """A lower bound on the distance from any point to the base slab's node centres: a grid over
-    their bounding box (corner ``lo``, cell ``size``, ``shape``) holding per cell the distance
-    from its centre to the nearest node centre minus the cell's half-diagonal. For a point y and
-    its projection y' onto the box, every centre s in the box has |y - s| >= |y' - s| (the box is
-    convex) >= the bound of the cell holding y'."""
+    their bounding box (corner ``lo``, cell ``size``, ``shape``, far corner ``hi``) holding per
+    cell the distance from its centre to the nearest node centre minus the cell's half-diagonal,
+    rounded down to whole ``step``s (one byte a cell: the grid stays in cache). For a point y and
+    its projection y' onto the grid's box, every centre s in the box has |y - s|² >= |y - y'|² +
+    |y' - s|² (the box is convex) and |y' - s| >= the bound of the cell holding y'."""
 
     lo: np.ndarray
+    hi: np.ndarray
     size: float
+    step: float
     shape: tuple
-    bound: np.ndarray  # (cells,) flat, C order
+    bound: np.ndarray  # (cells,) uint8, C order: the bound in steps
 
     @classmethod
     def of(cls, pts: np.ndarray) -> _Clearance:
@@ -88,16 +113,23 @@ class _Clearance:
         axes = [lo[a] + (np.arange(shape[a]) + 0.5) * size for a in range(3)]
         centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
         half = 0.5 * size * np.sqrt(3.0)
-        dist = tree.query(centres, distance_upper_bound=8 * size)[0]  # inf beyond: a bound all the same
-        bound = np.where(np.isfinite(dist), dist, 8 * size) - half
-        return cls(lo, size, shape, bound)
+        cap, step = CLEARANCE_CELLS * size, CLEARANCE_CELLS * size / 255
+        dist = tree.query(centres, distance_upper_bound=cap)[0]  # inf beyond: a bound all the same
+        bound = np.maximum(np.where(np.isfinite(dist), dist, cap) - half, 0.0)
+        steps = np.minimum(np.floor(bound / step), 255)
+        steps -= steps * step > bound  # rounding of the division never raises a bound
+        return cls(lo, lo + np.array(shape) * size, size, step, shape, steps.astype(np.uint8))
 
     def lower_bound(self, y: np.ndarray) -> np.ndarray:
-        """(m,) lower bounds on the distance from points y (m, 3) to the nearest node centre."""
-        cell = np.floor((y - self.lo) / self.size).astype(np.int64)
-        for a in range(3):
+        """(m,) lower bounds on the distance from points y (m, 3) to the nearest node centre,
+        computed as the compiled form does."""
+        cell = np.floor((y - self.lo) / self.size)
+        for a in range(3):  # clamped as floats: a far point's cell index never overflows
             np.clip(cell[:, a], 0, self.shape[a] - 1, out=cell[:, a])
-        return self.bound[(cell[:, 0] * self.shape[1] + cell[:, 1]) * self.shape[2] + cell[:, 2]]
+        cell = cell.astype(np.int64)
+        b = self.bound[(cell[:, 0] * self.shape[1] + cell[:, 1]) * self.shape[2] + cell[:, 2]] * self.step
+        d = y - np.minimum(np.maximum(y, self.lo), self.hi)  # outside the box: its distance adds
+        return np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2] + b * b)
 
 
 def fits(lat: Lattice) -> bool:
@@ -152,8 +184,31 @@ def build(lat: Lattice) -> _Plan:
             cb, rb = slab[db][0][ends], slab[db][1][ends]
             beam_r = max(beam_r, float(np.max(np.maximum(enclosing_ball(ca, ra, cb, rb)[1], np.maximum(ra, rb)))))
     fw = lat.W.factor
-    return _Plan((mu, mv, mw), ext_w, ext_v, ext_u, _inverse_rows(lat.W, nw), _inverse_rows(lat.V, nv), slab,
-                 float(r0.max()), beam_r, max(1.0, fw ** (nw - 1)), pats, _Clearance.of(c0.reshape(-1, 3)))
+    pl = _Plan((mu, mv, mw), ext_w, ext_v, ext_u, _inverse_rows(lat.W, nw), _inverse_rows(lat.V, nv), slab,
+               float(r0.max()), beam_r, max(1.0, fw ** (nw - 1)), pats, _Clearance.of(c0.reshape(-1, 3)))
+    if compiled_fits(lat):
+        pl.kernel = _kernel_arrays(pl)
+    return pl
+
+
+def _kernel_arrays(pl: _Plan) -> tuple:
+    """The plan as the compiled form reads it: maps, extents, inverse powers of W and V, the
+    slab under each W power (balls (S, nu, nv, nn, 4)) with a slot per power, the clearance
+    bounds and the beam-patterns."""
+    reach = max(abs(d) for d in pl.slab)
+    slot = np.full(2 * reach + 1, -1, np.int64)
+    balls = []
+    for s, (d, (c, r)) in enumerate(sorted(pl.slab.items())):
+        slot[d + reach] = s
+        balls.append(np.concatenate([c, r[..., None]], axis=-1))
+    nn = pl.slab[0][1].shape[2]
+    (wm, wf), (vm, vf) = pl.w_inv, pl.v_inv
+    return (np.concatenate([_packed_map(m) for m in pl.maps]), _packed_extents(pl.ext_w, 1),
+            _packed_extents(pl.ext_v, 1), _packed_extents(pl.ext_u, nn), np.ascontiguousarray(wm.reshape(-1, 12)),
+            np.ascontiguousarray(wf, dtype=float), np.ascontiguousarray(vm.reshape(-1, 12)),
+            np.ascontiguousarray(vf, dtype=float),
+            np.ascontiguousarray(np.stack(balls)), slot, pl.clearance.bound,
+            np.ascontiguousarray(pl.pats, dtype=np.int64))
 
 
 def cached_pullback(lat: Lattice) -> _Plan:
@@ -161,21 +216,48 @@ def cached_pullback(lat: Lattice) -> _Plan:
 
 
 def _pull(rows: tuple, p: np.ndarray, x: np.ndarray, r: np.ndarray):
-    """Apply S**-p (rows from ``_inverse_rows``) to balls (x (m, 3), r (m,))."""
+    """Apply S**-p (rows from ``_inverse_rows``) to balls (x (m, 3), r (m,)), each coordinate
+    summed ((m0 x0 + m1 x1) + m2 x2) + m3 as the compiled form does."""
     m, f = rows[0][p], rows[1][p]
-    return np.einsum("nab,nb->na", m[:, :, :3], x) + m[:, :, 3], r * f
+    return (m[:, :, 0] * x[:, None, 0] + m[:, :, 1] * x[:, None, 1] + m[:, :, 2] * x[:, None, 2] + m[:, :, 3],
+            r * f)
 
 
-def query(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True):
-    """Hits (qid, i, j, k, n) of nodes and (qid, i, j, k, pattern) of beams (empty when
-    ``beams`` is False), int64 arrays (N, 5), for query balls c (q, 3), r (q,) in world
-    coordinates. Requires ``fits(lat)``."""
+def query(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True) -> BIQResults:
+    """Per query ball (c (q, 3), r (q,), world coordinates), its node hits and, unless ``beams``
+    is False, its beam hits (path "pullback"): the compiled form when it is built and its keys
+    fit in int64, else the numpy form (the same hits, tested). Requires ``fits(lat)``."""
+    pl = cached_pullback(lat)
+    if pl.kernel is None:
+        return split_hits(len(c), *_query_numpy(lat, c, r, beams), "pullback")
+    qc, qr = _to_frame(lat, c, r)
+    h = _margin(pl, beams)
+    cl = pl.clearance
+    params = np.array([h, h * pl.grow, pl.beam_r * (1 + MARGIN), 1 + MARGIN, TOUCH_TOL, RANGE_SLACK, MAX_WRAP_STEPS,
+                       *cl.lo, *cl.hi, cl.size, cl.step, *cl.shape])
+    nodes, node_ends, beam_rows, beam_ends = _compiled.pullback(
+        (*lat.counts, len(lat.nodes)), *pl.kernel, params, np.ascontiguousarray(qc, dtype=float),
+        np.ascontiguousarray(qr, dtype=float), beams)
+    as_rows = lambda b: np.frombuffer(b, np.int64).reshape(-1, 4)  # noqa: E731
+    return BIQResults(as_rows(nodes), np.frombuffer(node_ends, np.int64), as_rows(beam_rows),
+                      np.frombuffer(beam_ends, np.int64), "pullback")
+
+
+def _margin(pl: _Plan, beams: bool) -> float:
+    """Slab-frame margin around node centres: the largest node radius, or with beams the
+    largest enclosing radius of a beam when that is larger."""
+    return max(pl.node_r, pl.beam_r if beams and len(pl.pats) else 0.0)
+
+
+def _query_numpy(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True):
+    """The numpy form of ``query``: hits (qid, i, j, k, n) of nodes and (qid, i, j, k, pattern)
+    of beams (empty when ``beams`` is False), int64 arrays (N, 5), unsorted."""
     pl = cached_pullback(lat)
     mu, mv, mw = pl.maps
     nu, nv, nw = lat.counts
     nn = len(lat.nodes)
     qc, qr = _to_frame(lat, c, r)
-    h = max(pl.node_r, pl.beam_r if beams and len(pl.pats) else 0.0)  # slab-frame margin around node centres
+    h = _margin(pl, beams)
     # 1. k: W-map of the query, widened by the margin at the largest scale of W**k
     lo, hi = candidate_range(mw, pl.ext_w, ball_extents(mw, qc, (qr + h * pl.grow) * (1 + MARGIN)), (len(qc),))
     qid, k = _expand(lo, hi)
@@ -195,7 +277,7 @@ def query(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True):
     s, jj = row[r2], j[r2]  # s: rows of (y, rho), the query in the base slab's frame
     c0, r0 = pl.slab[0]
     d = c0[i, jj, n] - y[s]
-    dist2 = np.einsum("na,na->n", d, d)
+    dist2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
     rq = rho[s]
     rr = rq + r0[i, jj, n]
     hit = dist2 <= rr * rr * (1 + TOUCH_TOL) + TOUCH_TOL * TOUCH_TOL

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..algebra.elements import ball_ball_interfere, ball_beam_interfere, beam_distance, enclosing_ball
+from ..algebra.elements import TOUCH_TOL, ball_ball_interfere, ball_beam_interfere, beam_distance, enclosing_ball
 from ..algebra.similarity import Similarity, commute
 from ..errors import PleError
 from ..model.lattice import Lattice
@@ -48,6 +48,12 @@ BLOCK = 8  # W-rows per block side in the "uv" path's culling level
 QUERY_BATCH = 1 << 15
 MAX_VW_TABLE = 1 << 18  # largest V×W table of the O(ū) path kept per lattice
 MAX_POWER_TABLE = 1 << 20  # longest direction whose powers are cached for the exact tests
+MAX_KEY = 1 << 62  # hit keys ((i nv + j) nw + k) · max(nn, patterns) of the compiled forms stay below
+
+try:  # the compiled forms (setup.py, optional): every query at once, the numpy forms' hits
+    from . import _rangefinder as _compiled
+except ImportError:  # not built (no C compiler): numpy
+    _compiled = None
 
 
 # ----- normalized maps of one incremental similarity -----------------------------------------
@@ -255,6 +261,7 @@ class _Plan:
     maps: tuple  # RowMaps of U, V, W
     elements: int
     tables: dict = field(default_factory=dict)  # template extents, filled on first use
+    forced: dict = field(default_factory=dict)  # plans of slower paths forced on this lattice, by path
 
 
 def _active(lat: Lattice) -> list[bool]:
@@ -554,6 +561,90 @@ def cached_plan(lat: Lattice) -> _Plan:
     return cached(lat, "rangefinder", plan)
 
 
+# ----- the compiled forms (``_rangefinder.c``) -------------------------------------------------------
+# the compiled form's layout of one row map (``_rangefinder.c``: M_*), MAP_WIDTH doubles
+MAP_WIDTH = 32
+EXT_KEYS = ("t", "d", "r")  # the order of a template's extents, two doubles each
+
+
+def _packed_map(m: RowMap) -> np.ndarray:
+    """A row map as the compiled forms read it: count, T-map (flag, a, origin·a, |a|), D-map
+    (flag, log d, F), R-map (flag, θ, axis, point, ref, axis × ref, period)."""
+    row = np.zeros(MAP_WIDTH)
+    row[0] = m.count
+    if m.a is not None:
+        row[1], row[2:5], row[5], row[6] = 1.0, m.a, m.origin @ m.a, np.linalg.norm(m.a)
+    if m.log_d is not None:
+        row[7], row[8], row[9:12] = 1.0, m.log_d, m.fixed
+    if m.theta is not None:
+        row[12], row[13], row[14:17], row[17:20], row[20:23] = 1.0, m.theta, m.axis, m.point, m.ref
+        row[23:26], row[26] = np.cross(m.axis, m.ref), m.period
+    return row
+
+
+def _packed_extents(ext: dict, count: int) -> np.ndarray:
+    """(count, 6) template extents [t_s, t_e, d_s, d_e, r_s, r_e] (zeros for a map absent)."""
+    out = np.zeros((count, 2 * len(EXT_KEYS)))
+    for col, key in enumerate(EXT_KEYS):
+        if key in ext:
+            out[:, 2 * col], out[:, 2 * col + 1] = (np.reshape(x, -1) for x in ext[key])
+    return out
+
+
+
+def compiled_fits(lat: Lattice) -> bool:
+    """Is the compiled form built, and do its hit keys ((i nv + j) nw + k) · max(nodes,
+    patterns) + x stay in int64 for ``lat``?"""
+    nu, nv, nw = lat.counts
+    return _compiled is not None and nu * nv * nw * max(len(lat.nodes), len(lat.beams), 1) < MAX_KEY
+
+
+def _path_kernel(lat: Lattice, pl: _Plan) -> tuple:
+    """The O(ū) or O(ūv̄) path's tables as ``_rangefinder.u_path`` / ``uv_path`` read them:
+    (reach of the cached powers, arrays), cached on the plan."""
+    if "kernel" not in pl.tables:
+        t = _templates(lat, pl)
+        nu, nv = lat.counts[:2]
+        ne = pl.elements
+        f64 = lambda x: np.ascontiguousarray(x, dtype=float)  # noqa: E731
+        powers = [f64(x) for _, m, f in _power_rows(lat, pl) for x in (m.reshape(-1, 12), f)]
+        tail = (*powers, f64(lat.template_centers), f64(lat.template_radii), _pattern_table(lat),
+                np.array([TOUCH_TOL, RANGE_SLACK, MAX_WRAP_STEPS], dtype=float))
+        maps = np.concatenate([_packed_map(m) for m in pl.maps])
+        if pl.path == "u":
+            axis = np.concatenate(t["axis"]) if "axis" in t else np.zeros(0)
+            band = np.stack(t["rho"], axis=1) if "axis" in t else np.zeros(0)
+            arrays = (maps, _packed_extents(t["gext_v"], nu), _packed_extents(t["gext_w"], nu),
+                      _packed_extents(t["ext_v"], nu * ne), _packed_extents(t["ext_w"], nu * ne), f64(t["gc"]),
+                      f64(t["gr"]), f64(axis), f64(band), *tail)
+        else:
+            nb = len(t["kr"])
+            arrays = (maps, _packed_extents(t["gext"], nu * nv), _packed_extents(t["ext"], nu * nv * ne),
+                      f64(t["gc"]), f64(t["gr"]), f64(t["kc"]), f64(t["kr"]), _packed_extents(t["kext"], nb),
+                      np.ascontiguousarray(t["order"], dtype=np.int64),
+                      np.ascontiguousarray(t["starts"], dtype=np.int64), *tail)
+        pl.tables["kernel"] = (_power_rows(lat, pl)[0][0], arrays)
+    return pl.tables["kernel"]
+
+
+def _hits_compiled(lat: Lattice, pl: _Plan, qc: np.ndarray, qr: np.ndarray):
+    """The O(ū) or O(ūv̄) path and its exact tests, compiled: node hits and beam hits (qid, i,
+    j, k, x)."""
+    reach, arrays = _path_kernel(lat, pl)
+    run = _compiled.u_path if pl.path == "u" else _compiled.uv_path
+    nodes, node_ends, beams, beam_ends = run((*lat.counts, len(lat.nodes)), reach, *arrays,
+                                             np.ascontiguousarray(qc, dtype=float),
+                                             np.ascontiguousarray(qr, dtype=float))
+    return _with_qid(nodes, node_ends), _with_qid(beams, beam_ends)
+
+
+def _with_qid(rows: bytes, ends: bytes) -> np.ndarray:
+    """Kernel rows (m, 4) with per-query ends as (qid, i, j, k, x) rows (m, 5)."""
+    rows, ends = np.frombuffer(rows, np.int64).reshape(-1, 4), np.frombuffer(ends, np.int64)
+    qid = np.repeat(np.arange(len(ends)), np.diff(ends, prepend=0))
+    return np.concatenate([qid[:, None], rows], axis=1)
+
+
 # ----- exact tests on candidates --------------------------------------------------------------------
 def _power_rows(lat: Lattice, pl: _Plan):
     """Cached rows [S**p]_{3x4} and factors s**p of U, V, W for p in [-reach, count + reach)."""
@@ -572,8 +663,8 @@ def _balls_fast(lat: Lattice, pl: _Plan, idx: np.ndarray):
     c = lat.template_centers[idx[:, 3]]
     r = lat.template_radii[idx[:, 3]].copy()
     for col, (reach, rows, fac) in enumerate(_power_rows(lat, pl)):
-        m = rows[idx[:, col] + reach]
-        c = (m[:, :, :3] @ c[:, :, None])[:, :, 0] + m[:, :, 3]
+        m = rows[idx[:, col] + reach]  # ((m0 x0 + m1 x1) + m2 x2) + m3 per row, as the compiled form
+        c = m[:, :, 0] * c[:, None, 0] + m[:, :, 1] * c[:, None, 1] + m[:, :, 2] * c[:, None, 2] + m[:, :, 3]
         r *= fac[idx[:, col] + reach]
     return c, r
 
@@ -626,13 +717,15 @@ def lattice_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, path: str | None = 
         if path not in PATH_ORDER or PATH_ORDER.index(path) < PATH_ORDER.index(pl.path):
             raise PleError(f"path {path!r} is not available on this lattice (detected {pl.path!r}; "
                            f"only slower paths {PATH_ORDER[PATH_ORDER.index(pl.path):]} can be forced)")
-        pl = _Plan(path, pl.maps, pl.elements)
+        pl = pl.forced.setdefault(path, _Plan(path, pl.maps, pl.elements))
     qc, qr = _to_frame(lat, c, r)
+    fast = not graded and max(lat.counts) <= MAX_POWER_TABLE  # cached powers know no field
+    if pl.path in ("u", "uv") and fast and compiled_fits(lat):
+        return *_hits_compiled(lat, pl, qc, qr), pl.path
     node_parts, beam_parts = [], []
     for s in range(0, len(qc), QUERY_BATCH):
         cand = _candidates(search, pl, qc[s:s + QUERY_BATCH], qr[s:s + QUERY_BATCH])
         cand[:, 0] += s
-        fast = not graded and max(lat.counts) <= MAX_POWER_TABLE  # cached powers know no field
         nh, bh = _exact(lat, cand, qc, qr, pl if fast else None)
         node_parts.append(nh)
         beam_parts.append(bh)
