@@ -964,9 +964,9 @@ class _UnionQueue:
         while self.pending:
             c = self.pending.popleft()
             rg = self._rings(c)
-            pieces = None if self.report is None else _split_pieces(self.tess, self.ev, self.report, c, rg, self.cache)
-            if pieces is not None:
-                self.done[id(c)] = (c, pieces)
+            if self.report is not None and len(c.hubs) > 1:
+                self._flush()
+                self._settle_split(c, rg)
                 continue
             key, anchor, ring_keys = self.cache.key(c, self.ev.center, self.ev.radius, self.bn, rg)
             piece = self.cache.get(key, anchor, ring_keys, rg)
@@ -1015,59 +1015,74 @@ class _UnionQueue:
 
     def _settle(self, c, rg) -> None:
         """One cluster's piece: a copy, or its union, grown while it touches clean junctions."""
-        bn, idx, pattern = self.bn, self.idx, self.pattern
         for _ in range(MAX_CLUSTER_GROWTH):
-            key, anchor, ring_keys = self.cache.key(c, self.ev.center, self.ev.radius, bn, rg)
-            piece = self.cache.get(key, anchor, ring_keys, rg)
-            if piece is not None:
-                break
-            try:
-                piece = unite_stoppable(c, self.ev.center, self.ev.radius, bn, rg, self.tess.grid)
-                self.cache.put(key, anchor, ring_keys, rg, piece)
-                break
-            except RingTouchedError as exc:
-                others = (list(self.pending) + [d for d, _ in self.unsettled if id(d) not in self.gone]
-                          + [d for d, _ in self.done.values()])
-                c, merged = _grown(c, [int(bn[j, e]) for j, e in exc.ring], bn, others)
-                gone = {id(p) for p in merged}
-                self.gone |= gone
-                self.pending = deque(q for q in self.pending if id(q) not in gone)
-                for g in gone:
-                    self.rings_of.pop(g, None)
-                    self.done.pop(g, None)
-                self.tess.exclude_more(idx[c.hubs], np.concatenate([idx[bn[c.beams, 0], :3],
-                                                                    pattern[c.beams, None]], axis=1))
-                rg = _cluster_rings(self.tess, idx, bn, pattern, [c])[0]
-        else:
-            raise PleError(f"an unclean cluster of {len(c.hubs):,} hubs and {len(c.beams):,} beams keeps "
-                           "touching the clean junctions around it")
-        self.done[id(c)] = (c, [piece])
+            piece = self._piece(c, rg)
+            if not isinstance(piece, RingTouchedError):
+                self.done[id(c)] = (c, [piece])
+                return
+            c, rg = self._grow(c, piece.ring)
+        raise PleError(f"an unclean cluster of {len(c.hubs):,} hubs and {len(c.beams):,} beams keeps "
+                       "touching the clean junctions around it")
 
+    def _settle_split(self, c, rg) -> None:
+        """A cluster cut across its free beams (``unions.split``), each piece united (or a copy);
+        grown, and cut anew, while pieces touch clean junctions. United whole (``_settle``) when
+        it is not cut, or when a piece touches a cut ring."""
+        bn = self.bn
+        for _ in range(MAX_CLUSTER_GROWTH):
+            cut = split(c, self.report, self.ev.center, self.ev.radius, bn, SEPARATION_GRIDS * self.tess.grid)
+            if cut is None:
+                self._settle(c, rg)
+                return
+            parts, cut_rings = cut
+            pieces, touched = [], []
+            for part in parts:
+                own, beams = set(part.hubs.tolist()), set(part.beams.tolist())
+                prg = {k: r for k, r in rg.items() if k[0] in beams and int(bn[k]) not in own}
+                prg.update({(j, CUT): cut_rings[(j, CUT)] for j, _ in part.halves.tolist()})
+                piece = self._piece(part, prg)
+                if isinstance(piece, RingTouchedError):
+                    if any(e == CUT for _, e in piece.ring):
+                        self._settle(c, rg)
+                        return
+                    touched += piece.ring
+                else:
+                    pieces.append(piece)
+            if not touched:
+                self.done[id(c)] = (c, pieces)
+                return
+            c, rg = self._grow(c, touched)
+        raise PleError(f"an unclean cluster of {len(c.hubs):,} hubs and {len(c.beams):,} beams keeps "
+                       "touching the clean junctions around it")
 
-def _split_pieces(tess: _Tessellator, ev, report, c, rings: dict, cache: ShapeCache):
-    """The pieces of cluster c cut across its free beams (``unions.split``), each united (or a
-    copy from ``cache``); None when c is not cut, or when a piece's union touches one of its rings
-    (then c is united whole, where a touched clean junction is taken in)."""
-    cut = split(c, report, ev.center, ev.radius, ev.beam_nodes, SEPARATION_GRIDS * tess.grid)
-    if cut is None:
-        return None
-    parts, cut_rings = cut
-    bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
-    pieces = []
-    for part in parts:
-        own = set(part.hubs.tolist())
-        rg = {k: r for k, r in rings.items() if k[0] in set(part.beams.tolist()) and int(bn[k]) not in own}
-        rg.update({(j, CUT): cut_rings[(j, CUT)] for j, _ in part.halves.tolist()})
-        key, anchor, ring_keys = cache.key(part, ev.center, ev.radius, bn, rg)
-        piece = cache.get(key, anchor, ring_keys, rg)
+    def _piece(self, c, rg):
+        """A cluster's piece from the cache, or its union (put in the cache); the RingTouchedError
+        when the union touches one of its rings."""
+        key, anchor, ring_keys = self.cache.key(c, self.ev.center, self.ev.radius, self.bn, rg)
+        piece = self.cache.get(key, anchor, ring_keys, rg)
         if piece is None:
             try:
-                piece = unite_stoppable(part, ev.center, ev.radius, bn, rg, tess.grid)
-            except RingTouchedError:
-                return None
-            cache.put(key, anchor, ring_keys, rg, piece)
-        pieces.append(piece)
-    return pieces
+                piece = unite_stoppable(c, self.ev.center, self.ev.radius, self.bn, rg, self.tess.grid)
+            except RingTouchedError as exc:
+                return exc
+            self.cache.put(key, anchor, ring_keys, rg, piece)
+        return piece
+
+    def _grow(self, c, ring_keys: list):
+        """Cluster c with the clean junctions at ``ring_keys`` taken in (``_grown``), the
+        clusters holding them merged; the fast path leaves them out. Returns (cluster, rings)."""
+        bn, idx, pattern = self.bn, self.idx, self.pattern
+        others = (list(self.pending) + [d for d, _ in self.unsettled if id(d) not in self.gone]
+                  + [d for d, _ in self.done.values()])
+        c, merged = _grown(c, sorted({int(bn[j, e]) for j, e in ring_keys}), bn, others)
+        gone = {id(p) for p in merged}
+        self.gone |= gone
+        self.pending = deque(q for q in self.pending if id(q) not in gone)
+        for g in gone:
+            self.rings_of.pop(g, None)
+            self.done.pop(g, None)
+        self.tess.exclude_more(idx[c.hubs], np.concatenate([idx[bn[c.beams, 0], :3], pattern[c.beams, None]], axis=1))
+        return c, _cluster_rings(self.tess, idx, bn, pattern, [c])[0]
 
 
 def _cluster_rings(tess: _Tessellator, idx, bn, pattern, part: list) -> list:
