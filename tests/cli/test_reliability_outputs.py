@@ -237,6 +237,45 @@ def test_fill_any_meshes_extreme_bodies_as_small_ones(tmp_path, capsys, size):
     assert abs(tris[size] - tris["1"]) <= 0.02 * tris["1"], tris  # float32 welds differ at 1e30, not the cells
 
 
+@pytest.mark.parametrize("size", [1e6, 4e10, 1e30])
+def test_fill_any_in_a_huge_body_keeps_the_whole_lattice(tmp_path, capsys, size):
+    """A lattice of size 4 inside a sphere of radius ``size`` (all of it inside): every fill mode
+    keeps every cell, uncut (the cut's Booleans, at manifold3d's tolerance of 1e-12 of the largest
+    coordinate, used to lose the lattice: 0 triangles at 4e10 and 1e30)."""
+    (tmp_path / "big.py").write_text(BIG)
+    sph = trimesh.creation.icosphere(subdivisions=3, radius=size)
+    sph.apply_translation((0.3 * size,) * 3)
+    sph.export(tmp_path / "b.stl")
+    base = ["mesh", tmp_path / "big.py", "--param", "n=4", "--style", "cnt"]
+    assert run([*base, "--out", tmp_path / "all.stl"], capsys)[0] == 0
+    whole = trimesh.load(tmp_path / "all.stl")
+    for fill in ("any", "inside"):
+        assert run([*base, "--body", tmp_path / "b.stl", "--fill", fill, "--out", tmp_path / "m.stl"], capsys)[0] == 0
+        m = trimesh.load(tmp_path / "m.stl")
+        assert len(m.faces) == len(whole.faces) and m.volume == pytest.approx(whole.volume, rel=1e-9)
+
+
+def test_a_body_cut_coarser_than_the_lattice_is_refused(tmp_path, capsys):
+    """A box 4e10 wide whose face crosses a lattice 1.4 wide: manifold3d would cut within 0.04."""
+    (tmp_path / "big.py").write_text(BIG)
+    box = trimesh.creation.box(extents=(4e10,) * 3)
+    box.apply_translation((1.1 - 2e10, 0, 0))  # through the balls at x = 1
+    box.export(tmp_path / "x.stl")
+    refused(["mesh", tmp_path / "big.py", "--param", "n=4", "--body", tmp_path / "x.stl", "--fill", "any", "--out",
+             tmp_path / "m.stl"], capsys, "x.stl", "4e+10 across", "coarser")
+    assert not (tmp_path / "m.stl").exists()
+
+
+def test_a_self_intersecting_body_is_refused_by_cuts_and_skins(tmp_path, capsys):
+    a, b = trimesh.creation.box(extents=(2, 2, 2)), trimesh.creation.box(extents=(2, 2, 2))
+    b.apply_translation((1, 1, 1))
+    trimesh.util.concatenate([a, b]).export(tmp_path / "sx.stl")  # closed, the boxes overlapping
+    for args in (["mesh", "cubic", "--param", "n=3", "--body", tmp_path / "sx.stl", "--fill", "any"],
+                 ["skin", "cubic", "--param", "n=3", "--body", tmp_path / "sx.stl", "--thickness", "0.1"]):
+        refused([*args, "--out", tmp_path / "m.stl"], capsys, "sx.stl", "intersects itself")
+    assert not (tmp_path / "m.stl").exists()
+
+
 # ----- 3. OS errors are user errors -------------------------------------------------------------------
 @contextlib.contextmanager
 def small_disk(base: Path, size: str = "20m", readonly: bool = False):
