@@ -317,6 +317,9 @@ def test_a_full_disk_is_one_line_and_keeps_the_old_file(tmp_path, capsys, monkey
 
         monkeypatch.setattr(cli_mesh, "mesh_triangles", lambda *a, **k: 1.0)
         refused(["mesh", "cubic", "--param", "n=6", "--out", d / "s.stl"], capsys, "s.stl", "No space left")
+        refused(["becots", "connectors", "becots_annulus", "--radius", "0.05", "--out", d / "cn"], capsys,
+                "No space left")
+        assert not (d / "cn").exists()  # a folder appears complete or not at all
         for name, data in old.items():
             assert (d / name).read_bytes() == data
         no_temporaries(d)
@@ -328,10 +331,10 @@ def test_a_read_only_disk_is_one_line(tmp_path, capsys, monkeypatch):
             pytest.skip("a tmpfs needs root")
         monkeypatch.chdir(tmp_path)
         assert subprocess.run(["mount", "-o", "remount,ro", str(d)]).returncode == 0
-        refused(["slice", "cubic", "--param", "n=2", "--layer", "0.5", "--pixel", "0.5", "--out", d / "sl"], capsys,
-                "Read-only")
-        refused(["clg", "slice", CLG_PRESETS / "shelled.json", "--layer", "0.5", "--pixel", "0.5", "--out",
-                 d / "sl"], capsys, "Read-only")
+        for args in (["slice", "cubic", "--param", "n=2"], ["clg", "slice", CLG_PRESETS / "shelled.json"]):
+            err = refused([*args, "--layer", "0.5", "--pixel", "0.5", "--out", d / "sl"], capsys, "Read-only",
+                          f"{d / 'sl'}: cannot write")
+            assert TMP_TAG not in err, err  # the output is named, not its temporary
         refused(["becots", "connectors", "becots_annulus", "--radius", "0.05", "--out", d / "cn"], capsys, "Read-only")
         refused(["mesh", "cubic", "--param", "n=2", "--style", "cnt", "--out", d / "m.stl"], capsys, "Read-only")
         assert os.listdir(d) == []
@@ -485,6 +488,50 @@ def test_clg_mesh_is_budgeted_before_any_boolean(tmp_path, capsys):
     (tmp_path / "c.json").write_text(json.dumps(_balls_clg(2000, copies=4)))
     refused(["clg", "mesh", tmp_path / "c.json", "--max-memory", "1G", "--out", tmp_path / "m.stl"], capsys,
             "triangles")
+
+
+class _Name(str):
+    """A node name that counts how often it is compared."""
+    compared = 0
+    __hash__ = str.__hash__
+
+    def __eq__(self, other):
+        _Name.compared += 1
+        return str.__eq__(self, other)
+
+
+def test_many_named_nodes_load_in_linear_work(monkeypatch):
+    """A CLG of 20,000 balls × 64 copies took 223 s to load before its budget refused it: each
+    named node was compared with every other (added, then resolved), and each leaf's balls
+    rebuilt the whole template. Now the names are indexed and the leaves' balls made at once."""
+    from ple.clg.ir import clg_from_dict
+    from ple.clg.query import compiled
+    from ple.model.lattice import Lattice
+
+    n = 3000
+    lat = Lattice()
+    names = [_Name(f"a{i}") for i in range(n)]
+    for i, name in enumerate(names):
+        lat.add_node((i, 0, 0), 0.1, name)
+    assert [lat.node_id(x) for x in names] == list(range(n))
+    assert _Name.compared < 4 * n  # was about n² (9·10⁶)
+    with pytest.raises(PleError, match="used twice"):
+        lat.add_node((0, 0, 0), 0.1, "a7")
+    lat.nodes[5].name = "renamed"  # in place: found by the scan the index falls back to
+    assert lat.node_id("renamed") == 5
+    lat.nodes = lat.nodes[:10]
+    with pytest.raises(PleError, match="unknown node id 'a20'"):
+        lat.node_id("a20")
+    built = {"templates": 0}
+    centers = Lattice.template_centers.fget
+
+    def counted(self):
+        built["templates"] += 1
+        return centers(self)
+
+    monkeypatch.setattr(Lattice, "template_centers", property(counted))
+    compiled(clg_from_dict(_balls_clg(n, copies=2)))
+    assert built["templates"] < 10  # was one per leaf (3,000)
 
 
 def test_info_on_balls_overlapping_everything_is_bounded(tmp_path):

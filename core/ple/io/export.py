@@ -50,12 +50,11 @@ from ..model.lattice import Lattice
 from .files import (
     DirectWriter,
     WriteBehind,
+    atomic_dir,
     atomic_path,
-    atomic_write_text,
     check_finite_array,
     check_output_dir,
     strict_json,
-    write_marker,
 )
 from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, from_file_axes, mesh_format, to_file_axes, unit_name
 from .threemf import NS_BALLS, NS_BEAM, NS_CORE, package_bytes, write_3mf  # noqa: F401 - NS_* re-exported
@@ -555,18 +554,15 @@ def export_connectors(lat: Lattice, folder, radius: float, beam_radius: float | 
         check_finite_array(cls.instances, f"{what}: connector {n}'s motions")
     for c in cyl:
         check_finite_array(c.vertices, f"{what}: the beams")
-    folder.mkdir(exist_ok=True)
-    write_marker(folder, "ple-connectors", "ple becots connectors")
     summary = {"classes": [], "beams": len(beams["start"]), "radius": radius, "beam_radius": beams["radius"]}
-    for n, cls in enumerate(classes):
-        path = folder / f"connector_{n}.stl"
-        with atomic_path(path) as tmp:
-            cls.mesh.export(tmp, file_type="stl")
-        summary["classes"].append({"file": path.name, "node": cls.key[0], "ends": [list(e) for e in cls.key[1]],
-                                   "count": len(cls.instances), "nodes": cls.nodes.tolist(),
-                                   "motions": cls.instances.round(12).tolist()})
-    if cyl:
-        with atomic_path(folder / "beams.stl") as tmp:
-            trimesh.util.concatenate(cyl).export(tmp, file_type="stl")
-    atomic_write_text(folder / "connectors.json", strict_json(summary, "the connectors summary") + "\n")
+    with atomic_dir(folder, "ple-connectors", "ple becots connectors") as tmp:  # complete or not at all
+        for n, cls in enumerate(classes):
+            name = f"connector_{n}.stl"
+            cls.mesh.export(tmp / name, file_type="stl")
+            summary["classes"].append({"file": name, "node": cls.key[0], "ends": [list(e) for e in cls.key[1]],
+                                       "count": len(cls.instances), "nodes": cls.nodes.tolist(),
+                                       "motions": cls.instances.round(12).tolist()})
+        if cyl:
+            trimesh.util.concatenate(cyl).export(tmp / "beams.stl", file_type="stl")
+        (tmp / "connectors.json").write_text(strict_json(summary, "the connectors summary") + "\n")
     return summary
