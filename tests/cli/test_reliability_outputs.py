@@ -506,6 +506,7 @@ def test_many_named_nodes_load_in_linear_work(monkeypatch):
     rebuilt the whole template. Now the names are indexed and the leaves' balls made at once."""
     from ple.clg.ir import clg_from_dict
     from ple.clg.query import compiled
+    from ple.model.ir import lattice_from_dict
     from ple.model.lattice import Lattice
 
     n = 3000
@@ -517,6 +518,12 @@ def test_many_named_nodes_load_in_linear_work(monkeypatch):
     assert _Name.compared < 4 * n  # was about n² (9·10⁶)
     with pytest.raises(PleError, match="used twice"):
         lat.add_node((0, 0, 0), 0.1, "a7")
+    _Name.compared = 0
+    nodes = [{"id": x, "center": [0, 0, 0], "radius": 0.1} for x in names]
+    assert len(lattice_from_dict({"format": "ple-lattice/1", "nodes": nodes}).nodes) == n  # the IR reader too
+    assert _Name.compared < 4 * n
+    with pytest.raises(PleError, match=r"nodes\[3\].id: 'a0' is used twice"):
+        lattice_from_dict({"format": "ple-lattice/1", "nodes": nodes[:3] + nodes[:1]})
     lat.nodes[5].name = "renamed"  # in place: found by the scan the index falls back to
     assert lat.node_id("renamed") == 5
     lat.nodes = lat.nodes[:10]
