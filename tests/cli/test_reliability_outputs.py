@@ -337,6 +337,8 @@ def test_a_read_only_disk_is_one_line(tmp_path, capsys, monkeypatch):
             assert TMP_TAG not in err, err  # the output is named, not its temporary
         refused(["becots", "connectors", "becots_annulus", "--radius", "0.05", "--out", d / "cn"], capsys, "Read-only")
         refused(["mesh", "cubic", "--param", "n=2", "--style", "cnt", "--out", d / "m.stl"], capsys, "Read-only")
+        monkeypatch.setattr("ple.bench.startup.run", lambda args: pytest.fail("the benchmark ran"))
+        refused(["bench", "startup", "--out", d / "b.json"], capsys, "Read-only")  # checked before it runs
         assert os.listdir(d) == []
 
 

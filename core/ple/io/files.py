@@ -402,12 +402,15 @@ def _destination(path: Path) -> tuple[Path, str]:
 
 def check_output_file(path) -> None:
     """Refuse, before any work, an output file that ``atomic_path`` would refuse (a folder, block
-    device or socket; a missing folder)."""
+    device or socket; a missing folder; a folder on a read-only file system or not writable)."""
     path = Path(path)
     target, how = _destination(path)
     parent = target.parent if str(target.parent) else Path(".")
     if how == "file" and not parent.is_dir():
         raise PleError(f"{path}: output folder {parent} does not exist")
+    if how == "file" and not os.access(parent, os.W_OK | os.X_OK):
+        why = "Read-only file system" if os.statvfs(parent).f_flag & os.ST_RDONLY else "Permission denied"
+        raise PleError(f"{path}: cannot write in {parent} ({why})")
 
 
 @contextlib.contextmanager
