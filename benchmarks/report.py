@@ -365,6 +365,22 @@ def startup_section(d) -> list[str]:
     return out + [""]
 
 
+def clg_budget_section(d) -> list[str]:
+    """The CLG mesh budget's estimate against the measured peak (``ple bench clg_budget``)."""
+    out = ["## CLG mesh budget (`ple bench clg_budget`)", "",
+           f"The estimate `ple clg mesh` is refused by (triangles × 650 B, nested materials as meshed) against "
+           f"the peak proportional set size of the command and its child, sampled every 10 ms; "
+           f"`--segments {d['segments']}`, load average {d['load'][0]:.1f}. The promise: the peak within "
+           f"{d['limit']}× the estimate (worst here {d['worst']:.2f}×).", "",
+           "| case | groups | bound (triangles) | estimate (triangles) | estimate | peak | peak / estimate |",
+           "|---|---|---|---|---|---|---|"]
+    for r in d["rows"]:
+        out.append(f"| `{r['case']}` | {r['groups']:,} | {r['triangles_bound']:.3g} | {r['triangles_estimate']:.3g} | "
+                   f"{r['estimate_bytes'] / 2**20:,.0f} MiB | {r['peak_bytes'] / 2**20:,.0f} MiB | "
+                   f"{r['peak_over_estimate']:.2f} |")
+    return out + ["", "Raw JSON: `benchmarks/results/clg_budget.json`.", ""]
+
+
 def _kept_sections(path: Path, generated: set[str]) -> list[str]:
     """The sections of the existing page that no benchmark here generates (written by hand: the
     seeds' tables, CLG, body fill), kept as they are, in their order."""
@@ -414,6 +430,9 @@ def write_report() -> Path:
     presets = _load("presets")
     if presets:
         lines += presets_section(presets)
+    clg_budget = _load("clg_budget")
+    if clg_budget:
+        lines += clg_budget_section(clg_budget)
     for title, name, d in (("BeCOTS RangeFinder", "becots", becots), ("Lazy evaluation", "eval", ev)):
         if d:
             lines += generic_section(title, name, d)

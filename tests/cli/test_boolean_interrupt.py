@@ -1,6 +1,6 @@
-"""A signal stops `ple clg mesh` (nested materials included) and `ple skin` inside a long manifold3d
-Boolean: the Booleans run in a forked child (``ple.program.meshes``), which the command kills on its
-way out; nothing is left on disk and the user's previous file is intact."""
+"""A signal stops `ple clg mesh` (nested materials included), `ple skin` and `ple mesh --fill any`
+inside a long manifold3d Boolean: the Booleans run in a forked child (``ple.program.meshes``), which
+the command kills on its way out; nothing is left on disk and the user's previous file is intact."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.cli.test_mesh_union_interrupt import interrupt_once_a_child_lives
@@ -55,6 +56,32 @@ def test_signal_during_a_clg_boolean_ends_the_mesh(tmp_path, sig):
 def test_signal_during_a_skin_ends_it(tmp_path):
     _interrupt(tmp_path, ["skin", "cubic", "--param", "n=8", "--body", ROOT / "presets" / "bracket.stl",
                           "--thickness", "0.3"], signal.SIGTERM)
+
+
+def test_signal_during_a_body_cut_ends_the_mesh(tmp_path):
+    """The lattice filling the bracket by 'any' is cut at its surface by Booleans of about 5 s."""
+    _interrupt(tmp_path, ["mesh", "cubic", "--param", "n=8", "--body", ROOT / "presets" / "bracket.stl", "--fill",
+                          "any"], signal.SIGTERM)
+
+
+def test_the_contained_body_cut_is_the_in_process_one():
+    from functools import partial
+
+    import trimesh
+    from ple.filters.body import Body
+    from ple.meshing.skin import clip_to_bodies
+    from ple.meshing.tessellate import tessellate
+    from ple.program.meshes import mesh_contained
+    from ple.program.sources import load_lattice
+
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=1.3)
+    sphere.apply_translation((1, 1, 1))
+    body = Body(sphere.vertices, sphere.faces)
+    mesh = tessellate(load_lattice("cubic", {"n": 3}), style="cnt")
+    here = clip_to_bodies(mesh, [body])
+    there = clip_to_bodies(mesh, [body], partial(mesh_contained, name="cubic", what="the cut"))
+    assert np.array_equal(here.vertices, there.vertices) and np.array_equal(here.faces, there.faces)
+    assert 0 < len(here.faces) and here.is_watertight and there.metadata["ple_cut_by"] == [body]
 
 
 def test_the_contained_clg_mesh_is_the_in_process_one(tmp_path):

@@ -156,6 +156,20 @@ def _write_inputs(d: Path) -> None:
         f"property float z\nelement face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n"
         + "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in ico.vertices.tolist())
         + "".join(f"3 {a} {b} {c}\n" for a, b, c in f.tolist()))
+    huge = trimesh.creation.icosphere(subdivisions=2, radius=1e30)  # around everything
+    huge.export(d / "huge.stl")
+    cross = trimesh.creation.box((4e10,) * 3)  # a face through the lattice's middle, triangles 4e10 long
+    cross.apply_translation((1 - 2e10, 0, 0))
+    cross.export(d / "cross.stl")
+    twice = trimesh.creation.box((2, 2, 2))
+    twice.apply_translation((3.5, 3.5, 3.5))
+    trimesh.util.concatenate([box, twice]).export(d / "selfx.stl")  # closed, intersecting itself
+    for args in (["batch", "cubic", "--param", "n=2,3", "--style", "cnt", "--out", d / "batch_dmg"],
+                 ["mesh", "cubic", "--param", "n=2", "--style", "cnt", "--parts", d / "job_dmg"]):
+        args += ["--scheduler", "sync"]
+        assert main([str(a) for a in args]) == 0
+    for damaged in (d / "batch_dmg" / "cubic__n-2.stl", d / "job_dmg" / "part_000000.stl"):
+        damaged.write_bytes(damaged.read_bytes()[:100])
     for name, line in (("filter5", "lat.filter = 5"), ("uhello", "lat.u = 'hello'"), ("beam3", "lat.beams.append(3)")):
         (d / f"lat_{name}.py").write_text(
             "def lattice():\n    lat = Lattice()\n    a = lat.add_node(Pt(0, 0, 0), 0.1)\n"
@@ -362,6 +376,18 @@ for name, needle in (("filter5", "filter is int"), ("uhello", "u is str"), ("bea
     for cmd in (("info",), ("eval", "--out", "e.npz"), ("mesh", "--out", "m.stl")):
         case(REFUSE, cmd[0], f"lat_{name}.py", *cmd[1:], needle=needle)
 case(REFUSE, "becots", "connectors", "becots_annulus", "--radius", "1e50", "--out", "cn", needle="non-finite")
+
+# ----- bodies cut by --fill any, damaged outputs that a re-run or assemble must not trust -------------------
+case(ANY, "mesh", "cubic", "--param", "n=3", "--body", "huge.stl", "--fill", "any", "--out", "hm.stl",
+     outs=("hm.stl",))
+case(REFUSE, "mesh", "cubic", "--param", "n=3", "--body", "cross.stl", "--fill", "any", "--out", "hm.stl",
+     needle="coarser")
+for cmd in (("mesh", "--fill", "any"), ("skin", "--thickness", "0.2")):
+    case(REFUSE, cmd[0], "cubic", "--param", "n=3", "--body", "selfx.stl", *cmd[1:], "--out", "hm.stl",
+         needle="intersects itself")
+case(ANY, "batch", "cubic", "--param", "n=2,3", "--style", "cnt", "--scheduler", "sync", "--out", "batch_dmg",
+     outs=("batch_dmg",))
+case(REFUSE, "assemble", "job_dmg", "--out", "a.stl", needle="damaged")
 
 # ----- --fillet, Möbius and warp presets -----------------------------------------------------------------
 for fillet in ("nan", "-1", "inf", "1e308", "100"):

@@ -237,6 +237,45 @@ def test_fill_any_meshes_extreme_bodies_as_small_ones(tmp_path, capsys, size):
     assert abs(tris[size] - tris["1"]) <= 0.02 * tris["1"], tris  # float32 welds differ at 1e30, not the cells
 
 
+@pytest.mark.parametrize("size", [1e6, 4e10, 1e30])
+def test_fill_any_in_a_huge_body_keeps_the_whole_lattice(tmp_path, capsys, size):
+    """A lattice of size 4 inside a sphere of radius ``size`` (all of it inside): every fill mode
+    keeps every cell, uncut (the cut's Booleans, at manifold3d's tolerance of 1e-12 of the largest
+    coordinate, used to lose the lattice: 0 triangles at 4e10 and 1e30)."""
+    (tmp_path / "big.py").write_text(BIG)
+    sph = trimesh.creation.icosphere(subdivisions=3, radius=size)
+    sph.apply_translation((0.3 * size,) * 3)
+    sph.export(tmp_path / "b.stl")
+    base = ["mesh", tmp_path / "big.py", "--param", "n=4", "--style", "cnt"]
+    assert run([*base, "--out", tmp_path / "all.stl"], capsys)[0] == 0
+    whole = trimesh.load(tmp_path / "all.stl")
+    for fill in ("any", "inside"):
+        assert run([*base, "--body", tmp_path / "b.stl", "--fill", fill, "--out", tmp_path / "m.stl"], capsys)[0] == 0
+        m = trimesh.load(tmp_path / "m.stl")
+        assert len(m.faces) == len(whole.faces) and m.volume == pytest.approx(whole.volume, rel=1e-9)
+
+
+def test_a_body_cut_coarser_than_the_lattice_is_refused(tmp_path, capsys):
+    """A box 4e10 wide whose face crosses a lattice 1.4 wide: manifold3d would cut within 0.04."""
+    (tmp_path / "big.py").write_text(BIG)
+    box = trimesh.creation.box(extents=(4e10,) * 3)
+    box.apply_translation((1.1 - 2e10, 0, 0))  # through the balls at x = 1
+    box.export(tmp_path / "x.stl")
+    refused(["mesh", tmp_path / "big.py", "--param", "n=4", "--body", tmp_path / "x.stl", "--fill", "any", "--out",
+             tmp_path / "m.stl"], capsys, "x.stl", "4e+10 across", "coarser")
+    assert not (tmp_path / "m.stl").exists()
+
+
+def test_a_self_intersecting_body_is_refused_by_cuts_and_skins(tmp_path, capsys):
+    a, b = trimesh.creation.box(extents=(2, 2, 2)), trimesh.creation.box(extents=(2, 2, 2))
+    b.apply_translation((1, 1, 1))
+    trimesh.util.concatenate([a, b]).export(tmp_path / "sx.stl")  # closed, the boxes overlapping
+    for args in (["mesh", "cubic", "--param", "n=3", "--body", tmp_path / "sx.stl", "--fill", "any"],
+                 ["skin", "cubic", "--param", "n=3", "--body", tmp_path / "sx.stl", "--thickness", "0.1"]):
+        refused([*args, "--out", tmp_path / "m.stl"], capsys, "sx.stl", "intersects itself")
+    assert not (tmp_path / "m.stl").exists()
+
+
 # ----- 3. OS errors are user errors -------------------------------------------------------------------
 @contextlib.contextmanager
 def small_disk(base: Path, size: str = "20m", readonly: bool = False):
@@ -278,6 +317,9 @@ def test_a_full_disk_is_one_line_and_keeps_the_old_file(tmp_path, capsys, monkey
 
         monkeypatch.setattr(cli_mesh, "mesh_triangles", lambda *a, **k: 1.0)
         refused(["mesh", "cubic", "--param", "n=6", "--out", d / "s.stl"], capsys, "s.stl", "No space left")
+        refused(["becots", "connectors", "becots_annulus", "--radius", "0.05", "--out", d / "cn"], capsys,
+                "No space left")
+        assert not (d / "cn").exists()  # a folder appears complete or not at all
         for name, data in old.items():
             assert (d / name).read_bytes() == data
         no_temporaries(d)
@@ -289,12 +331,14 @@ def test_a_read_only_disk_is_one_line(tmp_path, capsys, monkeypatch):
             pytest.skip("a tmpfs needs root")
         monkeypatch.chdir(tmp_path)
         assert subprocess.run(["mount", "-o", "remount,ro", str(d)]).returncode == 0
-        refused(["slice", "cubic", "--param", "n=2", "--layer", "0.5", "--pixel", "0.5", "--out", d / "sl"], capsys,
-                "Read-only")
-        refused(["clg", "slice", CLG_PRESETS / "shelled.json", "--layer", "0.5", "--pixel", "0.5", "--out",
-                 d / "sl"], capsys, "Read-only")
+        for args in (["slice", "cubic", "--param", "n=2"], ["clg", "slice", CLG_PRESETS / "shelled.json"]):
+            err = refused([*args, "--layer", "0.5", "--pixel", "0.5", "--out", d / "sl"], capsys, "Read-only",
+                          f"{d / 'sl'}: cannot write")
+            assert TMP_TAG not in err, err  # the output is named, not its temporary
         refused(["becots", "connectors", "becots_annulus", "--radius", "0.05", "--out", d / "cn"], capsys, "Read-only")
         refused(["mesh", "cubic", "--param", "n=2", "--style", "cnt", "--out", d / "m.stl"], capsys, "Read-only")
+        monkeypatch.setattr("ple.bench.startup.run", lambda args: pytest.fail("the benchmark ran"))
+        refused(["bench", "startup", "--out", d / "b.json"], capsys, "Read-only")  # checked before it runs
         assert os.listdir(d) == []
 
 
@@ -448,6 +492,57 @@ def test_clg_mesh_is_budgeted_before_any_boolean(tmp_path, capsys):
             "triangles")
 
 
+class _Name(str):
+    """A node name that counts how often it is compared."""
+    compared = 0
+    __hash__ = str.__hash__
+
+    def __eq__(self, other):
+        _Name.compared += 1
+        return str.__eq__(self, other)
+
+
+def test_many_named_nodes_load_in_linear_work(monkeypatch):
+    """A CLG of 20,000 balls × 64 copies took 223 s to load before its budget refused it: each
+    named node was compared with every other (added, then resolved), and each leaf's balls
+    rebuilt the whole template. Now the names are indexed and the leaves' balls made at once."""
+    from ple.clg.ir import clg_from_dict
+    from ple.clg.query import compiled
+    from ple.model.ir import lattice_from_dict
+    from ple.model.lattice import Lattice
+
+    n = 3000
+    lat = Lattice()
+    names = [_Name(f"a{i}") for i in range(n)]
+    for i, name in enumerate(names):
+        lat.add_node((i, 0, 0), 0.1, name)
+    assert [lat.node_id(x) for x in names] == list(range(n))
+    assert _Name.compared < 4 * n  # was about n² (9·10⁶)
+    with pytest.raises(PleError, match="used twice"):
+        lat.add_node((0, 0, 0), 0.1, "a7")
+    _Name.compared = 0
+    nodes = [{"id": x, "center": [0, 0, 0], "radius": 0.1} for x in names]
+    assert len(lattice_from_dict({"format": "ple-lattice/1", "nodes": nodes}).nodes) == n  # the IR reader too
+    assert _Name.compared < 4 * n
+    with pytest.raises(PleError, match=r"nodes\[3\].id: 'a0' is used twice"):
+        lattice_from_dict({"format": "ple-lattice/1", "nodes": nodes[:3] + nodes[:1]})
+    lat.nodes[5].name = "renamed"  # in place: found by the scan the index falls back to
+    assert lat.node_id("renamed") == 5
+    lat.nodes = lat.nodes[:10]
+    with pytest.raises(PleError, match="unknown node id 'a20'"):
+        lat.node_id("a20")
+    built = {"templates": 0}
+    centers = Lattice.template_centers.fget
+
+    def counted(self):
+        built["templates"] += 1
+        return centers(self)
+
+    monkeypatch.setattr(Lattice, "template_centers", property(counted))
+    compiled(clg_from_dict(_balls_clg(n, copies=2)))
+    assert built["templates"] < 10  # was one per leaf (3,000)
+
+
 def test_info_on_balls_overlapping_everything_is_bounded(tmp_path):
     (tmp_path / "big.py").write_text(BIG)
     r = ple("info", tmp_path / "big.py", "--param", "n=10", "--param", "radius=2.5", cwd=tmp_path)
@@ -472,7 +567,7 @@ def test_nested_clg_mesh_is_budgeted_before_any_boolean(tmp_path, capsys):
     several times loose); both estimates, bound and as meshed, bound the real mesh of 2³ groups."""
     from ple.clg.ir import clg_from_dict
     from ple.clg.query import compiled
-    from ple.meshing.clg import mesh_compiled, nested_materials, solid_triangles
+    from ple.meshing.clg import estimated_triangles, mesh_compiled, nested_materials, solid_triangles
 
     doc = json.loads((CLG_PRESETS / "beam_of_beams.json").read_text())
     doc["pattern"]["W"] = {"count": 14, "similarity": {"kind": "translation", "vector": [0, 0, 2]}}
@@ -492,4 +587,6 @@ def test_nested_clg_mesh_is_budgeted_before_any_boolean(tmp_path, capsys):
     comp = compiled(clg_from_dict(doc))
     real = len(mesh_compiled(comp, 16).faces)
     (sub,) = nested_materials(comp)
-    assert real <= solid_triangles(comp, 16, {id(sub): len(mesh_compiled(sub, 16).faces)}) <= solid_triangles(comp, 16)
+    as_meshed = solid_triangles(comp, 16, {id(sub): len(mesh_compiled(sub, 16).faces)})
+    assert real <= as_meshed <= solid_triangles(comp, 16)
+    assert estimated_triangles(comp, 16) == as_meshed  # what ple bench clg_budget reports

@@ -29,7 +29,7 @@ from ..algebra.elements import beam_distance, enclosing_ball
 from ..algebra.vectors import cross
 from ..errors import PleError
 from ..model.budget import fast_bounds
-from ..model.lattice import Lattice, Node
+from ..model.lattice import Node
 from ..queries import biq
 from ..queries.rangefinder import lattice_hits
 from .bound import conical_shell
@@ -86,17 +86,12 @@ class Compiled:
         self.ginv = ginv.matrix
         nodes, owner = [], []
         self.balls0 = {}
-        for c, lv in enumerate(self.leaves):
-            for p in lv:
-                ctr, rad = leaf_balls(lat, p, np.zeros((1, 3), np.int64))
-                self.balls0[p] = ((ctr[0][0], None if ctr[1] is None else ctr[1][0]),
-                                  (rad[0][0], None if rad[1] is None else rad[1][0]))
-                if p.b is None:
-                    bc, br = ctr[0][0], rad[0][0]
-                else:
-                    bc, br = enclosing_ball(ctr[0][0], rad[0][0], ctr[1][0], rad[1][0])
-                nodes.append(Node(ginv.apply_points(np.asarray(bc)[None])[0], float(br) / lat.placement.factor))
-                owner.append(c)
+        leaves = [(c, p) for c, lv in enumerate(self.leaves) for p in lv]
+        for (c, p), (ca, ra, cb, rb) in zip(leaves, own_balls(lat, [p for _, p in leaves], np.zeros((1, 3), np.int64))):
+            self.balls0[p] = ((ca[0], None if cb is None else cb[0]), (ra[0], None if rb is None else rb[0]))
+            bc, br = (ca[0], ra[0]) if p.b is None else enclosing_ball(ca[0], ra[0], cb[0], rb[0])
+            nodes.append(Node(ginv.apply_points(np.asarray(bc)[None])[0], float(br) / lat.placement.factor))
+            owner.append(c)
         aux = lat.copy()
         aux.nodes, aux.beams, aux.filter = nodes, [], None
         self.aux = aux
@@ -269,17 +264,6 @@ def compiled(clg: CLG, region=None) -> Compiled:
 
 def pmc(clg: CLG, points) -> np.ndarray:
     return compiled(clg).pmc(points)
-
-
-def leaf_balls(lat: Lattice, prim: Prim, g: np.ndarray):
-    """((centre a, centre b), (radius a, radius b)) of a primitive's copies at groups g (m, 3);
-    b parts are None for a ball."""
-    g = np.asarray(g, dtype=np.int64).reshape(-1, 3)
-    ca, ra = lat.node_balls(np.column_stack([g + prim.a.offset, np.full(len(g), prim.a.n)]))
-    if prim.b is None:
-        return (ca, None), (ra * prim.sa, None)
-    cb, rb = lat.node_balls(np.column_stack([g + prim.b.offset, np.full(len(g), prim.b.n)]))
-    return (ca, cb), (ra * prim.sa, rb * prim.sb)
 
 
 def least_rotations(e: np.ndarray) -> np.ndarray:

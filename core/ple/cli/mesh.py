@@ -6,6 +6,7 @@ import os
 import shutil
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -109,6 +110,7 @@ def run(args) -> int:
     if args.beam_lattice and fmt != "3mf":
         raise PleError(f"--beam-lattice writes 3MF; --out {args.out} is .{fmt}")
     info: dict = {}
+    contain = partial(mesh_contained, name=args.lattice, what="the cut at the body")  # a signal stops its Booleans
     if args.skin is not None:  # the body's shell united with the lattice: one solid, in memory
         if args.beam_lattice or args.check:
             raise PleError("--skin makes one solid of shell and lattice: not with --beam-lattice or --check")
@@ -120,7 +122,7 @@ def run(args) -> int:
         n = len(mesh.faces) - export_mesh(mesh, args.out, args.unit)["dropped_faces"]
     elif args.beam_lattice:
         got = write_beam_lattice(lat, args.out, region, args.fallback, args.levels, args.segments, max_groups,
-                                 args.unit, info, stream_workers(args.workers))
+                                 args.unit, info, stream_workers(args.workers), contain)
         if info["unclean"] is not None and len(info["unclean"].nodes):
             print(info["unclean"].line())
         mesh_text = (f"with {got['triangles']:,} triangles ({args.fallback})" if args.fallback != "none"
@@ -128,12 +130,13 @@ def run(args) -> int:
         print(f"wrote {args.out}: beam lattice, {got['balls']:,} balls, {got['beams']:,} beams, {mesh_text}, "
               f"unit {args.unit}")
     elif args.check and lat.group_map is not None:  # groups placed by a map: checked in memory
-        mesh = tessellate(lat, region, args.style, args.levels, args.segments, fillet=args.fillet)
+        mesh = tessellate(lat, region, args.style, args.levels, args.segments, fillet=args.fillet, contain=contain)
         info["unclean"] = _say_unclean(mesh)
         n = len(mesh.faces) - export_mesh(mesh, args.out, args.unit)["dropped_faces"]
     else:
         n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments, max_groups, unit=args.unit,
-                       info=info, fillet=args.fillet, workers=stream_workers(args.workers), max_memory=max_memory(args))
+                       info=info, fillet=args.fillet, workers=stream_workers(args.workers), max_memory=max_memory(args),
+                       contain=contain)
         if info.get("unclean") is not None and len(info["unclean"].nodes):
             print(info["unclean"].line())
     dt = time.perf_counter() - t0

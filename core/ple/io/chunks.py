@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import PleError
 from ..model.budget import EVAL_BEAM_BYTES, EVAL_NODE_BYTES, human, region_beams, region_nodes
 from ..model.lattice import Evaluation, Lattice
-from .files import check_output_dir, make_temp_dir, remove_stale_temporaries, replace_dir, strict_json, write_marker
+from .files import atomic_dir, check_output_dir, remove_stale_temporaries, strict_json
 
 FORMAT = "ple-chunks/1"
 KIND = "ple-chunks"  # the output-folder marker's kind
@@ -49,14 +49,8 @@ def stream_filter(lat: Lattice, out_dir, region=None, slab_groups: int = DEFAULT
     r = lat.region(region)
     remove_stale_temporaries(parent)
     _check_disk_bound(lat, r, parent)
-    tmp = make_temp_dir(parent, out.name)
-    try:
+    with atomic_dir(out, KIND, "ple filter") as tmp:
         manifest = _write_chunks(lat, r, tmp, int(slab_groups), progress)
-        write_marker(tmp, KIND, "ple filter")
-        replace_dir(tmp, out)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp)
     return manifest
 
 

@@ -50,12 +50,11 @@ from ..model.lattice import Lattice
 from .files import (
     DirectWriter,
     WriteBehind,
+    atomic_dir,
     atomic_path,
-    atomic_write_text,
     check_finite_array,
     check_output_dir,
     strict_json,
-    write_marker,
 )
 from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, from_file_axes, mesh_format, to_file_axes, unit_name
 from .threemf import NS_BALLS, NS_BEAM, NS_CORE, package_bytes, write_3mf  # noqa: F401 - NS_* re-exported
@@ -437,7 +436,7 @@ DEFAULT_FALLBACK = "cnt"  # the cheapest closed style: a fallback for consumers 
 
 def write_beam_lattice(lat: Lattice, path, region=None, fallback: str = DEFAULT_FALLBACK, levels: int | None = None,
                        segments: int | None = None, max_groups: int = 1 << 14, unit: str = DEFAULT_UNIT,
-                       info: dict | None = None, workers: int = 1) -> dict:
+                       info: dict | None = None, workers: int = 1, contain=None) -> dict:
     """A region's balls and cone beams as a 3MF Beam Lattice beside its watertight triangle mesh
     of style ``fallback`` (``FALLBACK_STYLES``), which a consumer without beam support prints;
     ``"none"`` writes the beams alone (the file then requires the extensions).
@@ -448,7 +447,7 @@ def write_beam_lattice(lat: Lattice, path, region=None, fallback: str = DEFAULT_
     are welded into one indexed mesh (the hub vertices repeated across box boundaries are the same
     grid points) and the model's XML is streamed into the package. An unclean region is meshed
     in memory with its unions, as ``write_mesh`` does. ``info["unclean"]`` gets the report (None:
-    not checked, or no fallback). Returns {"balls", "beams", "triangles"}."""
+    not checked, or no fallback). ``contain``: as ``write_mesh``'s. Returns {"balls", "beams", "triangles"}."""
     if mesh_format(path) != "3mf":
         raise PleError(f"{path}: a beam lattice is written as .3mf")
     if fallback not in FALLBACK_STYLES:
@@ -459,13 +458,14 @@ def write_beam_lattice(lat: Lattice, path, region=None, fallback: str = DEFAULT_
     info["unclean"] = None
     v, f = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
     if fallback != "none":
-        v, f = _fallback_mesh(lat, r, fallback, levels, segments, max_groups, unit, info, workers, Path(path).name)
+        v, f = _fallback_mesh(lat, r, fallback, levels, segments, max_groups, unit, info, workers, Path(path).name,
+                              contain)
     ev = lat.evaluate(r)
     write_3mf(path, v, f, unit_name(unit), (ev.center, ev.radius, ev.beam_nodes))
     return {"balls": len(ev.center), "beams": len(ev.beam_nodes), "triangles": len(f)}
 
 
-def _fallback_mesh(lat, r, style, levels, segments, max_groups, unit, info, workers, name):
+def _fallback_mesh(lat, r, style, levels, segments, max_groups, unit, info, workers, name, contain):
     """The beam lattice's triangle mesh (vertices float32 values (V, 3), faces (F, 3)), welded."""
     bounds = np.array(lat.bounds(r))
     check_float32_range(bounds, smallest_radius(lat, r), "3mf")
@@ -479,7 +479,7 @@ def _fallback_mesh(lat, r, style, levels, segments, max_groups, unit, info, work
                                      grid=grid)
     info["unclean"] = checked
     if chunks is None:  # unclean hubs: their unions are made in memory, one mesh
-        mesh = tessellate(lat, r, style, levels, segments, unclean=checked)
+        mesh = tessellate(lat, r, style, levels, segments, unclean=checked, contain=contain)
         info["unclean"] = mesh.metadata.get("ple_unclean")
         v, f, _ = prepare_closed(mesh, "3mf", unit, grid, name)
         return v, f
@@ -496,7 +496,7 @@ def _fallback_mesh(lat, r, style, levels, segments, max_groups, unit, info, work
 def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: int | None = None,
                segments: int | None = None, max_groups: int = 1 << 14, unit: str = DEFAULT_UNIT,
                info: dict | None = None, fillet: float | None = None, workers: int = 1,
-               max_memory: float | None = None) -> int:
+               max_memory: float | None = None, contain=None) -> int:
     """Tessellate a region straight to ``path`` (format from the suffix); returns the number of
     triangles. Binary STL streams box by box (memory bounded by ``max_groups`` groups, boxes
     assembled by ``workers`` threads, the same file for any number), every box snapped to the
@@ -507,7 +507,8 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
     (``ple.meshing.tessellate.checked_stream``); an unclean one streams its clean boxes, then its
     local unions one at a time, refused (PleError, no file) if the largest union's estimate
     exceeds ``max_memory`` bytes.
-    ``info["unclean"]`` gets the report (None when not checked)."""
+    ``info["unclean"]`` gets the report (None when not checked). ``contain`` runs the Booleans that
+    cut a lattice filling a body by ``any`` at its surface (``ple.meshing.skin.clip_to_bodies``)."""
     unit_name(unit)
     fmt = mesh_format(path)
     r = lat.region(region)
@@ -531,7 +532,7 @@ def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: 
     elif fmt == "stl":
         return write_stl(path, iter_triangles(lat, r, style, levels, segments, max_groups, workers=workers),
                          header=stl_header(unit), workers=workers)
-    mesh = tessellate(lat, r, style, levels, segments, fillet=fillet, unclean=checked)
+    mesh = tessellate(lat, r, style, levels, segments, fillet=fillet, unclean=checked, contain=contain)
     info["unclean"] = mesh.metadata.get("ple_unclean")
     stats = export_mesh(mesh, path, unit)
     return len(mesh.faces) - stats["dropped_faces"]  # as written (the weld may drop slivers)
@@ -553,18 +554,15 @@ def export_connectors(lat: Lattice, folder, radius: float, beam_radius: float | 
         check_finite_array(cls.instances, f"{what}: connector {n}'s motions")
     for c in cyl:
         check_finite_array(c.vertices, f"{what}: the beams")
-    folder.mkdir(exist_ok=True)
-    write_marker(folder, "ple-connectors", "ple becots connectors")
     summary = {"classes": [], "beams": len(beams["start"]), "radius": radius, "beam_radius": beams["radius"]}
-    for n, cls in enumerate(classes):
-        path = folder / f"connector_{n}.stl"
-        with atomic_path(path) as tmp:
-            cls.mesh.export(tmp, file_type="stl")
-        summary["classes"].append({"file": path.name, "node": cls.key[0], "ends": [list(e) for e in cls.key[1]],
-                                   "count": len(cls.instances), "nodes": cls.nodes.tolist(),
-                                   "motions": cls.instances.round(12).tolist()})
-    if cyl:
-        with atomic_path(folder / "beams.stl") as tmp:
-            trimesh.util.concatenate(cyl).export(tmp, file_type="stl")
-    atomic_write_text(folder / "connectors.json", strict_json(summary, "the connectors summary") + "\n")
+    with atomic_dir(folder, "ple-connectors", "ple becots connectors") as tmp:  # complete or not at all
+        for n, cls in enumerate(classes):
+            name = f"connector_{n}.stl"
+            cls.mesh.export(tmp / name, file_type="stl")
+            summary["classes"].append({"file": name, "node": cls.key[0], "ends": [list(e) for e in cls.key[1]],
+                                       "count": len(cls.instances), "nodes": cls.nodes.tolist(),
+                                       "motions": cls.instances.round(12).tolist()})
+        if cyl:
+            trimesh.util.concatenate(cyl).export(tmp / "beams.stl", file_type="stl")
+        (tmp / "connectors.json").write_text(strict_json(summary, "the connectors summary") + "\n")
     return summary

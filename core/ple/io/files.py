@@ -368,8 +368,12 @@ def temp_prefix(name: str) -> str:
 
 def make_temp_dir(parent: Path, name: str) -> Path:
     """A fresh temporary folder beside an output (removed by the next run if we are killed), with a
-    normal folder's permissions (not ``mkdtemp``'s 0700): it becomes the output folder."""
-    path = Path(tempfile.mkdtemp(prefix=temp_prefix(name), dir=parent))
+    normal folder's permissions (not ``mkdtemp``'s 0700): it becomes the output folder. An OS
+    error (a read-only or full disk) is a PleError naming the output, not the temporary."""
+    try:
+        path = Path(tempfile.mkdtemp(prefix=temp_prefix(name), dir=parent))
+    except OSError as exc:
+        raise PleError(oserror_message(exc, parent / name)) from None
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(path, 0o777 & ~umask)
@@ -398,12 +402,15 @@ def _destination(path: Path) -> tuple[Path, str]:
 
 def check_output_file(path) -> None:
     """Refuse, before any work, an output file that ``atomic_path`` would refuse (a folder, block
-    device or socket; a missing folder)."""
+    device or socket; a missing folder; a folder on a read-only file system or not writable)."""
     path = Path(path)
     target, how = _destination(path)
     parent = target.parent if str(target.parent) else Path(".")
     if how == "file" and not parent.is_dir():
         raise PleError(f"{path}: output folder {parent} does not exist")
+    if how == "file" and not os.access(parent, os.W_OK | os.X_OK):
+        why = "Read-only file system" if os.statvfs(parent).f_flag & os.ST_RDONLY else "Permission denied"
+        raise PleError(f"{path}: cannot write in {parent} ({why})")
 
 
 @contextlib.contextmanager
@@ -506,6 +513,25 @@ def check_output_dir(path, kind: str, flag: str = "--out") -> bool:
     found = f"it was written by {marker.get('command', '?')!r}" if marker else "it has no PLE output marker"
     raise PleError(f"{flag} {path}: folder exists and is not a {kind} output of PLE ({found}); "
                    "not touching it — give a new or empty folder")
+
+
+@contextlib.contextmanager
+def atomic_dir(out: Path, kind: str, command: str) -> Iterator[Path]:
+    """Yield a temporary folder beside the output folder ``out`` (checked by ``check_output_dir``
+    first); once the caller has filled it, it gets the marker of ``kind`` and replaces ``out``
+    (``replace_dir``). On any error it is removed and ``out`` is left as it was: a folder appears
+    complete or not at all."""
+    out = Path(out)
+    parent = out.parent if str(out.parent) else Path(".")
+    remove_stale_temporaries(parent)
+    tmp = make_temp_dir(parent, out.name)
+    try:
+        yield tmp
+        write_marker(tmp, kind, command)
+        replace_dir(tmp, out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
 
 
 def replace_dir(tmp: Path, out: Path) -> None:

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import shutil
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -12,14 +11,11 @@ import numpy as np
 from ..clg.grid import iter_slices
 from ..errors import PleError
 from .files import (
+    atomic_dir,
     atomic_path,
     atomic_write_text,
     check_output_dir,
-    make_temp_dir,
-    remove_stale_temporaries,
-    replace_dir,
     strict_json,
-    write_marker,
 )
 
 SLICES_FORMAT = "ple-slices/1"
@@ -44,16 +40,8 @@ def write_slices(out_dir, layers: Iterable, meta: dict, progress=None) -> dict:
         raise PleError("writing PNG slices needs Pillow (pip install pillow)") from None
     out = Path(out_dir)
     check_output_dir(out, KIND)
-    parent = out.parent if str(out.parent) else Path(".")
-    remove_stale_temporaries(parent)
-    tmp = make_temp_dir(parent, out.name)
-    try:
+    with atomic_dir(out, KIND, "ple slice") as tmp:
         manifest = _write_layers(tmp, layers, meta, progress)
-        write_marker(tmp, KIND, "ple slice")
-        replace_dir(tmp, out)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp)
     return manifest
 
 

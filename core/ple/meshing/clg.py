@@ -185,14 +185,7 @@ def mesh_arrays(comp, segments: int = 32, max_bytes: float | None = None) -> tup
         raise PleError(f"--segments {segments}: expected 8..512")
     m = _manifold()
     check_outer_budget(comp, segments, max_bytes)
-    # nested materials first, deepest first, each refused by its own estimate before it is meshed;
-    # the solid is then estimated with their real triangles (their bounds are several times loose)
-    solids: dict = {}
-    nested: dict = {}
-    for sub in nested_materials(comp):
-        check_budget(sub, segments, max_bytes, nested)
-        solids[id(sub)] = _solid_manifold(m, sub, segments, solids)
-        nested[id(sub)] = solids[id(sub)].num_tri()
+    solids, nested = _nested_solids(m, comp, segments, max_bytes)
     if nested:
         check_budget(comp, segments, max_bytes, nested, "nested materials as meshed")
     out = _solid_manifold(m, comp, segments, solids).to_mesh()
@@ -201,3 +194,23 @@ def mesh_arrays(comp, segments: int = 32, max_bytes: float | None = None) -> tup
     if len(faces) == 0:
         raise PleError("the CLG solid is empty: nothing to mesh")
     return verts, faces
+
+
+def _nested_solids(m, comp, segments: int, max_bytes: float | None) -> tuple[dict, dict]:
+    """The nested materials' solids and triangles (ids of their compiled CLGs -> manifold, ->
+    triangles), meshed deepest first, each refused by its own estimate before it is meshed: the
+    solid is then estimated with their real triangles (their bounds are several times loose)."""
+    solids: dict = {}
+    nested: dict = {}
+    for sub in nested_materials(comp):
+        check_budget(sub, segments, max_bytes, nested)
+        solids[id(sub)] = _solid_manifold(m, sub, segments, solids)
+        nested[id(sub)] = solids[id(sub)].num_tri()
+    return solids, nested
+
+
+def estimated_triangles(comp, segments: int = 32) -> float:
+    """The triangles ``mesh_arrays`` budgets the whole solid by before its Booleans: the leaves'
+    bound, each nested material counted as meshed (meshing them is part of the estimate)."""
+    _, nested = _nested_solids(_manifold(), comp, segments, None)
+    return solid_triangles(comp, segments, nested)

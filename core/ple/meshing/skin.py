@@ -21,42 +21,45 @@ import trimesh
 
 from ..errors import PleError
 from ..filters.body import Body, body_filters
+from .selfcheck import self_intersections
 from .weld import COLLAPSE_GRIDS, grid_spacing
 
 MAX_SDF_SAMPLES = 8_000_000  # grid samples of the signed distance
 
 
 def _manifold(vertices, faces):
-    from manifold3d import Manifold, Mesh  # optional: only skins need manifold3d
+    """A manifold3d solid of a closed mesh, its vertices in 64 bits (``Mesh64``): manifold3d
+    computes in doubles, so a body of size 1e30 filled by a lattice of size 1e30 keeps its cells."""
+    from manifold3d import Manifold, Mesh64  # optional: only skins and cuts need manifold3d
 
-    m = Manifold(Mesh(vert_properties=np.asarray(vertices, dtype=np.float32),
-                      tri_verts=np.asarray(faces, dtype=np.uint32)))
+    m = Manifold(Mesh64(vert_properties=np.array(vertices, dtype=np.float64, order="C"),  # copies: writeable
+                        tri_verts=np.array(faces, dtype=np.uint64, order="C")))
     if m.status().name != "NoError":
         raise PleError(f"the mesh is not a closed manifold for Booleans ({m.status().name})")
     return m
 
 
-def _trimesh(m, frame: tuple | None = None) -> trimesh.Trimesh:
+def _solid(body: Body):
+    """The body as a manifold3d solid; refused if it intersects itself: a Boolean would count
+    the overlap twice and leave a mesh that does not close (``ple.meshing.selfcheck``)."""
+    pairs = self_intersections(body.vertices, body.faces)
+    if len(pairs):
+        at = body.triangles[pairs[0, 0]].mean(axis=0)
+        raise PleError(f"{body.name}: the body intersects itself ({len(pairs):,} pairs of faces cross, e.g. near "
+                       f"({at[0]:.4g}, {at[1]:.4g}, {at[2]:.4g})); cutting or skinning needs a body that does "
+                       "not: repair it, e.g. unite its parts")
+    return _manifold(body.vertices, body.faces)
+
+
+def _trimesh(m) -> trimesh.Trimesh:
     """The Boolean's result with its slivers (features under a few float32 steps at its size,
-    which a float32 file cannot keep apart) removed by manifold3d itself: it stays manifold.
-    ``frame`` (centre, scale): the Boolean ran in that scaled frame (``body_frame``); the slivers
-    are measured and the result returned in world coordinates."""
-    c, s = frame if frame is not None else (np.zeros(3), 1.0)
+    which a float32 file cannot keep apart) removed by manifold3d itself: it stays manifold."""
     if not m.is_empty():
         box = np.asarray(m.bounding_box(), float)
-        m = m.simplify(COLLAPSE_GRIDS * grid_spacing(box[:3] * s + c, box[3:] * s + c) / s)
-    mesh = m.to_mesh()
-    v = np.asarray(mesh.vert_properties, float)[:, :3] * s + c
-    return trimesh.Trimesh(v, np.asarray(mesh.tri_verts), process=False)
-
-
-def body_frame(bodies) -> tuple[np.ndarray, float]:
-    """(centre, scale) of a frame in which the bodies span about 1: manifold3d computes in
-    float32, whose products overflow or lose the mesh at sizes like 1e30 (or 4e10 beside a
-    radius of 1); a Boolean in this frame keeps the right cells at any size."""
-    lo = np.min([b.lo for b in bodies], axis=0)
-    hi = np.max([b.hi for b in bodies], axis=0)
-    return (lo + hi) / 2, float((hi - lo).max()) or 1.0
+        m = m.simplify(COLLAPSE_GRIDS * grid_spacing(box[:3], box[3:]))
+    mesh = m.to_mesh64()
+    return trimesh.Trimesh(np.asarray(mesh.vert_properties, float)[:, :3], np.asarray(mesh.tri_verts, np.int64),
+                           process=False)
 
 
 def inward_offset(body: Body, thickness: float, edge: float | None = None):
@@ -134,7 +137,7 @@ def skin(body: Body, thickness: float, lattice_mesh=None, edge: float | None = N
     trimesh, clipped to the body) when given: one watertight solid."""
     if not body.closed:
         raise PleError("skin: the body must be a closed mesh")
-    outer = _manifold(body.vertices, body.faces)
+    outer = _solid(body)
     solid = outer - inward_offset(body, thickness, edge)
     if lattice_mesh is not None and len(lattice_mesh.faces):
         lattice = _manifold(lattice_mesh.vertices, lattice_mesh.faces)
@@ -150,19 +153,54 @@ def clip_bodies(lat) -> list[Body]:
     return [f.body for f in body_filters(lat) if f.mode == "any"]
 
 
-def clip_to_bodies(mesh: trimesh.Trimesh, bodies) -> trimesh.Trimesh:
+def clip_to_bodies(mesh: trimesh.Trimesh, bodies, contain=None) -> trimesh.Trimesh:
     """``mesh`` (closed) intersected with every body (closed): what sticks out is cut at their
-    surfaces. One watertight solid; an empty mesh stays empty."""
+    surfaces. One watertight solid; an empty mesh stays empty. A body whose surface stays away
+    from the mesh's box (``surface_meets_box``) holds all of the mesh or none of it: no Boolean,
+    whose tolerance (1e-12 of the largest coordinate) a body of size 1e30 around a lattice of
+    size 10 would make coarser than the lattice. ``contain`` runs the Booleans, given as a
+    function that returns the cut mesh, and returns that mesh (in a child process that a signal
+    stops: ``ple.program.meshes.mesh_contained``); None runs them here."""
     if not bodies or not len(mesh.faces):
         return mesh
     for body in bodies:
         if not body.closed:
             raise PleError(f"{body.name}: an open body (winding-number fallback) cannot cut a mesh: close it")
-    c, s = body_frame(bodies)
-    solid = _manifold((np.asarray(mesh.vertices) - c) / s, mesh.faces)
-    for body in bodies:
-        solid = solid ^ _manifold((body.vertices - c) / s, body.faces)
-    out = _trimesh(solid, (c, s))
+    lo, hi = mesh.bounds
+    crossing = [b for b in bodies if surface_meets_box(b, lo, hi)]
+    if any(not b.contains(mesh.vertices[:1])[0] for b in bodies if b not in crossing):  # the mesh lies outside
+        out = trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64), process=False)
+    elif crossing:
+        out = (contain or (lambda make: make()))(lambda: _cut(mesh, crossing))
+    else:  # inside every body
+        out = mesh.copy()
     out.metadata.update(mesh.metadata)
     out.metadata["ple_cut_by"] = [*mesh.metadata.get("ple_cut_by", ()), *bodies]
     return out
+
+
+def surface_meets_box(body: Body, lo, hi) -> bool:
+    """Whether a triangle of the body may meet the box [lo, hi] (their boxes overlap, the box
+    grown by a float32 step at its size); if none does, the box lies wholly inside or outside."""
+    pad = grid_spacing(lo, hi)
+    tri = body.triangles
+    near = (tri.min(axis=1) <= np.asarray(hi) + pad) & (tri.max(axis=1) >= np.asarray(lo) - pad)
+    return bool(np.any(np.all(near, axis=1)))
+
+
+def _cut(mesh: trimesh.Trimesh, bodies) -> trimesh.Trimesh:
+    """The Booleans of ``clip_to_bodies``. Refused (PleError) when manifold3d's tolerance, set by
+    the largest coordinate of mesh and bodies, is coarser than the float32 steps the mesh is
+    written with: the body's triangles that cross the lattice are far larger than it."""
+    solid = _manifold(mesh.vertices, mesh.faces)
+    for body in bodies:
+        solid = solid ^ _solid(body)
+    lo, hi = mesh.bounds
+    step = COLLAPSE_GRIDS * grid_spacing(lo, hi)
+    if solid.get_tolerance() > step:
+        big = max(bodies, key=lambda b: float(np.max(b.hi - b.lo)))
+        raise PleError(f"{big.name}: a body {float(np.max(big.hi - big.lo)):.3g} across, whose surface crosses a "
+                       f"lattice {float(np.max(hi - lo)):.3g} across, cannot cut it: the cut would be within "
+                       f"{solid.get_tolerance():.3g}, coarser than the mesh's {step:.3g}; fill by 'inside' or "
+                       "'centroid', or give the body finer triangles near the lattice")
+    return _trimesh(solid)

@@ -861,7 +861,7 @@ def tessellation_box(lat: Lattice, region, box, style: str = "refined", levels: 
 
 def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
                segments: int | None = None, check_clean: bool = True, fillet: float | None = None,
-               cut: bool = True, unclean=None) -> trimesh.Trimesh:
+               cut: bool = True, unclean=None, contain=None) -> trimesh.Trimesh:
     """The mesh of a region (default: the whole lattice) as one trimesh.
 
     ``levels``: refinement levels of ``refined`` (default 4); ``segments``: generators per full
@@ -872,7 +872,8 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     clean rest is meshed on the fast path and united with their balls and beams by manifold3d;
     ``mesh.metadata["ple_unclean"]`` holds the report (None when not checked). A lattice filling a
     body by ``any`` is cut at the body's surface (``ple.meshing.skin.clip_to_bodies``) unless
-    ``cut`` is False (for a skin, which cuts and unites in one run of Booleans). ``unclean``: the
+    ``cut`` is False (for a skin, which cuts and unites in one run of Booleans); ``contain`` runs
+    that cut's Booleans (``clip_to_bodies``: in a child process that a signal stops). ``unclean``: the
     region's report when the caller has it already (``checked_stream``), so the check runs once."""
     levels, segments = _check_style(style, levels, segments)
     bodies = clip_bodies(lat)
@@ -894,7 +895,7 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     mesh = trimesh.Trimesh(verts, faces, process=False)
     mesh.remove_unreferenced_vertices()
     mesh.metadata["ple_unclean"] = report
-    return clip_to_bodies(mesh, bodies if cut else [])  # a lattice filling a body by `any` ends at its surface
+    return clip_to_bodies(mesh, bodies if cut else [], contain)  # a lattice filling a body by `any` ends at its surface
 
 
 def leave_to_unions(tess: _Tessellator, ev, report) -> list:

@@ -75,6 +75,7 @@ def lattice_from_dict(data, filter_from_dict=None, surface_grade=None) -> Lattic
     nodes = data.get("nodes")
     if not isinstance(nodes, list) or not nodes:
         raise PleError("nodes: expected a non-empty list of nodes")
+    labels: set = set()  # the node ids seen: a set, not a scan per node
     for n, node in enumerate(nodes):
         where = f"nodes[{n}]"
         if not isinstance(node, dict):
@@ -92,8 +93,9 @@ def lattice_from_dict(data, filter_from_dict=None, surface_grade=None) -> Lattic
         if isinstance(name, int) and name != n:
             raise PleError(f"{where}.id: an integer id must equal the node's position {n}")
         label = name if isinstance(name, str) else None
-        if label is not None and any(x.name == label for x in lat.nodes):
+        if label is not None and label in labels:
             raise PleError(f"{where}.id: {label!r} is used twice")
+        labels.add(label)
         lat.add_node(center, radius, label)
     for b, beam in enumerate(data.get("beams", [])):
         where = f"beams[{b}]"

@@ -185,10 +185,26 @@ class Lattice:
         r = float(radius)
         if not math.isfinite(r) or r <= 0:
             raise PleError(f"node radius must be a positive number, got {radius!r}")
-        if name is not None and any(n.name == name for n in self.nodes):
+        names = self._names()
+        if name is not None and name in names and any(n.name == name for n in self.nodes):
             raise PleError(f"node id {name!r} is used twice")
         self.nodes.append(Node(c, r, name))
+        if name is not None:
+            names[name] = len(self.nodes) - 1
+        self._names_key = (id(self.nodes), len(self.nodes))
         return len(self.nodes) - 1
+
+    def _names(self) -> dict:
+        """Node name -> position (the first node of that name), rebuilt when ``nodes`` is another
+        list or has another length: thousands of named nodes are added and resolved in linear time."""
+        key = (id(self.nodes), len(self.nodes))
+        if getattr(self, "_names_key", None) != key:
+            names: dict = {}
+            for idx, node in enumerate(self.nodes):
+                if node.name is not None:
+                    names.setdefault(node.name, idx)
+            self._name_ids, self._names_key = names, key
+        return self._name_ids
 
     def node_id(self, ref) -> int:
         """Resolve a node reference (int position or string name) to its position."""
@@ -198,7 +214,10 @@ class Lattice:
             if 0 <= int(ref) < len(self.nodes):
                 return int(ref)
             raise PleError(f"unknown node id {ref!r} (the template has {len(self.nodes)} nodes)")
-        for idx, node in enumerate(self.nodes):
+        idx = self._names().get(ref)
+        if idx is not None and self.nodes[idx].name == ref:
+            return idx
+        for idx, node in enumerate(self.nodes):  # a node renamed in place since the names were listed
             if node.name == ref:
                 return idx
         raise PleError(f"unknown node id {ref!r}")
