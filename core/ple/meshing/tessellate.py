@@ -68,6 +68,7 @@ from .weld import COLLAPSE_GRIDS, grid_spacing, weld
 
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
 MAX_LEVELS = 6
+PLACED_VERTICES = 1 << 20  # template vertices the unclean check places at once (24 MiB)
 STEADY_MIN_LAYERS = 6  # the unclean check looks up anchors and border layers only from this many inner layers on
 MAX_CHECK_GROUPS = 500_000  # streamed regions up to this size are checked for unclean hubs first
 BOX_TRIANGLES = 1 << 22  # triangles of a streamed box, at most (about: the estimate is from above)
@@ -382,17 +383,24 @@ class _Tessellator:
         slot = np.concatenate([np.full(int((~beam).sum()), -1), self.beam_slots[pattern[b], 0],
                                self.beam_slots[pattern[b], 1]])
         second = np.repeat([False, False, True], [int((~beam).sum()), len(b), len(b)])
-        rows, pos = np.unique(hub, return_inverse=True)
-        verts, start = self._placed_hubs(tids, m, rows)
         first_id, size = self._vertex_lists(tids[hub], slot)
         length = np.zeros(len(e), np.int64)
         length[k[~second]] = size[~second]
         offset = np.where(second, length[k], 0)
         np.add.at(length, k[second], size[second])
-        j = np.arange(int(size.sum())) - np.repeat(np.cumsum(size) - size, size)
-        src = np.repeat(start[pos.reshape(-1)], size) + self.id_lists[np.repeat(first_id, size) + j]
         out = np.empty((len(e), int(length.max(initial=1)), 3))
-        out[np.repeat(k, size), np.repeat(offset, size) + j] = verts[src]
+        rows, pos = np.unique(hub, return_inverse=True)
+        pos = pos.reshape(-1)
+        counts = self.table.snapshot()[2][tids[rows], 2]
+        group = np.cumsum(counts) // PLACED_VERTICES  # whole templates placed, a bounded number at a time
+        for g in np.unique(group).tolist():
+            sel = np.flatnonzero(group[pos] == g)
+            verts, start = self._placed_hubs(tids, m, rows[group == g])
+            at = np.searchsorted(np.flatnonzero(group == g), pos[sel])
+            sz = size[sel]
+            j = np.arange(int(sz.sum())) - np.repeat(np.cumsum(sz) - sz, sz)
+            src = np.repeat(start[at], sz) + self.id_lists[np.repeat(first_id[sel], sz) + j]
+            out[np.repeat(k[sel], sz), np.repeat(offset[sel], sz) + j] = verts[src]
         last = np.minimum(np.arange(out.shape[1]), np.maximum(length, 1)[:, None] - 1)
         return np.take_along_axis(out, last[..., None], axis=1)
 
