@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from ple import Lattice, Translation
+from ple.algebra.vectors import Pt, Vec
 from ple.cli.main import main
 from ple.errors import PleError
 from ple.io.irfile import load_ir, save_ir
@@ -102,6 +103,43 @@ def test_folded_refined_hubs_of_the_fixture_go_to_unions():
     assert rep.shrunk_hubs > 0  # the folded junctions, now unclean
     v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     assert mesh.is_watertight and mesh.is_winding_consistent and len(self_intersections(v, f)) == 0
+
+
+def test_contact_rings_out_of_order_send_their_beams_to_unions():
+    """CHoCC junctions of the attached lattice whose contact ring has a vertex behind its
+    predecessor about the beam: the strip zipped by angle would fold (37 self-intersecting pairs
+    on beam (3, 0, 4)-(3, 1, 4) before). Such a beam is a pair with itself, meshed by a union:
+    the chocc mesh is closed, oriented and has no self-intersecting pair (exact)."""
+    from ple.meshing.selfcheck import self_intersections
+
+    lat = load_ir(DATA / "issue_lil_two_balls.json")
+    mesh = tessellate(lat, "2:5,0:3,3:6", style="chocc")
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    assert mesh.is_watertight and mesh.is_winding_consistent and len(self_intersections(v, f)) == 0
+    rep = mesh.metadata["ple_unclean"]
+    n = len(rep.shrunk)
+    pairs = np.asarray(rep.element_pairs)
+    assert ((pairs[:, 0] == pairs[:, 1]) & (pairs[:, 0] >= n)).any()  # a beam paired with itself
+
+
+def test_rings_in_order_sees_a_vertex_out_of_place():
+    """``_rings_in_order``: every contact ring of a cubic lattice's hub runs one way about its
+    beam; moving one ring vertex back past its predecessor is seen."""
+    from ple.meshing.tessellate import _Tessellator
+
+    lat = Lattice()
+    a = lat.add_node(Pt(0, 0, 0), 0.2)
+    for off in ((1, 0, 0), (0, 1, 0), (0, 0, 1)):
+        lat.add_beam(a, a, *off)
+    for axis in "uvw":
+        getattr(lat, f"set_{axis}")(3, Translation(Vec(*[float(axis == x) for x in "uvw"])))
+    tess = _Tessellator(lat, lat.region(), "chocc", 0, 16)
+    tess.instances(np.asarray(lat.evaluate(lat.region()).node_index, np.int64))
+    assert tess._rings_in_order().all()
+    tpl, slot_of = tess.tpl_list[0]
+    ring = np.asarray(tpl.rings[slot_of[0]], np.int64)
+    tpl.rings[slot_of[0]] = ring[[0, 2, 1, *range(3, len(ring))]]  # the second vertex behind the third
+    assert not tess._rings_in_order()[0, 0]
 
 
 # ----- coplanar and antipodal beam directions --------------------------------------------------

@@ -115,9 +115,10 @@ def test_random_steady_lattices_mesh_or_say_why(first):
     assert all(any(why in k for why in KNOWN) for k in errors), errors
 
 
-UNCLEAN = [1, 8, 14, 16, 23, 27, 29, 35, 36]  # unclean lattices the union path meshes in about a second
+UNCLEAN = [1, 8, 14, 16, 23, 27, 29, 35, 36, 61]  # unclean lattices the union path meshes in about a second
 # (14 and 27 were refused until the ring polygons, which the union is opened along, were left out
-# of on_grid's checks)
+# of on_grid's checks; 61's batched unions once lost a cluster's second piece: a union opened
+# along its rings may fall apart in several)
 
 
 @pytest.mark.parametrize("seed", UNCLEAN)

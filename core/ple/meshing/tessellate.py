@@ -247,6 +247,7 @@ class _Tessellator:
                                     for p, b in enumerate(lat.beams)], np.int64).reshape(-1, 2)
         self.templates: dict = {}
         self.tpl_list: list = []  # (template, slot map) by template id; only appended to
+        self.template_nodes: list = []  # the template node of each template id
         self.table = TemplateTable()  # their vertices and faces, for box assembly
         self.strips: dict = {}
         self.hints: dict = {}
@@ -334,9 +335,38 @@ class _Tessellator:
                          np.asarray(ev.beam_index, np.int64)[:, 3])
         # hulls more than the largest rounding of two vertices apart (the grid, then twice the grid
         # for files in other units) stay apart in every file
+        bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
+        slots = self.beam_slots[np.asarray(ev.beam_index, np.int64)[:, 3]]
+        ordered = self._rings_in_order()
+        twisted = ~(ordered[tids[bn[:, 0]], slots[:, 0]] & ordered[tids[bn[:, 1]], slots[:, 1]]) if len(bn) else None
         return find_unclean(ev.center, ev.radius, ev.beam_nodes, rp_t[tids] * f, ~clean_t[tids], points,
                             SEPARATION_GRIDS * self.grid, self._steady_layers(idx), pulled_t[tids],
-                            partial(self._hubs_meet, tids, m)), ev
+                            partial(self._hubs_meet, tids, m), twisted), ev
+
+    def _rings_in_order(self) -> np.ndarray:
+        """(templates, slots) bool: whether each contact ring of each hub template runs in one
+        angular direction about its beam (the axis from the ball's centre through the ring's
+        centroid). A beam strip zips its two rings by angle (``zippers``); a ring out of order
+        (a vertex behind its predecessor) would fold the strip, so its beams go to unions."""
+        width = max((len(x) for x in self.slots), default=0)
+        out = np.ones((len(self.tpl_list), max(width, 1)), bool)
+        by_size: dict = {}  # ring length -> [(template, slot, ring points)]
+        centers = self.lat.template_centers
+        for t, (tpl, slot_of) in enumerate(self.tpl_list):
+            c = centers[self.template_nodes[t]]
+            for s, r in enumerate(slot_of):
+                if r >= 0 and len(tpl.rings[r]) >= 3:
+                    by_size.setdefault(len(tpl.rings[r]), []).append((t, s, tpl.vertices[tpl.rings[r]] - c))
+        for rows in by_size.values():
+            t, s, w = zip(*rows)
+            w = np.stack(w)
+            axis = w.mean(axis=1)
+            norm = np.linalg.norm(axis, axis=1)
+            e1, e2 = perpendicular_frames(axis / np.where(norm > 0, norm, 1.0)[:, None])
+            ang = np.arctan2(np.einsum("gki,gi->gk", w, e2), np.einsum("gki,gi->gk", w, e1))
+            step = np.angle(np.exp(1j * (np.roll(ang, -1, axis=1) - ang)))  # each step, closing one included
+            out[np.array(t), np.array(s)] = (norm > 0) & ((step > 0).all(axis=1) | (step < 0).all(axis=1))
+        return out
 
     def _steady_layers(self, idx: np.ndarray):
         """``find_unclean``'s ``steady`` (node_index, a, b, shrink) when the region's layers along W
@@ -606,6 +636,7 @@ class _Tessellator:
             have = ~np.isnan(local[:, 3])
             self.templates[key] = (len(self.templates), built[key], np.where(have, np.cumsum(have) - 1, -1))
             self.tpl_list.append(self.templates[key][1:])
+            self.template_nodes.append(key[0])
         self.table.add(built[key] for key in new)  # in template-id order
 
     def _named(self, result, keys, new: dict, where: dict | None):

@@ -65,7 +65,7 @@ class UncleanReport:
 
 
 def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, margin: float = 0.0,
-                 steady=None, pulled=None, meet=None) -> UncleanReport:
+                 steady=None, pulled=None, meet=None, twisted=None) -> UncleanReport:
     """Unclean hubs of a region from its balls (center (N, 3), radius (N,)), beams (M, 2 rows),
     each hub's inflated radius r_plus (N,) (world units) and ``shrunk`` (N,) hubs whose ACHoCC
     was not clean. ``points(elements)``: for element ids (K,) (hubs 0..N-1, then beams N..N+M-1)
@@ -86,7 +86,8 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
     neighbouring junctions is tested on their hulls too (``points``; without it, unclean). The
     hulls of two such junctions often overlap where their meshes do not (a refined or CNT hub is
     far from convex); ``meet(pairs)`` (P, 2 hub rows) -> (P,) bool, when given, then tells
-    from the meshes themselves."""
+    from the meshes themselves. ``twisted`` (M,): beams whose strip cannot be zipped (a contact
+    ring out of angular order): each is a pair with itself, so a union meshes it."""
     c = np.asarray(center, float).reshape(-1, 3)
     rad = np.asarray(radius, float).reshape(-1)
     rp = np.maximum(np.asarray(r_plus, float).reshape(-1), rad)
@@ -144,6 +145,11 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
             copied = _mark_copies(bad, ends[rep], kmax[rep].max(axis=1), kb, node_index, kinds[rep], bn)
             pairs += len(copied)
             found.append(copied)
+    if twisted is not None and np.any(twisted):
+        rows = np.flatnonzero(np.asarray(twisted, bool).reshape(-1))
+        bad[bn[rows].reshape(-1)] = True
+        found.append(np.stack([n + rows, n + rows], axis=1))
+        pairs += len(rows)
     close = 0
     if pulled is not None:
         near = _pulled_neighbours(np.asarray(pulled, bool).reshape(-1), bn, points, margin, meet, steady)

@@ -407,16 +407,14 @@ def unite_batch(batch: list, center, radius, beam_nodes, rings: list, grid: floa
     if (ids < 0).any():
         return [None] * len(batch)
     ring_owner = np.repeat([k for k, _ in keys], [len(r) for r in pinned])
-    piece_of = np.full(len(batch), -1, np.int64)
-    piece_of[ring_owner] = label[ids]
-    whose = np.full(int(label.max()) + 1, -1, np.int64)
+    whose = np.full(int(label.max()) + 1, -1, np.int64)  # the cluster of each connected piece
     whose[label[ids]] = ring_owner
-    if len(np.unique(piece_of)) != len(batch) or (whose[label[ids]] != ring_owner).any() or (whose < 0).any():
+    if (whose[label[ids]] != ring_owner).any() or (whose[label[np.unique(f)]] < 0).any():
         return [None] * len(batch)  # a piece without rings, or two clusters in one piece
     out = []
-    face_label = label[f[:, 0]]
+    face_owner = whose[label[f[:, 0]]]  # a cluster's union may be open into several pieces
     for k in range(len(batch)):
-        fk = f[face_label == piece_of[k]]
+        fk = f[face_owner == k]
         used = np.unique(fk)
         remap = np.full(len(v), -1, np.int64)
         remap[used] = np.arange(len(used))
