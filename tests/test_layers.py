@@ -30,7 +30,7 @@ DOOR_NAMES = re.compile(r"\bple\.(cli|bench)\b|\bple_addon\b|\btools\.\w")  # al
 WRITES = {"write_text", "write_bytes", "savez", "savez_compressed", "save", "tofile", "export", "dump"}
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _nodes(text: str) -> tuple[ast.AST, ...]:
     """Every node of a module's syntax tree, parsed and walked once per text (the checker's
     self-tests read copies of the same files again and again)."""
