@@ -2,6 +2,14 @@
 
 from __future__ import annotations
 
+import os
+
+# one BLAS thread per process: make test runs one test process per core, and OpenBLAS threads
+# spinning on tiny matrices (scipy's SLSQP) cost up to ten times the CPU. Set before pytest-xdist
+# starts its processes and for every command a test starts; this process loaded numpy already
+# (the Makefile sets it for a run in one process).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import numpy as np
 import pytest
 from hypothesis import strategies as st

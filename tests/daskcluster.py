@@ -72,6 +72,18 @@ def kill_when(proc, ready, timeout: float = 300) -> float:
     return time.time()
 
 
+def eventually(holds, timeout: float = 30.0) -> bool:
+    """Whether ``holds()`` becomes true within ``timeout`` seconds (polled every 50 ms): for work
+    that ends on another thread, such as a progress bar's listener on the client's event loop,
+    which a fixed sleep would race on a loaded machine."""
+    deadline = time.monotonic() + timeout
+    while not holds():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
+
+
 def on_terminal(argv: list[str], env: dict, cwd: Path, timeout: float = 300) -> tuple[int, str, str]:
     """Run ``argv`` with its stderr on a pseudo-terminal (a tty, as in a shell) and its stdout on a
     pipe; returns (exit status, stdout, stderr). The process is killed after ``timeout`` seconds."""

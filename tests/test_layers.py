@@ -6,6 +6,7 @@ third-party packages. Imports are read with ``ast``, function-local ones include
 from __future__ import annotations
 
 import ast
+import functools
 import re
 import shutil
 from pathlib import Path
@@ -27,6 +28,13 @@ QUERY_DISPATCHER = "ple.queries.biq"
 COMPILED = {"ple.io._stlcodec", "ple.meshing._assemble", "ple.meshing._selfcheck", "ple.queries._rangefinder"}
 DOOR_NAMES = re.compile(r"\bple\.(cli|bench)\b|\bple_addon\b|\btools\.\w")  # also in strings (subprocess)
 WRITES = {"write_text", "write_bytes", "savez", "savez_compressed", "save", "tofile", "export", "dump"}
+
+
+@functools.cache
+def _nodes(text: str) -> tuple[ast.AST, ...]:
+    """Every node of a module's syntax tree, parsed and walked once per text (the checker's
+    self-tests read copies of the same files again and again)."""
+    return tuple(ast.walk(ast.parse(text)))
 
 
 def modules(root: Path) -> dict[str, Path]:
@@ -56,9 +64,8 @@ def imports(root: Path) -> list[tuple[str, str, int, bool]]:
     known = modules(root)
     out = []
     for mod, path in known.items():
-        tree = ast.parse(path.read_text())
         is_pkg = path.name == "__init__.py"
-        for node in ast.walk(tree):
+        for node in _nodes(path.read_text()):
             local = getattr(node, "col_offset", 0) > 0
             if isinstance(node, ast.Import):
                 out += [(mod, a.name, node.lineno, local) for a in node.names]
@@ -106,7 +113,7 @@ def cycles(edges: dict[str, set[str]]) -> list[list[str]]:
 
 def _writes_files(path: Path) -> list[int]:
     lines = []
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in _nodes(path.read_text()):
         if not isinstance(node, ast.Call):
             continue
         fn = node.func

@@ -314,9 +314,9 @@ def case_no_leaks():
                       len(bpy.data.node_groups), len(bpy.data.texts), len(bpy.data.collections))
     before = counts()
     start = fu.location.copy()
-    for n in range(2000):
+    for n in range(600):  # a leak of one datablock per update, or per count change (4 here), shows
         fu.location = (start[0] + 0.001 * (n % 50), start[1], start[2])
-        if n % 500 == 250:
+        if n % 150 == 75:
             rig.ple.counts = (7, 12, 10 + n % 3)
         update()
     assert counts() == before, (before, counts())

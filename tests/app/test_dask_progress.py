@@ -13,7 +13,7 @@ import threading
 import time
 from pathlib import Path
 
-from daskcluster import on_terminal
+from daskcluster import eventually, on_terminal
 from ple.app.cluster import dask_client, run_job, run_tasks
 from ple.app.jobs import mesh_job
 from ple.errors import PleError
@@ -91,8 +91,8 @@ def test_the_bar_outlives_an_erred_task_and_stops_with_the_job(capsys):
         tasks = run_tasks(client, slow_or_broken, [(i,) for i in range(10, 20)], list(range(10, 20)), "cut",
                           progress=True)
         next(tasks)
-        tasks.close()  # an interrupted job: its bar stops at once and ends its line
-        time.sleep(0.5)
-        assert capsys.readouterr().err.endswith("\n")
-    time.sleep(0.5)
-    assert {t.name for t in set(threading.enumerate()) - before} <= {"Dask-Offload_0"}
+        tasks.close()  # an interrupted job: its bar stops (on the client's loop) and ends its line
+        err: list[str] = []
+        assert eventually(lambda: err.append(capsys.readouterr().err) or "".join(err).endswith("\n")), err
+    assert eventually(lambda: {t.name for t in set(threading.enumerate()) - before} <= {"Dask-Offload_0"}), \
+        {t.name for t in set(threading.enumerate()) - before}

@@ -39,20 +39,25 @@ def node(ref, g, pat):
     return c, f * pat["radii"][n]
 
 
-def beam_f(p, ca, ra, cb, rb, iters: int = 80) -> np.ndarray:
+def beam_f(p, ca, ra, cb, rb, iters: int = 50) -> np.ndarray:
     """min over t in [0, 1] of |p - c(t)| - r(t): the distance to the hull outside, ≤ 0 inside
-    (a convex function of t, minimized by golden-section search)."""
+    (a convex function of t, minimized by golden-section search: one new value of t per step, the
+    other inner point kept; 50 steps leave t within 4e-11, far below the tests' 1e-7 near surfaces)."""
     lo, hi = np.zeros(len(p)), np.ones(len(p))
 
     def f(t):
-        c = ca + t[:, None] * (cb - ca)
-        return np.linalg.norm(p - c, axis=1) - (ra + t * (rb - ra))
+        d = p - (ca + t[:, None] * (cb - ca))
+        return np.sqrt(np.einsum("ij,ij->i", d, d)) - (ra + t * (rb - ra))
+    a, b = hi - GOLD * (hi - lo), lo + GOLD * (hi - lo)
+    fa, fb = f(a), f(b)
     for _ in range(iters):
-        a, b = hi - GOLD * (hi - lo), lo + GOLD * (hi - lo)
-        left = f(a) < f(b)
+        left = fa < fb  # the minimum lies in [lo, b]: b becomes the new upper inner point, else a the lower
         hi = np.where(left, b, hi)
         lo = np.where(left, lo, a)
-    return np.minimum.reduce([f(lo), f(np.zeros(len(p))), f(np.ones(len(p)))])
+        a, b = np.where(left, hi - GOLD * (hi - lo), b), np.where(left, a, lo + GOLD * (hi - lo))
+        new = f(np.where(left, a, b))
+        fa, fb = np.where(left, new, fb), np.where(left, fa, new)
+    return np.minimum.reduce([fa, fb, f(lo), f(np.zeros(len(p))), f(np.ones(len(p)))])
 
 
 def expand(e, pat):

@@ -310,7 +310,7 @@ def test_a_full_disk_is_one_line_and_keeps_the_old_file(tmp_path, capsys, monkey
         fill(d, 64 << 10)
         refused(["eval", "cubic", "--param", "n=40", "--out", d / "e.npz"], capsys, "e.npz", "No space left")
         for fmt in ("ply", "glb", "obj", "3mf"):
-            refused(["mesh", "cubic", "--param", "n=3", "--style", "refined", "--out", d / f"m.{fmt}"], capsys,
+            refused(["mesh", "cubic", "--param", "n=8", "--style", "cnt", "--out", d / f"m.{fmt}"], capsys,
                     f"m.{fmt}", "No space left")
         # a streamed STL larger than its estimate passes the free-space check, then meets the full disk
         import ple.cli.mesh as cli_mesh
@@ -484,10 +484,10 @@ def _balls_clg(n: int, copies: int = 1) -> dict:
 
 
 def test_clg_mesh_is_budgeted_before_any_boolean(tmp_path, capsys):
-    (tmp_path / "b.json").write_text(json.dumps(_balls_clg(5000)))
-    refused(["clg", "mesh", tmp_path / "b.json", "--max-memory", "1G", "--out", tmp_path / "m.stl"], capsys,
+    (tmp_path / "b.json").write_text(json.dumps(_balls_clg(500)))  # 2.56e5 triangles: about 159 MiB
+    refused(["clg", "mesh", tmp_path / "b.json", "--max-memory", "100M", "--out", tmp_path / "m.stl"], capsys,
             "--max-memory", "estimated before starting")
-    (tmp_path / "c.json").write_text(json.dumps(_balls_clg(2000, copies=4)))
+    (tmp_path / "c.json").write_text(json.dumps(_balls_clg(300, copies=6)))  # 216 groups: 3.3e7 triangles
     refused(["clg", "mesh", tmp_path / "c.json", "--max-memory", "1G", "--out", tmp_path / "m.stl"], capsys,
             "triangles")
 

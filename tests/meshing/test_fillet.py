@@ -30,14 +30,20 @@ def _corner_cube() -> Lattice:
 
 
 def _blend_inside(lat: Lattice, pts: np.ndarray, size: float) -> np.ndarray:
-    """Eq. 6 per hub, written out: -ln Σ exp(-b d_i) / b <= 0 for some hub."""
+    """Eq. 6 per hub, written out: -ln Σ exp(-b d_i) / b <= 0 for some hub. A hub is asked only
+    about the points within its reach: with k beams the sum is below 1 once every d_i > ln(k) / b,
+    and d_i >= |p - c_h| - (|c_n - c_h| + max(r_h, r_n)) (the beam lies in that ball around c_h)."""
     ev = lat.evaluate()
     inside = np.zeros(len(pts), bool)
     for h in range(len(ev.center)):
         nbs = [b if a == h else a for a, b in ev.beam_nodes if h in (a, b)]
         b = blobbiness(size, ev.radius[h])
-        d = np.stack([beam_distance(pts, ev.center[h], ev.radius[h], ev.center[n], ev.radius[n]) for n in nbs], 1)
-        inside |= np.log(np.exp(-b * d).sum(axis=1)) >= 0
+        reach = max(np.linalg.norm(ev.center[n] - ev.center[h]) + max(ev.radius[h], ev.radius[n]) for n in nbs)
+        reach += np.log(len(nbs)) / b
+        near = np.flatnonzero(np.einsum("ij,ij->i", pts - ev.center[h], pts - ev.center[h]) <= (1.01 * reach) ** 2)
+        p = pts[near]
+        d = np.stack([beam_distance(p, ev.center[h], ev.radius[h], ev.center[n], ev.radius[n]) for n in nbs], 1)
+        inside[near] |= np.log(np.exp(-b * d).sum(axis=1)) >= 0
     return inside
 
 

@@ -185,12 +185,15 @@ def _hull_distance(a, b):
 
     na = len(a)
 
-    def gap(w):
-        return np.sum((w[:na] @ a - w[na:] @ b) ** 2)
+    def gap(w):  # squared distance of the two convex combinations, and its gradient
+        d = w[:na] @ a - w[na:] @ b
+        return d @ d, np.concatenate([2 * a @ d, -2 * b @ d])
 
-    cons = [{"type": "eq", "fun": lambda w: w[:na].sum() - 1}, {"type": "eq", "fun": lambda w: w[na:].sum() - 1}]
+    in_a = np.concatenate([np.ones(na), np.zeros(len(b))])
+    cons = [{"type": "eq", "fun": lambda w: w[:na].sum() - 1, "jac": lambda w: in_a},
+            {"type": "eq", "fun": lambda w: w[na:].sum() - 1, "jac": lambda w: 1 - in_a}]
     w0 = np.concatenate([np.full(na, 1 / na), np.full(len(b), 1 / len(b))])
-    res = minimize(gap, w0, method="SLSQP", bounds=[(0, 1)] * len(w0), constraints=cons,
+    res = minimize(gap, w0, jac=True, method="SLSQP", bounds=[(0, 1)] * len(w0), constraints=cons,
                    options={"ftol": 1e-14, "maxiter": 500})
     return float(np.sqrt(max(res.fun, 0.0)))
 
