@@ -159,16 +159,20 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
     nodes = np.flatnonzero(bad)
     comps = 0
     if len(nodes):
-        from scipy.sparse import coo_matrix  # noqa: PLC0415 - optional package
-        from scipy.sparse.csgraph import connected_components  # noqa: PLC0415
-
-        sel = bad[bn[:, 0]] & bad[bn[:, 1]]
-        g = coo_matrix((np.ones(int(sel.sum())), (bn[sel, 0], bn[sel, 1])), shape=(n, n))
-        _, lab = connected_components(g, directed=False)
+        lab = component_labels(n, bn[bad[bn[:, 0]] & bad[bn[:, 1]]])
         comps = len(np.unique(lab[nodes]))
     shrunk_mask = np.zeros(n, bool) if shrunk is None else np.asarray(shrunk, bool).copy()
     return UncleanReport(nodes, pairs, shrunk_count, comps, close, np.concatenate(found).astype(np.int64),
                          shrunk_mask, r_plus=rp)
+
+
+def component_labels(n: int, edges) -> np.ndarray:
+    """The connected component (a label, (n,)) of each of n nodes joined by ``edges`` (E, 2)."""
+    from scipy.sparse import coo_matrix  # noqa: PLC0415 - optional package
+    from scipy.sparse.csgraph import connected_components  # noqa: PLC0415
+
+    e = np.asarray(edges, np.int64).reshape(-1, 2)
+    return connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)), directed=False)[1]
 
 
 def _pulled_neighbours(pulled, bn, points, margin: float, meet=None, steady=None) -> np.ndarray:

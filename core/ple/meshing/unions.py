@@ -33,7 +33,7 @@ import numpy as np
 from ..algebra.elements import segment_distance
 from ..algebra.vectors import perpendicular_frames
 from ..errors import PleError
-from .unclean import BALL_TURNS, SPHERE_SEGMENTS, match_rows, on_grid, on_one_ring, ring_of_vertices
+from .unclean import BALL_TURNS, SPHERE_SEGMENTS, component_labels, match_rows, on_grid, on_one_ring, ring_of_vertices
 
 UNION_TRIANGLE_BYTES = 600  # peak bytes per input triangle of a manifold3d union and its repair (measured, rounded up)
 
@@ -93,14 +93,9 @@ def clusters(report, beam_nodes, center=None, radius=None) -> list:
     beam_b |= incident
     if not hub_e.any() and not beam_b.any():
         return []
-    from scipy.sparse import coo_matrix  # noqa: PLC0415 - optional package
-    from scipy.sparse.csgraph import connected_components  # noqa: PLC0415
-
     rows = np.flatnonzero(incident)
     edges = np.concatenate([pairs, np.stack([bn[rows, 0], n + rows], 1), np.stack([bn[rows, 1], n + rows], 1)])
-    edges = edges[np.concatenate([hub_e, beam_b])[edges].all(axis=1)]
-    g = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n + m, n + m))
-    _, label = connected_components(g, directed=False)
+    label = component_labels(n + m, edges[np.concatenate([hub_e, beam_b])[edges].all(axis=1)])
     members = np.flatnonzero(np.concatenate([hub_e, beam_b]))
     order = members[np.argsort(label[members], kind="stable")]
     cuts = np.flatnonzero(np.diff(label[order])) + 1
@@ -124,7 +119,7 @@ def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 
     one piece stays whole. Returns (clusters, cut rings {(beam row, CUT): (SPHERE_SEGMENTS, 3)}):
     each ring lies on the tangent cone of the beam, and both halves' unions take it as their
     rim, so they meet exactly there."""
-    hubs = np.asarray(cluster.hubs, np.int64)
+    hubs = np.sort(np.asarray(cluster.hubs, np.int64))
     if len(hubs) < 2 or len(cluster.halves):
         return None
     c, rad = np.asarray(center, float), np.asarray(radius, float)
@@ -145,38 +140,28 @@ def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 
     cut = np.array(sorted(j for j, _ in rings), np.int64)
     whole = np.setdiff1d(beams, cut)
     halves = np.stack([np.repeat(cut, 2), np.tile([0, 1], len(cut))], axis=1)
-    # elements: hubs, whole beams, halves; edges: pairs inside the cluster, incidences
-    names = {("h", int(h)): k for k, h in enumerate(hubs.tolist())}
-    names.update({("b", int(j)): len(names) + k for k, j in enumerate(whole.tolist())})
-    names.update({("c", int(j), int(e)): len(names) + k for k, (j, e) in enumerate(halves.tolist())})
-    edges = []
-    for a, b in pairs.tolist():
-        na = names.get(("h", a) if a < n else ("b", a - n))
-        nb = names.get(("h", b) if b < n else ("b", b - n))
-        if na is not None and nb is not None:
-            edges.append((na, nb))
-    for j in whole.tolist():
-        edges += [(names[("b", j)], names[("h", int(x))]) for x in bn[j] if ("h", int(x)) in names]
-    for j, e in halves.tolist():
-        edges.append((names[("c", j, e)], names[("h", int(bn[j, e]))]))
-    from scipy.sparse import coo_matrix  # noqa: PLC0415 - optional package
-    from scipy.sparse.csgraph import connected_components  # noqa: PLC0415
-
-    e = np.asarray(edges, np.int64).reshape(-1, 2)
-    count, label = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])),
-                                                   shape=(len(names), len(names))), directed=False)
+    # elements numbered hubs, whole beams, halves; edges: the pairs inside the cluster, incidences
+    h, w = len(hubs), len(whole)
+    element = np.full(n + len(bn), -1, np.int64)  # find_unclean's element ids -> ours
+    element[hubs] = np.arange(h)
+    element[n + whole] = h + np.arange(w)
+    pairs = element[pairs]
+    hub_of = np.searchsorted(hubs, bn)  # row of each beam end among the hubs (valid where it is one)
+    own = np.isin(bn[whole], hubs)
+    edges = np.concatenate([pairs[(pairs >= 0).all(axis=1)],
+                            np.stack([np.repeat(h + np.arange(w), 2)[own.reshape(-1)], hub_of[whole][own]], 1),
+                            np.stack([h + w + np.arange(len(halves)), hub_of[halves[:, 0], halves[:, 1]]], 1)])
+    label = component_labels(h + w + len(halves), edges)
+    count = int(label.max()) + 1
     if count == 1:
         return None
     out = []
     for g in range(count):
-        hs = np.array([h for (kind, *rest), k in names.items() if kind == "h" and label[k] == g
-                       for h in rest], np.int64)
-        bs = [j for (kind, *rest), k in names.items() if kind == "b" and label[k] == g for j in rest]
-        hv = [tuple(rest) for (kind, *rest), k in names.items() if kind == "c" and label[k] == g]
-        both = {j for j, e in hv if (j, 1 - e) in hv}  # both halves here: the beam stays whole
-        bs += sorted(both)
-        hv = [(j, x) for j, x in hv if j not in both]
-        out.append(Cluster(hs, np.array(sorted(bs), np.int64), np.array(hv, np.int64).reshape(-1, 2)))
+        hv = halves[label[h + w:] == g]
+        both = np.unique(hv[:, 0], return_counts=True)
+        both = both[0][both[1] == 2]  # both halves here: the beam stays whole
+        out.append(Cluster(hubs[label[:h] == g], np.sort(np.concatenate([whole[label[h:h + w] == g], both])),
+                           hv[~np.isin(hv[:, 0], both)]))
     used = {j for piece in out for j, _ in piece.halves.tolist()}
     return out, {k: r for k, r in rings.items() if k[0] in used}
 
@@ -397,12 +382,7 @@ def unite_batch(batch: list, center, radius, beam_nodes, rings: list, grid: floa
         v, f = _open_rings(v, f, pinned, keys)
     except PleError:
         return [None] * len(batch)
-    from scipy.sparse import coo_matrix  # noqa: PLC0415 - optional package
-    from scipy.sparse.csgraph import connected_components  # noqa: PLC0415
-
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
-    _, label = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(v), len(v))),
-                                    directed=False)
+    label = component_labels(len(v), np.concatenate([f[:, [0, 1]], f[:, [1, 2]]]))
     ids = match_rows(np.concatenate(pinned), v)
     if (ids < 0).any():
         return [None] * len(batch)
