@@ -763,8 +763,7 @@ class _Tessellator:
                 continue
             dl = ((dst_idx[:, 0] * nv + dst_idx[:, 1]) * nw + dst_idx[:, 2]) * nn + dst_idx[:, 3]
             dst = srt[np.searchsorted(lin[srt], dl)]
-            slot_a = self.slots[b.n1].index((p, 1))
-            slot_b = self.slots[b.n2].index((p, -1))
+            slot_a, slot_b = (int(x) for x in self.beam_slots[p])
             col = idx[src, 0] * nv + idx[src, 1]
             gkey = (tids[src] * n_tpl + tids[dst]) * (nu * nv) + col
             _, first, inv = np.unique(gkey, return_index=True, return_inverse=True)
@@ -1137,14 +1136,10 @@ def _cluster_rings(tess: _Tessellator, idx, bn, pattern, part: list) -> list:
         return rings
     rows = np.array([bn[j, e] for _, j, e in ends], np.int64)
     tids, m, _, _ = tess.instances(idx[rows])
-    table = tess.table.snapshot()
-    counts = table[2][tids, 2]
-    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-    verts = np.empty((int(counts.sum()), 3))
-    place(table, tids, offsets, m, verts)
+    verts, offsets = tess._placed_hubs(tids, m, np.arange(len(rows)))
     for q, (k, j, e) in enumerate(ends):
         tpl, slot_of = tess.tpl_list[int(tids[q])]
-        slot = tess.slots[int(idx[bn[j, e], 3])].index((int(pattern[j]), 1 if e == 0 else -1))
+        slot = int(tess.beam_slots[pattern[j], e])
         rings[k][(j, e)] = verts[offsets[q] + np.asarray(tpl.rings[slot_of[slot]], np.int64)]
     return rings
 
