@@ -238,6 +238,15 @@ static Py_ssize_t sort_unique(int64_t *v, Py_ssize_t from, Py_ssize_t n) {
     return w;
 }
 
+/* a query's hits done: its node rows (from n0 on) and beam keys (from b0 on) sorted and distinct,
+ * and where each list now ends */
+static void end_query(Vec *nodes, Py_ssize_t n0, int64_t *node_end, Vec *bk, Py_ssize_t b0, int64_t *beam_end) {
+    nodes->n = sort_unique(nodes->v, n0, nodes->n);
+    bk->n = sort_unique(bk->v, b0, bk->n);
+    *node_end = nodes->n;
+    *beam_end = bk->n;
+}
+
 typedef struct {
     const double *maps, *ext_w, *ext_v, *ext_u, *w_rows, *w_fac, *v_rows, *v_fac, *slabs;
     const uint8_t *bound;
@@ -356,10 +365,7 @@ static int run(const Plan *p, const double *qc, const double *qr, Py_ssize_t nq,
                 }
             }
         }
-        nodes->n = sort_unique(nodes->v, n0, nodes->n);
-        bk->n = sort_unique(bk->v, b0, bk->n);
-        node_end[t] = nodes->n;
-        beam_end[t] = bk->n;
+        end_query(nodes, n0, node_end + t, bk, b0, beam_end + t);
     }
     return 0;
 }
@@ -482,10 +488,7 @@ static int u_run(const UPlan *p, const double *qc, const double *qr, Py_ssize_t 
                 }
             }
         }
-        nodes->n = sort_unique(nodes->v, n0, nodes->n);
-        bk->n = sort_unique(bk->v, b0, bk->n);
-        node_end[t] = nodes->n;
-        beam_end[t] = bk->n;
+        end_query(nodes, n0, node_end + t, bk, b0, beam_end + t);
     }
     free(er);
     return 0;
@@ -536,10 +539,7 @@ static int uv_run(const UPlan *p, const double *qc, const double *qr, Py_ssize_t
                 }
             }
         }
-        nodes->n = sort_unique(nodes->v, n0, nodes->n);
-        bk->n = sort_unique(bk->v, b0, bk->n);
-        node_end[t] = nodes->n;
-        beam_end[t] = bk->n;
+        end_query(nodes, n0, node_end + t, bk, b0, beam_end + t);
     }
     free(er);
     return 0;
