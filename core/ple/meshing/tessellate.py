@@ -1005,7 +1005,7 @@ class _UnionQueue:
             rg = self._rings(c)
             if self.report is not None and len(c.hubs) > 1:
                 self._flush()
-                self._settle_split(c, rg)
+                self._settle(c, rg, cut=True)
                 continue
             key, anchor, ring_keys = self.cache.key(c, self.ev.center, self.ev.radius, self.bn, rg)
             piece = self.cache.get(key, anchor, ring_keys, rg)
@@ -1052,33 +1052,26 @@ class _UnionQueue:
             if id(c) not in self.gone:
                 self._settle(c, rg)
 
-    def _settle(self, c, rg) -> None:
-        """One cluster's piece: a copy, or its union, grown while it touches clean junctions."""
-        for _ in range(MAX_CLUSTER_GROWTH):
-            piece = self._piece(c, rg)
-            if not isinstance(piece, RingTouchedError):
-                self.done[id(c)] = (c, [piece])
-                return
-            c, rg = self._grow(c, piece.ring)
-        raise PleError(f"an unclean cluster of {len(c.hubs):,} hubs and {len(c.beams):,} beams keeps "
-                       "touching the clean junctions around it")
-
-    def _settle_split(self, c, rg) -> None:
-        """A cluster cut across its free beams (``unions.split``), each piece united (or a copy);
-        grown, and cut anew, while pieces touch clean junctions. United whole (``_settle``) when
-        it is not cut, or when a piece touches a cut ring."""
+    def _settle(self, c, rg, cut: bool = False) -> None:
+        """One cluster's pieces, each a copy or its union; with ``cut``, the cluster cut across its
+        free beams (``unions.split``) first. The cluster grows (and is cut anew) while pieces touch
+        clean junctions; it is united whole when it is not cut, or when a piece touches a cut ring."""
         bn = self.bn
         for _ in range(MAX_CLUSTER_GROWTH):
-            cut = split(c, self.report, self.ev.center, self.ev.radius, bn, SEPARATION_GRIDS * self.tess.grid)
-            if cut is None:
-                self._settle(c, rg)
-                return
-            parts, cut_rings = cut
+            parts, cut_rings = [c], {}
+            if cut:
+                got = split(c, self.report, self.ev.center, self.ev.radius, bn, SEPARATION_GRIDS * self.tess.grid)
+                if got is None:
+                    self._settle(c, rg)
+                    return
+                parts, cut_rings = got
             pieces, touched = [], []
             for part in parts:
-                own, beams = set(part.hubs.tolist()), set(part.beams.tolist())
-                prg = {k: r for k, r in rg.items() if k[0] in beams and int(bn[k]) not in own}
-                prg.update({(j, CUT): cut_rings[(j, CUT)] for j, _ in part.halves.tolist()})
+                prg = rg
+                if part is not c:
+                    own, beams = set(part.hubs.tolist()), set(part.beams.tolist())
+                    prg = {k: r for k, r in rg.items() if k[0] in beams and int(bn[k]) not in own}
+                    prg.update({(j, CUT): cut_rings[(j, CUT)] for j, _ in part.halves.tolist()})
                 piece = self._piece(part, prg)
                 if isinstance(piece, RingTouchedError):
                     if any(e == CUT for _, e in piece.ring):
