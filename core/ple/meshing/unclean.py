@@ -197,18 +197,13 @@ def _pulled_neighbours(pulled, bn, points, margin: float, meet=None, steady=None
         anchor = inside & (kmin == ka)
         apart[anchor] = _hulls_apart(pairs[anchor], points, margin / shrink, meet is not None)
         copy = np.flatnonzero(inside & (kmin > ka))
-        dims = idx.max(axis=0) + 1
-        key = ((idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]) * dims[3] + idx[:, 3]
-        step = np.int64(dims[3])
-        total = np.int64(len(key) and key.max() + 1)
+        key, step = _layer_keys(idx, kb)
+        total = np.int64(key.max() + 1)
 
         def pair_key(rows, shift):
             return (key[rows[:, 0]] - shift * step) * total + key[rows[:, 1]] - shift * step
 
-        proven = np.sort(pair_key(pairs[anchor & apart], 0))
-        at = np.searchsorted(proven, pair_key(pairs[copy], kmin[copy] - ka))
-        apart[copy] = proven[np.minimum(at, len(proven) - 1)] == pair_key(pairs[copy], kmin[copy] - ka) \
-            if len(proven) else False
+        apart[copy] = np.isin(pair_key(pairs[copy], kmin[copy] - ka), pair_key(pairs[anchor & apart], 0))
         # a copy of an anchor whose hulls were not proven apart goes to the mesh test at once (with
         # ``meet``): its hulls are a similar image of the anchor's
         todo = ~inside if meet is not None else ~anchor & ~apart
@@ -248,6 +243,14 @@ def _query_pairs(ends, kinds, lo, hi, bn, query):
         yield order[i], order[j]
 
 
+def _layer_keys(idx: np.ndarray, kb: int) -> tuple[np.ndarray, np.int64]:
+    """Linear keys of node indices (N, 4) (i, j, k, n) with room for layers up to kb, and the key
+    step of one layer: a node shifted up by s layers has key + s · step."""
+    dims = idx.max(axis=0) + 1
+    dims[2] = max(int(dims[2]), kb) + 1
+    return ((idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]) * dims[3] + idx[:, 3], np.int64(dims[3])
+
+
 def _mark_copies(bad, ends, top, kb: int, node_index, kinds, bn) -> np.ndarray:
     """Flag the nodes of the copies of element pairs (P, 2, 2 node rows; ``kinds`` (P, 2): 0 a
     hub, 1 a beam) shifted up by 1, 2, … layers while their highest layer ``top`` (P,) stays
@@ -255,14 +258,12 @@ def _mark_copies(bad, ends, top, kb: int, node_index, kinds, bn) -> np.ndarray:
     in ``bn``; a beam copy joins the shifted nodes: every beam between them)."""
     idx = np.asarray(node_index, np.int64)
     n = len(idx)
-    dims = idx.max(axis=0) + 1
-    dims[2] = max(int(dims[2]), kb) + 1
-    key = ((idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]) * dims[3] + idx[:, 3]
+    key, step = _layer_keys(idx, kb)
     order = np.argsort(key)
     shifts = np.maximum(kb - 1 - np.asarray(top, np.int64), 0)
     rows = np.repeat(ends.reshape(len(ends), -1), shifts, axis=0)  # (copies, 4) node rows
     s = 1 + np.arange(len(rows)) - np.repeat(np.cumsum(shifts) - shifts, shifts)
-    k = key[rows] + s[:, None] * dims[3]
+    k = key[rows] + s[:, None] * step
     at = np.minimum(np.searchsorted(key[order], k), len(key) - 1)
     found = key[order][at] == k
     bad[order[at][found]] = True
