@@ -236,13 +236,15 @@ def _coplanar_overlap(t1: np.ndarray, t2: np.ndarray, normal: np.ndarray) -> np.
     return hit
 
 
-def self_intersections(vertices, faces, fresh=None, *, workers: int | None = None) -> np.ndarray:
+def self_intersections(vertices, faces, fresh=None, *, workers: int | None = None,
+                       cell: float | None = None) -> np.ndarray:
     """Pairs (P, 2) int64 of faces (i < j, sorted) that intersect other than in their shared
     vertices or edge, for vertices (V, 3) and faces (F, 3) (vertex ids: faces share a vertex when
     they share its id). Faces without area (``degenerate``) are ignored. ``fresh`` (F,)
     bool: only pairs with at least one fresh face (the others are known apart). ``workers``:
     threads of the compiled form (default: the cores, one per 10⁵ faces; the same pairs for any
-    number)."""
+    number). ``cell``: the search grid's first cell (``search_cell``), when the caller knows it
+    (a copy of a checked mesh)."""
     v = np.ascontiguousarray(vertices, float).reshape(-1, 3)
     f = np.ascontiguousarray(faces, np.int64).reshape(-1, 3)
     fresh = None if fresh is None else np.ascontiguousarray(fresh, bool).reshape(-1)
@@ -255,12 +257,12 @@ def self_intersections(vertices, faces, fresh=None, *, workers: int | None = Non
         return np.zeros((0, 2), np.int64)
     if workers is None:
         workers = min(os.cpu_count() or 1, 1 + len(f) // 100_000)
-    raw, _ = _compiled.pairs(v, f, fresh, _cell(v, f), max(1, int(workers)))
+    raw, _ = _compiled.pairs(v, f, fresh, search_cell(v, f) if cell is None else float(cell), max(1, int(workers)))
     pairs = np.frombuffer(raw, np.int64).reshape(-1, 2)
     return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
 
 
-def _cell(v: np.ndarray, f: np.ndarray) -> float:
+def search_cell(v: np.ndarray, f: np.ndarray) -> float:
     """The compiled grid's first cell (it grows until the faces lie in few cells each):
     ``CELL_MEDIANS`` median middle extents of the faces' boxes (the width of a needle, the size of
     a compact face), from a sample of at most 10⁵ faces."""

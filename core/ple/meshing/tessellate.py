@@ -995,7 +995,8 @@ class _UnionQueue:
         self.rings_of: dict = {}
         self.cache = ShapeCache(tess.grid)  # copies of a cluster's shape take its piece, moved (steady lattices)
         self.batch: list = []  # (cluster, rings, key, anchor, ring keys) to unite at once
-        self.waiting: list = []  # (cluster, rings): copies of a batched shape, settled after the batch
+        self.waiting: list = []  # (cluster, rings, shape): copies of a batched shape, settled after the batch
+        self.batched: set = set()  # the ``like`` keys of the batch's shapes
         self.unsettled: list = []  # clusters of a flushed batch not settled yet
         self.gone: set = set()  # ids of clusters merged into a grown one
 
@@ -1007,15 +1008,17 @@ class _UnionQueue:
                 self._flush()
                 self._settle(c, rg, cut=True)
                 continue
-            key, anchor, ring_keys = self.cache.key(c, self.ev.center, self.ev.radius, self.bn, rg)
-            piece = self.cache.get(key, anchor, ring_keys, rg)
+            shape = self.cache.shape(c, self.ev.center, self.ev.radius, self.bn, rg)
+            piece = self.cache.get(shape, rg)
             if piece is not None:
                 self.done[id(c)] = (c, [piece])
             elif rg and piece_estimate(c)[0] <= MAX_BATCHED:
-                if key is not None and any(key == b[2] for b in self.batch):
-                    self.waiting.append((c, rg))
+                like = self.cache.like(shape)
+                if like is not None and like in self.batched:
+                    self.waiting.append((c, rg, shape))  # a copy (moved, turned) of a batched shape
                     continue
-                self.batch.append((c, rg, key, anchor, ring_keys))
+                self.batch.append((c, rg, shape))
+                self.batched.add(like)
                 if sum(piece_estimate(b[0])[0] for b in self.batch) >= BATCH_TRIANGLES:
                     self._flush()
             else:
@@ -1036,16 +1039,22 @@ class _UnionQueue:
         if not self.batch:
             return
         batch, self.batch = self.batch, []
+        self.batched = set()
         ev = self.ev
         pieces = [None] if len(batch) == 1 else unite_batch([b[0] for b in batch], ev.center, ev.radius, self.bn,
                                                             [b[1] for b in batch], self.tess.grid)
-        for (c, rg, key, anchor, ring_keys), piece in zip(batch, pieces):
+        for (c, rg, shape), piece in zip(batch, pieces):
             if piece is not None:
-                self.cache.put(key, anchor, ring_keys, rg, piece)
+                self.cache.put(shape, rg, piece)
                 self.done[id(c)] = (c, [piece])
             else:
                 self.unsettled.append((c, rg))
-        self.unsettled += self.waiting
+        for c, rg, shape in self.waiting:
+            piece = self.cache.get(shape, rg)
+            if piece is not None:
+                self.done[id(c)] = (c, [piece])
+            else:
+                self.unsettled.append((c, rg))
         self.waiting = []
         while self.unsettled:
             c, rg = self.unsettled.pop(0)
@@ -1090,14 +1099,14 @@ class _UnionQueue:
     def _piece(self, c, rg):
         """A cluster's piece from the cache, or its union (put in the cache); the RingTouchedError
         when the union touches one of its rings."""
-        key, anchor, ring_keys = self.cache.key(c, self.ev.center, self.ev.radius, self.bn, rg)
-        piece = self.cache.get(key, anchor, ring_keys, rg)
+        shape = self.cache.shape(c, self.ev.center, self.ev.radius, self.bn, rg)
+        piece = self.cache.get(shape, rg)
         if piece is None:
             try:
                 piece = unite_stoppable(c, self.ev.center, self.ev.radius, self.bn, rg, self.tess.grid)
             except RingTouchedError as exc:
                 return exc
-            self.cache.put(key, anchor, ring_keys, rg, piece)
+            self.cache.put(shape, rg, piece)
         return piece
 
     def _grow(self, c, ring_keys: list):

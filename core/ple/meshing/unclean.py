@@ -437,10 +437,42 @@ def _row_view(a: np.ndarray) -> np.ndarray:
 
 
 def match_rows(rows, table) -> np.ndarray:
-    """For each row of ``rows`` (K, 3) the index of an equal row of ``table`` (T, 3), or -1."""
-    rows, table = np.asarray(rows).reshape(-1, 3), np.asarray(table).reshape(-1, 3)
+    """For each row of ``rows`` (K, 3) the index of an equal row of ``table`` (T, 3), or -1 (of
+    equal rows of ``table``, the last). One hash per row (its three 64-bit words mixed), a sorted
+    search, then the rows compared; rows whose hash meets another row's are matched by sorting."""
+    rows, table = _words(rows), _words(table)
     if not len(rows) or not len(table):
         return np.full(len(rows), -1, np.int64)
+    ht, hr = _row_hash(table), _row_hash(rows)
+    order = np.argsort(ht, kind="stable")
+    hs = ht[order]
+    pos = np.searchsorted(hs, hr, side="right") - 1
+    cand = order[np.maximum(pos, 0)]
+    same_hash = (pos >= 0) & (hs[np.maximum(pos, 0)] == hr)
+    equal = same_hash & (table[cand] == rows).all(axis=1)
+    out = np.where(equal, cand, -1)
+    if (clash := np.flatnonzero(same_hash & ~equal)).size:  # another row with that hash: sort them out
+        out[clash] = _match_sorted(rows[clash], table)
+    return out
+
+
+def _words(a) -> np.ndarray:
+    """Rows (N, 3) as 64-bit words (floats with -0.0 made 0.0, so that equal floats are equal words)."""
+    a = np.asarray(a).reshape(-1, 3)
+    a = np.ascontiguousarray(a + 0.0 if a.dtype.kind == "f" else a.astype(np.int64, copy=False))
+    return a.view(np.uint64)
+
+
+_MIX = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9], np.uint64)
+
+
+def _row_hash(w: np.ndarray) -> np.ndarray:
+    h = (w * _MIX) if len(w) else w
+    h = h[:, 0] ^ np.left_shift(h[:, 1], np.uint64(21)) ^ np.right_shift(h[:, 1], np.uint64(43)) ^ h[:, 2]
+    return h ^ np.right_shift(h, np.uint64(29))
+
+
+def _match_sorted(rows, table) -> np.ndarray:
     _, inv = np.unique(np.concatenate([table, rows]), axis=0, return_inverse=True)
     inv = inv.reshape(-1)
     where = np.full(int(inv.max()) + 1, -1, np.int64)

@@ -33,7 +33,9 @@ import numpy as np
 from ..algebra.elements import segment_distance
 from ..algebra.vectors import perpendicular_frames
 from ..errors import PleError
+from .selfcheck import search_cell, self_intersections
 from .unclean import BALL_TURNS, SPHERE_SEGMENTS, component_labels, match_rows, on_grid, on_one_ring, ring_of_vertices
+from .weld import COLLAPSE_GRIDS, snap
 
 UNION_TRIANGLE_BYTES = 600  # peak bytes per input triangle of a manifold3d union and its repair (measured, rounded up)
 
@@ -469,7 +471,22 @@ def _open_rings(v, f, rings: list, keys: list):
 
 
 SHAPE_QUANTUM = 2.0**-10  # grid steps: clusters whose inputs agree to this, relative to an anchor, share a piece
+TURNED_QUANTUM = 2.0**-4  # grid steps: the distances that sort turned copies (a candidate is then fitted)
+TURNED_FIT = 2.0**-6  # grid steps: how far a turned copy's inputs may lie from the kept shape moved onto them
+TURNED_CANDIDATES = 4  # kept shapes tried per distance key
 CACHE_TRIANGLES = 1 << 21  # triangles of united pieces kept for copies (the least recently used go first)
+
+
+@dataclass
+class Shape:
+    """A cluster's inputs as ``ShapeCache`` sees them: ``key`` (translations), ``like`` (turns)."""
+
+    key: tuple | None
+    anchor: np.ndarray | None
+    ring_keys: list
+    points: np.ndarray  # (N, 3): balls' centres, then ring vertices in the order of ring_keys
+    radii: np.ndarray  # (H,): the balls' radii
+    like: tuple | None = None
 
 
 class ShapeCache:
@@ -481,18 +498,28 @@ class ShapeCache:
     vertex), quantized to ``SHAPE_QUANTUM`` grid steps. A copy whose anchor lies a whole number of
     grid steps from the cached one takes the cached piece (already on the grid, checked there)
     moved by that exact translation, with its ring vertices replaced by its own: the floats the
-    fast path places at that copy, so the seams stay exact. Other copies (turned ones) are united
-    anew. Memory: at most ``CACHE_TRIANGLES`` kept triangles."""
+    fast path places at that copy, so the seams stay exact.
+
+    Turned copies (rows of a rotation, a screw) are found by the distances of their inputs from
+    their centroid (``TURNED_QUANTUM`` grid steps); the kept shape is fitted onto the copy's
+    inputs (Kabsch, a proper rotation) and taken when every input lands within ``TURNED_FIT``
+    grid steps. Its piece is moved, snapped to the grid, given the copy's ring vertices, and
+    checked as ``unclean.on_grid`` leaves a union: no two vertices on one grid point, no faces
+    that meet when rounded to twice the grid (exact), no cap flatter than ``COLLAPSE_GRIDS``
+    grid steps that the kept piece did not have. A copy that fails is united anew.
+    Memory: at most ``CACHE_TRIANGLES`` kept triangles."""
 
     def __init__(self, grid: float, limit: int = CACHE_TRIANGLES):
         self.grid = float(grid)
         self.limit = limit
-        self.kept: dict = {}
+        self.kept: dict = {}  # key -> (vertices, faces, anchor, ring ids, shape, flat faces)
+        self.alike: dict = {}  # like -> keys of kept shapes (at most TURNED_CANDIDATES)
         self.triangles = 0
         self.hits = 0
+        self.turned = 0
 
-    def key(self, cluster: Cluster, center, radius, beam_nodes, rings: dict):
-        """(shape key, anchor (3,), ring keys in the order of the key) of a cluster."""
+    def shape(self, cluster: Cluster, center, radius, beam_nodes, rings: dict) -> Shape:
+        """The shape of a cluster (its keys, anchor, ring keys and inputs)."""
         c = np.asarray(center, float)
         bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
         hubs = np.sort(np.asarray(cluster.hubs, np.int64))
@@ -501,43 +528,119 @@ class ShapeCache:
         halves = sorted(map(tuple, np.asarray(cluster.halves, np.int64).reshape(-1, 2).tolist()))
         ring_keys = ([(j, e) for j in beams for e in (0, 1) if int(bn[j, e]) not in order]
                      + [(j, CUT) for j, _ in halves])
-        pts = [c[hubs]] + [np.asarray(rings[k], float) for k in ring_keys]
-        pts = np.concatenate(pts) if pts else np.zeros((0, 3))
+        pts = np.concatenate([c[hubs], *[np.asarray(rings[k], float).reshape(-1, 3) for k in ring_keys]])
+        rad = np.asarray(radius, float)[hubs]
         if not len(pts):
-            return None, None, ring_keys
+            return Shape(None, None, ring_keys, pts, rad)
         anchor = pts[0]
         ends = [order.get(int(bn[j, e]), -1) for j in beams for e in (0, 1)] + [order[int(bn[j, e])] for j, e in halves]
-        q = self.grid * SHAPE_QUANTUM
-        body = np.round(np.concatenate([(pts - anchor).ravel() / q, np.asarray(radius, float)[hubs] / q]))
-        sizes = [len(hubs), len(halves)] + [len(rings[k]) for k in ring_keys] + ends
-        return (np.asarray(sizes, np.int64).tobytes(), body.tobytes()), anchor, ring_keys
+        sizes = np.asarray([len(hubs), len(halves)] + [len(rings[k]) for k in ring_keys] + ends, np.int64).tobytes()
+        body = np.round(np.concatenate([(pts - anchor).ravel(), rad]) * (1.0 / (self.grid * SHAPE_QUANTUM)))
+        return Shape((sizes, body.tobytes()), anchor, ring_keys, pts, rad)
 
-    def get(self, key, anchor, ring_keys, rings: dict):
+    def like(self, shape: Shape) -> tuple | None:
+        """The key of a shape's turned copies (the distances of its inputs from their centroid),
+        computed once, when its translations are not kept."""
+        if shape.like is None and shape.key is not None:
+            d = shape.points - shape.points.mean(axis=0)
+            spread = np.round(np.concatenate([np.sqrt(np.einsum("ij,ij->i", d, d)), shape.radii])
+                              * (1.0 / (self.grid * TURNED_QUANTUM)))
+            shape.like = (shape.key[0], spread.tobytes())
+        return shape.like
+
+    def get(self, shape: Shape, rings: dict):
         """The piece of a copy of a kept shape, or None."""
-        hit = self.kept.get(key) if key is not None else None
-        if hit is None:
+        if shape.key is None:
             return None
-        v0, f, at, ids = hit
-        d = anchor - at
-        step = np.round(d / self.grid) * self.grid
-        if np.max(np.abs(d - step)) > self.grid * SHAPE_QUANTUM:
-            return None  # not a whole number of grid steps away: unite anew
-        self.kept[key] = self.kept.pop(key)  # most recently used
-        v = v0 + step
-        for k, r in zip(ring_keys, ids):
+        hit = self.kept.get(shape.key)
+        if hit is not None:
+            v0, f, at, ids = hit[:4]
+            d = shape.anchor - at
+            step = np.round(d / self.grid) * self.grid
+            if np.max(np.abs(d - step)) <= self.grid * SHAPE_QUANTUM:
+                self.kept[shape.key] = self.kept.pop(shape.key)  # most recently used
+                v = v0 + step
+                for k, r in zip(shape.ring_keys, ids):
+                    v[r] = rings[k]
+                self.hits += 1
+                return v, f.copy()
+        for key in self.alike.get(self.like(shape), ()):
+            kept = self.kept.get(key)  # (or gone: the least recently used)
+            piece = None if kept is None else self._moved(kept, shape, rings)
+            if piece is not None:
+                self.hits += 1
+                self.turned += 1
+                return piece
+        return None
+
+    def _moved(self, kept, shape: Shape, rings: dict):
+        """The kept piece moved onto a turned copy (class docstring), or None."""
+        v0, f, _, ids, was, flat0, cell = kept
+        if len(was.points) != len(shape.points) or np.max(np.abs(was.radii - shape.radii), initial=0.0) > (
+                self.grid * TURNED_FIT):
+            return None
+        rot, t = rigid_fit(was.points, shape.points)
+        if rot is None or np.max(np.abs(was.points @ rot.T + t - shape.points)) > self.grid * TURNED_FIT:
+            return None
+        v = snap(v0 @ rot.T + t, self.grid)
+        for k, r in zip(shape.ring_keys, ids):
             v[r] = rings[k]
-        self.hits += 1
+        on = snap(v, self.grid)
+        t3 = on[f]
+        if not (t3 != t3[:, [1, 2, 0]]).any(axis=2).all():
+            return None  # an edge's two ends on one grid point (other vertices that meet are met below)
+        flat = flat_faces(v, f, self.grid)
+        if not np.isin(flat, flat0).all():
+            return None
+        if len(self_intersections(snap(v, 2 * self.grid), f, cell=cell)):
+            return None
+        self._keep(shape, v, f, ids, flat, cell)  # the translations of this copy are then found directly
         return v, f.copy()
 
-    def put(self, key, anchor, ring_keys, rings: dict, piece) -> None:
-        if key is None or key in self.kept:
+    def put(self, shape: Shape, rings: dict, piece) -> None:
+        if shape.key is None or shape.key in self.kept:
             return
         v, f = piece
-        ids = [match_rows(np.asarray(rings[k], float), v) for k in ring_keys]
-        if any((i < 0).any() for i in ids):  # a ring vertex not in the piece (not for an opened piece): not kept
+        pts = [np.asarray(rings[k], float).reshape(-1, 3) for k in shape.ring_keys]
+        at = match_rows(np.concatenate(pts), v) if pts else np.zeros(0, np.int64)
+        if (at < 0).any():  # a ring vertex not in the piece (not for an opened piece): not kept
             return
-        self.kept[key] = (np.asarray(v, float), np.asarray(f, np.int64), np.asarray(anchor, float), ids)
+        ids = np.split(at, np.cumsum([len(p) for p in pts])[:-1])
+        self._keep(shape, np.asarray(v, float), np.asarray(f, np.int64), ids)
+
+    def _keep(self, shape: Shape, v, f, ids, flat=None, cell=None) -> None:
+        self.kept[shape.key] = (v, f, np.asarray(shape.anchor, float), ids, shape,
+                                flat_faces(v, f, self.grid) if flat is None else flat,
+                                search_cell(v, f) if cell is None else cell)
+        alike = self.alike.setdefault(self.like(shape), [])
+        alike.insert(0, shape.key)
+        del alike[TURNED_CANDIDATES:]
         self.triangles += len(f)
         while self.triangles > self.limit and len(self.kept) > 1:
             oldest = next(iter(self.kept))
             self.triangles -= len(self.kept.pop(oldest)[1])
+
+
+def rigid_fit(p: np.ndarray, q: np.ndarray):
+    """The proper rotation R (3, 3) and translation t (3,) that best move the points p (N, 3) onto
+    q (N, 3) (least squares, Kabsch); (None, None) when the best orthogonal map is a reflection."""
+    pc, qc = p.mean(axis=0), q.mean(axis=0)
+    u, _, vt = np.linalg.svd((p - pc).T @ (q - qc))
+    rot = (u @ vt).T
+    if np.linalg.det(rot) < 0:
+        if len(p) > 3 and np.linalg.matrix_rank(p - pc, tol=1e-9 * max(1.0, float(np.abs(p - pc).max()))) == 3:
+            return None, None
+        rot = (u @ np.diag([1.0, 1.0, -1.0]) @ vt).T  # flat inputs: the proper rotation fits as well
+    return rot, qc - pc @ rot.T
+
+
+def flat_faces(v: np.ndarray, f: np.ndarray, grid: float) -> np.ndarray:
+    """The faces (ids) whose altitude on their longest edge is under ``COLLAPSE_GRIDS`` grid steps
+    (``unclean.on_grid`` collapses such caps)."""
+    t = v[f]
+    a, b, c = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0], t[:, 2] - t[:, 1]
+    n = np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                  a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+    longest = np.maximum(np.maximum(np.einsum("ij,ij->i", a, a), np.einsum("ij,ij->i", b, b)),
+                         np.einsum("ij,ij->i", c, c))
+    return np.flatnonzero(np.einsum("ij,ij->i", n, n) < (COLLAPSE_GRIDS * grid) ** 2 * longest)
