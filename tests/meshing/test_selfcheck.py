@@ -164,6 +164,25 @@ def test_fresh_faces_keep_exactly_their_pairs(seed):
     assert as_set(got) == want and as_set(numpy_pairs) == want
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_sides_keep_exactly_the_pairs_across(seed):
+    """``sides``: the pairs of the whole soup (every pair tested) whose two faces lie on different
+    sides, in both forms; the bucket skip of a one-sided bucket loses none."""
+    rng = np.random.default_rng(200 + seed)
+    v, f = soup(rng, 20, 4)
+    everything = as_set(self_intersections(v, f))
+    sides = rng.random(len(f)) < [0.5, 0.1, 0.9][seed % 3]
+    want = {(i, j) for i, j in everything if sides[i] != sides[j]}
+    assert as_set(self_intersections(v, f, sides=sides)) == want
+    saved = selfcheck._compiled
+    try:
+        selfcheck._compiled = None
+        assert as_set(self_intersections(v, f, sides=sides)) == want
+    finally:
+        selfcheck._compiled = saved
+    assert 0 < len(want) < len(everything)
+
+
 # ----- constructed cases --------------------------------------------------------------------------
 
 Z = [(0.0, 0, 0), (4.0, 0, 0), (0.0, 4, 0)]

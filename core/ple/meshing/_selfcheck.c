@@ -481,7 +481,8 @@ typedef struct {
     const Grid *g;
     const double *v;
     const int64_t *f, *orig;
-    const uint8_t *fresh; /* NULL: every face fresh */
+    const uint8_t *fresh; /* NULL: every face fresh; with ``apart``, each face's side (0 or 1) */
+    int apart;            /* only pairs of faces on different sides */
     const int32_t *entries;
     const int64_t *start;
     uint64_t nb, h0, h1;
@@ -507,10 +508,10 @@ static void *sweep(void *arg) {
         int64_t k = start[h + 1] - start[h];
         if (k < 2)
             continue;
-        if (fresh0) {
+        if (fresh0) { /* a bucket without a fresh face (or with faces of one side only) holds no pair */
             int any = 0;
             for (int64_t i = 0; i < k && !any; i++)
-                any = fresh0[e[i]];
+                any = job->apart ? fresh0[e[i]] != fresh0[e[0]] : fresh0[e[i]];
             if (!any)
                 continue;
         }
@@ -537,7 +538,8 @@ static void *sweep(void *arg) {
             for (int64_t j = i + 1; j < k && local[j].lo[0] <= A->hi[0]; j++) {
                 const Local *B = local + j;
                 if (A->lo[1] > B->hi[1] || B->lo[1] > A->hi[1] ||
-                    A->lo[2] > B->hi[2] || B->lo[2] > A->hi[2] || !(A->fresh | B->fresh))
+                    A->lo[2] > B->hi[2] || B->lo[2] > A->hi[2] ||
+                    (job->apart ? A->fresh == B->fresh : !(A->fresh | B->fresh)))
                     continue;
                 /* each pair once: a face in one cell is in one bucket; two boxed faces meet first in
                  * the corner of their boxes' intersection; else the bucket of the first cell both
@@ -573,8 +575,8 @@ done:
 /* The intersecting pairs (i < j) of the faces f (F, 3) of the vertices v (V, 3), only pairs with
  * a fresh face when ``fresh``; faces without area (``has_area``) are left out. The faces are
  * renumbered in Morton order of their boxes' cells (neighbours near in memory). -1: out of memory. */
-static int find_pairs(const double *v, const int64_t *f0, Py_ssize_t nf0, const uint8_t *fresh0, double cell,
-                      int workers, Out *out) {
+static int find_pairs(const double *v, const int64_t *f0, Py_ssize_t nf0, const uint8_t *fresh0, int apart,
+                      double cell, int workers, Out *out) {
     exact_calls = 0;
     Grid g = {v, NULL, {INFINITY, INFINITY, INFINITY}, cell, 0.0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL};
     int64_t *orig = malloc((nf0 + 1) * sizeof(int64_t)), *f = NULL;
@@ -749,7 +751,8 @@ static int find_pairs(const double *v, const int64_t *f0, Py_ssize_t nf0, const 
         int64_t goal = start[nb] * (t + 1) / workers;
         while (h1 < nb && (t == workers - 1 || start[h1] < goal))
             h1++;
-        jobs[t] = (Sweep){&g, v, f, orig, fresh0 ? fresh : NULL, entries, start, nb, h0, h1, {NULL, 0, 0}, 0, -1};
+        jobs[t] = (Sweep){&g, v, f, orig, fresh0 ? fresh : NULL, apart && fresh0, entries, start, nb, h0, h1,
+                          {NULL, 0, 0}, 0, -1};
         h0 = h1;
     }
     long long exact = exact_calls; /* faces without area; sweep counts anew in this thread */
@@ -810,15 +813,16 @@ static int take(PyObject *o, Py_buffer *b, char kind, Py_ssize_t per, const char
     return 0;
 }
 
-/* pairs(vertices float64 (V, 3), faces int64 (F, 3), fresh bool (F,) or None, cell, workers=1) ->
+/* pairs(vertices float64 (V, 3), faces int64 (F, 3), fresh bool (F,) or None, cell, workers=1, apart=0) ->
  * (bytes of int64 pairs (i < j) in no particular order, number of predicates decided by the exact
- * form); ``workers`` threads test the buckets (the same pairs for any number) */
+ * form); ``workers`` threads test the buckets (the same pairs for any number). With ``apart``,
+ * ``fresh`` is each face's side (0 or 1) and only pairs of faces on different sides are tested */
 static PyObject *pairs(PyObject *self, PyObject *args) {
     PyObject *ov, *of, *ofr;
     double cell;
-    int workers = 1;
+    int workers = 1, apart = 0;
     (void)self;
-    if (!PyArg_ParseTuple(args, "OOOd|i", &ov, &of, &ofr, &cell, &workers))
+    if (!PyArg_ParseTuple(args, "OOOd|ii", &ov, &of, &ofr, &cell, &workers, &apart))
         return NULL;
     Py_buffer bv, bf, bfr;
     if (take(ov, &bv, 'd', 3, "vertices") < 0)
@@ -846,7 +850,7 @@ static PyObject *pairs(PyObject *self, PyObject *args) {
         int status;
         long long exact;
         Py_BEGIN_ALLOW_THREADS
-        status = find_pairs(bv.buf, f, nf, has_fresh ? bfr.buf : NULL, cell, workers, &out);
+        status = find_pairs(bv.buf, f, nf, has_fresh ? bfr.buf : NULL, apart, cell, workers, &out);
         exact = exact_calls;
         Py_END_ALLOW_THREADS
         if (status < 0)
@@ -982,8 +986,8 @@ static PyObject *flat(PyObject *self, PyObject *args) {
 
 static PyMethodDef methods[] = {
     {"pairs", pairs, METH_VARARGS,
-     "pairs(vertices, faces, fresh, cell, workers=1) -> (bytes of int64 (i, j): the intersecting face pairs, exact "
-     "predicates)."},
+     "pairs(vertices, faces, fresh, cell, workers=1, apart=0) -> (bytes of int64 (i, j): the intersecting face "
+     "pairs, exact predicates); apart: fresh is each face's side, and only pairs across sides are tested."},
     {"weld", weld, METH_VARARGS, "weld(points) -> (bytes of int64 ids, bytes of int64 first rows): equal points merged."},
     {"flat", flat, METH_VARARGS, "flat(vertices, faces) -> bytes of bools: faces without area (exact)."},
     {"orient3d_exact", signs3, METH_VARARGS,

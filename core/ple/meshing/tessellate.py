@@ -69,6 +69,7 @@ from .weld import COLLAPSE_GRIDS, grid_spacing, weld
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
 MAX_LEVELS = 6
 PLACED_VERTICES = 1 << 20  # template vertices the unclean check places at once (24 MiB)
+HULL_VERTICES = 64  # hub templates up to this many vertices are their own hull points (``_hull_ids``)
 STEADY_MIN_LAYERS = 6  # the unclean check looks up anchors and border layers only from this many inner layers on
 MAX_CHECK_GROUPS = 500_000  # streamed regions up to this size are checked for unclean hubs first
 BOX_TRIANGLES = 1 << 22  # triangles of a streamed box, at most (about: the estimate is from above)
@@ -385,12 +386,16 @@ class _Tessellator:
         return idx, a, b, float(np.min(f) / f[0])
 
     def _hull_ids(self, t: int) -> np.ndarray:
-        """Vertex ids of template t on the convex hull of its vertices (all of them if qhull cannot
-        say: a flat hub)."""
+        """Vertex ids of template t whose convex hull is its vertices' hull: those on it (qhull),
+        or all of them for a small template (up to HULL_VERTICES: most are on it, and qhull costs
+        more than the extra points) or a flat one (qhull cannot say)."""
         if t not in self.hulls:
             from scipy.spatial import ConvexHull, QhullError  # noqa: PLC0415 - optional package
 
             v = self.tpl_list[t][0].vertices
+            if len(v) <= HULL_VERTICES:
+                self.hulls[t] = np.arange(len(v))
+                return self.hulls[t]
             try:
                 self.hulls[t] = np.asarray(ConvexHull(v).vertices, np.int64)
             except (QhullError, ValueError):
@@ -490,12 +495,26 @@ class _Tessellator:
             side, other = pos.reshape(-1), pos[:, ::-1].reshape(-1)
             nf = fcount[side]
             owner = np.repeat(np.arange(len(side)), nf)
-            local = np.concatenate(tf)[np.repeat(fstart[side], nf) + np.arange(int(nf.sum()))
-                                       - np.repeat(np.cumsum(nf) - nf, nf)]
-            tri = verts[vstart[side][owner][:, None] + local]
-            near = (np.all(tri.max(axis=1) >= box_lo[other][owner] - 1, axis=1)
-                    & np.all(tri.min(axis=1) <= box_hi[other][owner] + 1, axis=1))
-            if not near.any():
+            local = np.concatenate(tf)[_runs(fstart[side], nf)]
+            # faces not wholly behind the other hub along the line from this one's box centre to
+            # the other's (every point of the other hub lies at least as far along it) ...
+            u = (box_lo[other] + box_hi[other] - box_lo[side] - box_hi[side]) * 0.5
+            ahead = np.minimum.reduceat(np.einsum("ij,ij->i", verts[_runs(vstart[other], vcount[other])],
+                                                  np.repeat(u, vcount[other], axis=0)),
+                                        np.cumsum(vcount[other]) - vcount[other])
+            along = np.einsum("ij,ij->i", verts[_runs(vstart[side], vcount[side])], np.repeat(u, vcount[side], axis=0))
+            at = (np.cumsum(vcount[side]) - vcount[side])[owner][:, None] + local
+            along = along[at]
+            near = np.flatnonzero(np.maximum(np.maximum(along[:, 0], along[:, 1]), along[:, 2])
+                                  >= ahead[owner])  # exact: whole numbers
+            # ... and within its box
+            tri = verts[vstart[side][owner[near]][:, None] + local[near]]
+            a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+            whose = other[owner[near]]
+            up = np.maximum(np.maximum(a, b), c) >= box_lo[whose] - 1
+            down = np.minimum(np.minimum(a, b), c) <= box_hi[whose] + 1
+            near = near[up[:, 0] & up[:, 1] & up[:, 2] & down[:, 0] & down[:, 1] & down[:, 2]]
+            if not len(near):
                 continue
             # every (pair, side) with a near face takes its hub's vertices, its pair moved along x
             # by a whole power of two of grid steps beyond the chunk's largest pair
@@ -505,14 +524,12 @@ class _Tessellator:
             nv = np.zeros(len(side), np.int64)
             nv[owner[near]] = vcount[side[owner[near]]]
             vbase = np.cumsum(nv) - nv
-            vowner = np.repeat(np.arange(len(side)), nv)
-            v = verts[vstart[side][vowner] + np.arange(int(nv.sum())) - vbase[vowner]]
-            v[:, 0] += (vowner // 2) * step
+            v = verts[_runs(vstart[side], nv)]
+            v[:, 0] += (np.repeat(np.arange(len(side)), nv) // 2) * step
             o = owner[near]
-            hits = self_intersections(v, local[near] + vbase[o][:, None], workers=1)
+            hits = self_intersections(v, local[near] + vbase[o][:, None], workers=1, sides=o % 2 == 1)
             oa, ob = o[hits[:, 0]], o[hits[:, 1]]
-            cross = (oa // 2 == ob // 2) & (oa != ob)
-            out[lo + oa[cross] // 2] = True
+            out[lo + oa[oa // 2 == ob // 2] // 2] = True  # (pairs are far apart: the two sides of one)
         return out
 
     # ----- hubs -----------------------------------------------------------------------
@@ -980,6 +997,7 @@ def union_pieces(tess: _Tessellator, ev, cl: list, report=None, chunk: int = 512
 
 
 MAX_BATCHED = BATCH_TRIANGLES // 8  # clusters up to this estimate (input triangles) are united in batches
+MAX_WAITING = 64  # copies of batched shapes held before the batch is united (their rings are held too)
 
 
 class _UnionQueue:
@@ -996,9 +1014,10 @@ class _UnionQueue:
         self.cache = ShapeCache(tess.grid)  # copies of a cluster's shape take its piece, moved (steady lattices)
         self.batch: list = []  # (cluster, rings, key, anchor, ring keys) to unite at once
         self.waiting: list = []  # (cluster, rings, shape): copies of a batched shape, settled after the batch
-        self.batched: set = set()  # the ``like`` keys of the batch's shapes
+        self.batched: set = set()  # the keys and ``like`` keys of the batch's shapes
         self.unsettled: list = []  # clusters of a flushed batch not settled yet
         self.gone: set = set()  # ids of clusters merged into a grown one
+        self.united = 0  # unions made (the other pieces are copies)
 
     def run(self):
         while self.pending:
@@ -1009,24 +1028,35 @@ class _UnionQueue:
                 self._settle(c, rg, cut=True)
                 continue
             shape = self.cache.shape(c, self.ev.center, self.ev.radius, self.bn, rg)
+            if shape.key is not None and shape.key in self.batched:  # a moved copy of a batched shape
+                self._wait(c, rg, shape)
+                continue
             piece = self.cache.get(shape, rg)
             if piece is not None:
                 self.done[id(c)] = (c, [piece])
             elif rg and piece_estimate(c)[0] <= MAX_BATCHED:
                 like = self.cache.like(shape)
-                if like is not None and like in self.batched:
-                    self.waiting.append((c, rg, shape))  # a copy (moved, turned) of a batched shape
+                if like is not None and like in self.batched:  # a turned copy of a batched shape
+                    self._wait(c, rg, shape)
                     continue
                 self.batch.append((c, rg, shape))
-                self.batched.add(like)
+                self.batched |= {like, shape.key}  # its turned copies and its moved ones wait
                 if sum(piece_estimate(b[0])[0] for b in self.batch) >= BATCH_TRIANGLES:
                     self._flush()
             else:
                 self._flush()
                 self._settle(c, rg)
         self._flush()
+        if self.report is not None:
+            self.report.united = self.united
         for _, pieces in self.done.values():
             yield from pieces
+
+    def _wait(self, c, rg, shape) -> None:
+        """Hold a copy of a batched shape until the batch is united (at most MAX_WAITING are held)."""
+        self.waiting.append((c, rg, shape))
+        if len(self.waiting) >= MAX_WAITING:
+            self._flush()
 
     def _rings(self, c) -> dict:
         if id(c) not in self.rings_of:  # this cluster and the next ones' rings, placed at once
@@ -1045,6 +1075,7 @@ class _UnionQueue:
                                                             [b[1] for b in batch], self.tess.grid)
         for (c, rg, shape), piece in zip(batch, pieces):
             if piece is not None:
+                self.united += 1
                 self.cache.put(shape, rg, piece)
                 self.done[id(c)] = (c, [piece])
             else:
@@ -1106,6 +1137,7 @@ class _UnionQueue:
                 piece = unite_stoppable(c, self.ev.center, self.ev.radius, self.bn, rg, self.tess.grid)
             except RingTouchedError as exc:
                 return exc
+            self.united += 1
             self.cache.put(shape, rg, piece)
         return piece
 
@@ -1124,6 +1156,12 @@ class _UnionQueue:
             self.done.pop(g, None)
         self.tess.exclude_more(idx[c.hubs], np.concatenate([idx[bn[c.beams, 0], :3], pattern[c.beams, None]], axis=1))
         return c, _cluster_rings(self.tess, idx, bn, pattern, [c])[0]
+
+
+def _runs(start: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """The indices start[k], …, start[k] + count[k] - 1 of every k, one run after the other."""
+    base = np.cumsum(count) - count
+    return np.repeat(start - base, count) + np.arange(int(count.sum()))
 
 
 def _cluster_rings(tess: _Tessellator, idx, bn, pattern, part: list) -> list:

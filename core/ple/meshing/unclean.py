@@ -53,12 +53,15 @@ class UncleanReport:
     element_pairs: np.ndarray | None = None  # (P, 2) element ids (hubs 0..N-1, beams N + row) found overlapping
     shrunk: np.ndarray | None = None  # (N,) hubs whose ACHoCC shrank its caps
     clusters: int = 0  # local unions (``ple.meshing.unions``), once the stream has split them
+    united: int = 0  # unions made by manifold3d once the stream has settled them (the rest: kept shapes' copies)
     union_bytes: int = 0  # the largest cluster's union, estimated from above (peak bytes)
     r_plus: np.ndarray | None = None  # (N,) each hub's S⁺ radius (world units), which holds its junction
 
     def line(self) -> str:
         close = f", {self.close_junctions:,} close junction pairs" if self.close_junctions else ""
         local = f" in {self.clusters:,} local unions" if self.clusters else ""
+        if self.clusters and self.united:
+            local += f" ({self.united:,} united, the others copies of those)"
         return (f"unclean lattice: {len(self.nodes):,} hubs in {self.components:,} neighbourhoods "
                 f"({self.pairs:,} overlapping element pairs, {self.shrunk_hubs:,} shrunk junctions{close}) "
                 f"united with manifold3d{local}")

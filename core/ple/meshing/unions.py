@@ -542,7 +542,7 @@ class ShapeCache:
         """The key of a shape's turned copies (the distances of its inputs from their centroid),
         computed once, when its translations are not kept."""
         if shape.like is None and shape.key is not None:
-            d = shape.points - shape.points.mean(axis=0)
+            d = shape.points - shape.points.sum(axis=0) * (1.0 / len(shape.points))
             spread = np.round(np.concatenate([np.sqrt(np.einsum("ij,ij->i", d, d)), shape.radii])
                               * (1.0 / (self.grid * TURNED_QUANTUM)))
             shape.like = (shape.key[0], spread.tobytes())
