@@ -52,6 +52,7 @@ from .common import add_cluster_args, add_lattice_args, lattice_from_args, max_m
 MAX_MESH_GROUPS = 20_000_000  # streamed binary STL
 MAX_MEMORY_GROUPS = 500_000  # formats built in memory (trimesh) and --beam-lattice
 CHECK_SAMPLES = 400_000
+DEFAULT_MESH_BYTES = 16 << 30  # refined without --levels: the finest level whose STL is at most this (_default_levels)
 CHECK_CHUNK = 1 << 18  # triangles read from the written STL at a time by --check
 
 
@@ -105,7 +106,7 @@ def run(args) -> int:
     if in_memory and region.groups > MAX_MEMORY_GROUPS:
         raise PleError(f"region {region} has {region.groups:,} node-groups: too many to hold in memory for "
                        f".{fmt}; write .stl (streamed) or a smaller --region")
-    max_groups = _within_budget(args, lat, region, fmt, in_memory)
+    max_groups = _default_levels(args, lat, region, fmt, in_memory)
     t0 = time.perf_counter()
     if args.beam_lattice and fmt != "3mf":
         raise PleError(f"--beam-lattice writes 3MF; --out {args.out} is .{fmt}")
@@ -178,6 +179,35 @@ def run_parts(args) -> int:
         n = assemble_stl(args.parts, args.out)
         print(f"wrote {args.out}: {n:,} triangles from {len(job.parts)} parts")
     return status
+
+
+def _default_levels(args, lat, region, fmt: str, in_memory: bool) -> int:
+    """``_within_budget``, with the refinement chosen when --levels is not given: the default
+    (4) if its mesh fits the budgets and at most DEFAULT_MESH_BYTES of STL, else the finest level
+    that does, else 0 levels if it fits the budgets (said on stderr). A lattice of 10⁶ hubs (the
+    thesis presets) is thus meshed at the levels it can be, not refused; an explicit --levels is
+    kept, or refused as before. Nothing fits: the default's refusal."""
+    if args.levels is not None or args.style != "refined" or args.beam_lattice:
+        return _within_budget(args, lat, region, fmt, in_memory)
+    default, segments = _check_style(args.style, None, args.segments)
+    why = None
+    for levels, capped in [*((k, True) for k in range(default, -1, -1)), (0, False)]:
+        tris = mesh_triangles(lat, region, args.style, levels, segments)
+        args.levels = levels
+        try:
+            if capped and streamed_stl_bytes(tris) > DEFAULT_MESH_BYTES:
+                raise PleError(f"{tris:,.3g} triangles make a binary STL of up to {human(streamed_stl_bytes(tris))}, "
+                               f"more than {human(DEFAULT_MESH_BYTES)}")
+            got = _within_budget(args, lat, region, fmt, in_memory)
+        except PleError as exc:
+            why = why or exc
+            continue
+        if levels < default:
+            print(f"note: refined at {default} levels (the default): {why}; meshing at {levels} levels, up to "
+                  f"{human(streamed_stl_bytes(tris))} of STL (--levels chooses)", file=sys.stderr)
+        return got
+    args.levels = None
+    raise why
 
 
 def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
