@@ -61,7 +61,9 @@ def register(sub) -> None:
     add_lattice_args(p)
     p.add_argument("--style", choices=STYLE_NAMES, default=None,
                    help=f"tessellation style (default: {DEFAULT_STYLE}; balls-beams is a preview, not a closed solid)")
-    p.add_argument("--levels", type=int, default=None, help="refinement levels of 'refined' (default 4)")
+    p.add_argument("--levels", type=int, default=None,
+                   help="refinement levels of 'refined' (default 4, or the finest whose STL fits 16 GiB and the "
+                        "budgets)")
     p.add_argument("--segments", type=int, default=None, help="generators per circle of 'chocc' (default 16)")
     p.add_argument("--region", help="I0:I1,J0:J1,K0:K1 (half-open); default: the whole lattice")
     p.add_argument("--fillet", type=float, default=None,
