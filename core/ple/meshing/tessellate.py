@@ -1174,13 +1174,14 @@ def _cluster_rings(tess: _Tessellator, idx, bn, pattern, part: list) -> list:
     rings: list = [{} for _ in part]
     if not ends:
         return rings
-    rows = np.array([bn[j, e] for _, j, e in ends], np.int64)
+    at = np.array(ends, np.int64).reshape(-1, 3)
+    rows = bn[at[:, 1], at[:, 2]]
     tids, m, _, _ = tess.instances(idx[rows])
     verts, offsets = tess._placed_hubs(tids, m, np.arange(len(rows)))
-    for q, (k, j, e) in enumerate(ends):
-        tpl, slot_of = tess.tpl_list[int(tids[q])]
-        slot = int(tess.beam_slots[pattern[j], e])
-        rings[k][(j, e)] = verts[offsets[q] + np.asarray(tpl.rings[slot_of[slot]], np.int64)]
+    first, size = tess._vertex_lists(tids, tess.beam_slots[pattern[at[:, 1]], at[:, 2]])
+    placed = verts[np.repeat(offsets, size) + tess.id_lists[_runs(first, size)]]
+    for (k, j, e), ring in zip(ends, np.split(placed, np.cumsum(size)[:-1])):
+        rings[k][(j, e)] = ring
     return rings
 
 
