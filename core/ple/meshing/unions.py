@@ -520,22 +520,33 @@ class ShapeCache:
 
     def shape(self, cluster: Cluster, center, radius, beam_nodes, rings: dict) -> Shape:
         """The shape of a cluster (its keys, anchor, ring keys and inputs)."""
-        c = np.asarray(center, float)
         bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
         hubs = np.sort(np.asarray(cluster.hubs, np.int64))
-        order = {int(h): k for k, h in enumerate(hubs.tolist())}
-        beams = np.sort(np.asarray(cluster.beams, np.int64)).tolist()
+        order = {h: k for k, h in enumerate(hubs.tolist())}
+        beams = sorted(np.asarray(cluster.beams, np.int64).tolist())
         halves = sorted(map(tuple, np.asarray(cluster.halves, np.int64).reshape(-1, 2).tolist()))
-        ring_keys = ([(j, e) for j in beams for e in (0, 1) if int(bn[j, e]) not in order]
-                     + [(j, CUT) for j, _ in halves])
-        pts = np.concatenate([c[hubs], *[np.asarray(rings[k], float).reshape(-1, 3) for k in ring_keys]])
+        ring_keys, ends = [], []  # the rings of its beams' clean ends, then its cut rings; each end's hub
+        for j, pair in zip(beams, bn[beams].tolist()):
+            for e in (0, 1):
+                ends.append(order.get(pair[e], -1))
+                if ends[-1] < 0:
+                    ring_keys.append((j, e))
+        for j, e in halves:
+            ring_keys.append((j, CUT))
+            ends.append(order[int(bn[j, e])])
+        pts = [np.asarray(rings[k], float).reshape(-1, 3) for k in ring_keys]
+        if len(hubs):
+            pts.insert(0, np.asarray(center, float)[hubs])
+        pts = np.concatenate(pts) if pts else np.zeros((0, 3))
         rad = np.asarray(radius, float)[hubs]
         if not len(pts):
             return Shape(None, None, ring_keys, pts, rad)
         anchor = pts[0]
-        ends = [order.get(int(bn[j, e]), -1) for j in beams for e in (0, 1)] + [order[int(bn[j, e])] for j, e in halves]
-        sizes = np.asarray([len(hubs), len(halves)] + [len(rings[k]) for k in ring_keys] + ends, np.int64).tobytes()
-        body = np.round(np.concatenate([(pts - anchor).ravel(), rad]) * (1.0 / (self.grid * SHAPE_QUANTUM)))
+        sizes = np.array([len(hubs), len(halves), *(len(rings[k]) for k in ring_keys), *ends], np.int64).tobytes()
+        body = (pts - anchor).ravel()
+        if len(rad):
+            body = np.concatenate([body, rad])
+        body = np.round(body * (1.0 / (self.grid * SHAPE_QUANTUM)))
         return Shape((sizes, body.tobytes()), anchor, ring_keys, pts, rad)
 
     def like(self, shape: Shape) -> tuple | None:
