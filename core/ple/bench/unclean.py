@@ -42,6 +42,7 @@ from ..meshing.tessellate import (
     _Tessellator,
     iter_triangles,
     leave_to_unions,
+    merged,
     union_pieces,
 )
 from ..meshing.unclean import UncleanReport
@@ -162,7 +163,7 @@ def write_tenth(lat, out, style: str, levels: int, fraction: float = 0.1, seed: 
     cl = leave_to_unions(tess, ev, report)
     pool = RecordPool()
     encode = lambda chunk: stl_chunk(chunk, grid, pool)  # noqa: E731
-    chunks = [map(encode, union_pieces(tess, ev, cl, report)),
+    chunks = [map(encode, merged(union_pieces(tess, ev, cl, report))),
               iter_triangles(lat, r, style, lv, sg, _tess=tess, encode=encode)]
     tris = write_stl(out, itertools.chain(*chunks), header=stl_header("mm"), pool=pool)
     return tris, report, stream_estimate(lat, style, levels, report)

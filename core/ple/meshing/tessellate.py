@@ -996,6 +996,22 @@ def union_pieces(tess: _Tessellator, ev, cl: list, report=None, chunk: int = 512
     yield from _UnionQueue(tess, ev, cl, report, chunk).run()
 
 
+def merged(pieces, triangles: int = 1 << 16):
+    """Pieces (vertices, faces) joined into chunks of at least ``triangles`` faces (the last
+    fewer): one encoding per chunk instead of one per piece (copies of a small cluster are many)."""
+    vs, fs, at, n = [], [], 0, 0
+    for v, f in pieces:
+        vs.append(v)
+        fs.append(np.asarray(f) + at)
+        at += len(v)
+        n += len(f)
+        if n >= triangles:
+            yield np.concatenate(vs), np.concatenate(fs)
+            vs, fs, at, n = [], [], 0, 0
+    if fs:
+        yield np.concatenate(vs), np.concatenate(fs)
+
+
 MAX_BATCHED = BATCH_TRIANGLES // 8  # clusters up to this estimate (input triangles) are united in batches
 MAX_WAITING = 64  # copies of batched shapes held before the batch is united (their rings are held too)
 
@@ -1368,4 +1384,4 @@ def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: in
     cl = leave_to_unions(tess, ev, report)  # before the first box: the boxes leave the clusters' rings open
     pieces = union_pieces(tess, ev, cl, report)
     # the pieces first: a cluster that grows takes hubs from the boxes, which are built after it
-    return report, itertools.chain(pieces if encode is None else map(encode, pieces), boxes)
+    return report, itertools.chain(pieces if encode is None else map(encode, merged(pieces)), boxes)
