@@ -574,7 +574,7 @@ class ShapeCache:
                 for k, r in zip(shape.ring_keys, ids):
                     v[r] = rings[k]
                 self.hits += 1
-                return v, f.copy()
+                return v, f  # (read-only: shared by the copies)
         for key in self.alike.get(self.like(shape), ()):
             kept = self.kept.get(key)  # (or gone: the least recently used)
             piece = None if kept is None else self._moved(kept, shape, rings)
@@ -606,7 +606,7 @@ class ShapeCache:
         if len(self_intersections(snap(v, 2 * self.grid), f, cell=cell)):
             return None
         self._keep(shape, v, f, ids, flat, cell)  # the translations of this copy are then found directly
-        return v, f.copy()
+        return v, f
 
     def put(self, shape: Shape, rings: dict, piece) -> None:
         if shape.key is None or shape.key in self.kept:
@@ -620,6 +620,8 @@ class ShapeCache:
         self._keep(shape, np.asarray(v, float), np.asarray(f, np.int64), ids)
 
     def _keep(self, shape: Shape, v, f, ids, flat=None, cell=None) -> None:
+        f = np.asarray(f, np.int64)
+        f.flags.writeable = False  # the copies' pieces share it (and the piece it came with)
         self.kept[shape.key] = (v, f, np.asarray(shape.anchor, float), ids, shape,
                                 flat_faces(v, f, self.grid) if flat is None else flat,
                                 search_cell(v, f) if cell is None else cell)
