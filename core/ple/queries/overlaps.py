@@ -221,7 +221,8 @@ def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float, split: int
         corner = np.maximum(lo[i], lo[j])  # the one cell that reports the pair
         keep = ((corner[:, 0] * dims[1] + corner[:, 1]) * dims[2] + corner[:, 2]) == cell
         i, j = i[keep], j[keep]
-        near = np.all((blo[i] <= bhi[j]) & (blo[j] <= bhi[i]), axis=1)
+        hit = (blo[i] <= bhi[j]) & (blo[j] <= bhi[i])
+        near = hit[:, 0] & hit[:, 1] & hit[:, 2]
         if near.any():
             yield i[near], j[near]
 
@@ -275,15 +276,16 @@ def check_pairs(pairs: float, elements: int, max_pairs: float | None) -> None:
 
 def _cell_entries(lo, span, dims, rows):
     """(cell key, element) for every grid cell each element's box covers."""
-    per = np.prod(span[rows], axis=1)
-    owner = np.repeat(rows, per)
-    local = np.arange(per.sum()) - np.repeat(np.cumsum(per) - per, per)
-    sp = span[owner]
-    cz = local % sp[:, 2]
-    cy = (local // sp[:, 2]) % sp[:, 1]
-    cx = local // (sp[:, 2] * sp[:, 1])
-    c = lo[owner] + np.stack([cx, cy, cz], axis=1)
-    return (c[:, 0] * dims[1] + c[:, 1]) * dims[2] + c[:, 2], owner
+    sp = span[rows]
+    per = sp[:, 0] * sp[:, 1] * sp[:, 2]
+    base = (lo[rows, 0] * dims[1] + lo[rows, 1]) * dims[2] + lo[rows, 2]  # the first cell's key
+    if (per == 1).all():  # every box in one cell
+        return base, rows
+    k = np.repeat(np.arange(len(rows)), per)
+    local = np.arange(len(k)) - np.repeat(np.cumsum(per) - per, per)
+    sz, sy = sp[k, 2], sp[k, 1]
+    cz, t = local % sz, local // sz
+    return base[k] + ((t // sy) * dims[1] + t % sy) * dims[2] + cz, rows[k]
 
 
 class _Collector:
