@@ -26,7 +26,7 @@ grid by ``on_grid``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -56,6 +56,32 @@ class UncleanReport:
     united: int = 0  # unions made by manifold3d once the stream has settled them (the rest: kept shapes' copies)
     union_bytes: int = 0  # the largest cluster's union, estimated from above (peak bytes)
     r_plus: np.ndarray | None = None  # (N,) each hub's S⁺ radius (world units), which holds its junction
+    _index: tuple | None = field(default=None, repr=False, compare=False)  # ``pairs_within``'s, made once
+
+    def pairs_within(self, elements: np.ndarray) -> np.ndarray:
+        """The element pairs (K, 2) with both ends among ``elements`` (sorted element ids): each
+        element's pairs looked up in a directed copy of them sorted once, not a scan of all."""
+        if self._index is None:
+            p = np.asarray(self.element_pairs if self.element_pairs is not None else np.zeros((0, 2)),
+                           np.int64).reshape(-1, 2)
+            src, dst = np.concatenate([p[:, 0], p[:, 1]]), np.concatenate([p[:, 1], p[:, 0]])
+            order = np.argsort(src, kind="stable")
+            self._index = (src[order], dst[order])
+        src, dst = self._index
+        lo, hi = np.searchsorted(src, elements), np.searchsorted(src, elements, "right")
+        count = hi - lo
+        at = np.repeat(lo - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))
+        a, b = src[at], dst[at]
+        keep = (a < b) & np.isin(b, elements)
+        return np.stack([a[keep], b[keep]], axis=1)
+
+    def paired_beams(self) -> np.ndarray:
+        """Rows (sorted) of the beams in some element pair."""
+        if self._index is None:
+            self.pairs_within(np.zeros(0, np.int64))
+        n = len(self.shrunk)
+        src = self._index[0]
+        return np.unique(src[src >= n] - n)
 
     def line(self) -> str:
         close = f", {self.close_junctions:,} close junction pairs" if self.close_junctions else ""

@@ -128,10 +128,8 @@ def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 
     bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
     n = len(report.shrunk)
     beams = np.asarray(cluster.beams, np.int64)
-    pairs = np.asarray(report.element_pairs, np.int64).reshape(-1, 2)
-    paired = np.unique(pairs[pairs >= n] - n)
     ends = bn[beams]
-    inner = np.isin(ends, hubs).all(axis=1) & (ends[:, 0] != ends[:, 1]) & ~np.isin(beams, paired)
+    inner = np.isin(ends, hubs).all(axis=1) & (ends[:, 0] != ends[:, 1]) & ~np.isin(beams, report.paired_beams())
     rings: dict = {}
     for j in beams[inner].tolist():
         cut = _cut_ring(j, c, rad, bn, beams, margin)
@@ -144,15 +142,14 @@ def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 
     halves = np.stack([np.repeat(cut, 2), np.tile([0, 1], len(cut))], axis=1)
     # elements numbered hubs, whole beams, halves; edges: the pairs inside the cluster, incidences
     h, w = len(hubs), len(whole)
-    element = np.full(n + len(bn), -1, np.int64)  # find_unclean's element ids -> ours
-    element[hubs] = np.arange(h)
-    element[n + whole] = h + np.arange(w)
-    pairs = element[pairs]
-    hub_of = np.searchsorted(hubs, bn)  # row of each beam end among the hubs (valid where it is one)
+    ids = np.concatenate([hubs, n + whole])  # find_unclean's element ids of ours (sorted: hubs < n)
+    pairs = np.searchsorted(ids, report.pairs_within(ids))
     own = np.isin(bn[whole], hubs)
-    edges = np.concatenate([pairs[(pairs >= 0).all(axis=1)],
-                            np.stack([np.repeat(h + np.arange(w), 2)[own.reshape(-1)], hub_of[whole][own]], 1),
-                            np.stack([h + w + np.arange(len(halves)), hub_of[halves[:, 0], halves[:, 1]]], 1)])
+    edges = np.concatenate([pairs,
+                            np.stack([np.repeat(h + np.arange(w), 2)[own.reshape(-1)],
+                                      np.searchsorted(hubs, bn[whole][own])], 1),
+                            np.stack([h + w + np.arange(len(halves)),
+                                      np.searchsorted(hubs, bn[halves[:, 0], halves[:, 1]])], 1)])
     label = component_labels(h + w + len(halves), edges)
     count = int(label.max()) + 1
     if count == 1:
