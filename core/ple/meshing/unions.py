@@ -130,11 +130,7 @@ def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 
     beams = np.asarray(cluster.beams, np.int64)
     ends = bn[beams]
     inner = np.isin(ends, hubs).all(axis=1) & (ends[:, 0] != ends[:, 1]) & ~np.isin(beams, report.paired_beams())
-    rings: dict = {}
-    for j in beams[inner].tolist():
-        cut = _cut_ring(j, c, rad, bn, beams, margin)
-        if cut is not None:
-            rings[(j, CUT)] = cut
+    rings = {(j, CUT): r for j, r in _cut_rings(beams[inner], c, rad, bn, beams, margin).items()}
     if not rings:
         return None
     cut = np.array(sorted(j for j, _ in rings), np.int64)
@@ -167,39 +163,59 @@ def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 
 
 def _cut_ring(j: int, c, rad, bn, beams, margin: float):
     """The cut ring of beam j (``split``), or None when its halves do not clear the other end."""
-    x, y = (int(v) for v in bn[j])
+    return _cut_rings(np.array([j], np.int64), c, rad, bn, beams, margin).get(int(j))
+
+
+def _cut_rings(js: np.ndarray, c, rad, bn, beams, margin: float) -> dict:
+    """The cut rings of the beams ``js`` of a cluster (its ``beams``) whose halves clear the other
+    end (``split``): {beam row: ring (SPHERE_SEGMENTS, 3)}, all tested at once."""
+    x, y = bn[js, 0], bn[js, 1]
     axis = c[y] - c[x]
-    length = float(np.linalg.norm(axis))
+    length = np.linalg.norm(axis, axis=1)
     rx, ry = rad[x] * TANGENT_SCALE, rad[y] * TANGENT_SCALE
-    if length <= abs(rx - ry):
-        return None
-    a = axis / length
-    cos_t = (rx - ry) / length
-    sin_t = np.sqrt(max(1.0 - cos_t * cos_t, 0.0))
+    ok = length > np.abs(rx - ry)
+    length = np.where(ok, length, 1.0)
+    a = axis / length[:, None]
+    cos_t = np.where(ok, (rx - ry) / length, 0.0)
+    sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
     px, py = rx * cos_t, length + ry * cos_t  # the tangent circles' positions along the axis, radii ρ
     rho_x, rho_y = rx * sin_t, ry * sin_t
-    lo, hi = max(px, rad[x] * CUT_BOUND), min(py, length - rad[y] * CUT_BOUND)
-    if hi <= lo:
-        return None
+    lo, hi = np.maximum(px, rad[x] * CUT_BOUND), np.minimum(py, length - rad[y] * CUT_BOUND)
+    ok &= hi > lo
     p = 0.5 * (lo + hi)
-    rho = rho_x + (rho_y - rho_x) * (p - px) / (py - px)
-    for near, start, stop, r_half in ((x, p, py, max(rho, rho_y)), (y, px, p, max(rho_x, rho))):
-        # the other end's half (its frustum) against `near`'s ball and its other beams
-        s0, s1 = c[x] + start * a, c[x] + stop * a
-        r_half *= CUT_BOUND
-        others = beams[(bn[beams] == near).any(axis=1) & (beams != j)]
-        if len(others):
-            o = bn[others]
-            reach = np.maximum(rad[o[:, 0]], rad[o[:, 1]]) * CUT_BOUND
-            d = segment_distance(s0[None], s1[None], c[o[:, 0]], c[o[:, 1]])
-            if np.any(d <= reach + r_half + margin):
-                return None
-        gap = segment_distance(s0[None], s1[None], c[near][None], c[near][None])[0]
-        if gap <= rad[near] * CUT_BOUND + r_half + margin:
-            return None
-    e1, e2 = perpendicular_frames(a)
+    rho = rho_x + (rho_y - rho_x) * (p - px) / np.where(py > px, py - px, 1.0)
+    # each beam's two sides: the other end's half (its frustum) against `near`'s ball and its other beams
+    near = np.concatenate([x, y])
+    start, stop = np.concatenate([p, px]), np.concatenate([py, p])
+    r_half = np.concatenate([np.maximum(rho, rho_y), np.maximum(rho_x, rho)]) * CUT_BOUND
+    a2, cx2 = np.concatenate([a, a]), np.concatenate([c[x], c[x]])
+    s0, s1 = cx2 + start[:, None] * a2, cx2 + stop[:, None] * a2
+    gap = segment_distance(s0, s1, c[near], c[near])
+    clear = gap > rad[near] * CUT_BOUND + r_half + margin
+    # the cluster's beams at each near hub, but the beam itself
+    ends = bn[beams]
+    hub, beam = np.concatenate([ends[:, 0], ends[:, 1]]), np.concatenate([beams, beams])
+    order = np.argsort(hub, kind="stable")
+    hub, beam = hub[order], beam[order]
+    first, last = np.searchsorted(hub, near), np.searchsorted(hub, near, "right")
+    count = last - first
+    side = np.repeat(np.arange(len(near)), count)
+    other = beam[np.repeat(first - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))]
+    keep = other != np.concatenate([js, js])[side]
+    side, other = side[keep], other[keep]
+    o = bn[other]
+    reach = np.maximum(rad[o[:, 0]], rad[o[:, 1]]) * CUT_BOUND
+    hit = segment_distance(s0[side], s1[side], c[o[:, 0]], c[o[:, 1]]) <= reach + r_half[side] + margin
+    clear[side[hit]] = False
+    ok &= clear[:len(js)] & clear[len(js):]
+    k = np.flatnonzero(ok)
+    if not len(k):
+        return {}
+    e1, e2 = perpendicular_frames(a[k])
     ang = 2 * np.pi * np.arange(SPHERE_SEGMENTS) / SPHERE_SEGMENTS
-    return c[x] + p * a + rho * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2)
+    rings = ((c[x[k]] + p[k, None] * a[k])[:, None] + rho[k, None, None]
+             * (np.cos(ang)[None, :, None] * e1[:, None] + np.sin(ang)[None, :, None] * e2[:, None]))
+    return dict(zip(js[k].tolist(), rings))
 
 
 def excluded(report, beam_nodes) -> tuple[np.ndarray, np.ndarray]:
