@@ -1,5 +1,5 @@
 """Points and vectors of the program API (``Pt``, ``Vec``) and the vector helpers every layer uses:
-unit vectors, fast cross products, perpendicular frames, rotations about an axis."""
+unit vectors, fast cross products, perpendicular frames, rotations about an axis, index runs."""
 
 from __future__ import annotations
 
@@ -79,3 +79,9 @@ def rotate(v, axis: np.ndarray, angles) -> np.ndarray:
     c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
     return v * c + cross(axis, v) * s + axis * (v @ axis)[:, None] * (1.0 - c)
 
+
+def runs(start, count) -> np.ndarray:
+    """The indices start[k], …, start[k] + count[k] − 1 of every k (K,), one run after the other
+    (sum(count),): the gather of K variable-length slices of a flat array at once."""
+    start, count = np.asarray(start, np.int64), np.asarray(count, np.int64)
+    return np.repeat(start - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))

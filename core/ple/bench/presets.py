@@ -61,8 +61,9 @@ def run(args) -> dict:
                 row = {"preset": name, "style": style, "info_seconds": info.get("seconds"), **got}
                 lines = row.pop("output", [])
                 row["unclean"] = next((x for x in lines if "unclean lattice" in x), None)
-                tris = [re.search(r"([\d,]+) triangles", x) for x in lines]
+                tris = [re.search(r"^wrote .*: ([\d,]+) triangles", x) for x in lines]
                 row["triangles"] = next((int(t.group(1).replace(",", "")) for t in tris if t), None)
+                row["note"] = next((x for x in lines if x.startswith("note:")), None)  # e.g. fewer levels
                 row["meshed"] = got.get("exit") == 0
                 if os.path.exists(out):
                     os.unlink(out)

@@ -39,7 +39,7 @@ from functools import partial
 import numpy as np
 import trimesh
 
-from ..algebra.vectors import perpendicular_frames, unit_rows
+from ..algebra.vectors import perpendicular_frames, runs, unit_rows
 from ..errors import PleError
 from ..model.budget import hub_triangles, mean_degree
 from ..model.lattice import Lattice, Region
@@ -495,14 +495,14 @@ class _Tessellator:
             side, other = pos.reshape(-1), pos[:, ::-1].reshape(-1)
             nf = fcount[side]
             owner = np.repeat(np.arange(len(side)), nf)
-            local = np.concatenate(tf)[_runs(fstart[side], nf)]
+            local = np.concatenate(tf)[runs(fstart[side], nf)]
             # faces not wholly behind the other hub along the line from this one's box centre to
             # the other's (every point of the other hub lies at least as far along it) ...
             u = (box_lo[other] + box_hi[other] - box_lo[side] - box_hi[side]) * 0.5
-            ahead = np.minimum.reduceat(np.einsum("ij,ij->i", verts[_runs(vstart[other], vcount[other])],
+            ahead = np.minimum.reduceat(np.einsum("ij,ij->i", verts[runs(vstart[other], vcount[other])],
                                                   np.repeat(u, vcount[other], axis=0)),
                                         np.cumsum(vcount[other]) - vcount[other])
-            along = np.einsum("ij,ij->i", verts[_runs(vstart[side], vcount[side])], np.repeat(u, vcount[side], axis=0))
+            along = np.einsum("ij,ij->i", verts[runs(vstart[side], vcount[side])], np.repeat(u, vcount[side], axis=0))
             at = (np.cumsum(vcount[side]) - vcount[side])[owner][:, None] + local
             along = along[at]
             near = np.flatnonzero(np.maximum(np.maximum(along[:, 0], along[:, 1]), along[:, 2])
@@ -524,7 +524,7 @@ class _Tessellator:
             nv = np.zeros(len(side), np.int64)
             nv[owner[near]] = vcount[side[owner[near]]]
             vbase = np.cumsum(nv) - nv
-            v = verts[_runs(vstart[side], nv)]
+            v = verts[runs(vstart[side], nv)]
             v[:, 0] += (np.repeat(np.arange(len(side)), nv) // 2) * step
             o = owner[near]
             hits = self_intersections(v, local[near] + vbase[o][:, None], workers=1, sides=o % 2 == 1)
@@ -1174,12 +1174,6 @@ class _UnionQueue:
         return c, _cluster_rings(self.tess, idx, bn, pattern, [c])[0]
 
 
-def _runs(start: np.ndarray, count: np.ndarray) -> np.ndarray:
-    """The indices start[k], …, start[k] + count[k] - 1 of every k, one run after the other."""
-    base = np.cumsum(count) - count
-    return np.repeat(start - base, count) + np.arange(int(count.sum()))
-
-
 def _cluster_rings(tess: _Tessellator, idx, bn, pattern, part: list) -> list:
     """Per cluster of ``part``, its rings (beam row, end) -> vertices (k, 3) placed as the boxes
     place them: the contact rings of the clean junctions at the ends of its beams."""
@@ -1195,7 +1189,7 @@ def _cluster_rings(tess: _Tessellator, idx, bn, pattern, part: list) -> list:
     tids, m, _, _ = tess.instances(idx[rows])
     verts, offsets = tess._placed_hubs(tids, m, np.arange(len(rows)))
     first, size = tess._vertex_lists(tids, tess.beam_slots[pattern[at[:, 1]], at[:, 2]])
-    placed = verts[np.repeat(offsets, size) + tess.id_lists[_runs(first, size)]]
+    placed = verts[np.repeat(offsets, size) + tess.id_lists[runs(first, size)]]
     for (k, j, e), ring in zip(ends, np.split(placed, np.cumsum(size)[:-1])):
         rings[k][(j, e)] = ring
     return rings

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..algebra.elements import segment_distance
+from ..algebra.vectors import runs
 from ..errors import PleError
 from ..queries.overlaps import non_incident_pairs
 from .selfcheck import self_intersections
@@ -68,9 +69,8 @@ class UncleanReport:
             order = np.argsort(src, kind="stable")
             self._index = (src[order], dst[order])
         src, dst = self._index
-        lo, hi = np.searchsorted(src, elements), np.searchsorted(src, elements, "right")
-        count = hi - lo
-        at = np.repeat(lo - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))
+        lo = np.searchsorted(src, elements)
+        at = runs(lo, np.searchsorted(src, elements, "right") - lo)
         a, b = src[at], dst[at]
         keep = (a < b) & np.isin(b, elements)
         return np.stack([a[keep], b[keep]], axis=1)

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..algebra.elements import segment_distance
-from ..algebra.vectors import perpendicular_frames
+from ..algebra.vectors import perpendicular_frames, runs
 from ..errors import PleError
 from .selfcheck import search_cell, self_intersections
 from .unclean import BALL_TURNS, SPHERE_SEGMENTS, component_labels, match_rows, on_grid, on_one_ring, ring_of_vertices
@@ -197,10 +197,10 @@ def _cut_rings(js: np.ndarray, c, rad, bn, beams, margin: float) -> dict:
     hub, beam = np.concatenate([ends[:, 0], ends[:, 1]]), np.concatenate([beams, beams])
     order = np.argsort(hub, kind="stable")
     hub, beam = hub[order], beam[order]
-    first, last = np.searchsorted(hub, near), np.searchsorted(hub, near, "right")
-    count = last - first
+    first = np.searchsorted(hub, near)
+    count = np.searchsorted(hub, near, "right") - first
     side = np.repeat(np.arange(len(near)), count)
-    other = beam[np.repeat(first - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))]
+    other = beam[runs(first, count)]
     keep = other != np.concatenate([js, js])[side]
     side, other = side[keep], other[keep]
     o = bn[other]

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..algebra.elements import beam_beam_gap, beam_distance, enclosing_ball, segment_closest, segment_distance
 from ..algebra.similarity import commute
+from ..algebra.vectors import runs
 from ..errors import PleError
 from ..model.lattice import Evaluation, Lattice
 from .rangefinder import lattice_hits
@@ -215,7 +216,7 @@ def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float, split: int
         cnt = b - a
         j = np.repeat(owner, cnt)
         cell = np.repeat(key, cnt)
-        i = table[1][np.repeat(a, cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
+        i = table[1][runs(a, cnt)]
         keep = i < j
         i, j, cell = i[keep], j[keep], cell[keep]
         corner = np.maximum(lo[i], lo[j])  # the one cell that reports the pair
@@ -282,7 +283,7 @@ def _cell_entries(lo, span, dims, rows):
     if (per == 1).all():  # every box in one cell
         return base, rows
     k = np.repeat(np.arange(len(rows)), per)
-    local = np.arange(len(k)) - np.repeat(np.cumsum(per) - per, per)
+    local = runs(np.zeros(len(rows), np.int64), per)
     sz, sy = sp[k, 2], sp[k, 1]
     cz, t = local % sz, local // sz
     return base[k] + ((t // sy) * dims[1] + t % sy) * dims[2] + cz, rows[k]
