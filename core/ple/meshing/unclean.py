@@ -211,7 +211,10 @@ def _pulled_neighbours(pulled, bn, points, margin: float, meet=None, steady=None
     anchor) is proven apart by margin / shrink is apart (its hulls are a similar image, at least
     shrink times the size); only the others are looked at (with ``meet``, the copies of an anchor
     that was not proven apart on their meshes only)."""
-    pairs = np.unique(np.sort(bn[pulled[bn[:, 0]] | pulled[bn[:, 1]]], axis=1), axis=0)
+    ends = bn[pulled[bn[:, 0]] | pulled[bn[:, 1]]]
+    n = np.int64(len(pulled))
+    key = np.unique(np.minimum(ends[:, 0], ends[:, 1]) * n + np.maximum(ends[:, 0], ends[:, 1]))
+    pairs = np.stack([key // n, key % n], axis=1)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     if points is None or not len(pairs):
         return pairs
@@ -263,12 +266,13 @@ def _hulls_apart(pairs, points, margin: float, meet: bool = False) -> np.ndarray
 
 def _query_pairs(ends, kinds, lo, hi, bn, query):
     """Non-incident candidate pairs (blocks of element ids) with at least one element in
-    ``query`` (E,) bool: the query elements among themselves, then against all the others."""
+    ``query`` (E,) bool: the query elements among themselves, then against all the others (the
+    query elements the grid's table, the others looked up in blocks: memory follows the few)."""
     q, rest = np.flatnonzero(query), np.flatnonzero(~query)
     for i, j in non_incident_pairs(ends[q], kinds[q], lo[q], hi[q], bn):
         yield q[i], q[j]
-    order = np.concatenate([rest, q])
-    for i, j in non_incident_pairs(ends[order], kinds[order], lo[order], hi[order], bn, split=len(rest)):
+    order = np.concatenate([q, rest])
+    for i, j in non_incident_pairs(ends[order], kinds[order], lo[order], hi[order], bn, split=len(q)):
         yield order[i], order[j]
 
 

@@ -42,6 +42,7 @@ WORST = 10  # worst offenders listed
 MAX_ANCHOR_FRACTION = 0.02  # "auto" takes the steady path when the anchors are at most this share of all groups
 MAX_EXPLICIT = 2_000_000  # ... or when more elements than this would be evaluated
 PAIR_CHUNK = 1 << 18  # candidate pairs per vectorized block
+ROW_CHUNK = 1 << 16  # boxes whose grid cells are listed at once (their entries' temporaries)
 QUERY_CHUNK = 1 << 10  # anchor blocks per RangeFinder batch
 ANCHOR_BLOCK = 4  # anchor groups per block side: one RangeFinder query per block
 KINDS = ("ball_ball", "ball_beam", "beam_beam")
@@ -197,17 +198,24 @@ def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float, split: int
         return
     blo, bhi, lo, span, dims = _grid(box_lo, box_hi, margin)
     first = 0 if split is None else split  # rows looked up in the table of rows [0, split or n)
-    key_all, owner_all = _cell_entries(lo, span, dims, np.arange(n if split is None else split))
+    parts = [_cell_entries(lo, span, dims, np.arange(a, min(a + ROW_CHUNK, split or n)))
+             for a in range(0, split or n, ROW_CHUNK)]  # (chunks of rows: their cells' temporaries stay small)
+    key_all, owner_all = (np.concatenate(x) for x in zip(*parts))
+    del parts
     sort = np.argsort(key_all, kind="stable")
     table = (key_all[sort], owner_all[sort])
+    del key_all, owner_all, sort
     # blocks of rows forming about PAIR_CHUNK candidates each: a row forms one per entry of every
     # cell it covers (where elements overlap many others, thousands a row)
     starts = np.flatnonzero(np.diff(table[0], prepend=table[0][:1] - 1))  # the table is sorted: runs are cells
     cells, counts = table[0][starts], np.diff(np.append(starts, len(table[0])))
-    key_q, owner_q = (key_all, owner_all) if split is None else _cell_entries(lo, span, dims, np.arange(first, n))
-    pos = np.minimum(np.searchsorted(cells, key_q), max(len(cells) - 1, 0))
-    formed = np.where(cells[pos] == key_q, counts[pos], 0) + 1 if len(cells) else np.ones(len(key_q))
-    cum = np.cumsum(np.bincount(owner_q - first, weights=formed, minlength=n - first))
+    formed = np.zeros(n - first)
+    for a in range(first, n, ROW_CHUNK):
+        key_q, owner_q = _cell_entries(lo, span, dims, np.arange(a, min(a + ROW_CHUNK, n)))
+        pos = np.minimum(np.searchsorted(cells, key_q), max(len(cells) - 1, 0))
+        per = np.where(cells[pos] == key_q, counts[pos], 0) + 1 if len(cells) else np.ones(len(key_q))
+        formed[a - first:a - first + ROW_CHUNK] = np.bincount(owner_q - a, weights=per, minlength=min(ROW_CHUNK, n - a))
+    cum = np.cumsum(formed)
     bounds = first + np.searchsorted(cum, np.arange(0, cum[-1], PAIR_CHUNK), "right")
     edges = np.unique(np.concatenate([[first], bounds, [n]]))
     for start, stop in zip(edges[:-1], edges[1:]):
