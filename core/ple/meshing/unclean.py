@@ -132,6 +132,7 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
     tb = TRIM * np.sqrt(np.maximum(rp[bn[:, 1]] ** 2 - rad[bn[:, 1]] ** 2, 0))
     seg0 = np.concatenate([c, a + u * ta[:, None]])
     seg1 = np.concatenate([c, b - u * tb[:, None]])
+    del a, b, u, length, ta, tb  # (per beam: the check's memory follows its elements)
     rr = np.concatenate([rp, np.maximum(rad[bn[:, 0]], rad[bn[:, 1]])])
     ends = np.concatenate([np.repeat(np.arange(n)[:, None], 2, axis=1), bn])
     kinds = np.concatenate([np.zeros(n, np.int64), np.ones(m, np.int64)])
