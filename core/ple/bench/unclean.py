@@ -40,6 +40,7 @@ from ..meshing.tessellate import (
     BOX_TRIANGLES,
     _check_style,
     _Tessellator,
+    check_bytes,
     iter_triangles,
     leave_to_unions,
     merged,
@@ -172,11 +173,12 @@ def write_tenth(lat, out, style: str, levels: int, fraction: float = 0.1, seed: 
 def stream_estimate(lat, style: str, levels: int, report) -> float:
     """Peak bytes of streaming a region to STL beyond the process's own: its evaluation (the
     cleanliness check holds it), the boxes alive at once (two, each at most BOX_TRIANGLES) and the
-    largest local union (``unions.piece_estimate``)."""
+    largest local union (``unions.piece_estimate``); the check's own peak includes the evaluation."""
     r = lat.region()
     lv, sg = _check_style(style, levels, None)
     box = min(mesh_triangles(lat, r, style, lv, sg), BOX_TRIANGLES) * MESH_TRIANGLE_BYTES
-    return evaluation_bytes(lat, r) + 2 * box + (report.union_bytes if report is not None else 0)
+    return (max(evaluation_bytes(lat, r), check_bytes(lat, r)) + 2 * box
+            + (report.union_bytes if report is not None else 0))
 
 
 def _run(code: str, args: list, timeout: float | None = None, memory: float | None = None) -> dict:

@@ -32,7 +32,7 @@ from ..measure.check import is_clean, solid_volume
 from ..meshing.selfcheck import BLOCK_TRIANGLES, check_triangles
 from ..meshing.skin import skin
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
-from ..meshing.tessellate import _check_style, check_fillet, tessellate
+from ..meshing.tessellate import _check_style, check_bytes, check_fillet, tessellate
 from ..model.budget import (
     CHECK_TRIANGLE_BYTES,
     MESH_TRIANGLE_BYTES,
@@ -198,7 +198,7 @@ def _default_levels(args, lat, region, fmt: str, in_memory: bool) -> int:
         args.levels = levels
         try:
             if capped and streamed_stl_bytes(tris) > DEFAULT_MESH_BYTES:
-                raise PleError(f"{tris:,.3g} triangles make a binary STL of up to {human(streamed_stl_bytes(tris))}, "
+                raise PleError(f"{tris:,.3g} triangles make up to {human(streamed_stl_bytes(tris))} of binary STL, "
                                f"more than {human(DEFAULT_MESH_BYTES)}")
             got = _within_budget(args, lat, region, fmt, in_memory)
         except PleError as exc:
@@ -209,7 +209,7 @@ def _default_levels(args, lat, region, fmt: str, in_memory: bool) -> int:
                   f"{human(streamed_stl_bytes(tris))} of STL (--levels chooses)", file=sys.stderr)
         return got
     args.levels = None
-    raise why
+    return _within_budget(args, lat, region, fmt, in_memory)  # nothing fits: the default's own refusal
 
 
 def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
@@ -241,6 +241,7 @@ def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
         return 1 << 14
     per_group = len(lat.nodes) * hub_triangles(mean_degree(lat), args.style, levels, segments) * MESH_TRIANGLE_BYTES
     require(per_group, f"one node-group of {args.style} mesh", limit, "choose fewer --levels")
+    require(check_bytes(lat, region), f"the cleanliness check of {what}", limit, "choose a smaller --region")
     out_dir = Path(args.out).resolve().parent
     free = shutil.disk_usage(out_dir).free if out_dir.is_dir() else None
     if free is not None and streamed_stl_bytes(tris) > free:

@@ -41,7 +41,7 @@ import trimesh
 
 from ..algebra.vectors import perpendicular_frames, runs, unit_rows
 from ..errors import PleError
-from ..model.budget import hub_triangles, mean_degree
+from ..model.budget import hub_triangles, mean_degree, region_beams, region_nodes
 from ..model.lattice import Lattice, Region
 from .achocc import JunctionError
 from .assembly import Packed, Pieces, TemplateTable, fill, hub_faces, place
@@ -72,6 +72,7 @@ PLACED_VERTICES = 1 << 20  # template vertices the unclean check places at once 
 HULL_VERTICES = 64  # hub templates up to this many vertices are their own hull points (``_hull_ids``)
 STEADY_MIN_LAYERS = 6  # the unclean check looks up anchors and border layers only from this many inner layers on
 MAX_CHECK_GROUPS = 500_000  # streamed regions up to this size are checked for unclean hubs first
+CHECK_ELEMENT_BYTES = 640  # peak bytes of that check per hub and beam, evaluation included (measured 540-620)
 BOX_TRIANGLES = 1 << 22  # triangles of a streamed box, at most (about: the estimate is from above)
 TEMPLATE_CHUNK = 768  # hub shapes per template task (fixed: the output must not depend on the workers)
 POOL_MAP_MIN = 1 << 20  # pooled buffers from this size on are mapped in small pages (``fresh_buffer``)
@@ -1353,6 +1354,15 @@ def smallest_radius(lat: Lattice, region=None) -> float:
                         for k in (r.k0, max(r.k1 - 1, r.k0))])
     f = lat.group_factors(corners[:, 0], corners[:, 1], corners[:, 2])
     return float(np.min(lat.template_radii) * np.min(f))
+
+
+def check_bytes(lat: Lattice, region=None) -> float:
+    """Peak bytes of ``checked_stream``'s cleanliness check of a region (0 beyond
+    MAX_CHECK_GROUPS groups: not checked), estimated before it runs."""
+    r = lat.region(region)
+    if r.groups > MAX_CHECK_GROUPS:
+        return 0.0
+    return CHECK_ELEMENT_BYTES * (region_nodes(lat, r) + region_beams(lat, r))
 
 
 def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
