@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -348,7 +349,9 @@ def presets_section(d) -> list[str]:
                 line.append(f"exit {r['exit']}: {r.get('last', '')[:80]}")
             else:
                 tris = r.get("triangles")
+                fewer = re.search(r"meshing at (\d+) levels", r.get("note") or "")
                 line.append(f"{r['cpu_seconds']:.1f} s" + (f", {tris:,} tri" if tris else "")
+                            + (f" at {fewer.group(1)} levels" if fewer else "")
                             + (" (unions)" if r.get("unclean") and "local union" in r["unclean"] else ""))
         out.append("| " + " | ".join(line) + " |")
     return out + ["", "Raw JSON: `benchmarks/results/presets.json`.", ""]
