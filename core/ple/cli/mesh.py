@@ -62,8 +62,8 @@ def register(sub) -> None:
     p.add_argument("--style", choices=STYLE_NAMES, default=None,
                    help=f"tessellation style (default: {DEFAULT_STYLE}; balls-beams is a preview, not a closed solid)")
     p.add_argument("--levels", type=int, default=None,
-                   help="refinement levels of 'refined' (default 4, or the finest whose STL fits 16 GiB and the "
-                        "budgets)")
+                   help="refinement levels of 'refined' (default 4; when the budgets refuse it, the finest they "
+                        "take, up to 16 GiB of STL)")
     p.add_argument("--segments", type=int, default=None, help="generators per circle of 'chocc' (default 16)")
     p.add_argument("--region", help="I0:I1,J0:J1,K0:K1 (half-open); default: the whole lattice")
     p.add_argument("--fillet", type=float, default=None,
@@ -185,15 +185,16 @@ def run_parts(args) -> int:
 
 def _default_levels(args, lat, region, fmt: str, in_memory: bool) -> int:
     """``_within_budget``, with the refinement chosen when --levels is not given: the default
-    (4) if its mesh fits the budgets and at most DEFAULT_MESH_BYTES of STL, else the finest level
-    that does, else 0 levels if it fits the budgets (said on stderr). A lattice of 10⁶ hubs (the
-    thesis presets) is thus meshed at the levels it can be, not refused; an explicit --levels is
-    kept, or refused as before. Nothing fits: the default's refusal."""
+    (4) if its mesh fits the budgets (memory, disk), else the finest level that does with at most
+    DEFAULT_MESH_BYTES of STL, else 0 levels if it fits the budgets (said on stderr). A lattice of
+    10⁶ hubs (the thesis presets: 0.7-1.6 TiB at 4 levels) is thus meshed at the levels it can
+    be, not refused; an explicit --levels is kept, or refused as before. Nothing fits: the
+    default's refusal."""
     if args.levels is not None or args.style != "refined" or args.beam_lattice:
         return _within_budget(args, lat, region, fmt, in_memory)
     default, segments = _check_style(args.style, None, args.segments)
     why = None
-    for levels, capped in [*((k, True) for k in range(default, -1, -1)), (0, False)]:
+    for levels, capped in [(default, False), *((k, True) for k in range(default - 1, -1, -1)), (0, False)]:
         tris = mesh_triangles(lat, region, args.style, levels, segments)
         args.levels = levels
         try:
