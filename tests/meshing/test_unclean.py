@@ -272,10 +272,10 @@ def test_neighbouring_pulled_hubs_apart_by_their_meshes(style, monkeypatch):
     seen = {}
     hulls_only = unclean._pulled_neighbours
 
-    def spy(pulled, bn, points, margin, meet=None, steady=None):
+    def spy(pulled, bn, points, margin, meet=None, steady=None, farther=None):
         seen["hulls"] = len(hulls_only(pulled, bn, points, margin))
         seen["meshes"] = len(hulls_only(pulled, bn, points, margin, meet))
-        return hulls_only(pulled, bn, points, margin, meet, steady)
+        return hulls_only(pulled, bn, points, margin, meet, steady, farther)
 
     monkeypatch.setattr(unclean, "_pulled_neighbours", spy)
     mesh = tessellate(lat, region, style)
@@ -341,7 +341,7 @@ def test_steady_anchors_prove_their_copies_apart(monkeypatch):
     seen = {}
     pulled_neighbours = unclean._pulled_neighbours
 
-    def spy(pulled, bn, points, margin, meet=None, steady=None):
+    def spy(pulled, bn, points, margin, meet=None, steady=None, farther=None):
         assert steady is not None
         seen["steady"] = pulled_neighbours(pulled, bn, points, margin, None, steady)
         seen["alone"] = pulled_neighbours(pulled, bn, points, margin, None, None)
@@ -356,3 +356,59 @@ def test_steady_anchors_prove_their_copies_apart(monkeypatch):
     ev = lat.evaluate(region)
     tids, m, _, _ = tess.instances(np.asarray(ev.node_index, np.int64))
     assert not tess._hubs_meet(tids, m, only).any()
+
+
+def test_anchor_meshes_farther_apart_free_their_copies(monkeypatch):
+    """Copies of anchor pairs whose placed meshes are proven farther apart than the margin over
+    the layers' shrink (``Tessellator._hubs_farther``) skip the mesh test: the pulled pairs found
+    are those found when every copy is tested on its meshes (exact), with far fewer tests."""
+    import ple.meshing.unclean as unclean
+    from ple.meshing.tessellate import _Tessellator
+    from ple.model.lattice import Region
+
+    lat, region = case_lattice("curved", 40), Region(30, 33, 8, 11, 0, 12)
+    found, tested = {}, {}
+    pulled_neighbours = unclean._pulled_neighbours
+
+    def spy(pulled, bn, points, margin, meet=None, steady=None, farther=None):
+        assert steady is not None and meet is not None and farther is not None
+        for name, far in (("farther", farther), ("meshes", None)):
+            tested[name] = 0
+
+            def counted(p, name=name):
+                tested[name] += len(p)
+                return meet(p)
+
+            found[name] = pulled_neighbours(pulled, bn, points, margin, counted, steady, far)
+        return found["farther"]
+
+    monkeypatch.setattr(unclean, "_pulled_neighbours", spy)
+    _Tessellator(lat, region, "cnt", 0, 16).find_unclean()
+    key = lambda p: set(map(tuple, np.asarray(p).tolist()))  # noqa: E731
+    assert key(found["farther"]) == key(found["meshes"])
+    assert tested["meshes"] > 50 and tested["farther"] < tested["meshes"] / 2, tested
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_triangles_proven_apart_are_apart(seed):
+    """``_triangles_within``: a pair it proves more than gap apart is (densely sampled points of
+    both triangles, whose nearest pair is at least the distance); and it proves most pairs that
+    are clearly farther (twice the gap and the sampling's resolution)."""
+    from ple.meshing.tessellate import _triangles_within
+
+    rng = np.random.default_rng(seed)
+    k = 300
+    t1 = rng.normal(size=(k, 3, 3))
+    t2 = rng.normal(size=(k, 3, 3)) + rng.normal(size=(k, 1, 3)) * 2
+    gap = 0.3
+    within = _triangles_within(t1, t2, gap)
+    u, v = np.meshgrid(np.linspace(0, 1, 41), np.linspace(0, 1, 41))
+    keep = u + v <= 1
+    bary = np.stack([1 - u[keep] - v[keep], u[keep], v[keep]], axis=1)  # (S, 3)
+    p1, p2 = np.einsum("sc,kci->ksi", bary, t1), np.einsum("sc,kci->ksi", bary, t2)
+    sampled = np.array([np.sqrt(((a[:, None] - b[None]) ** 2).sum(-1)).min() for a, b in zip(p1, p2)])
+    both = np.concatenate([t1, t2], axis=1)
+    edge = np.linalg.norm(both[:, [1, 2, 0, 4, 5, 3]] - both, axis=2).max(axis=1) / 40  # sampling resolution
+    assert (sampled[~within] > gap).all()
+    clear = sampled > 2 * gap + 2 * edge
+    assert clear.sum() > 30 and within[clear].mean() < 0.5

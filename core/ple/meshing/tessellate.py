@@ -43,6 +43,7 @@ from ..algebra.vectors import perpendicular_frames, runs, unit_rows
 from ..errors import PleError
 from ..model.budget import hub_triangles, mean_degree, region_beams, region_nodes
 from ..model.lattice import Lattice, Region
+from ..queries.overlaps import grid_pairs
 from .achocc import JunctionError
 from .assembly import Packed, Pieces, TemplateTable, fill, hub_faces, place
 from .hubs import hub_templates
@@ -343,7 +344,7 @@ class _Tessellator:
         twisted = ~(ordered[tids[bn[:, 0]], slots[:, 0]] & ordered[tids[bn[:, 1]], slots[:, 1]]) if len(bn) else None
         return find_unclean(ev.center, ev.radius, ev.beam_nodes, rp_t[tids] * f, ~clean_t[tids], points,
                             SEPARATION_GRIDS * self.grid, self._steady_layers(idx), pulled_t[tids],
-                            partial(self._hubs_meet, tids, m), twisted), ev
+                            partial(self._hubs_meet, tids, m), twisted, partial(self._hubs_farther, tids, m)), ev
 
     def _rings_in_order(self) -> np.ndarray:
         """(templates, slots) bool: whether each contact ring of each hub template runs in one
@@ -531,6 +532,39 @@ class _Tessellator:
             hits = self_intersections(v, local[near] + vbase[o][:, None], workers=1, sides=o % 2 == 1)
             oa, ob = o[hits[:, 0]], o[hits[:, 1]]
             out[lo + oa[oa // 2 == ob // 2] // 2] = True  # (pairs are far apart: the two sides of one)
+        return out
+
+    def _hubs_farther(self, tids, m, pairs, gap: float, chunk: int = 2048) -> np.ndarray:
+        """Which hub pairs (P, 2 rows) have meshes, as placed (not rounded), more than ``gap``
+        apart: every two faces whose boxes come within ``gap`` (``grid_pairs``, the pairs moved
+        apart as in ``_hubs_meet``) are more than ``gap`` apart along one of the axes that
+        separate two triangles (``_triangles_within``)."""
+        out = np.zeros(len(pairs), bool)
+        for lo in range(0, len(pairs), chunk):
+            part = np.asarray(pairs[lo:lo + chunk], np.int64)
+            rows, pos = np.unique(part, return_inverse=True)
+            pos = pos.reshape(-1, 2)
+            verts, vstart = self._placed_hubs(tids, m, rows)
+            tpl, tpos = np.unique(tids[rows], return_inverse=True)
+            tf = [np.asarray(self.tpl_list[t][0].faces, np.int64) for t in tpl.tolist()]
+            sizes = np.array([len(f) for f in tf], np.int64)
+            fcount, fstart = sizes[tpos], (np.cumsum(sizes) - sizes)[tpos]
+            side = pos.reshape(-1)  # (pair k, side) as 2k + side
+            nf = fcount[side]
+            owner = np.repeat(np.arange(len(side)), nf)
+            tri = verts[vstart[side][owner][:, None] + np.concatenate(tf)[runs(fstart[side], nf)]]
+            box_lo = np.minimum.reduceat(verts, vstart)
+            span = float((np.maximum.reduceat(verts, vstart) - box_lo).max()) * 2 + 4 * gap
+            tri[:, :, 0] += (owner // 2 * span)[:, None]  # each pair far from the others
+            first = owner % 2 == 0
+            a, b = np.flatnonzero(first), np.flatnonzero(~first)
+            order = np.concatenate([a, b])
+            t = tri[order]
+            near = np.zeros(len(part), bool)  # pairs with two faces that may be within gap
+            for i, j in grid_pairs(t.min(axis=1), t.max(axis=1), gap, split=len(a)):
+                close = _triangles_within(t[i], t[j], gap)
+                near[owner[order[i[close]]] // 2] = True
+            out[lo:lo + len(part)] = ~near
         return out
 
     # ----- hubs -----------------------------------------------------------------------
@@ -995,6 +1029,22 @@ def union_pieces(tess: _Tessellator, ev, cl: list, report=None, chunk: int = 512
     clusters are united in batches (``unions.unite_batch``), copies of a shape from its piece
     (``unions.ShapeCache``)."""
     yield from _UnionQueue(tess, ev, cl, report, chunk).run()
+
+
+def _triangles_within(t1: np.ndarray, t2: np.ndarray, gap: float) -> np.ndarray:
+    """(K,) bool: triangle pairs (K, 3, 3) each not proven more than ``gap`` apart by their
+    projections on 14 axes (x, y, z, both normals, the nine cross products of their edges: the
+    separating axes of two triangles): the gap of the projections on a unit axis is at most their
+    distance."""
+    e1, e2 = t1[:, [1, 2, 0]] - t1, t2[:, [1, 2, 0]] - t2
+    axes = np.concatenate([np.broadcast_to(np.eye(3), (len(t1), 3, 3)),
+                           np.cross(e1[:, 0], e1[:, 1])[:, None], np.cross(e2[:, 0], e2[:, 1])[:, None],
+                           np.cross(e1[:, :, None], e2[:, None, :]).reshape(-1, 9, 3)], axis=1)  # (K, 14, 3)
+    norm = np.linalg.norm(axes, axis=2)
+    p1, p2 = np.einsum("kai,kvi->kav", axes, t1), np.einsum("kai,kvi->kav", axes, t2)
+    gaps = np.maximum(p2.min(axis=2) - p1.max(axis=2), p1.min(axis=2) - p2.max(axis=2))
+    gaps = np.where(norm > 0, gaps / np.where(norm > 0, norm, 1.0), -np.inf)
+    return gaps.max(axis=1) <= gap
 
 
 def merged(pieces, triangles: int = 1 << 16):

@@ -94,7 +94,7 @@ class UncleanReport:
 
 
 def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, margin: float = 0.0,
-                 steady=None, pulled=None, meet=None, twisted=None) -> UncleanReport:
+                 steady=None, pulled=None, meet=None, twisted=None, farther=None) -> UncleanReport:
     """Unclean hubs of a region from its balls (center (N, 3), radius (N,)), beams (M, 2 rows),
     each hub's inflated radius r_plus (N,) (world units) and ``shrunk`` (N,) hubs whose ACHoCC
     was not clean. ``points(elements)``: for element ids (K,) (hubs 0..N-1, then beams N..N+M-1)
@@ -182,7 +182,7 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
         pairs += len(rows)
     close = 0
     if pulled is not None:
-        near = _pulled_neighbours(np.asarray(pulled, bool).reshape(-1), bn, points, margin, meet, steady)
+        near = _pulled_neighbours(np.asarray(pulled, bool).reshape(-1), bn, points, margin, meet, steady, farther)
         bad[near.reshape(-1)] = True
         close = len(near)
         found.append(near)
@@ -205,13 +205,14 @@ def component_labels(n: int, edges) -> np.ndarray:
     return connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)), directed=False)[1]
 
 
-def _pulled_neighbours(pulled, bn, points, margin: float, meet=None, steady=None) -> np.ndarray:
+def _pulled_neighbours(pulled, bn, points, margin: float, meet=None, steady=None, farther=None) -> np.ndarray:
     """Pairs (P, 2) of neighbouring hubs (beams ``bn`` (M, 2) with a ``pulled`` end) whose
     junction hulls are not proven apart (``separated``) and, with ``meet``, whose meshes meet.
     ``steady`` (``find_unclean``'s): a pair inside layers [a, b) whose copy in layer a (its
     anchor) is proven apart by margin / shrink is apart (its hulls are a similar image, at least
-    shrink times the size); only the others are looked at (with ``meet``, the copies of an anchor
-    that was not proven apart on their meshes only)."""
+    shrink times the size), and so is one whose anchor's meshes are (``farther(pairs, gap)``:
+    the placed meshes more than gap apart); only the others are looked at (with ``meet``, the
+    copies of an anchor that was not proven apart on their meshes only)."""
     ends = bn[pulled[bn[:, 0]] | pulled[bn[:, 1]]]
     n = np.int64(len(pulled))
     key = np.unique(np.minimum(ends[:, 0], ends[:, 1]) * n + np.maximum(ends[:, 0], ends[:, 1]))
@@ -229,6 +230,9 @@ def _pulled_neighbours(pulled, bn, points, margin: float, meet=None, steady=None
         inside = (kmin >= ka) & (layer.max(axis=1) < kb)
         anchor = inside & (kmin == ka)
         apart[anchor] = _hulls_apart(pairs[anchor], points, margin / shrink, meet is not None)
+        if farther is not None:  # the anchors' meshes, where their hulls overlap (junctions are not convex)
+            rest = np.flatnonzero(anchor & ~apart)
+            apart[rest] = farther(pairs[rest], margin / shrink)
         copy = np.flatnonzero(inside & (kmin > ka))
         key, step = _layer_keys(idx, kb)
         total = np.int64(key.max() + 1)
