@@ -525,7 +525,7 @@ class ShapeCache:
     def __init__(self, grid: float, limit: int = CACHE_TRIANGLES):
         self.grid = float(grid)
         self.limit = limit
-        self.kept: dict = {}  # key -> (vertices, faces, anchor, ring ids, shape, flat faces)
+        self.kept: dict = {}  # key -> (vertices, faces, anchor, ring ids, shape, flat faces, search cell)
         self.alike: dict = {}  # like -> keys of kept shapes (at most TURNED_CANDIDATES)
         self.triangles = 0
         self.hits = 0
@@ -635,6 +635,8 @@ class ShapeCache:
     def _keep(self, shape: Shape, v, f, ids, flat=None, cell=None) -> None:
         f = np.asarray(f, np.int64)
         f.flags.writeable = False  # the copies' pieces share it (and the piece it came with)
+        if shape.key in self.kept:  # a copy of this shape off the whole grid steps: it takes its place
+            self.triangles -= len(self.kept.pop(shape.key)[1])
         self.kept[shape.key] = (v, f, np.asarray(shape.anchor, float), ids, shape,
                                 flat_faces(v, f, self.grid) if flat is None else flat,
                                 search_cell(v, f) if cell is None else cell)
