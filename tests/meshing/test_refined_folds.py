@@ -84,7 +84,7 @@ def overlapping_boxes(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     pairs = [np.stack([box[a], box[b]], axis=1)]
     prop = rtree.index.Property()
     prop.dimension = 3
-    idx = rtree.index.Index(((i, (*lo[i], *hi[i]), None) for i in range(len(lo))), properties=prop)
+    idx = rtree.index.Index((np.arange(len(lo), dtype=np.int64), lo, hi), properties=prop)  # bulk loaded
     for i in np.flatnonzero(width > step):
         hits = np.fromiter(idx.intersection((*lo[i], *hi[i])), np.int64)
         pairs.append(np.stack([np.full(len(hits), i), hits], axis=1))
