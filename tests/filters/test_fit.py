@@ -75,7 +75,7 @@ def _crossings(fld, m):
 def test_chosen_order_meets_the_bound_against_the_analytic_sphere(fitted):
     assert fitted.met and fitted.order == min(n for n, h in fitted.tried if h <= fitted.bound)
     assert all(h > fitted.bound for n, h in fitted.tried if n < fitted.order)
-    pts = _crossings(fitted.field, 64)  # crossings 1/64 apart: both distances as on a 90³ grid, within 0.002
+    pts = _crossings(fitted.field, 90)
     slack = fitted.sampling_error
     # level set -> sphere, exactly
     assert np.abs(np.linalg.norm(pts, axis=1) - R).max() <= fitted.bound + slack
