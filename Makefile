@@ -11,7 +11,9 @@ GLTF_VALIDATOR := $(VENV)/node/node_modules/gltf-validator
 WHEELS := build/wheels/.fetched
 # the test run's processes (pytest-xdist): one per core of the 2-core machine the suite is sized for; a test
 # file runs in one process (loadfile: the add-on's files share that process's Blender worker); one BLAS
-# thread each (tests/conftest.py says why)
+# thread each (tests/conftest.py says why). Bytecode is written (``__pycache__``, ignored by git) even where
+# the shell says PYTHONDONTWRITEBYTECODE: the run starts many Python processes (commands, Dask
+# workers, Blender), and each would otherwise compile the package from source again
 TEST_WORKERS ?= 2
 
 .PHONY: setup syslibs consumers demo test lint bench wheels extension docs clean
@@ -53,7 +55,7 @@ demo: $(STAMP)
 
 test: $(STAMP) $(WHEELS)
 	$(BIN)/ruff check .
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest tests -n $(TEST_WORKERS) --dist loadfile --durations=20
+	OPENBLAS_NUM_THREADS=1 PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest tests -n $(TEST_WORKERS) --dist loadfile --durations=20
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

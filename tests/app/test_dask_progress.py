@@ -43,9 +43,9 @@ def test_dask_bar_and_dashboard_on_a_terminal_stdout_clean(tmp_path):
     run_job(job, str(tmp_path / "sync"), "sync", progress=False)  # the single-process reference
     assert _hashes(parts) == _hashes(tmp_path / "sync")
     assert all((parts / n).read_bytes() == (tmp_path / "sync" / n).read_bytes() for n in _hashes(parts))
-    # resumed: only the missing part is submitted, and the bar counts it alone
+    # resumed: only the missing part is submitted (to one worker: it is one task), and the bar counts it alone
     (parts / job.parts[3].name).unlink()
-    code, out, err = under_terminal([*MESH, "--parts", str(parts), "--scheduler", "local", "--workers", "2"])
+    code, out, err = under_terminal([*MESH, "--parts", str(parts), "--scheduler", "local", "--workers", "1"])
     assert code == 0 and out.startswith("1 part(s) written, 7 already there, 0 failed")
     assert "| 100% Completed |" in err and _hashes(parts) == _hashes(tmp_path / "sync")
     # the in-process path keeps the project's bar: no Dask, no dashboard

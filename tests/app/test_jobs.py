@@ -106,7 +106,7 @@ def test_sweep_and_filter_jobs(tmp_path):
     assert np.array_equal(ev.center[ev.beam_nodes], want.center[want.beam_nodes])
 
 
-def test_cli_doors_and_bad_input(tmp_path, capsys):
+def test_cli_doors_and_bad_input(tmp_path, capsys, monkeypatch):
     assert main(["mesh", "cubic", "--param", "n=4", "--style", "cnt", "--parts", str(tmp_path / "p"),
                  "--scheduler", "sync", "--box-groups", "16", "--out", str(tmp_path / "m.stl")]) == 0
     assert main(["assemble", str(tmp_path / "p"), "--out", str(tmp_path / "m2.stl")]) == 0
@@ -117,6 +117,7 @@ def test_cli_doors_and_bad_input(tmp_path, capsys):
     assert main(["assemble", str(tmp_path / "l"), "--out", str(tmp_path / "l2.npz")]) == 0
     with np.load(tmp_path / "l.npz") as a, np.load(tmp_path / "l2.npz") as b:
         assert 0 < len(a["node_index"]) and all(np.array_equal(a[k], b[k]) for k in a.files)
+    monkeypatch.setattr("ple.app.cluster.CONNECT_TIMEOUT", 0.5)  # nothing listens on port 9: no need to retry for 5 s
     t0 = time.monotonic()
     assert main(["mesh", "cubic", "--parts", str(tmp_path / "x"), "--scheduler", "tcp://127.0.0.1:9"]) == 2
     assert time.monotonic() - t0 < 60 and "cannot reach the scheduler" in capsys.readouterr().err

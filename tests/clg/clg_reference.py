@@ -147,17 +147,24 @@ def inside(data, clg, p, tol_out: list | None = None) -> np.ndarray:
         g = g_one[None]
         if key == "ball":
             c, r = node(val["node"], g[:1], pat)
-            f = np.linalg.norm(p - c[0], axis=1) - r[0] * val["scale"]
-            ca, ra, cb = c.repeat(len(p), 0), np.repeat(r * val["scale"], len(p)), None
+            ca, ra, cb, rb = c[0], r[0] * val["scale"], None, None
+            box = np.array([ca - ra, ca + ra])
         else:
             ca, ra = node(val["from"], g[:1], pat)
             cb, rb = node(val["to"], g[:1], pat)
             s1, s2 = val["scale"]
-            f = beam_f(p, ca[0], ra[0] * s1, cb[0], rb[0] * s2)
-            ca, ra, cb = ca.repeat(len(p), 0), np.repeat(ra * s1, len(p)), cb.repeat(len(p), 0)
+            ca, ra, cb, rb = ca[0], ra[0] * s1, cb[0], rb[0] * s2
+            box = np.array([np.minimum(ca - ra, cb - rb), np.maximum(ca + ra, cb + rb)])
+        if tol_out is None:  # beyond the primitive's box f > 0: only the points in it are measured
+            pad = 1e-9 * (1 + np.abs(box).max())
+            rows = np.flatnonzero(np.all((p >= box[0] - pad) & (p <= box[1] + pad), axis=1))
+        else:
+            rows = np.arange(len(p))
+        f = np.linalg.norm(p[rows] - ca, axis=1) - ra if cb is None else beam_f(p[rows], ca, ra, cb, rb)
         if tol_out is not None:
             tol_out.append(np.abs(f))
-        res = f <= 0
+        res = np.zeros(len(p), bool)
+        res[rows] = f <= 0
         mid = val.get("material")
         if mid is not None and subs[mid][1].get("replace") is not None:
             sub_clg, m = subs[mid]
@@ -165,10 +172,12 @@ def inside(data, clg, p, tol_out: list | None = None) -> np.ndarray:
                 if mid not in world:
                     world[mid] = inside(m["replace"], sub_clg, p)
                 return res & world[mid]
-            o, rot, fac = frame(m.get("frame", "world"), ca, ra, cb)
-            loc = np.einsum("mji,mj->mi", rot, p - o) / fac[:, None]
+            sel = rows if tol_out is not None else np.flatnonzero(res)  # the replacement where it matters
+            o, rot, fac = frame(m.get("frame", "world"), np.repeat(ca[None], len(sel), 0), np.repeat(ra, len(sel)),
+                                None if cb is None else np.repeat(cb[None], len(sel), 0))
+            loc = np.einsum("mji,mj->mi", rot, p[sel] - o) / fac[:, None]
             sub_tol = [] if tol_out is not None else None
-            res = res & inside(m["replace"], sub_clg, loc, sub_tol)
+            res[sel] &= inside(m["replace"], sub_clg, loc, sub_tol)
             if tol_out is not None:
                 tol_out.extend(t * fac for t in sub_tol)
         return res

@@ -9,11 +9,13 @@ import re
 import numpy as np
 import pytest
 import trimesh
+from ple.algebra.elements import beam_distance
 from ple.cli.main import main
-from ple.cli.mesh import file_triangles
+from ple.cli.mesh import file_triangles, monte_carlo_volume
 from ple.io.export import export_mesh, read_back
 from ple.io.spill import SpillFiles
 from ple.meshing.selfcheck import check_triangles, self_intersections
+from ple.program.sources import load_lattice
 
 
 def test_volume_line_beside_ple_info(tmp_path, capsys):
@@ -49,3 +51,20 @@ def test_an_stl_is_read_in_chunks(tmp_path):
         assert rep["blocks"] > 1 and not list(tmp_path.glob("ple-spill-*/*"))  # every block read back
     assert not list(tmp_path.glob("ple-spill-*"))
     assert rep["self_intersecting_pairs"] == len(self_intersections(back.vertices, back.faces)) > 0
+
+
+@pytest.mark.parametrize("name, params", [("octet", {"n": 2}), ("warped", {"n": 3}), ("tmi_slab", {"nu": 2, "nv": 3})])
+def test_monte_carlo_volume_counts_the_points_every_element_would(name, params):
+    """The Monte Carlo estimate of ``--check`` (each element tests only the samples of its grid
+    cells) counts exactly the sample points that some ball or beam, tested on every point, holds."""
+    lat = load_lattice(name, params)
+    samples, seed = 40_000, 2
+    ev = lat.evaluate()
+    lo = (ev.center - ev.radius[:, None]).min(axis=0)
+    hi = (ev.center + ev.radius[:, None]).max(axis=0)
+    p = np.random.default_rng(seed).uniform(lo, hi, size=(samples, 3))
+    inside = (np.linalg.norm(p[:, None] - ev.center[None], axis=2) <= ev.radius).any(axis=1)
+    for a, b in ev.beam_nodes:
+        inside |= beam_distance(p, ev.center[a], ev.radius[a], ev.center[b], ev.radius[b]) <= 0
+    box = float(np.prod(hi - lo))
+    assert monte_carlo_volume(lat, None, samples, seed)[0] == inside.mean() * box

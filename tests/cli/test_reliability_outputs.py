@@ -380,6 +380,7 @@ def test_assemble_refuses_a_damaged_part(tmp_path, capsys):
 
 def test_a_bad_scheduler_creates_nothing(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("ple.app.cluster.CONNECT_TIMEOUT", 0.5)  # nothing listens on port 1: no need to retry for 5 s
     refused(["batch", "cubic", "--param", "n=2", "--scheduler", "bogus", "--out", "b"], capsys, "--scheduler")
     refused(["mesh", "cubic", "--param", "n=2", "--parts", "pp", "--scheduler", "bogus"], capsys, "--scheduler")
     refused(["batch", "cubic", "--param", "n=2", "--scheduler", "tcp://127.0.0.1:1", "--out", "b"], capsys,

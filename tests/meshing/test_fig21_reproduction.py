@@ -47,7 +47,7 @@ def test_chocc_and_cnt_volumes_are_convex_hull_volumes(name, fix):
     j = fig21.authors_junction(name)
     j = fig21.with_point_circle(j) if fix else j
     c = chocc(j.normals, j.alphas)
-    th = np.linspace(0, 2 * np.pi, 4000, endpoint=False)
+    th = np.linspace(0, 2 * np.pi, 1000, endpoint=False)  # within 1e-6 of the volume, as 4000 (qhull: 20x the time)
     pts = []
     for n, a in zip(j.normals, j.alphas):
         e1 = np.cross(n, [1.0, 0, 0])

@@ -41,9 +41,10 @@ def _blend_inside(lat: Lattice, pts: np.ndarray, size: float) -> np.ndarray:
         reach = max(np.linalg.norm(ev.center[n] - ev.center[h]) + max(ev.radius[h], ev.radius[n]) for n in nbs)
         reach += np.log(len(nbs)) / b
         near = np.flatnonzero(np.einsum("ij,ij->i", pts - ev.center[h], pts - ev.center[h]) <= (1.01 * reach) ** 2)
-        p = pts[near]
-        d = np.stack([beam_distance(p, ev.center[h], ev.radius[h], ev.center[n], ev.radius[n]) for n in nbs], 1)
-        inside[near] |= np.log(np.exp(-b * d).sum(axis=1)) >= 0
+        p, total = pts[near], np.zeros(len(near))
+        for n in nbs:  # beam by beam: no (points, beams) array summed along its short axis
+            total += np.exp(-b * beam_distance(p, ev.center[h], ev.radius[h], ev.center[n], ev.radius[n]))
+        inside[near] |= np.log(total) >= 0
     return inside
 
 

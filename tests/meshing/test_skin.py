@@ -38,14 +38,20 @@ def part():
     return mesh
 
 
-def monte_carlo(mesh, thickness, lat=None, n=600_000, seed=0):
-    """Volume of the true solid: the body's exact volume times the fraction of uniform points in
-    it that lie within ``thickness`` of its surface or inside the lattice's balls and beams."""
-    rng = np.random.default_rng(seed)
-    lo, hi = mesh.bounds
-    p = rng.uniform(lo, hi, (n, 3))
-    inside, depth = convex_inside_depth(mesh, p)
-    p, depth = p[inside], depth[inside]
+@pytest.fixture(scope="module")
+def samples(part):
+    """Uniform points (600,000) in the part's box, kept where they are inside it, with their
+    depth below its surface: the sample of every Monte Carlo estimate here."""
+    lo, hi = part.bounds
+    p = np.random.default_rng(0).uniform(lo, hi, (600_000, 3))
+    inside, depth = convex_inside_depth(part, p)
+    return p[inside], depth[inside]
+
+
+def monte_carlo(mesh, samples, thickness, lat=None):
+    """Volume of the true solid: the body's exact volume times the fraction of the ``samples``
+    inside it that lie within ``thickness`` of its surface or inside the lattice's balls and beams."""
+    p, depth = samples
     solid = depth < thickness
     if lat is not None:
         rest = np.flatnonzero(~solid)
@@ -55,29 +61,39 @@ def monte_carlo(mesh, thickness, lat=None, n=600_000, seed=0):
 
 
 @pytest.mark.parametrize("mode", ["any"])
-def test_skinned_lattice_is_watertight_with_the_monte_carlo_volume(part, mode):
+def test_skinned_lattice_is_watertight_with_the_monte_carlo_volume(part, samples, mode):
     body = body_from_trimesh(part)
     lat = load_lattice("cubic").with_filter(BodyFilter(body, mode))
     out = skin(body, 0.3, tessellate(lat))
     assert out.is_watertight and out.is_volume
-    mc, se = monte_carlo(part, 0.3, lat)
+    mc, se = monte_carlo(part, samples, 0.3, lat)
     assert 3 * se < 0.01 * mc  # the estimate is sharp enough for the 1 % claim
     assert out.volume == pytest.approx(mc, rel=0.01)
     # the lattice adds volume to the bare shell (the union is not the shell alone)
     shell = skin(body, 0.3)
     assert shell.is_watertight
-    mc_shell, _ = monte_carlo(part, 0.3)
+    mc_shell, _ = monte_carlo(part, samples, 0.3)
     assert shell.volume == pytest.approx(mc_shell, rel=0.01)
     assert out.volume > shell.volume * 1.02
 
 
-def test_skin_command(tmp_path, part, capsys):
+@pytest.fixture(scope="module")
+def skinned(part, tmp_path_factory):
+    """The part as an STL, and ``ple skin cubic --body part.stl --thickness 0.4`` of it (the file
+    both doors below are compared with)."""
     from ple.cli.main import main
 
-    path = tmp_path / "part.stl"
+    folder = tmp_path_factory.mktemp("skin")
+    path, out = folder / "part.stl", folder / "skinned.stl"
     part.export(path)
-    out = tmp_path / "skinned.stl"
     assert main(["skin", "cubic", "--body", str(path), "--thickness", "0.4", "--out", str(out)]) == 0
+    return path, out
+
+
+def test_skin_command(tmp_path, part, skinned, capsys):
+    from ple.cli.main import main
+
+    _, out = skinned
     got = trimesh.load(out, force="mesh", process=False)
     body = body_from_trimesh(part)
     want = skin(body, 0.4, tessellate(load_lattice("cubic").with_filter(BodyFilter(body, "any")), cut=False))
@@ -86,17 +102,15 @@ def test_skin_command(tmp_path, part, capsys):
     assert want.is_watertight and merged.is_watertight
     assert abs(len(got.faces) - len(want.faces)) <= 0.01 * len(want.faces)
     assert got.volume == pytest.approx(want.volume, rel=1e-4)
-    assert main(["skin", "cubic", "--thickness", "0.4", "--out", str(out)]) == 2
+    assert main(["skin", "cubic", "--thickness", "0.4", "--out", str(tmp_path / "x.stl")]) == 2
     assert "needs --body" in capsys.readouterr().err
 
 
-def test_mesh_skin_flag_writes_the_skinned_solid(tmp_path, part, capsys):
+def test_mesh_skin_flag_writes_the_skinned_solid(tmp_path, skinned, capsys):
     from ple.cli.main import main
 
-    path = tmp_path / "part.stl"
-    part.export(path)
-    a, b = tmp_path / "a.stl", tmp_path / "b.stl"
-    assert main(["skin", "cubic", "--body", str(path), "--thickness", "0.4", "--out", str(a)]) == 0
+    path, a = skinned
+    b = tmp_path / "b.stl"
     assert main(["mesh", "cubic", "--body", str(path), "--fill", "any", "--skin", "0.4", "--out", str(b)]) == 0
     got, want = (trimesh.load(x, force="mesh", process=False) for x in (b, a))  # the same solid as ple skin
     assert len(got.faces) == len(want.faces) and got.volume == pytest.approx(want.volume, rel=1e-6)

@@ -81,21 +81,23 @@ def test_graded_mesh_is_watertight_with_the_monte_carlo_volume():
     n = 400_000
     p = rng.uniform(lo, hi, (n, 3))
     ev = lat.evaluate()
+    # brute force: every ball and beam of the graded evaluation, each tested on the points not yet
+    # inside whose x lies within its box (the points sorted by x once)
+    order = np.argsort(p[:, 0], kind="stable")
+    x = p[order, 0]
     inside = np.zeros(n, dtype=bool)
-    for s in range(0, n, 20_000):  # brute force: every ball and beam of the graded evaluation
-        q = p[s:s + 20_000]
-        hit = np.zeros(len(q), dtype=bool)
-        for c, r in zip(ev.center, ev.radius):
-            hit |= np.einsum("ij,ij->i", q - c, q - c) <= r * r
-        a, b = ev.beam_nodes[:, 0], ev.beam_nodes[:, 1]
-        rows = np.flatnonzero(~hit)
-        for k in range(len(a)):
-            if rows.size == 0:
-                break
-            m = ball_beam_interfere(q[rows], 0.0, ev.center[a[k]], ev.radius[a[k]], ev.center[b[k]], ev.radius[b[k]])
-            hit[rows[m]] = True
-            rows = rows[~m]
-        inside[s:s + 20_000] = hit
+
+    def near(x0: float, x1: float) -> np.ndarray:
+        rows = order[np.searchsorted(x, x0 - 1e-9):np.searchsorted(x, x1 + 1e-9, "right")]
+        return rows[~inside[rows]]
+
+    for c, r in zip(ev.center, ev.radius):
+        rows = near(c[0] - r, c[0] + r)
+        inside[rows] = np.einsum("ij,ij->i", p[rows] - c, p[rows] - c) <= r * r
+    for a, b in ev.beam_nodes:
+        ca, ra, cb, rb = ev.center[a], ev.radius[a], ev.center[b], ev.radius[b]
+        rows = near(min(ca[0] - ra, cb[0] - rb), max(ca[0] + ra, cb[0] + rb))
+        inside[rows] = ball_beam_interfere(p[rows], 0.0, ca, ra, cb, rb)
     frac = inside.mean()
     box = np.prod(hi - lo)
     mc, se = frac * box, np.sqrt(frac * (1 - frac) / n) * box

@@ -106,6 +106,14 @@ class TPMSField(Field):
 
 
 # ----- Fourier fields (004_ Eq. 2, 7, 8) ------------------------------------------------------------
+def _triple_sum(w: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Σ_ijk w[i, j, k] t[i, 0] t[j, 1] t[k, 2] per point: weights (H, H, H), per-axis tables
+    t (H, 3, P); (P,)."""
+    h, points = len(w), t.shape[2]
+    b = (w.reshape(h, h * h).T @ t[:, 0]).reshape(h, h, points)  # summed over i
+    return np.einsum("jp,jp->p", np.einsum("jkp,kp->jp", b, t[:, 2]), t[:, 1])
+
+
 class FourierField(Field):
     """Φ(x) = Re Σ_f c_f exp(2πi f·x) over integer frequencies f (K, 3), period 1 in cell units.
 
@@ -212,8 +220,8 @@ class FourierField(Field):
         permutation σ, the summed exponentials over the 4 even sign patterns are
         4 Π_k cos(2π r_k x_σ(k)) - 4i Π_k sin(2π r_k x_σ(k)); the group sum counts each member of
         an orbit O 24/|O| times, so Re Σ_{h∈O} c_h e^{2πi h·x} = Σ_σ (Re S Π cos + Im S Π sin) / 6
-        with S = Σ_{h∈O} c_h. Returns per column the table indices (3,) of |r_k| on axis σ(k),
-        the cos weight and the sin weight."""
+        with S = Σ_{h∈O} c_h. Each column takes one factor per axis, so the columns add up to dense
+        weights (H, H, H) of the frequencies on x, y and z: returns H and the cos and sin weights."""
         f = self.freqs
         mags = np.sort(np.abs(f), axis=1)[:, ::-1]
         sign = np.where(np.prod(np.sign(f), axis=1) < 0, -1, 1)
@@ -227,7 +235,14 @@ class FourierField(Field):
             cols_idx.append(np.abs(reps) * 3 + np.array(perm)[None, :])  # table row of (|r_k|, axis σ(k))
             cols_cos.append(total.real / 6)
             cols_sin.append(np.sign(reps[:, 2]) * total.imag / 6)  # sin is odd: the sign of r_z
-        return h, np.concatenate(cols_idx), np.concatenate(cols_cos), np.concatenate(cols_sin)
+        idx = np.concatenate(cols_idx)
+        freq = np.take_along_axis(idx // 3, np.argsort(idx % 3, axis=1), axis=1)  # (columns, 3): on x, y, z
+        weights = []
+        for w in (np.concatenate(cols_cos), np.concatenate(cols_sin)):
+            dense = np.zeros((h, h, h))
+            np.add.at(dense, tuple(freq.T), w)
+            weights.append(dense)
+        return h, weights[0], weights[1]
 
     def evaluate_local(self, x):
         if self._orbits is not None:
@@ -242,12 +257,13 @@ class FourierField(Field):
 
     def _evaluate_orbits(self, x):
         """Symmetric fields: cos/sin of 2π m x_a per axis and frequency m (Chebyshev recurrence,
-        no per-term transcendental), then 3-factor products per (orbit, permutation) column."""
-        h, idx, wc, ws = self._orbits
+        no per-term transcendental), then Σ w[i, j, k] t_i(x) t_j(y) t_k(z) over the dense
+        weights of ``_orbit_terms``: one matrix product over i, then the sums over k and j."""
+        h, wc, ws = self._orbits
         use_sin = np.any(ws != 0)
         out = np.empty(len(x))
         for s in range(0, len(x), EVAL_CHUNK):
-            p = x[s:s + EVAL_CHUNK].T  # (3, P): tables are gathered by rows, contiguous copies
+            p = x[s:s + EVAL_CHUNK].T  # (3, P)
             c1, s1 = np.cos(2 * math.pi * p), np.sin(2 * math.pi * p)
             ct, st = np.empty((h, 3, p.shape[1])), np.empty((h, 3, p.shape[1]))
             ct[0], st[0] = 1.0, 0.0
@@ -256,10 +272,9 @@ class FourierField(Field):
             for m in range(2, h):  # cos(mθ) = 2 cos θ cos((m-1)θ) - cos((m-2)θ), the same for sin
                 ct[m] = 2 * c1 * ct[m - 1] - ct[m - 2]
                 st[m] = 2 * c1 * st[m - 1] - st[m - 2]
-            ct, st = ct.reshape(3 * h, -1), st.reshape(3 * h, -1)
-            val = wc @ (ct[idx[:, 0]] * ct[idx[:, 1]] * ct[idx[:, 2]])
+            val = _triple_sum(wc, ct)
             if use_sin:
-                val += ws @ (st[idx[:, 0]] * st[idx[:, 1]] * st[idx[:, 2]])
+                val += _triple_sum(ws, st)
             out[s:s + EVAL_CHUNK] = val
         return out
 

@@ -43,6 +43,7 @@ from ..meshing.weld import (
     snap,
     snap_triangles,
     snapped_slices,
+    unique_rows,
     weld,
 )
 from ..model.budget import evaluation_bytes, require
@@ -385,8 +386,9 @@ def read_back(path, unit: str = DEFAULT_UNIT, as_stored: bool = False) -> trimes
     lists the ball centres) are dropped."""
     fmt = mesh_format(path)
     m = trimesh.load(path, force="mesh", process=False)
-    uniq, inv = np.unique(np.asarray(m.vertices, float), axis=0, return_inverse=True)
-    f = inv.reshape(-1)[np.asarray(m.faces)]
+    v = np.asarray(m.vertices, float)
+    first, inv, _ = unique_rows(v)
+    uniq, f = v[first], inv[np.asarray(m.faces)]
     out = trimesh.Trimesh(uniq if as_stored else from_file_axes(uniq, fmt, unit), f, process=False)
     out.remove_unreferenced_vertices()
     return out

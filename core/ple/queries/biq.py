@@ -27,7 +27,7 @@ from ..algebra.elements import ball_ball_interfere, ball_beam_interfere, beam_di
 from ..errors import PleError
 from ..model.lattice import Lattice
 from . import becots_rangefinder, mobius_rangefinder, pullback
-from .hits import BIQResult, check_queries, split_hits
+from .hits import BIQResult, BIQResults, check_queries, split_hits
 from .rangefinder import cached_plan, lattice_any, lattice_hits
 
 NAIVE_CHUNK = 1 << 21  # element × query tests per vectorized batch of the naive path
@@ -75,6 +75,8 @@ def any_hit(lat: Lattice, centers, radii) -> np.ndarray:
     if (lat.becots is not None or lat.filter is not None or lat.radius_field is not None
             or lat.group_map is not None):
         res = query(lat, c, r)
+        if isinstance(res, BIQResults):  # the flat rows: a query has a hit where its rows end later
+            return (np.diff(res.node_ends, prepend=0) > 0) | (np.diff(res.beam_ends, prepend=0) > 0)
         return np.array([len(x.nodes) > 0 or len(x.beams) > 0 for x in res], dtype=bool)
     return lattice_any(lat, c, r)
 
@@ -99,23 +101,48 @@ def _group_map_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, method: str) -> 
 
 def _kept(lat: Lattice, results: Sequence[BIQResult]) -> Sequence[BIQResult]:
     """Hits of a filtered lattice: a node the filter removed is never a hit, nor a beam with a
-    removed end (thesis §9); the filter is asked once for all hits of all queries."""
-    if lat.filter is None or not results:
+    removed end (thesis §9); the filter is asked once, for the distinct nodes among all hits of
+    all queries. Flat hit rows (``BIQResults``) stay flat."""
+    if lat.filter is None or not len(results):
         return results
-    nodes = np.concatenate([x.nodes for x in results]).reshape(-1, 4)
-    beams = np.concatenate([x.beams for x in results]).reshape(-1, 4)
-    keep_nodes = lat.keeps(nodes)
+    if isinstance(results, BIQResults):
+        nodes, beams = results.nodes.reshape(-1, 4), results.beams.reshape(-1, 4)
+    else:
+        nodes = np.concatenate([x.nodes for x in results]).reshape(-1, 4)
+        beams = np.concatenate([x.beams for x in results]).reshape(-1, 4)
     pats = np.array([(b.n1, b.n2, *b.offset) for b in lat.beams], dtype=np.int64).reshape(-1, 5)[beams[:, 3]]
     start = np.concatenate([beams[:, :3], pats[:, :1]], axis=1)
     end = np.concatenate([beams[:, :3] + pats[:, 2:], pats[:, 1:2]], axis=1)
-    keep_ends = lat.keeps(np.concatenate([start, end]))
-    keep_beams = keep_ends[:len(beams)] & keep_ends[len(beams):]
+    keep = _keeps_distinct(lat, np.concatenate([nodes, start, end]))
+    keep_nodes = keep[:len(nodes)]
+    keep_beams = keep[len(nodes):len(nodes) + len(beams)] & keep[len(nodes) + len(beams):]
+    if isinstance(results, BIQResults):
+        node_count = np.concatenate([[0], np.cumsum(keep_nodes)])
+        beam_count = np.concatenate([[0], np.cumsum(keep_beams)])
+        return BIQResults(results.nodes[keep_nodes], node_count[results.node_ends], results.beams[keep_beams],
+                          beam_count[results.beam_ends], results.path)
     out, n0, b0 = [], 0, 0
     for x in results:
         n1, b1 = n0 + len(x.nodes), b0 + len(x.beams)
         out.append(BIQResult(x.nodes[keep_nodes[n0:n1]], x.beams[keep_beams[b0:b1]], x.path))
         n0, b0 = n1, b1
     return out
+
+
+def _keeps_distinct(lat: Lattice, index: np.ndarray) -> np.ndarray:
+    """``lat.keeps`` of the nodes (N, 4), each distinct node asked once (a node is hit by many
+    queries, and a filter decides per node)."""
+    if len(index) < 2:
+        return lat.keeps(index)
+    low = index.min(axis=0)
+    span = index.max(axis=0) - low + 1
+    if np.prod(span.astype(float)) < 2.0**62:  # a mixed-radix key of the rows
+        rows = index - low
+        key = ((rows[:, 0] * span[1] + rows[:, 1]) * span[2] + rows[:, 2]) * span[3] + rows[:, 3]
+        _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    else:
+        _, first, inverse = np.unique(index, axis=0, return_index=True, return_inverse=True)
+    return lat.keeps(index[first])[inverse.reshape(-1)]
 
 
 def pmc(lat: Lattice, points) -> np.ndarray:

@@ -105,7 +105,9 @@ class _Clearance:
         from scipy.spatial import cKDTree  # noqa: PLC0415 - the plan only: keeps `import ple` light
 
         lo, hi = pts.min(axis=0), pts.max(axis=0)
-        tree = cKDTree(pts)
+        # sliding-midpoint splits and boxes not shrunk to the data: the same nearest distances,
+        # found 2-7x faster for the grid's many centres far off a slab's sheet of nodes
+        tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)
         spacing = float(np.median(tree.query(pts[:min(len(pts), 4096)], k=2)[0][:, 1])) if len(pts) > 1 else 1.0
         ext = np.maximum(hi - lo, 1e-12)
         size = max(spacing, float(np.prod(ext) / MAX_CLEARANCE_CELLS) ** (1 / 3), float(ext.max()) / 4096, 1e-12)
