@@ -181,7 +181,8 @@ def test_a_moebius_region_is_budgeted_as_one_box(tmp_path, capsys):
     """Meshed per hub, a Möbius region is one box: its whole mesh is held at once, and the budget
     counts it so (55.8 M refined triangles of a 60 x 60 slab, 15.6 GiB, against a 1 GiB limit)."""
     out = tmp_path / "m.stl"
-    argv = ["mesh", "mobius_slab", "--param", "nu=60", "--param", "nv=60", "--max-memory", "1G", "--out", str(out)]
+    argv = ["mesh", "mobius_slab", "--param", "nu=60", "--param", "nv=60", "--levels", "4", "--max-memory", "1G",
+            "--out", str(out)]  # (without --levels, ple mesh would choose fewer: the budget is the point here)
     assert main(argv) == 2
     assert "in one box (a Möbius lattice is meshed per hub)" in capsys.readouterr().err
     assert not out.exists()

@@ -389,7 +389,7 @@ def test_anchor_meshes_farther_apart_free_their_copies(monkeypatch):
     assert tested["meshes"] > 50 and tested["farther"] < tested["meshes"] / 2, tested
 
 
-@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("seed", range(2))
 def test_triangles_proven_apart_are_apart(seed):
     """``_triangles_within``: a pair it proves more than gap apart is (densely sampled points of
     both triangles, whose nearest pair is at least the distance); and it proves most pairs that
@@ -397,18 +397,19 @@ def test_triangles_proven_apart_are_apart(seed):
     from ple.meshing.tessellate import _triangles_within
 
     rng = np.random.default_rng(seed)
-    k = 300
+    k = 200
     t1 = rng.normal(size=(k, 3, 3))
     t2 = rng.normal(size=(k, 3, 3)) + rng.normal(size=(k, 1, 3)) * 2
     gap = 0.3
     within = _triangles_within(t1, t2, gap)
-    u, v = np.meshgrid(np.linspace(0, 1, 41), np.linspace(0, 1, 41))
+    u, v = np.meshgrid(np.linspace(0, 1, 25), np.linspace(0, 1, 25))
     keep = u + v <= 1
     bary = np.stack([1 - u[keep] - v[keep], u[keep], v[keep]], axis=1)  # (S, 3)
     p1, p2 = np.einsum("sc,kci->ksi", bary, t1), np.einsum("sc,kci->ksi", bary, t2)
-    sampled = np.array([np.sqrt(((a[:, None] - b[None]) ** 2).sum(-1)).min() for a, b in zip(p1, p2)])
+    sampled = np.array([np.sqrt(np.min(np.einsum("si,si->s", a, a)[:, None] + np.einsum("ti,ti->t", b, b)[None]
+                                       - 2 * a @ b.T).clip(0)) for a, b in zip(p1, p2)])
     both = np.concatenate([t1, t2], axis=1)
-    edge = np.linalg.norm(both[:, [1, 2, 0, 4, 5, 3]] - both, axis=2).max(axis=1) / 40  # sampling resolution
+    edge = np.linalg.norm(both[:, [1, 2, 0, 4, 5, 3]] - both, axis=2).max(axis=1) / 24  # sampling resolution
     assert (sampled[~within] > gap).all()
     clear = sampled > 2 * gap + 2 * edge
     assert clear.sum() > 30 and within[clear].mean() < 0.5
