@@ -88,14 +88,23 @@ def _elements(lat: Lattice):
 
 
 def _inside(p, elements, tol=0.0):
-    """Is each point strictly inside (distance < -tol) some element? Also the min distance."""
+    """Is each point strictly inside (distance < -tol) some element? Also the least distance to
+    the elements whose boxes hold the point (inf where none does), which is the least distance to
+    all elements wherever that is <= 0. Each element measures only the points in its x-slab."""
     nc, nr, ca, ra, cb, rb = elements
+    order = np.argsort(p[:, 0], kind="stable")
+    x = p[order, 0]
+
+    def near(x0: float, x1: float) -> np.ndarray:
+        return order[np.searchsorted(x, x0 - 1e-9):np.searchsorted(x, x1 + 1e-9, "right")]
+
     d = np.full(len(p), np.inf)
-    for lo in range(0, len(p), 20000):
-        q = p[lo:lo + 20000]
-        dn = (np.linalg.norm(q[:, None] - nc[None], axis=2) - nr[None]).min(axis=1)
-        db = beam_distance(q[:, None], ca[None], ra[None], cb[None], rb[None]).min(axis=1)
-        d[lo:lo + 20000] = np.minimum(dn, db)
+    for c, r in zip(nc, nr):
+        rows = near(c[0] - r, c[0] + r)
+        d[rows] = np.minimum(d[rows], np.linalg.norm(p[rows] - c, axis=1) - r)
+    for a, r1, b, r2 in zip(ca, ra, cb, rb):
+        rows = near(min(a[0] - r1, b[0] - r2), max(a[0] + r1, b[0] + r2))
+        d[rows] = np.minimum(d[rows], beam_distance(p[rows], a, r1, b, r2))
     return d < -tol, d
 
 
@@ -114,9 +123,11 @@ def test_volume_and_area_vs_monte_carlo():
     u *= (rng.random((len(balls_r), per, 1)) ** (1 / 3)) / np.linalg.norm(u, axis=2, keepdims=True)
     pts = (balls_c[:, None] + u * balls_r[:, None, None]).reshape(-1, 3)
     cover = np.zeros(len(pts))
-    for lo in range(0, len(pts), 20000):
-        q = pts[lo:lo + 20000]
-        cover[lo:lo + 20000] = (np.linalg.norm(q[:, None] - balls_c[None], axis=2) <= balls_r[None]).sum(axis=1)
+    order = np.argsort(pts[:, 0], kind="stable")
+    xs = pts[order, 0]
+    for c, r in zip(balls_c, balls_r):  # each ball counts at the points of its x-slab
+        rows = order[np.searchsorted(xs, c[0] - r - 1e-9):np.searchsorted(xs, c[0] + r + 1e-9, "right")]
+        cover[rows] += np.linalg.norm(pts[rows] - c, axis=1) <= r
     inside = _inside(pts, elements)[1] <= 0
     contrib = (inside / cover).reshape(len(balls_r), per) * (4 / 3 * math.pi * balls_r[:, None] ** 3)
     v_mc = contrib.mean(axis=1).sum()

@@ -31,7 +31,7 @@ def test_beam_beam_gap_vs_sampling():
 
 def _brute(ev, margin):
     """Every pair of elements of an evaluation: counts of overlapping non-incident pairs per kind
-    and the smallest gap below margin."""
+    and the smallest gap below margin (the exact gap of each pair whose boxes come within it)."""
     nn, nb = len(ev.radius), len(ev.beam_nodes)
     ends = np.concatenate([np.repeat(np.arange(nn)[:, None], 2, axis=1), ev.beam_nodes])
     kinds = np.concatenate([np.zeros(nn, np.int64), np.ones(nb, np.int64)])
@@ -41,7 +41,12 @@ def _brute(ev, margin):
     shared = (ia[:, :1] == ib).any(axis=1) | (ia[:, 1:] == ib).any(axis=1)
     joined = np.array([kinds[x] == 0 and kinds[y] == 0 and tuple(sorted((x, y))) in edges for x, y in zip(i, j)],
                       bool).reshape(-1)
-    keep = ~shared & ~joined
+    # pairs whose boxes lie more than the margin apart can neither overlap nor come within it
+    ball_lo, ball_hi = ev.center - ev.radius[:, None], ev.center + ev.radius[:, None]
+    lo = np.minimum(ball_lo[ends[:, 0]], ball_lo[ends[:, 1]])
+    hi = np.maximum(ball_hi[ends[:, 0]], ball_hi[ends[:, 1]])
+    near = np.all((lo[i] <= hi[j] + margin + 1e-9) & (lo[j] <= hi[i] + margin + 1e-9), axis=1)
+    keep = ~shared & ~joined & near
     i, j, ia, ib = i[keep], j[keep], ia[keep], ib[keep]
     gap, over, _ = pair_gaps(kinds[i], ev.center[ia[:, 0]], ev.radius[ia[:, 0]],
                              (ev.center[ia[:, 1]], ev.radius[ia[:, 1]]), kinds[j], ev.center[ib[:, 0]],
