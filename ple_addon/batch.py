@@ -41,7 +41,9 @@ STYLES = {"chocc": "CHOCC", "cnt": "CNT", "refined": "REFINED"}
 
 # ----- client: plan, Dask, manifest ---------------------------------------------------------------
 def build_zip(tmp: Path) -> Path:
-    proc = subprocess.run([sys.executable, "-m", "ple_addon.build", "--out", str(tmp)], cwd=ROOT,
+    """The extension's zip built from this checkout into ``tmp`` by ``ple_addon/build.py``, run as
+    a script: ``-m ple_addon.build`` would import the add-on (and bpy) first, a second for nothing."""
+    proc = subprocess.run([sys.executable, str(ROOT / "ple_addon" / "build.py"), "--out", str(tmp)], cwd=ROOT,
                           capture_output=True, text=True)
     if proc.returncode != 0:
         raise SystemExit(f"error: building the extension failed: {proc.stderr.strip()[-500:]}")

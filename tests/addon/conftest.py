@@ -36,7 +36,8 @@ def pytest_collection_modifyitems(items):
 def zip_path(tmp_path_factory) -> Path:
     """The extension's zip, built once per test run (no network: wheels from ``build/wheels``)."""
     tmp = tmp_path_factory.mktemp("addon")
-    build = subprocess.run([sys.executable, "-m", "ple_addon.build", "--out", str(tmp)], cwd=ROOT,
+    # the tool run as a script: ``-m ple_addon.build`` would first import the add-on and bpy
+    build = subprocess.run([sys.executable, str(ROOT / "ple_addon" / "build.py"), "--out", str(tmp)], cwd=ROOT,
                            capture_output=True, text=True)
     assert build.returncode == 0, build.stdout + build.stderr
     path = Path(build.stdout.strip().splitlines()[-1])

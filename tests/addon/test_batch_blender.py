@@ -91,7 +91,7 @@ def test_a_killed_worker_loses_no_variant(tmp_path):
     """One of two ``dask worker`` processes SIGKILLed while it has a variant in flight: its
     variants are exported again by the other, every file equals the one-process run's, and no
     half-written file remains."""
-    sweep, count = "radius=0.1:0.3:8", 8  # variants of a few hundred ms each (n=8): the kill lands mid-job
+    sweep, count = "radius=0.1:0.3:6", 6  # variants of a few hundred ms each (n=8): the kill lands mid-job
     out = tmp_path / "out"
     with blender_workers(tmp_path, 2) as (address, procs), Client(address, timeout=30) as client:
         with subprocess.Popen(batch_argv(out, "--scheduler", address, sweep=sweep, n=8), cwd=ROOT, text=True,

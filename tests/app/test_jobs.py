@@ -71,7 +71,7 @@ def test_mesh_parts_are_identical_on_every_path_and_close_up(tmp_path, cluster):
 
 def test_a_killed_worker_loses_nothing(tmp_path, cluster):
     address, procs = cluster
-    job = mesh_job("octet", ["n=4"], "refined", levels=2, box_groups=4)
+    job = mesh_job("octet", ["n=3"], "refined", levels=2, box_groups=4)  # 9 parts of a few hundred ms
     out = tmp_path / "killed"
     result = {}
     thread = threading.Thread(target=lambda: result.update(run_job(job, str(out), address, progress=False)))

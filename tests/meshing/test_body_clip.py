@@ -52,11 +52,16 @@ def inside_l(mesh, p):
 
 
 def inside_by_planes(mesh, p):
+    """Below every face plane (a convex mesh). A sixteenth of the planes first: most points
+    outside are above one of them, and only the rest are tested against all."""
     n = mesh.face_normals
     off = np.einsum("ij,ij->i", n, mesh.triangles[:, 0])
     out = np.empty(len(p), bool)
     for s in range(0, len(p), 4096):
-        out[s:s + 4096] = (p[s:s + 4096] @ n.T < off[None]).all(axis=1)
+        q = p[s:s + 4096]
+        rows = np.flatnonzero((q @ n[::16].T < off[None, ::16]).all(axis=1))
+        out[s:s + 4096] = False
+        out[s + rows] = (q[rows] @ n.T < off[None]).all(axis=1)
     return out
 
 

@@ -19,12 +19,16 @@ pytest.importorskip("manifold3d")
 
 def convex_inside_depth(mesh, points):
     """For a convex polyhedron: (inside, depth) by its face planes alone: a point is inside when it
-    is below every plane, and its distance to the surface is then the smallest plane distance."""
+    is below every plane, and its distance to the surface is then the smallest plane distance (for
+    a point outside, ``depth`` is only some plane's negative distance)."""
     n = mesh.face_normals
     off = np.einsum("ij,ij->i", n, mesh.triangles[:, 0])
     depth = np.full(len(points), np.inf)
     for s in range(0, len(points), 4096):
-        depth[s:s + 4096] = (off[None] - points[s:s + 4096] @ n.T).min(axis=1)
+        q = points[s:s + 4096]
+        depth[s:s + 4096] = (off[None, ::16] - q @ n[::16].T).min(axis=1)  # a sixteenth of the planes first
+        rows = np.flatnonzero(depth[s:s + 4096] > 0)  # below all of those: measured against every plane
+        depth[s + rows] = (off[None] - q[rows] @ n.T).min(axis=1)
     return depth > 0, depth
 
 

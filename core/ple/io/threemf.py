@@ -42,8 +42,11 @@ ROWS = 1 << 16  # vertices, triangles, beams or balls formatted at a time: the t
 
 
 def _write_rows(fh, fmt: str, a: np.ndarray) -> None:
+    """``fmt`` (one row's XML element) for each row of ``a``, ROWS rows formatted by one ``%``
+    (``np.savetxt``'s text, without its Python call and write per row)."""
     for k in range(0, len(a), ROWS):
-        np.savetxt(fh, a[k:k + ROWS], fmt=fmt, delimiter="", newline="")
+        rows = a[k:k + ROWS]
+        fh.write((fmt * len(rows)) % tuple(rows.ravel().tolist()))
 
 
 def write_model(fh, vertices: np.ndarray, faces: np.ndarray, unit: str = "millimeter", lattice=None,
