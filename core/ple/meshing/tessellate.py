@@ -482,22 +482,12 @@ class _Tessellator:
         g = self.grid
         out = np.zeros(len(pairs), bool)
         for lo in range(0, len(pairs), chunk):
-            part = np.asarray(pairs[lo:lo + chunk], np.int64)
-            rows, pos = np.unique(part, return_inverse=True)
-            pos = pos.reshape(-1, 2)
-            verts, vstart = self._placed_hubs(tids, m, rows)
+            pos, verts, vstart, owner, local = self._pair_faces(tids, m, pairs[lo:lo + chunk])
             verts = np.round(verts / g)  # grid steps, whole numbers
             vcount = np.diff(np.append(vstart, len(verts)))
             box_lo, box_hi = np.minimum.reduceat(verts, vstart), np.maximum.reduceat(verts, vstart)
-            tpl, tpos = np.unique(tids[rows], return_inverse=True)
-            tf = [np.asarray(self.tpl_list[t][0].faces, np.int64) for t in tpl.tolist()]
-            fcount = np.array([len(f) for f in tf], np.int64)[tpos]
-            fstart = (np.cumsum([len(f) for f in tf]) - [len(f) for f in tf])[tpos]
-            # (pair k, side) as 2k + side: the faces of that side's hub near the other's box
+            # the faces of each side's hub near the other's box
             side, other = pos.reshape(-1), pos[:, ::-1].reshape(-1)
-            nf = fcount[side]
-            owner = np.repeat(np.arange(len(side)), nf)
-            local = np.concatenate(tf)[runs(fstart[side], nf)]
             # faces not wholly behind the other hub along the line from this one's box centre to
             # the other's (every point of the other hub lies at least as far along it) ...
             u = (box_lo[other] + box_hi[other] - box_lo[side] - box_hi[side]) * 0.5
@@ -534,6 +524,21 @@ class _Tessellator:
             out[lo + oa[oa // 2 == ob // 2] // 2] = True  # (pairs are far apart: the two sides of one)
         return out
 
+    def _pair_faces(self, tids, m, part):
+        """The hubs of pairs ``part`` (P, 2 rows) placed once each: (their rows' places (P, 2) in
+        the placed hubs, vertices (V, 3), first vertex of each placed hub, and each face of every
+        (pair k, side) as 2k + side: its owner (F,) and vertex ids in its hub (F, 3))."""
+        rows, pos = np.unique(np.asarray(part, np.int64), return_inverse=True)
+        pos = pos.reshape(-1, 2)
+        verts, vstart = self._placed_hubs(tids, m, rows)
+        tpl, tpos = np.unique(tids[rows], return_inverse=True)
+        tf = [np.asarray(self.tpl_list[t][0].faces, np.int64) for t in tpl.tolist()]
+        sizes = np.array([len(f) for f in tf], np.int64)
+        nf = sizes[tpos][pos.reshape(-1)]
+        owner = np.repeat(np.arange(2 * len(pos)), nf)
+        first = (np.cumsum(sizes) - sizes)[tpos][pos.reshape(-1)]
+        return pos, verts, vstart, owner, np.concatenate(tf)[runs(first, nf)]
+
     def _hubs_farther(self, tids, m, pairs, gap: float, chunk: int = 2048) -> np.ndarray:
         """Which hub pairs (P, 2 rows) have meshes, as placed (not rounded), more than ``gap``
         apart: every two faces whose boxes come within ``gap`` (``grid_pairs``, the pairs moved
@@ -541,18 +546,8 @@ class _Tessellator:
         separate two triangles (``_triangles_within``)."""
         out = np.zeros(len(pairs), bool)
         for lo in range(0, len(pairs), chunk):
-            part = np.asarray(pairs[lo:lo + chunk], np.int64)
-            rows, pos = np.unique(part, return_inverse=True)
-            pos = pos.reshape(-1, 2)
-            verts, vstart = self._placed_hubs(tids, m, rows)
-            tpl, tpos = np.unique(tids[rows], return_inverse=True)
-            tf = [np.asarray(self.tpl_list[t][0].faces, np.int64) for t in tpl.tolist()]
-            sizes = np.array([len(f) for f in tf], np.int64)
-            fcount, fstart = sizes[tpos], (np.cumsum(sizes) - sizes)[tpos]
-            side = pos.reshape(-1)  # (pair k, side) as 2k + side
-            nf = fcount[side]
-            owner = np.repeat(np.arange(len(side)), nf)
-            tri = verts[vstart[side][owner][:, None] + np.concatenate(tf)[runs(fstart[side], nf)]]
+            pos, verts, vstart, owner, local = self._pair_faces(tids, m, pairs[lo:lo + chunk])
+            tri = verts[vstart[pos.reshape(-1)][owner][:, None] + local]
             box_lo = np.minimum.reduceat(verts, vstart)
             span = float((np.maximum.reduceat(verts, vstart) - box_lo).max()) * 2 + 4 * gap
             tri[:, :, 0] += (owner // 2 * span)[:, None]  # each pair far from the others
@@ -560,11 +555,11 @@ class _Tessellator:
             a, b = np.flatnonzero(first), np.flatnonzero(~first)
             order = np.concatenate([a, b])
             t = tri[order]
-            near = np.zeros(len(part), bool)  # pairs with two faces that may be within gap
+            near = np.zeros(len(pos), bool)  # pairs with two faces that may be within gap
             for i, j in grid_pairs(t.min(axis=1), t.max(axis=1), gap, split=len(a)):
                 close = _triangles_within(t[i], t[j], gap)
                 near[owner[order[i[close]]] // 2] = True
-            out[lo:lo + len(part)] = ~near
+            out[lo:lo + len(pos)] = ~near
         return out
 
     # ----- hubs -----------------------------------------------------------------------
