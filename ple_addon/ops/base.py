@@ -16,7 +16,6 @@ from ..corelink import PleError, needs, presets, styles, work
 from ..rig import events, model, sync
 
 SNIPPET_TEXT = "PLE snippet"  # the text block snippets go to (and the clipboard)
-EXPORT_BOXES = 20  # an STL export streams the region in about this many boxes (progress steps)
 
 
 class RigOperator:
@@ -298,17 +297,41 @@ class SteppedOperator(RigOperator):
         if context.workspace is not None:
             context.workspace.status_text_set(None)
 
-    def mesh_job(self, lat, region, style: str):
-        """Steps tessellating ``region`` box by box in a child process (thesis §6.2.2 hubs per
-        box); returns the boxes (vertices, faces)."""
-        tess = needs("meshing.tessellate")
-        size = max(1, region.groups // EXPORT_BOXES)
-        boxes = len(range(0, region.groups, size))
-        job = jobs.start(lambda: tess.iter_triangles(lat, region, core_style(style), max_groups=size),
-                         self._rig.name, f"the {core_style(style)} tessellation of {region}", self.beyond_limit)
-        chunks, _ = yield from jobs.follow(job, lambda items: 0.8 * min(1.0, len(items) / boxes))
-        return chunks
+    def mesh_job(self, request):
+        """Steps meshing ``request`` (``ple.app.pipeline``) in a child process, box by box;
+        returns (boxes (vertices, faces), the unclean-hubs line or None)."""
+        pipeline = needs("app.pipeline")  # trimesh and manifold3d: bundled wheels
+        p = pipeline.plan(request)
+        boxes = max(1, len(range(0, p.region.groups, request.max_groups)))
 
+        def work():
+            info: dict = {}
+            yield from pipeline.stream(p, info)
+            return unclean_line(info)
+
+        job = jobs.start(work, self._rig.name, p.describe(), self.beyond_limit)
+        chunks, line = yield from jobs.follow(job, lambda items: 0.8 * min(1.0, len(items) / boxes))
+        return chunks, line
+
+    def file_job(self, request, path):
+        """Steps writing ``request``'s mesh to ``path`` in a child process (``pipeline.write_mesh``,
+        as ``ple mesh``); returns (triangles written, the unclean-hubs line or None)."""
+        pipeline = needs("app.pipeline")
+
+        def work():
+            info: dict = {}
+            n = pipeline.write_mesh(request, path, info)
+            return n, unclean_line(info)
+
+        job = jobs.start(work, self._rig.name, f"the export of region {request.region}", self.beyond_limit)
+        _, (count, line) = yield from jobs.follow(job, lambda items: 0.5)
+        return count, line
+
+
+def unclean_line(info: dict):
+    """The report line of the unclean hubs a mesh united (None: clean or not checked)."""
+    rep = info.get("unclean")
+    return rep.line() if rep is not None and len(rep.nodes) else None
 
 
 class RigPanel:

@@ -33,15 +33,20 @@ class PLE_OT_tessellate(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Bl
         budget(lat, region, self.style, f"{self.style.lower()} tessellation of {region}",
                beyond=self.beyond_limit)
         yield 0.0
-        chunks = yield from self.mesh_job(lat, region, self.style)
-        verts, faces = needs("meshing.tessellate").weld_chunks(chunks)  # welded by the core
-        yield 0.8
+        # the core's one mesh pipeline (``ple.app.pipeline``): checked for unclean hubs, their
+        # local unions included, on the region's float32 grid: the triangles `ple mesh` writes
+        pipeline = needs("app.pipeline")
+        request = pipeline.MeshRequest(lat, region, core_style(self.style))
+        chunks, report = yield from self.mesh_job(request)
+        verts, faces = pipeline.weld_chunks(chunks)  # the boxes share their hubs' grid points
+        yield 0.9
         me = draw.mesh_from_arrays(f"{rig.name}.{self.style.lower()}", verts, faces)
         obj = bpy.data.objects.new(me.name, me)
         for coll in rig.users_collection:
             coll.objects.link(obj)
         obj.matrix_world = rig.matrix_world
         self.result = f"{obj.name}: {len(faces)} triangles"
+        say_unclean(rig, report)
         yield 1.0
 
 
@@ -70,21 +75,21 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
         region = model.region_of(rig, lat)
         if region is None:
             raise PleError("the region is empty: set Region from/to inside the repetition counts")
-        tess, export = needs("meshing.tessellate"), needs("io.export")
         streamed = path.suffix.lower() == ".stl"
         budget(lat, region, self.style, f"export of {region}", streamed=streamed, beyond=self.beyond_limit)
         yield 0.0
-        # binary STL is snapped to the region's float32 grid as `ple mesh` writes it (previews are
-        # not snapped); other formats are welded into one mesh by the core
-        chunks = yield from self.mesh_job(lat, region, self.style)
-        yield 0.8
-        if streamed:
-            grid = None if core_style(self.style) == "balls-beams" else tess.output_grid(lat, region)
-            count = export.write_stl(path, chunks, header=export.stl_header(), grid=grid)
-        else:
-            count = export.write_chunks(path, chunks)
+        # the file `ple mesh` writes for the same request (``ple.app.pipeline.write_mesh``): the
+        # unclean check and its local unions, the float32 grid, the atomic write
+        request = needs("app.pipeline").MeshRequest(lat, region, core_style(self.style))
+        count, report = yield from self.file_job(request, path)
         self.result = f"{count} triangles written to {path}"
+        say_unclean(rig, report)
         yield 1.0
+
+
+def say_unclean(rig, report) -> None:
+    """The rig's status: the unclean hubs the mesh united locally (empty when clean)."""
+    rig.ple.status = report if report else ""
 
 
 class PLE_OT_bake(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming

@@ -192,14 +192,14 @@ def test_lil_count_cli_on_a_real_cluster(tmp_path, cluster, capsys):
 
 
 def test_parts_of_an_unclean_lattice_carry_its_unions(tmp_path):
-    from ple.io.export import write_mesh
+    from ple.app.pipeline import MeshRequest, write_mesh
 
     name, params = "becots_annulus", ["nu=2"]  # every hub is unclean (as at its defaults, 8 rows of 36)
     job = mesh_job(name, params, "cnt", box_groups=1)
     assert "united with manifold3d" in job.settings["unclean"] and len(job.parts) == 1
     assert run_job(job, str(tmp_path / "parts"), "sync", progress=False)["written"] == 1
     n = assemble_stl(str(tmp_path / "parts"), tmp_path / "all.stl")
-    single = write_mesh(load_lattice(name, params), tmp_path / "single.stl", style="cnt")
+    single = write_mesh(MeshRequest(load_lattice(name, params), style="cnt"), tmp_path / "single.stl")
     assert n == single
     assert (tmp_path / "all.stl").read_bytes()[80:] == (tmp_path / "single.stl").read_bytes()[80:]
     import trimesh

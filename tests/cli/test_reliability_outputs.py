@@ -343,7 +343,7 @@ def test_a_read_only_disk_is_one_line(tmp_path, capsys, monkeypatch):
 
 
 def test_the_streamed_stl_estimate_bounds_the_file(tmp_path):
-    from ple.meshing.tessellate import _check_style, tessellate
+    from ple.meshing.tessellate import resolve_style, tessellate
     from ple.model.budget import STL_BOUND, mesh_triangles
     from ple.program.sources import load_lattice
 
@@ -351,7 +351,7 @@ def test_the_streamed_stl_estimate_bounds_the_file(tmp_path):
         lat = load_lattice(name, {})
         r = lat.region("0:3,0:3,0:1")
         for style in ("refined", "chocc", "cnt"):
-            lv, seg = _check_style(style, None, None)
+            lv, seg = resolve_style(style, None, None)
             assert len(tessellate(lat, r, style).faces) <= STL_BOUND * mesh_triangles(lat, r, style, lv, seg)
 
 

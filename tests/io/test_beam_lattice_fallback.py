@@ -10,9 +10,10 @@ import zipfile
 
 import numpy as np
 import pytest
+from ple.app.pipeline import MeshRequest, write_beam_lattice, write_mesh
 from ple.cli.main import main
 from ple.io import threemf
-from ple.io.export import STL_RECORD, write_beam_lattice, write_mesh
+from ple.io.export import STL_RECORD
 from ple.program.sources import load_lattice
 
 from tests.meshing.test_unclean import random_unclean_lattice
@@ -67,9 +68,10 @@ def test_fallback_is_the_streamed_mesh_welded(tmp_path, fallback, levels):
     lat = load_lattice("bcc").with_counts(3, 2, 2)
     path = tmp_path / "b.3mf"
     # boxes of 2 groups: hubs repeated across every box boundary are welded into one vertex each
-    got = write_beam_lattice(lat, path, fallback=fallback, levels=levels, max_groups=2, workers=2)
+    got = write_beam_lattice(MeshRequest(lat, style=fallback, levels=levels, max_groups=2, workers=2), path,
+                             fallback=fallback)
     stl = tmp_path / "m.stl"
-    n = write_mesh(lat, stl, fallback, levels=levels)
+    n = write_mesh(MeshRequest(lat, style=fallback, levels=levels), stl)
     obj, pos, tri = _read(path)
     ev = lat.evaluate()
     nv = _assert_beams_are_the_lattice(obj, pos, ev)
@@ -101,7 +103,7 @@ def test_default_fallback_is_cnt(tmp_path, capsys):
     assert main(["mesh", "bcc", "--param", "n=2", "--beam-lattice", "--out", str(path)]) == 0
     assert "(cnt)" in capsys.readouterr().out
     stl = tmp_path / "m.stl"
-    n = write_mesh(load_lattice("bcc", ["n=2"]), stl, "cnt")
+    n = write_mesh(MeshRequest(load_lattice("bcc", ["n=2"]), style="cnt"), stl)
     obj, pos, tri = _read(path)
     assert len(tri) == n and obj.IsManifoldAndOriented()
     # an explicit --style still names it (as before --fallback); the two disagreeing are refused
@@ -117,7 +119,7 @@ def test_unclean_fallback_is_the_union_mesh(tmp_path):
     lat = random_unclean_lattice(1)
     info = {}
     path = tmp_path / "u.3mf"
-    write_beam_lattice(lat, path, fallback="cnt", info=info)
+    write_beam_lattice(MeshRequest(lat, style="cnt"), path, fallback="cnt", info=info)
     assert len(info["unclean"].nodes) > 0
     obj, pos, tri = _read(path)
     assert len(tri) and obj.IsManifoldAndOriented()

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 import trimesh
 from lxml import etree
+from ple.app.pipeline import write_chunks
 from ple.cli.main import main
 from ple.errors import PleError
-from ple.io.export import NS_BALLS, NS_BEAM, NS_CORE, export_mesh, write_beam_lattice_3mf, write_chunks, write_stl
+from ple.io.export import NS_BALLS, NS_BEAM, NS_CORE, export_mesh, write_beam_lattice_3mf, write_stl
 from ple.meshing.tessellate import iter_triangles, tessellate
 from ple.program.sources import load_lattice
 

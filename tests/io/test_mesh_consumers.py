@@ -9,7 +9,8 @@ import zipfile
 import numpy as np
 import pytest
 import trimesh
-from ple.io.export import export_mesh, prepare, write_beam_lattice_3mf, write_mesh
+from ple.app.pipeline import MeshRequest, write_mesh
+from ple.io.export import export_mesh, prepare, write_beam_lattice_3mf
 from ple.io.formats import FORMAT_NAMES, Y_UP
 from ple.meshing.selfcheck import count_self_intersections, orient3d, self_intersections
 from ple.meshing.tessellate import tessellate
@@ -108,7 +109,7 @@ def test_streamed_stl_reads_back_manifold(tmp_path, name, params):
     lat = load_lattice(name, params)
     path = tmp_path / "s.stl"
     info = {}
-    n = write_mesh(lat, path, "refined", levels=1, max_groups=7, info=info)  # many boxes
+    n = write_mesh(MeshRequest(lat, style="refined", levels=1, max_groups=7), path, info=info)  # many boxes
     assert (len(info["unclean"].nodes) > 0) == (name == "rectified_warp")
     back = read_back(path)
     assert len(back.faces) == n
@@ -334,7 +335,7 @@ def test_a_lattice_scaled_by_1e10_is_written_closed(tmp_path, style):
     small = tessellate(_scaled_cubic(1.0), None, style, 1)
     for fmt in ("stl", "3mf", "glb"):
         path = tmp_path / f"big.{fmt}"
-        n = write_mesh(_scaled_cubic(1e10), path, style=style, levels=1)
+        n = write_mesh(MeshRequest(_scaled_cubic(1e10), style=style, levels=1), path)
         back = read_back(path)
         assert n == len(back.faces) == len(small.faces)
         scale = 1e-3 if fmt == "glb" else 1.0  # glTF in metres
@@ -347,8 +348,8 @@ def test_sizes_float32_cannot_hold_are_refused(tmp_path):
     lat = _scaled_cubic(1.0, factor=1e5)  # groups of size 1 beside groups of size 1e10
     for fmt in ("stl", "3mf"):
         with pytest.raises(PleError, match="float32"):
-            write_mesh(lat, tmp_path / f"x.{fmt}", style="cnt")
+            write_mesh(MeshRequest(lat, style="cnt"), tmp_path / f"x.{fmt}")
         assert not (tmp_path / f"x.{fmt}").exists()
     ok = _scaled_cubic(1.0, factor=10.0)  # within float32's reach: written closed
-    write_mesh(ok, tmp_path / "ok.stl", style="cnt")
+    write_mesh(MeshRequest(ok, style="cnt"), tmp_path / "ok.stl")
     assert_consumer_clean(read_back(tmp_path / "ok.stl"))

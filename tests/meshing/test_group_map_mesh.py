@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from ple.app.pipeline import MeshRequest, write_mesh
 from ple.cli.main import main
-from ple.io.export import write_mesh
 from ple.measure.integrals import lattice_measures
 from ple.meshing.weld import grid_spacing, unique_rows
 from ple.program.presets import preset_names
@@ -86,7 +86,7 @@ def _streamed(lat, tmp_path, style, region=None):
     """The door that refused these lattices: the streamed binary STL (checked first), read back with
     equal coordinates merged, as slicers read it."""
     path = tmp_path / f"{style}.stl"
-    n = write_mesh(lat, path, style, region, workers=2)
+    n = write_mesh(MeshRequest(lat, style=style, region=region, workers=2), path)
     mesh = trimesh.load(path, force="mesh", process=False)
     v = np.asarray(mesh.vertices)
     first, inv, _ = unique_rows(v)  # np.unique(v, axis=0)'s rows, without its slow sort of records

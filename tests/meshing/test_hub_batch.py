@@ -132,8 +132,9 @@ def test_random_steady_lattices_batch_equal_per_hub(monkeypatch):
 def test_stream_is_byte_identical_for_any_number_of_workers(tmp_path, monkeypatch):
     """Boxes are prepared in order and assembled by 1 or 3 threads: the same STL bytes; and
     the same triangles as the in-memory mesh."""
+    from ple.app.pipeline import MeshRequest, write_mesh
     from ple.cli.main import main
-    from ple.io.export import read_back, write_mesh
+    from ple.io.export import read_back
 
     path = tmp_path / "curved.py"
     path.write_text(CURVED)
@@ -141,7 +142,7 @@ def test_stream_is_byte_identical_for_any_number_of_workers(tmp_path, monkeypatc
     outs = []
     for workers in (1, 3):
         out = tmp_path / f"w{workers}.stl"
-        n = write_mesh(lat, out, style="cnt", max_groups=24, workers=workers)  # 9 boxes
+        n = write_mesh(MeshRequest(lat, style="cnt", max_groups=24, workers=workers), out)  # 9 boxes
         outs.append(out.read_bytes())
     assert outs[0] == outs[1]
     # hub templates in tasks of 5 hub shapes, computed by the template processes (workers > 1)
@@ -157,7 +158,7 @@ def test_stream_is_byte_identical_for_any_number_of_workers(tmp_path, monkeypatc
     monkeypatch.setattr(tessellate, "ProcessPoolExecutor", Counted)
     for workers in (1, 2):
         out = tmp_path / f"t{workers}.stl"
-        write_mesh(lat, out, style="refined", levels=1, workers=workers)
+        write_mesh(MeshRequest(lat, style="refined", levels=1, workers=workers), out)
         outs.append(out.read_bytes())
     assert outs[2] == outs[3]
     assert len(tasks) >= 2 and max(tasks) <= 5  # template tasks of at most 5 hubs ran in the processes
@@ -397,7 +398,7 @@ def test_unsure_coordinates_are_those_near_a_snap_boundary():
 def test_template_rounds_do_not_change_the_file(tmp_path, monkeypatch, style):
     """New hub shapes built once per round of boxes (TEMPLATE_ROUND) or box by box: the same
     STL bytes, on 1 and 2 workers."""
-    from ple.io.export import write_mesh
+    from ple.app.pipeline import MeshRequest, write_mesh
 
     path = tmp_path / "curved.py"
     path.write_text(CURVED)
@@ -406,7 +407,8 @@ def test_template_rounds_do_not_change_the_file(tmp_path, monkeypatch, style):
     for rounds, workers in ((1, 1), (4, 1), (3, 2)):
         monkeypatch.setattr(tessellate, "TEMPLATE_ROUND", rounds)
         out = tmp_path / f"r{rounds}.stl"
-        write_mesh(lat, out, style=style, levels=1 if style == "refined" else None, max_groups=24, workers=workers)
+        write_mesh(MeshRequest(lat, style=style, levels=1 if style == "refined" else None, max_groups=24,
+                               workers=workers), out)
         outs.append(out.read_bytes())
     assert outs[0] == outs[1] == outs[2]
 

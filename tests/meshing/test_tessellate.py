@@ -10,8 +10,8 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from ple.algebra.similarity import Similarity
+from ple.app.pipeline import MeshRequest, write_mesh
 from ple.errors import PleError
-from ple.io.export import write_mesh
 from ple.meshing.tessellate import _Tessellator, tessellate
 from ple.model.lattice import Lattice
 from ple.program.presets import preset_names
@@ -205,7 +205,7 @@ def test_stream_matches_in_memory(tmp_path):
     lat = load_lattice("octet").with_counts(3, 3, 2)
     mem = tessellate(lat, style="chocc")
     path = tmp_path / "m.stl"
-    n = write_mesh(lat, path, style="chocc", max_groups=4)  # many boxes, with ghost hubs between them
+    n = write_mesh(MeshRequest(lat, style="chocc", max_groups=4), path)  # many boxes, with ghost hubs between them
     assert n == len(mem.faces)
     back = trimesh.load(path)  # merges coincident vertices
     assert back.is_watertight and back.is_winding_consistent

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from ple.algebra.similarity import Rotation, Translation
 from ple.algebra.vectors import Pt, Vec
+from ple.app.pipeline import MeshRequest, write_mesh
 from ple.cli.mesh import monte_carlo_volume
-from ple.io.export import read_back, write_mesh
+from ple.io.export import read_back
 from ple.meshing.selfcheck import self_intersections
 from ple.meshing.tessellate import _Tessellator, tessellate
 from ple.meshing.unions import clusters
@@ -61,7 +62,7 @@ def test_streamed_file_is_the_closed_union(curved, tmp_path):
     for workers in (1, 2):
         out = tmp_path / f"m{workers}.stl"
         info = {}
-        write_mesh(lat, out, style="refined", levels=3, max_groups=4, workers=workers, info=info)
+        write_mesh(MeshRequest(lat, style="refined", levels=3, max_groups=4, workers=workers), out, info=info)
         assert info["unclean"].clusters == 12
         back = read_back(out)
         assert back.is_watertight and back.is_winding_consistent

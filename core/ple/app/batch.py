@@ -27,7 +27,7 @@ from ..io.export import export_mesh
 from ..io.files import atomic_write_text, check_output_dir, plain_name, write_marker
 from ..io.formats import format_named
 from ..meshing.styles import style as style_named
-from ..meshing.tessellate import _check_style, tessellate
+from ..meshing.tessellate import resolve_style, tessellate
 from ..model.budget import MESH_TRIANGLE_BYTES, default_max_memory, mesh_triangles, require
 from ..program.runner import DEFAULT_TIMEOUT, run_program
 from ..program.runtime import Param, load_program_file, parse_param_value
@@ -119,7 +119,7 @@ def _run_variant(source: str, params: dict, style: str, levels, region, out: str
     memory = memory or default_max_memory()
     lat = run_program(source, params, timeout, memory)
     r = lat.region(region)
-    lv, seg = _check_style(style if style != "balls-beams" else "cnt", levels, None)
+    lv, seg = resolve_style(style if style != "balls-beams" else "cnt", levels, None)
     tris = mesh_triangles(lat, r, style, lv, seg)
     require(tris * MESH_TRIANGLE_BYTES, f"{Path(out).name}: {tris:,.3g} triangles", memory,
             "choose a smaller --region or fewer --levels")

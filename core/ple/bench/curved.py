@@ -28,8 +28,9 @@ import time
 import numpy as np
 
 from ..algebra.similarity import Rotation, Swirl, Translation
+from ..app.pipeline import MeshRequest, write_mesh
 from ..errors import PleError
-from ..io.export import RecordPool, StlWriter, _direct_writer, stl_chunk, stl_header, write_mesh, write_stl
+from ..io.export import RecordPool, StlWriter, _direct_writer, stl_chunk, stl_header, write_stl
 from ..meshing.tessellate import _Tessellator, iter_triangles, output_grid
 from ..model.lattice import Lattice
 from ..program.sources import load_lattice
@@ -158,7 +159,7 @@ def _whole(lat: Lattice, style: str, levels: int, workers: int, path: str) -> di
     templates reused by the stream), then the checked stream or the exact unions, the file."""
     info: dict = {}
     t0 = time.perf_counter()
-    n = write_mesh(lat, path, style, levels=levels or None, workers=workers, info=info)
+    n = write_mesh(MeshRequest(lat, style=style, levels=levels or None, workers=workers), path, info=info)
     dt = time.perf_counter() - t0
     rep = info.get("unclean")
     return {"path": "ple mesh", "workers": workers, "seconds": round(dt, 3), "triangles": n,

@@ -26,10 +26,10 @@ from .startup import startup_rows
 CHILD = """
 import json, resource, sys, time
 from ple.program.sources import load_lattice
-from ple.io.export import write_mesh
+from ple.app.pipeline import MeshRequest, write_mesh
 lat = load_lattice(sys.argv[1]).with_counts(*[int(x) for x in sys.argv[2].split(",")])
 t0 = time.perf_counter()
-n = write_mesh(lat, sys.argv[3], style=sys.argv[4])
+n = write_mesh(MeshRequest(lat, style=sys.argv[4]), sys.argv[3])
 dt = time.perf_counter() - t0
 print(json.dumps({"beams": lat.beam_count(), "groups": lat.groups, "triangles": n, "seconds": dt,
                   "peak_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6}))

@@ -38,12 +38,12 @@ from ..algebra.vectors import Pt, Vec
 from ..io.export import RecordPool, stl_chunk, stl_header, write_stl
 from ..meshing.tessellate import (
     BOX_TRIANGLES,
-    _check_style,
     _Tessellator,
     check_bytes,
     iter_triangles,
     leave_to_unions,
     merged,
+    resolve_style,
     union_pieces,
 )
 from ..meshing.unclean import UncleanReport
@@ -58,18 +58,18 @@ import numpy as np
 from ple.bench.unclean import case_lattice
 name, n, style, levels, out = sys.argv[1], int(sys.argv[2]), sys.argv[3], int(sys.argv[4]), sys.argv[5]
 lat = case_lattice(name, n)
-import ple.meshing.tessellate, ple.io.export, manifold3d  # the process's own baseline, before any work
+import ple.meshing.tessellate, ple.app.pipeline, manifold3d  # the process's own baseline, before any work
 base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1e3
 t0, c0 = time.perf_counter(), time.process_time()
 if name == "tenth":
     from ple.bench.unclean import write_tenth
     tris, report, estimate = write_tenth(lat, out, style, levels)
 else:
-    from ple.io.export import write_mesh
+    from ple.app.pipeline import MeshRequest, write_mesh
     from ple.bench.unclean import stream_estimate
     info = {}
     from ple.model.budget import default_max_memory
-    tris = write_mesh(lat, out, style=style, levels=levels, info=info, max_memory=default_max_memory())
+    tris = write_mesh(MeshRequest(lat, style=style, levels=levels, max_memory=default_max_memory()), out, info=info)
     report = info["unclean"]
     estimate = stream_estimate(lat, style, levels, report)
 estimate += base
@@ -152,7 +152,7 @@ def write_tenth(lat, out, style: str, levels: int, fraction: float = 0.1, seed: 
     streamed to binary STL as ``ple mesh`` streams an unclean region. Returns (triangles, report,
     estimated peak bytes)."""
     r = lat.region()
-    lv, sg = _check_style(style, levels, None)
+    lv, sg = resolve_style(style, levels, None)
     grid = grid_spacing(*lat.bounds(r))
     tess = _Tessellator(lat, r, style, lv, sg, grid=grid)
     ev = lat.evaluate(r)
@@ -175,7 +175,7 @@ def stream_estimate(lat, style: str, levels: int, report) -> float:
     cleanliness check holds it), the boxes alive at once (two, each at most BOX_TRIANGLES) and the
     largest local union (``unions.piece_estimate``); the check's own peak includes the evaluation."""
     r = lat.region()
-    lv, sg = _check_style(style, levels, None)
+    lv, sg = resolve_style(style, levels, None)
     box = min(mesh_triangles(lat, r, style, lv, sg), BOX_TRIANGLES) * MESH_TRIANGLE_BYTES
     return (max(evaluation_bytes(lat, r), check_bytes(lat, r)) + 2 * box
             + (report.union_bytes if report is not None else 0))

@@ -14,17 +14,10 @@ import numpy as np
 from ..algebra.elements import beam_distance
 from ..app.cluster import run_job
 from ..app.jobs import assemble_stl, mesh_job
+from ..app.pipeline import DEFAULT_FALLBACK, FALLBACK_STYLES, MeshRequest, write_beam_lattice, write_mesh
 from ..errors import PleError
 from ..filters.body import body_of
-from ..io.export import (
-    DEFAULT_FALLBACK,
-    FALLBACK_STYLES,
-    STL_RECORD,
-    export_mesh,
-    read_back,
-    write_beam_lattice,
-    write_mesh,
-)
+from ..io.export import STL_RECORD, export_mesh, read_back
 from ..io.files import strict_json
 from ..io.formats import DEFAULT_UNIT, UNITS, mesh_format
 from ..io.spill import SpillFiles
@@ -32,7 +25,7 @@ from ..measure.check import is_clean, solid_volume
 from ..meshing.selfcheck import BLOCK_TRIANGLES, check_triangles
 from ..meshing.skin import skin
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
-from ..meshing.tessellate import _check_style, check_bytes, check_fillet, tessellate
+from ..meshing.tessellate import check_bytes, check_fillet, resolve_style, tessellate
 from ..model.budget import (
     CHECK_TRIANGLE_BYTES,
     MESH_TRIANGLE_BYTES,
@@ -124,8 +117,10 @@ def run(args) -> int:
         info["unclean"] = lattice.metadata.get("ple_unclean")
         n = len(mesh.faces) - export_mesh(mesh, args.out, args.unit)["dropped_faces"]
     elif args.beam_lattice:
-        got = write_beam_lattice(lat, args.out, region, args.fallback, args.levels, args.segments, max_groups,
-                                 args.unit, info, stream_workers(args.workers), contain)
+        request = MeshRequest(lat, region, args.fallback if args.fallback != "none" else DEFAULT_FALLBACK,
+                              args.levels, args.segments, unit=args.unit, max_groups=max_groups,
+                              workers=stream_workers(args.workers), contain=contain)
+        got = write_beam_lattice(request, args.out, args.fallback, info)
         if info["unclean"] is not None and len(info["unclean"].nodes):
             print(info["unclean"].line())
         mesh_text = (f"with {got['triangles']:,} triangles ({args.fallback})" if args.fallback != "none"
@@ -137,9 +132,9 @@ def run(args) -> int:
         info["unclean"] = _say_unclean(mesh)
         n = len(mesh.faces) - export_mesh(mesh, args.out, args.unit)["dropped_faces"]
     else:
-        n = write_mesh(lat, args.out, args.style, region, args.levels, args.segments, max_groups, unit=args.unit,
-                       info=info, fillet=args.fillet, workers=stream_workers(args.workers), max_memory=max_memory(args),
-                       contain=contain)
+        request = MeshRequest(lat, region, args.style, args.levels, args.segments, args.fillet, args.unit, max_groups,
+                              stream_workers(args.workers), max_memory(args), contain)
+        n = write_mesh(request, args.out, info)
         if info.get("unclean") is not None and len(info["unclean"].nodes):
             print(info["unclean"].line())
     dt = time.perf_counter() - t0
@@ -192,7 +187,7 @@ def _default_levels(args, lat, region, fmt: str, in_memory: bool) -> int:
     default's refusal."""
     if args.levels is not None or args.style != "refined" or args.beam_lattice:
         return _within_budget(args, lat, region, fmt, in_memory)
-    default, segments = _check_style(args.style, None, args.segments)
+    default, segments = resolve_style(args.style, None, args.segments)
     why = None
     for levels, capped in [(default, False), *((k, True) for k in range(default - 1, -1, -1)), (0, False)]:
         tris = mesh_triangles(lat, region, args.style, levels, segments)
@@ -218,11 +213,11 @@ def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
     node-groups per streamed box so that the boxes alive at once (--workers + 1) fit the memory
     limit."""
     limit = max_memory(args)
-    levels, segments = _check_style(args.style, args.levels, args.segments)
+    levels, segments = resolve_style(args.style, args.levels, args.segments)
     what = f"region {region} ({region_nodes(lat, region):,} nodes)"
     if args.beam_lattice:  # balls and beams, and the triangle mesh that rides along in the 3MF
         style = args.fallback
-        tris = 0 if style == "none" else mesh_triangles(lat, region, style, *_check_style(style, args.levels,
+        tris = 0 if style == "none" else mesh_triangles(lat, region, style, *resolve_style(style, args.levels,
                                                                                            args.segments))
         require(evaluation_bytes(lat, region) + 150 * (region_nodes(lat, region) + region_beams(lat, region))
                 + tris * MESH_TRIANGLE_BYTES, f"the beam lattice of {what} with {tris:,.3g} triangles ({style})",

@@ -26,27 +26,17 @@ import trimesh
 
 from ..errors import PleError
 from ..meshing.connectors import constant_radius_connectors
-from ..meshing.tessellate import (
-    ArrayPool,
-    checked_stream,
-    iter_triangles,
-    ordered_map,
-    smallest_radius,
-    tessellate,
-    weld_chunks,
-)
+from ..meshing.tessellate import ArrayPool, ordered_map  # buffers and ordered threads, no meshing
 from ..meshing.weld import (
     COLLAPSE_GRIDS,
     collapse_short_edges,
     edge_manifold,
     grid_spacing,
-    snap,
     snap_triangles,
     snapped_slices,
     unique_rows,
     weld,
 )
-from ..model.budget import evaluation_bytes, require
 from ..model.lattice import Lattice
 from .files import (
     DirectWriter,
@@ -361,15 +351,6 @@ def check_float32_range(vertices_or_bounds, smallest: float, fmt: str) -> None:
                        f"(mesh a region with a smaller range of sizes, or shrink the lattice's scale factors)")
 
 
-def write_chunks(path, chunks: Iterable, unit: str = DEFAULT_UNIT) -> int:
-    """Write the boxes of ``iter_triangles`` (pairs vertices, faces) as one mesh, welded by
-    ``weld_chunks``, in the format of ``path``'s suffix; returns the number of triangles. (Binary
-    STL needs no weld: ``write_stl`` streams the boxes.)"""
-    verts, faces = weld_chunks(chunks)
-    export_mesh(trimesh.Trimesh(verts, faces, process=False), path, unit)
-    return len(faces)
-
-
 def mesh_bytes(mesh: trimesh.Trimesh, fmt: str, unit: str = DEFAULT_UNIT, grid: float | None = None) -> bytes:
     """The file contents of a mesh in format ``fmt``, as ``export_mesh`` writes them (for writers
     to other places: job parts)."""
@@ -430,114 +411,6 @@ def write_beam_lattice_3mf(path, center, radius, beam_nodes, mesh=None, unit: st
     else:
         v, f, _ = prepare_closed(mesh, "3mf", unit, name=Path(path).name)
     write_3mf(path, v, f, unit_name(unit), (center, radius, beam_nodes))
-
-
-FALLBACK_STYLES = ("cnt", "chocc", "refined", "none")
-DEFAULT_FALLBACK = "cnt"  # the cheapest closed style: a fallback for consumers without beam support
-
-
-def write_beam_lattice(lat: Lattice, path, region=None, fallback: str = DEFAULT_FALLBACK, levels: int | None = None,
-                       segments: int | None = None, max_groups: int = 1 << 14, unit: str = DEFAULT_UNIT,
-                       info: dict | None = None, workers: int = 1, contain=None) -> dict:
-    """A region's balls and cone beams as a 3MF Beam Lattice beside its watertight triangle mesh
-    of style ``fallback`` (``FALLBACK_STYLES``), which a consumer without beam support prints;
-    ``"none"`` writes the beams alone (the file then requires the extensions).
-
-    The fallback mesh comes from the stream of ``write_mesh``'s STL (``checked_stream``: boxes of
-    at most ``max_groups`` groups assembled by ``workers`` threads, each box snapped to the
-    region's float32 grid as it is made and kept as float32 vertices and int32 faces); the boxes
-    are welded into one indexed mesh (the hub vertices repeated across box boundaries are the same
-    grid points) and the model's XML is streamed into the package. An unclean region is meshed
-    in memory with its unions, as ``write_mesh`` does. ``info["unclean"]`` gets the report (None:
-    not checked, or no fallback). ``contain``: as ``write_mesh``'s. Returns {"balls", "beams", "triangles"}."""
-    if mesh_format(path) != "3mf":
-        raise PleError(f"{path}: a beam lattice is written as .3mf")
-    if fallback not in FALLBACK_STYLES:
-        raise PleError(f"fallback mesh {fallback!r}: expected one of {', '.join(FALLBACK_STYLES)}")
-    unit_name(unit)
-    r = lat.region(region)
-    info = {} if info is None else info
-    info["unclean"] = None
-    v, f = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
-    if fallback != "none":
-        v, f = _fallback_mesh(lat, r, fallback, levels, segments, max_groups, unit, info, workers, Path(path).name,
-                              contain)
-    ev = lat.evaluate(r)
-    write_3mf(path, v, f, unit_name(unit), (ev.center, ev.radius, ev.beam_nodes))
-    return {"balls": len(ev.center), "beams": len(ev.beam_nodes), "triangles": len(f)}
-
-
-def _fallback_mesh(lat, r, style, levels, segments, max_groups, unit, info, workers, name, contain):
-    """The beam lattice's triangle mesh (vertices float32 values (V, 3), faces (F, 3)), welded."""
-    bounds = np.array(lat.bounds(r))
-    check_float32_range(bounds, smallest_radius(lat, r), "3mf")
-    grid = grid_spacing(*bounds)  # ``output_grid``: every box snapped to one grid, as the streamed STL
-
-    def keep(chunk):  # in the assembling thread: the stream reuses the box's arrays once this returns
-        verts, faces = chunk
-        return snap(verts, grid).astype(np.float32), np.array(faces, np.int32)  # copies
-
-    checked, chunks = checked_stream(lat, r, style, levels, segments, max_groups, workers=workers, encode=keep,
-                                     grid=grid)
-    info["unclean"] = checked
-    if chunks is None:  # unclean hubs: their unions are made in memory, one mesh
-        mesh = tessellate(lat, r, style, levels, segments, unclean=checked, contain=contain)
-        info["unclean"] = mesh.metadata.get("ple_unclean")
-        v, f, _ = prepare_closed(mesh, "3mf", unit, grid, name)
-        return v, f
-    boxes = list(chunks)
-    offsets = np.cumsum([0] + [len(bv) for bv, _ in boxes])
-    verts = np.concatenate([bv for bv, _ in boxes] or [np.zeros((0, 3), np.float32)])
-    faces = np.concatenate([bf.astype(np.int64) + o for (_, bf), o in zip(boxes, offsets)]
-                           or [np.zeros((0, 3), np.int64)])
-    del boxes
-    v, f, _ = weld(verts, faces, grid)
-    return v, f
-
-
-def write_mesh(lat: Lattice, path, style: str = "refined", region=None, levels: int | None = None,
-               segments: int | None = None, max_groups: int = 1 << 14, unit: str = DEFAULT_UNIT,
-               info: dict | None = None, fillet: float | None = None, workers: int = 1,
-               max_memory: float | None = None, contain=None) -> int:
-    """Tessellate a region straight to ``path`` (format from the suffix); returns the number of
-    triangles. Binary STL streams box by box (memory bounded by ``max_groups`` groups, boxes
-    assembled by ``workers`` threads, the same file for any number), every box snapped to the
-    region's float32 grid; the other formats build the mesh in memory and go
-    through ``export_mesh``. Coordinates are in ``unit`` (see there).
-
-    Regions up to ``MAX_CHECK_GROUPS`` groups are checked for unclean hubs first
-    (``ple.meshing.tessellate.checked_stream``); an unclean one streams its clean boxes, then its
-    local unions one at a time, refused (PleError, no file) if the largest union's estimate
-    exceeds ``max_memory`` bytes.
-    ``info["unclean"]`` gets the report (None when not checked). ``contain`` runs the Booleans that
-    cut a lattice filling a body by ``any`` at its surface (``ple.meshing.skin.clip_to_bodies``)."""
-    unit_name(unit)
-    fmt = mesh_format(path)
-    r = lat.region(region)
-    info = {} if info is None else info
-    checked = None  # the stream's report, reused by the in-memory mesh (the check runs once)
-    bounds = np.array(lat.bounds(r)) if style != "balls-beams" else None  # one pass: the range check and the grid
-    if bounds is not None:
-        check_float32_range(bounds, smallest_radius(lat, r), fmt)
-    if fmt == "stl" and style != "balls-beams":
-        grid = grid_spacing(*bounds)  # ``output_grid``: the snap and the templates share it
-        pool = RecordPool()
-        checked, chunks = checked_stream(lat, r, style, levels, segments, max_groups, fillet, workers,
-                                         encode=lambda chunk: stl_chunk(chunk, grid, pool), grid=grid)
-        info["unclean"] = checked
-        if checked is not None and checked.clusters and max_memory is not None:  # one local union at a time
-            require(checked.union_bytes + evaluation_bytes(lat, r),
-                    f"the largest of {checked.clusters:,} local unions of unclean hubs, with the region's "
-                    f"evaluation, of region {r}", max_memory, "choose a smaller --region")
-        if chunks is not None:  # each box encoded by the thread that assembled it; then the unions
-            return write_stl(path, chunks, header=stl_header(unit), pool=pool)
-    elif fmt == "stl":
-        return write_stl(path, iter_triangles(lat, r, style, levels, segments, max_groups, workers=workers),
-                         header=stl_header(unit), workers=workers)
-    mesh = tessellate(lat, r, style, levels, segments, fillet=fillet, unclean=checked, contain=contain)
-    info["unclean"] = mesh.metadata.get("ple_unclean")
-    stats = export_mesh(mesh, path, unit)
-    return len(mesh.faces) - stats["dropped_faces"]  # as written (the weld may drop slivers)
 
 
 def export_connectors(lat: Lattice, folder, radius: float, beam_radius: float | None = None,

@@ -916,7 +916,7 @@ def check_fillet(fillet, style: str):
 _check_fillet = check_fillet
 
 
-def _check_style(style: str, levels: int | None, segments: int | None) -> tuple[int, int]:
+def resolve_style(style: str, levels: int | None, segments: int | None) -> tuple[int, int]:
     style_named(style)
     levels = DEFAULT_LEVELS if levels is None else int(levels)
     segments = DEFAULT_SEGMENTS if segments is None else int(segments)
@@ -934,7 +934,7 @@ def tessellation_box(lat: Lattice, region, box, style: str = "refined", levels: 
     of one region close up exactly as the streamed tessellation's do (``iter_triangles``).
     ``grid``: the region's ``output_grid`` when the caller knows it (it streams the region's
     bounds otherwise: a whole-region pass per box)."""
-    levels, segments = _check_style(style, levels, segments)
+    levels, segments = resolve_style(style, levels, segments)
     if style == "balls-beams":
         raise PleError("boxes of a mesh need a closed style (refined, cnt or chocc)")
     if clip_bodies(lat):
@@ -960,7 +960,7 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     ``cut`` is False (for a skin, which cuts and unites in one run of Booleans); ``contain`` runs
     that cut's Booleans (``clip_to_bodies``: in a child process that a signal stops). ``unclean``: the
     region's report when the caller has it already (``checked_stream``), so the check runs once."""
-    levels, segments = _check_style(style, levels, segments)
+    levels, segments = resolve_style(style, levels, segments)
     bodies = clip_bodies(lat)
     lat, r = lat.per_hub(region)  # groups not similar (Möbius, TMI): every hub its own template
     if style == "balls-beams":
@@ -1261,7 +1261,7 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
     ``encode``, each box is yielded as ``encode((vertices, faces))``, computed by the same thread
     right after the box (e.g. a file's records: the box's arrays are freed at once, and at most
     workers + 1 boxes are alive)."""
-    levels, segments = _check_style(style, levels, segments)
+    levels, segments = resolve_style(style, levels, segments)
     r = lat.region(region)
     if style == "balls-beams" or clip_bodies(lat):  # a preview; or one mesh cut at a body's surface
         mesh = tessellate(lat, r, style, levels, segments, fillet=fillet)
@@ -1418,7 +1418,7 @@ def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: in
     report is None for larger regions (not checked). A region with unclean hubs streams each
     cluster's local union (``ple.meshing.unions``), then its boxes without the clusters, which
     meet the unions exactly along contact rings: memory is bounded by a box and a cluster."""
-    levels, segments = _check_style(style, levels, segments)
+    levels, segments = resolve_style(style, levels, segments)
     if style == "balls-beams":
         raise PleError("a checked stream needs a closed style (refined, cnt or chocc)")
     if clip_bodies(lat):  # cut at a body's surface: one Boolean of the whole mesh, in memory
