@@ -24,7 +24,7 @@ def chunks(rng, k=9):
 
 def plain_stl(path, data, monkeypatch):
     with monkeypatch.context() as m:
-        m.setattr(export, "_direct_writer", lambda fh: None)
+        m.setattr(export, "direct_writer", lambda fh: None)
         export.write_stl(path, data, grid=2.0**-12)
     return path.read_bytes()
 

@@ -12,7 +12,7 @@ from ple.io import export, files
 @pytest.fixture(autouse=True)
 def buffered(monkeypatch):
     """Write-behind serves buffered writes: files the O_DIRECT writer would take are kept from it."""
-    monkeypatch.setattr(export, "_direct_writer", lambda fh: None)
+    monkeypatch.setattr(export, "direct_writer", lambda fh: None)
 
 
 def chunks(rng, k=12):

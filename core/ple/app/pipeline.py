@@ -18,7 +18,7 @@ encode what this module hands them.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -234,7 +234,7 @@ def write_beam_lattice(request: MeshRequest, path, fallback: str = DEFAULT_FALLB
     v, f = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
     r = lat.region(request.region)
     if fallback != "none":
-        p = plan(MeshRequest(**{**request.__dict__, "style": fallback, "region": r}))
+        p = plan(replace(request, style=fallback, region=r))
         check_float32_range(p.bounds, smallest_radius(lat, r), "3mf")
         if p.cut:  # one mesh cut at the body: kept closed through float32 as every closed file is
             mesh_ = _in_memory(p)

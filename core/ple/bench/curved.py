@@ -30,7 +30,7 @@ import numpy as np
 from ..algebra.similarity import Rotation, Swirl, Translation
 from ..app.pipeline import MeshRequest, write_mesh
 from ..errors import PleError
-from ..io.export import RecordPool, StlWriter, _direct_writer, stl_chunk, stl_header, write_stl
+from ..io.export import RecordPool, StlWriter, direct_writer, stl_chunk, stl_header, write_stl
 from ..meshing.tessellate import _Tessellator, iter_triangles, output_grid
 from ..model.lattice import Lattice
 from ..program.sources import load_lattice
@@ -144,7 +144,7 @@ def _bytes_alone(size: int, path: str) -> float:
     block = np.random.default_rng(0).integers(0, 256, 64 << 20, dtype=np.uint8).tobytes()
     t0 = time.perf_counter()
     with open(path, "wb") as fh:
-        direct = _direct_writer(fh)  # as StlWriter chooses
+        direct = direct_writer(fh)  # as StlWriter chooses
         for lo in range(0, size, len(block)):
             (direct or fh).write(block[:min(len(block), size - lo)])
         if direct is not None:

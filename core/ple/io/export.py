@@ -117,7 +117,7 @@ class StlWriter:
     def __init__(self, fh, header: bytes = b"PLE binary STL", direct: bool = True):
         self.fh = fh
         self.count = 0
-        self.direct = _direct_writer(fh) if direct else None  # a new regular file: past the page cache
+        self.direct = direct_writer(fh) if direct else None  # a new regular file: past the page cache
         head = header[:80].ljust(80, b" ") + struct.pack("<I", 0)
         if self.direct is not None:
             self.direct.write(head)
@@ -156,7 +156,7 @@ class StlWriter:
             self.direct = None
 
 
-def _direct_writer(fh) -> DirectWriter | None:
+def direct_writer(fh) -> DirectWriter | None:
     """A ``DirectWriter`` appending to ``fh`` when it is an empty regular file opened by path,
     with nothing written yet and O_DIRECT allowed there; else None (buffered writes)."""
     try:
