@@ -16,6 +16,7 @@ from ..corelink import PleError, needs, presets, styles, work
 from ..rig import events, model, sync
 
 SNIPPET_TEXT = "PLE snippet"  # the text block snippets go to (and the clipboard)
+PROGRESS_BOXES = 20  # a job that asks the core box by box asks about this many boxes (progress steps)
 
 
 class RigOperator:

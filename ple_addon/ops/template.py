@@ -16,7 +16,7 @@ from bpy.props import (
 from .. import jobs
 from ..corelink import PleError, snippets
 from ..rig import events, model
-from .base import BEYOND, EXPORT_BOXES, RigOperator, SteppedOperator
+from .base import BEYOND, PROGRESS_BOXES, RigOperator, SteppedOperator
 
 
 class PLE_OT_node_add(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
@@ -144,7 +144,7 @@ class PLE_OT_lil_filter(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Bl
             model.check_budget(lat, region, f"LiL filter of region {region}")
         key = model.lil_key(rig, coarse)
         yield 0.0
-        size = max(1, region.groups // EXPORT_BOXES)  # the filter is asked box by box: progress
+        size = max(1, region.groups // PROGRESS_BOXES)  # the filter is asked box by box: progress
         job = jobs.start(lambda: shown.evaluate_steps(region, max_groups=size), rig.name,
                          f"the LiL filter of region {region}", self.beyond_limit)
         _, ev = yield from jobs.follow(job, lambda items: 0.95 * (items[-1] if items else 0.0))
