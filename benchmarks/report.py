@@ -170,7 +170,7 @@ def curved_section(d) -> list[str]:
     out = ["## Curved lattices (`ple bench curved`)", "",
            "Regular, curved and warped lattices streamed to binary STL (float32 snap included), each run in a "
            "child process of its own (peak memory is that run's VmHWM): the per-hub path "
-           "(`_Tessellator(batched=False)`, one CHoCC per hub shape) as the baseline, the batched hub templates on "
+           "(`Tessellator(batched=False)`, one CHoCC per hub shape) as the baseline, the batched hub templates on "
            "1 and 2 workers, the STL writer alone on the same triangles (this machine's ceiling; in brackets, "
            "writing the file's bytes alone from memory the way the writer writes, past the page cache here: "
            "the disk's floor), and the cleanliness check `ple mesh` runs first; last, `ple mesh` end to end on "

@@ -127,6 +127,39 @@ def _writes_files(path: Path) -> list[int]:
     return lines
 
 
+def _private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def private_crossings(root: Path) -> list[str]:
+    """Every private name (``_name``) that a module of the package at ``root`` takes from another
+    module: ``from m import _name``, or ``m._name`` on a module it imported. A private module of the
+    importer's own package (``from . import _baselines``) and the compiled kernels are allowed."""
+    known = modules(root)
+    found = []
+    for mod, path in known.items():
+        is_pkg = path.name == "__init__.py"
+        package = mod if is_pkg else mod.rsplit(".", 1)[0]
+        bound: set[str] = set()  # names the module binds to imported modules
+        where = path.relative_to(root.parent)
+        for node in _nodes(path.read_text()):
+            if isinstance(node, ast.Import):
+                bound |= {a.asname for a in node.names if a.asname}
+            elif isinstance(node, ast.ImportFrom) and node.module != "__future__":
+                for a in node.names:
+                    dst = _target(mod, is_pkg, node, a.name, known)
+                    if dst in known or dst in COMPILED:
+                        bound.add(a.asname or a.name)
+                    own = dst == f"{package}.{a.name}"  # a private module of the importer's own package
+                    if _private(a.name) and dst not in COMPILED and not own:
+                        found.append(f"{where}:{node.lineno}: private name {a.name} imported from {dst}")
+        for node in _nodes(path.read_text()):
+            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in bound \
+                    and _private(node.attr):
+                found.append(f"{where}:{node.lineno}: private name {node.attr} of the module {node.value.id}")
+    return found
+
+
 def violations(root: Path) -> list[str]:
     """Every broken rule in the package at ``root`` (``.../ple``), one line each."""
     known = modules(root)
@@ -159,7 +192,7 @@ def violations(root: Path) -> list[str]:
             found.append(f"{path.relative_to(root.parent)}: library module names a door or tool (subprocess?)")
         if part(mod) == "meshing":
             found += [f"{path.relative_to(root.parent)}:{n}: meshing writes a file" for n in _writes_files(path)]
-    return found
+    return found + private_crossings(root)
 
 
 def test_the_core_keeps_its_layers():
@@ -187,6 +220,9 @@ def test_every_part_is_a_documented_layer():
     ("meshing/bad.py", "def f(p):\n    return open(p, 'wb')\n", "meshing writes a file"),
     ("model/bad.py", "from . import bad2\n", "import cycle"),
     ("filters/bad.py", "def f():\n    import trimesh\n", "not an optional package"),
+    ("meshing/bad.py", "from .tessellate import _ahead\n", "private name _ahead imported"),
+    ("bench/bad.py", "from ..queries import rangefinder as rf\nrf._expand(1, 2)\n", "private name _expand of"),
+    ("io/bad.py", "import ple.queries.rangefinder as rf\nrf._q({})\n", "private name _q of"),
 ])
 def test_a_forbidden_import_is_caught(tmp_path, module, text, rule):
     """The checker itself: a copy of the core with one bad module breaks exactly that rule."""
@@ -255,7 +291,7 @@ def addon_violations(root: Path) -> list[str]:
         n = len(path.read_text().splitlines())
         if n > MAX_LINES:
             found.append(f"{path.relative_to(root.parent)}: {n} lines (at most {MAX_LINES})")
-    return found
+    return found + private_crossings(root)
 
 
 def test_the_addon_keeps_its_layers():
@@ -283,6 +319,7 @@ def test_the_tools_import_no_circle():
     ("rig/model.py", "def f():\n    from . import events\n", "function-local import"),
     ("rig/model.py", "def f():\n    from . import events\n", "import cycle"),
     ("ui.py", "\n" * MAX_LINES, "lines (at most"),
+    ("ops/bad.py", "from .base import _style_item\n", "private name _style_item"),
 ])
 def test_a_forbidden_import_in_the_addon_is_caught(tmp_path, module, text, rule):
     """The checker itself: a copy of the add-on with one bad module (or line) breaks exactly that rule."""

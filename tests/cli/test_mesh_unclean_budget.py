@@ -5,7 +5,7 @@ the user's file untouched) when it exceeds --max-memory."""
 from __future__ import annotations
 
 from ple.cli.main import main
-from ple.meshing.tessellate import _Tessellator
+from ple.meshing.tessellate import Tessellator
 from ple.program.sources import load_lattice
 from ple.queries.overlaps import unclean_pairs
 
@@ -29,7 +29,7 @@ def test_local_unions_are_estimated_before_they_start(tmp_path, capsys):
     src.write_text(CROSSING)
     lat = load_lattice(str(src), {"n": 6})
     assert unclean_pairs(lat)["unclean_pairs"] > 0  # independent: the beams do cross
-    report, _ = _Tessellator(lat, lat.region(), "cnt", 0, 16).find_unclean()
+    report, _ = Tessellator(lat, lat.region(), "cnt", 0, 16).find_unclean()
     assert len(report.nodes) > 0
     out = tmp_path / "w.stl"
     out.write_bytes(b"users file")

@@ -226,10 +226,10 @@ def test_adaptive_hubs_of_a_preset_within_0_1_percent_of_a_fine_grid():
 
     lat = load_lattice("fig6_3", {})
     reach = [1, 1, 1]
-    segs = [measure._segments(c, r, s) for c, r, s in zip(lat.counts, reach, measure._similar_axes(lat))]
-    idx, _, _ = measure._rep_hubs(lat, segs)
+    segs = [measure.row_segments(c, r, s) for c, r, s in zip(lat.counts, reach, measure.similar_axes(lat))]
+    idx, _, _ = measure.rep_hubs(lat, segs)
     idx = idx[np.random.default_rng(5).choice(len(idx), 16, replace=False)]
-    ra, off, rb, present, _ = measure._hub_geometry(lat, idx)
+    ra, off, rb, present, _ = measure.hub_geometry(lat, idx)
     a, v = hub_measures_batch(ra, off, rb, present)
     fa, fv = hub_measures_batch(ra, off, rb, present, grid=128)
     assert np.all(np.abs(a / fa - 1) < 1e-3) and np.all(np.abs(v / fv - 1) < 1e-3)

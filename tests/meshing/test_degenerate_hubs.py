@@ -125,7 +125,7 @@ def test_contact_rings_out_of_order_send_their_beams_to_unions():
 def test_rings_in_order_sees_a_vertex_out_of_place():
     """``_rings_in_order``: every contact ring of a cubic lattice's hub runs one way about its
     beam; moving one ring vertex back past its predecessor is seen."""
-    from ple.meshing.tessellate import _Tessellator
+    from ple.meshing.tessellate import Tessellator
 
     lat = Lattice()
     a = lat.add_node(Pt(0, 0, 0), 0.2)
@@ -133,7 +133,7 @@ def test_rings_in_order_sees_a_vertex_out_of_place():
         lat.add_beam(a, a, *off)
     for axis in "uvw":
         getattr(lat, f"set_{axis}")(3, Translation(Vec(*[float(axis == x) for x in "uvw"])))
-    tess = _Tessellator(lat, lat.region(), "chocc", 0, 16)
+    tess = Tessellator(lat, lat.region(), "chocc", 0, 16)
     tess.instances(np.asarray(lat.evaluate(lat.region()).node_index, np.int64))
     assert tess._rings_in_order().all()
     tpl, slot_of = tess.tpl_list[0]

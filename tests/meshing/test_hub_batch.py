@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import trimesh
 from ple.meshing import hubs, tessellate
-from ple.meshing.tessellate import _Tessellator
+from ple.meshing.tessellate import Tessellator
 from ple.model.lattice import Lattice, Node
 from ple.program.sources import load_lattice
 
@@ -35,7 +35,7 @@ def _mesh(lat, style, batched, levels=1, segments=8):
     if lat.group_map is not None:  # as ``tessellate``: the one-group form of a group-mapped lattice
         lat = lat.explicit(r)
         r = lat.region()
-    tess = _Tessellator(lat, r, style, levels, segments, batched=batched)
+    tess = Tessellator(lat, r, style, levels, segments, batched=batched)
     v, f = tess.build(r)
     return v, f, len(tess.templates)
 

@@ -32,7 +32,7 @@ from ple import Lattice
 from ple.algebra.similarity import Similarity
 from ple.errors import PleError
 from ple.filters.stencil import Stencil
-from ple.meshing.tessellate import _Tessellator, tessellate
+from ple.meshing.tessellate import Tessellator, tessellate
 from scipy.spatial.transform import Rotation
 from union_oracle import union_volume
 
@@ -86,7 +86,7 @@ def _check(seed: int, unite: bool) -> str:
     'unclean, not meshed' or 'PleError: …'; raises AssertionError on a wrong mesh."""
     lat = random_lattice(seed)
     try:
-        report, ev = _Tessellator(lat, lat.region(), "cnt", 0, 16).find_unclean()
+        report, ev = Tessellator(lat, lat.region(), "cnt", 0, 16).find_unclean()
         unclean = len(report.nodes) > 0
         if unclean and not unite:
             return "unclean, not meshed"

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from ple.algebra.similarity import Similarity
 from ple.app.pipeline import MeshRequest, write_mesh
 from ple.errors import PleError
-from ple.meshing.tessellate import _Tessellator, tessellate
+from ple.meshing.tessellate import Tessellator, tessellate
 from ple.model.lattice import Lattice
 from ple.program.presets import preset_names
 from ple.program.sources import load_lattice
@@ -191,12 +191,12 @@ def test_steady_copies_reuse_hub_templates():
     """Hubs are tessellated once per neighbourhood seen from their own frame: for a translation
     lattice once per boundary class (3³), for a curved one once per (i, j, n) and k-class."""
     lat = load_lattice("cubic").with_counts(6, 6, 6)
-    t = _Tessellator(lat, lat.region(), "cnt", 0, 16)
+    t = Tessellator(lat, lat.region(), "cnt", 0, 16)
     mesh = trimesh.Trimesh(*t.build(lat.region()), process=False)
     assert len(t.templates) <= 27
     assert_closed(mesh)
     warped = load_lattice("warped").with_counts(3, 3, 8)
-    t = _Tessellator(warped, warped.region(), "cnt", 0, 16)
+    t = Tessellator(warped, warped.region(), "cnt", 0, 16)
     t.build(warped.region())
     assert len(t.templates) <= 3 * 3 * 3 < warped.groups
 

@@ -160,10 +160,10 @@ def _spheres(tess):
 def test_steady_check_equals_the_search_of_every_element(seed):
     """Anchored layers and their copies along W (``steady``) find exactly the unclean hubs and the
     pairs of the search over every element; with the meshes' hulls, at least its hubs."""
-    from ple.meshing.tessellate import _Tessellator
+    from ple.meshing.tessellate import Tessellator
 
     lat = steady_lattice(seed)
-    tess = _Tessellator(lat, lat.region(), "cnt", 0, 16)
+    tess = Tessellator(lat, lat.region(), "cnt", 0, 16)
     ev, idx, rp = _spheres(tess)
     steady = tess._steady_layers(idx)
     assert steady is not None and steady[1:3] == (1, 11)
@@ -172,7 +172,7 @@ def test_steady_check_equals_the_search_of_every_element(seed):
     assert whole.pairs > 100 and layered.pairs == whole.pairs
     assert np.array_equal(layered.nodes, whole.nodes)
     report, _ = tess.find_unclean()  # steady, with the hulls
-    plain = _Tessellator(lat, lat.region(), "cnt", 0, 16)
+    plain = Tessellator(lat, lat.region(), "cnt", 0, 16)
     plain._steady_layers = lambda idx: None
     alone, _ = plain.find_unclean()
     assert set(alone.nodes.tolist()) <= set(report.nodes.tolist())
@@ -251,9 +251,9 @@ def test_short_beams_mesh_without_unions(style, levels, tol):
 
 
 def _templates(lat, style, levels):
-    from ple.meshing.tessellate import _Tessellator
+    from ple.meshing.tessellate import Tessellator
 
-    tess = _Tessellator(lat, lat.region(), style, levels, 16)
+    tess = Tessellator(lat, lat.region(), style, levels, 16)
     tess.instances(lat.region().node_index(len(lat.nodes)))
     return [t for t, _ in tess.tpl_list]
 
@@ -288,10 +288,10 @@ def test_neighbouring_pulled_hubs_apart_by_their_meshes(style, monkeypatch):
 def test_hubs_meet_sees_a_hub_meet_itself():
     """``_hubs_meet`` answers True for a hub paired with itself (every face meets its copy) and
     False for neighbours of a clean lattice, so it is not vacuous."""
-    from ple.meshing.tessellate import _Tessellator
+    from ple.meshing.tessellate import Tessellator
 
     lat = short_beam_lattice(4)
-    tess = _Tessellator(lat, lat.region(), "cnt", 0, 16, grid=2.0**-20)
+    tess = Tessellator(lat, lat.region(), "cnt", 0, 16, grid=2.0**-20)
     ev = lat.evaluate(lat.region())
     tids, m, _, _ = tess.instances(np.asarray(ev.node_index, np.int64))
     hubs = np.arange(len(tids))
@@ -302,10 +302,10 @@ def test_hubs_meet_sees_a_hub_meet_itself():
 def test_hubs_meet_in_a_batch_as_pair_by_pair():
     """``_hubs_meet`` tests many pairs in one exact check; each answer equals that of the pair
     alone (its two hubs placed and rounded to the grid, every face against every face)."""
-    from ple.meshing.tessellate import _Tessellator
+    from ple.meshing.tessellate import Tessellator
 
     lat = short_beam_lattice(4)
-    tess = _Tessellator(lat, lat.region(), "cnt", 0, 16, grid=2.0**-20)
+    tess = Tessellator(lat, lat.region(), "cnt", 0, 16, grid=2.0**-20)
     ev = lat.evaluate(lat.region())
     tids, m, _, _ = tess.instances(np.asarray(ev.node_index, np.int64))
     rng = np.random.default_rng(3)
@@ -334,7 +334,7 @@ def test_steady_anchors_prove_their_copies_apart(monkeypatch):
     anchor layer only: the junctions still sent to unions are a subset of those the pair-by-pair
     test sends, and the pairs only the anchors proved apart do not meet (their meshes, exact)."""
     import ple.meshing.unclean as unclean
-    from ple.meshing.tessellate import _Tessellator
+    from ple.meshing.tessellate import Tessellator
     from ple.model.lattice import Region
 
     lat, region = case_lattice("curved", 40), Region(30, 33, 8, 11, 0, 12)
@@ -348,7 +348,7 @@ def test_steady_anchors_prove_their_copies_apart(monkeypatch):
         return seen["steady"]
 
     monkeypatch.setattr(unclean, "_pulled_neighbours", spy)
-    tess = _Tessellator(lat, region, "cnt", 0, 16)
+    tess = Tessellator(lat, region, "cnt", 0, 16)
     tess.find_unclean()
     key = lambda p: set(map(tuple, np.asarray(p).tolist()))  # noqa: E731
     assert len(seen["alone"]) > 20 and key(seen["steady"]) <= key(seen["alone"])
@@ -363,7 +363,7 @@ def test_anchor_meshes_farther_apart_free_their_copies(monkeypatch):
     the layers' shrink (``Tessellator._hubs_farther``) skip the mesh test: the pulled pairs found
     are those found when every copy is tested on its meshes (exact), with far fewer tests."""
     import ple.meshing.unclean as unclean
-    from ple.meshing.tessellate import _Tessellator
+    from ple.meshing.tessellate import Tessellator
     from ple.model.lattice import Region
 
     lat, region = case_lattice("curved", 40), Region(30, 33, 8, 11, 0, 12)
@@ -383,7 +383,7 @@ def test_anchor_meshes_farther_apart_free_their_copies(monkeypatch):
         return found["farther"]
 
     monkeypatch.setattr(unclean, "_pulled_neighbours", spy)
-    _Tessellator(lat, region, "cnt", 0, 16).find_unclean()
+    Tessellator(lat, region, "cnt", 0, 16).find_unclean()
     key = lambda p: set(map(tuple, np.asarray(p).tolist()))  # noqa: E731
     assert key(found["farther"]) == key(found["meshes"])
     assert tested["meshes"] > 50 and tested["farther"] < tested["meshes"] / 2, tested

@@ -12,7 +12,7 @@ from ple.app.pipeline import MeshRequest, write_mesh
 from ple.cli.mesh import monte_carlo_volume
 from ple.io.export import read_back
 from ple.meshing.selfcheck import self_intersections
-from ple.meshing.tessellate import _Tessellator, tessellate
+from ple.meshing.tessellate import Tessellator, tessellate
 from ple.meshing.unions import clusters
 from ple.model.lattice import Lattice
 
@@ -36,7 +36,7 @@ def test_crossing_diagonals_are_pairs_of_beams():
     cluster of those two beams, no hub (their junctions are clean)."""
     n = 3
     lat = crossing(n, curved=False)
-    tess = _Tessellator(lat, lat.region(), "cnt", 0, 16)
+    tess = Tessellator(lat, lat.region(), "cnt", 0, 16)
     report, ev = tess.find_unclean()
     cl = clusters(report, ev.beam_nodes)
     assert len(cl) == (n - 1) ** 2 * n
@@ -91,7 +91,7 @@ def test_copies_of_a_cluster_take_its_union_exactly(curved, monkeypatch):
 
     def pieces():
         lat = crossing(4, curved)
-        tess = _Tessellator(lat, lat.region(), "cnt", 0, 16, grid=2.0**-18)
+        tess = Tessellator(lat, lat.region(), "cnt", 0, 16, grid=2.0**-18)
         report, ev = tess.find_unclean()
         return list(union_pieces(tess, ev, leave_to_unions(tess, ev, report))), tess
 
@@ -208,7 +208,7 @@ def test_clusters_cut_across_free_beams_mesh_their_union(style, levels, monkeypa
         return real(cluster, *args)
 
     def mesh():
-        tess = _Tessellator(lat, lat.region(), style, levels, 16, grid=2.0**-18)
+        tess = Tessellator(lat, lat.region(), style, levels, 16, grid=2.0**-18)
         return trimesh.Trimesh(*build_with_unions(tess, lat.evaluate(lat.region()), report), process=False)
 
     monkeypatch.setattr(tessellate_module, "unite_stoppable", spy)

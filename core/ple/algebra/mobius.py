@@ -28,7 +28,7 @@ from .vectors import Vec
 EPS = 1e-13  # relative size below which c counts as 0 (a similarity) or two points coincide
 
 
-def _complex(p) -> complex:
+def as_complex(p) -> complex:
     """A point given as complex, (x, y) or (x, y, z) (z ignored) as a complex number."""
     if isinstance(p, (complex, float, int, np.number)) and not isinstance(p, bool):
         z = complex(p)
@@ -105,8 +105,8 @@ class Mobius:
         """The Möbius transformation taking three distinct points ``src`` to ``dst`` (Eq. 11.3)."""
         if len(src) != 3 or len(dst) != 3:
             raise PleError("Möbius from points: expected three source and three target points")
-        fs = Mobius._to_standard(*(_complex(p) for p in src))
-        fd = Mobius._to_standard(*(_complex(p) for p in dst))
+        fs = Mobius._to_standard(*(as_complex(p) for p in src))
+        fd = Mobius._to_standard(*(as_complex(p) for p in dst))
         return Mobius(_normalized(np.linalg.inv(fd) @ fs))
 
     @staticmethod
@@ -301,12 +301,12 @@ class Cline:
         r = float(radius)
         if not (math.isfinite(r) and r > 0):
             raise PleError(f"circle radius must be positive, got {radius!r}")
-        return Cline(_complex(center), r)
+        return Cline(as_complex(center), r)
 
     @staticmethod
     def through(p, q) -> Cline:
         """The line through two distinct points."""
-        a, b = _complex(p), _complex(q)
+        a, b = as_complex(p), as_complex(q)
         if abs(b - a) == 0:
             raise PleError("line: the two points coincide")
         return Cline(a, 0.0, True, (b - a) / abs(b - a))
@@ -341,4 +341,4 @@ def mobius_frame(frame0, frame1, u: float):
     """MöbiusFrame({A0,B0,C0}, {A1,B1,C1}, u) (Eq. 11.5): the frame G**u ∘ frame0, with G
     taking frame0 to frame1; u = i gives P[i] of the steady pattern (Eq. 11.4)."""
     g = Mobius.between_frames(frame0, frame1)
-    return tuple(complex(x) for x in (g ** u)(np.array([_complex(p) for p in frame0])))
+    return tuple(complex(x) for x in (g ** u)(np.array([as_complex(p) for p in frame0])))

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import PleError
-from .vectors import Pt, Vec, _as3, rotation_matrices, unit
+from .vectors import Pt, Vec, as3, rotation_matrices, unit
 
 # Below these the rotation axis (or the swirl's fixed point) is numerically meaningless:
 # the similarity is treated as its degenerate kind (pure translation / screw), see §2.5.5.
@@ -266,7 +266,7 @@ def _screw_from(axis: np.ndarray, angle: float, b: np.ndarray) -> Similarity:
 
 def _frame_matrix(frame, what: str) -> np.ndarray:
     if isinstance(frame, (tuple, list)) and len(frame) == 4:
-        o, x, y, z = (_as3(v, what) for v in frame)
+        o, x, y, z = (as3(v, what) for v in frame)
         m = np.eye(4)
         m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x, y, z, o
     else:

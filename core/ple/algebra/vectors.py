@@ -8,7 +8,7 @@ import numpy as np
 from ..errors import PleError
 
 
-def _as3(values, what: str) -> np.ndarray:
+def as3(values, what: str) -> np.ndarray:
     arr = np.asarray(values, dtype=float).reshape(-1)
     if arr.shape != (3,):
         raise PleError(f"{what}: expected 3 coordinates, got {np.asarray(values).tolist()!r}")
@@ -19,17 +19,17 @@ def _as3(values, what: str) -> np.ndarray:
 
 def Pt(x, y=None, z=None) -> np.ndarray:  # noqa: N802 - thesis API name
     """A 3D point, ``Pt(x, y, z)`` or ``Pt([x, y, z])``; returns a float array of shape (3,)."""
-    return _as3([x, y, z] if y is not None else x, "Pt")
+    return as3([x, y, z] if y is not None else x, "Pt")
 
 
 def Vec(x, y=None, z=None) -> np.ndarray:  # noqa: N802 - thesis API name
     """A 3D vector, ``Vec(x, y, z)`` or ``Vec([x, y, z])``; returns a float array of shape (3,)."""
-    return _as3([x, y, z] if y is not None else x, "Vec")
+    return as3([x, y, z] if y is not None else x, "Vec")
 
 
 def unit(v, what: str = "axis") -> np.ndarray:
     """``v`` normalized; a zero (or non-finite) vector is a user error naming ``what``."""
-    v = _as3(v, what)
+    v = as3(v, what)
     scale = float(np.abs(v).max())
     if not np.isfinite(scale):
         raise PleError(f"{what}: must be finite, got {v.tolist()}")

@@ -31,7 +31,7 @@ from ..algebra.similarity import Rotation, Swirl, Translation
 from ..app.pipeline import MeshRequest, write_mesh
 from ..errors import PleError
 from ..io.export import RecordPool, StlWriter, direct_writer, stl_chunk, stl_header, write_stl
-from ..meshing.tessellate import _Tessellator, iter_triangles, output_grid
+from ..meshing.tessellate import Tessellator, iter_triangles, output_grid
 from ..model.lattice import Lattice
 from ..program.sources import load_lattice
 
@@ -95,7 +95,7 @@ def _stream(lat: Lattice, style: str, levels: int, batched: bool, workers: int, 
     written (the computation without the file system)."""
     r = lat.region()
     t0 = time.perf_counter()
-    tess = _Tessellator(lat, r, style, levels, 16, batched=batched, workers=workers)
+    tess = Tessellator(lat, r, style, levels, 16, batched=batched, workers=workers)
     grid, pool = output_grid(lat, r), RecordPool()
     chunks = iter_triangles(lat, r, style, levels, _tess=tess, workers=workers,
                             encode=lambda chunk: stl_chunk(chunk, grid, pool))
@@ -168,7 +168,7 @@ def _whole(lat: Lattice, style: str, levels: int, workers: int, path: str) -> di
 
 def _check(lat: Lattice, style: str, levels: int) -> dict:
     t0 = time.perf_counter()
-    report, _ = _Tessellator(lat, lat.region(), style, levels, 16).find_unclean()
+    report, _ = Tessellator(lat, lat.region(), style, levels, 16).find_unclean()
     return {"check_s": round(time.perf_counter() - t0, 3), "unclean_hubs": int(len(report.nodes))}
 
 

@@ -42,11 +42,11 @@ def run(args) -> dict:
 def _baseline(lat, m: dict, count: int) -> dict:
     """Time the old per-hub path on ``count`` hubs and compare them with the new batch."""
     reach = [max([abs(b.offset[d]) for b in lat.beams], default=0) for d in range(3)]
-    segs = [measure._segments(c, r, s) for c, r, s in zip(lat.counts, reach, measure._similar_axes(lat))]
-    idx, _, _ = measure._rep_hubs(lat, segs)
+    segs = [measure.row_segments(c, r, s) for c, r, s in zip(lat.counts, reach, measure.similar_axes(lat))]
+    idx, _, _ = measure.rep_hubs(lat, segs)
     rng = np.random.default_rng(0)
     pick = rng.choice(len(idx), min(count, len(idx)), replace=False)
-    ra, off, rb, present, _ = measure._hub_geometry(lat, idx[pick])
+    ra, off, rb, present, _ = measure.hub_geometry(lat, idx[pick])
     t0 = time.perf_counter()
     old = [measure.hub_measures(float(ra[h]), [measure.HalfBeam(off[h, b], float(ra[h]), float(rb[h, b]))
                                                for b in np.nonzero(present[h])[0]]) for h in range(len(pick))]

@@ -16,7 +16,7 @@ import trimesh
 
 from ..errors import PleError
 from ..io.export import write_stl
-from ..meshing.tessellate import _Tessellator, build_with_unions, tessellate
+from ..meshing.tessellate import Tessellator, build_with_unions, tessellate
 from ..meshing.unclean import UncleanReport
 from ..program.sources import load_lattice
 from ._timing import best_of
@@ -109,7 +109,7 @@ def _unclean_cost(region, fraction: float = 0.1, seed: int = 0) -> dict:
         t1 = time.perf_counter()
         checked = tessellate(region, style=style)
         t2 = time.perf_counter()
-        tess = _Tessellator(region, r, style, 4, 16)
+        tess = Tessellator(region, r, style, 4, 16)
         t_d = time.perf_counter()
         rep, ev = tess.find_unclean()
         detector = time.perf_counter() - t_d  # what a clean lattice pays for the check (templates shared)

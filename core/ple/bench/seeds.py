@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 from ..program.sources import load_lattice
-from ..queries.biq import _naive_hits
+from ..queries.biq import naive_hits as lattice_naive_hits
 from ..queries.rangefinder import PATH_ORDER, cached_plan, lattice_hits
 from ._baselines import Elements, naive_hits
 from .biq import protocol_queries
@@ -135,7 +135,7 @@ def lil_tables(args) -> list[dict]:
             ours[path] = {"seconds": sec * total / len(idx), "sampled_nodes": len(idx)}
         m = min(args.lil_naive_sample, len(idx))
         t0 = time.perf_counter()
-        _naive_hits(coarse, c[:m], r[:m])
+        lattice_naive_hits(coarse, c[:m], r[:m])
         ours["naive"] = {"seconds": (time.perf_counter() - t0) * total / m, "sampled_nodes": m}
         unit = 60.0 if "min" in source else 1.0
         rows.append({"case": case, "source": source, "fine_nodes": total, "coarse_groups": coarse.groups,

@@ -38,7 +38,7 @@ from ..algebra.vectors import Pt, Vec
 from ..io.export import RecordPool, stl_chunk, stl_header, write_stl
 from ..meshing.tessellate import (
     BOX_TRIANGLES,
-    _Tessellator,
+    Tessellator,
     check_bytes,
     iter_triangles,
     leave_to_unions,
@@ -154,7 +154,7 @@ def write_tenth(lat, out, style: str, levels: int, fraction: float = 0.1, seed: 
     r = lat.region()
     lv, sg = resolve_style(style, levels, None)
     grid = grid_spacing(*lat.bounds(r))
-    tess = _Tessellator(lat, r, style, lv, sg, grid=grid)
+    tess = Tessellator(lat, r, style, lv, sg, grid=grid)
     ev = lat.evaluate(r)
     rng = np.random.default_rng(seed)
     nodes = np.sort(rng.choice(len(ev.center), int(round(fraction * len(ev.center))), replace=False))

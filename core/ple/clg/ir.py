@@ -20,8 +20,8 @@ from .model import (
     Material,
     Op,
     Prim,
-    _pair,
-    _scale,
+    scale_pair,
+    scale_value,
 )
 
 FORMAT = "ple-clg/1"
@@ -105,7 +105,7 @@ def _node(x, where: str):
 def _num_field(d: dict, key: str, where: str) -> float:
     if key not in d:
         raise PleError(f"{where}.{key}: missing")
-    return _scale(d[key], f"{where}.{key}")
+    return scale_value(d[key], f"{where}.{key}")
 
 
 def _expr(e, where: str, materials: set):
@@ -132,10 +132,10 @@ def _expr(e, where: str, materials: set):
         if k not in val:
             raise PleError(f"{w}.{k}: missing")
     if key == "ball":
-        s = _scale(val.get("scale", 1.0), f"{w}.scale")
+        s = scale_value(val.get("scale", 1.0), f"{w}.scale")
         return Prim(_node(val["node"], f"{w}.node"), s, None, 0.0, mat)
     if key == "extended_hub":
-        s1, s2 = _pair(val.get("scale", [1.0, 1.0]), f"{w}.scale")
+        s1, s2 = scale_pair(val.get("scale", [1.0, 1.0]), f"{w}.scale")
         return Compound(key, (_node(val["node"], f"{w}.node"), s1, s2), mat)
     if key == "connector":
         s1, s2 = _num_field(val, "outer", w), _num_field(val, "inner", w)
@@ -143,7 +143,7 @@ def _expr(e, where: str, materials: set):
             raise PleError(f"{w}.inner: must be smaller than outer ({s1}), got {s2}")
         return Compound(key, (_node(val["node"], f"{w}.node"), s1, s2, _num_field(val, "reach", w)), mat)
     a, b = _node(val["from"], f"{w}.from"), _node(val["to"], f"{w}.to")
-    s1, s2 = _pair(val.get("scale", [1.0, 1.0]), f"{w}.scale")
+    s1, s2 = scale_pair(val.get("scale", [1.0, 1.0]), f"{w}.scale")
     if key == "beam":
         return Prim(a, s1, b, s2, mat)
     h = val["hollow"]

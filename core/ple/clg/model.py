@@ -101,7 +101,7 @@ class Material:
 
 
 # ----- building expressions (the Python API of programs) --------------------------------------------
-def _scale(s, where: str) -> float:
+def scale_value(s, where: str) -> float:
     if isinstance(s, bool) or not isinstance(s, (int, float)) or not math.isfinite(float(s)):
         raise PleError(f"{where}: expected a number, got {s!r}")
     if s <= 0:
@@ -111,12 +111,12 @@ def _scale(s, where: str) -> float:
     return float(s)
 
 
-def _pair(s, where: str) -> tuple[float, float]:
+def scale_pair(s, where: str) -> tuple[float, float]:
     if isinstance(s, (int, float)) and not isinstance(s, bool):
         s = (s, s)
     if not isinstance(s, (list, tuple)) or len(s) != 2:
         raise PleError(f"{where}: expected two scales [s1, s2], got {s!r}")
-    return _scale(s[0], f"{where}[0]"), _scale(s[1], f"{where}[1]")
+    return scale_value(s[0], f"{where}[0]"), scale_value(s[1], f"{where}[1]")
 
 
 def _ref(node, where: str):
@@ -135,19 +135,19 @@ def _ref(node, where: str):
 
 def Ball(node, scale: float = 1.0, material=None) -> Prim:
     """Ball(node, s): the node's centre, s times its radius."""
-    return Prim(_ref(node, "ball.node"), _scale(scale, "ball.scale"), None, 0.0, material)
+    return Prim(_ref(node, "ball.node"), scale_value(scale, "ball.scale"), None, 0.0, material)
 
 
 def Beam(a, b, scale=(1.0, 1.0), material=None) -> Prim:
     """Beam(a, b, (s1, s2)): the convex hull of Ball(a, s1) and Ball(b, s2)."""
-    s1, s2 = _pair(scale, "beam.scale")
+    s1, s2 = scale_pair(scale, "beam.scale")
     return Prim(_ref(a, "beam.from"), s1, _ref(b, "beam.to"), s2, material)
 
 
 def HollowBeam(a, b, scale=(1.0, 1.0), hollow: float = 0.5, material=None) -> Compound:
     """Beam(s1, s2) − Beam(h s1, h s2), h ∈ (0, 1) (§5.4)."""
-    s1, s2 = _pair(scale, "hollow_beam.scale")
-    h = _scale(hollow, "hollow_beam.hollow")
+    s1, s2 = scale_pair(scale, "hollow_beam.scale")
+    h = scale_value(hollow, "hollow_beam.hollow")
     if not 0 < h < 1:
         raise PleError(f"hollow_beam.hollow: must be in (0, 1), got {hollow!r}")
     return Compound("hollow_beam", (_ref(a, "hollow_beam.from"), _ref(b, "hollow_beam.to"), s1, s2, h), material)
@@ -155,14 +155,14 @@ def HollowBeam(a, b, scale=(1.0, 1.0), hollow: float = 0.5, material=None) -> Co
 
 def ExtendedHub(node, scale=(1.0, 1.0), material=None) -> Compound:
     """The union of the whole beams incident on a node (§5.4.1): s1 at the node, s2 at the other end."""
-    s1, s2 = _pair(scale, "extended_hub.scale")
+    s1, s2 = scale_pair(scale, "extended_hub.scale")
     return Compound("extended_hub", (_ref(node, "extended_hub.node"), s1, s2), material)
 
 
 def Connector(node, outer: float, inner: float, reach: float, material=None) -> Compound:
     """Ball(node, reach) ∩ ExtendedHub(outer) − ExtendedHub(inner) (§5.4.2)."""
-    s1, s2 = _scale(outer, "connector.outer"), _scale(inner, "connector.inner")
-    r = _scale(reach, "connector.reach")
+    s1, s2 = scale_value(outer, "connector.outer"), scale_value(inner, "connector.inner")
+    r = scale_value(reach, "connector.reach")
     if s2 >= s1:
         raise PleError(f"connector.inner: must be smaller than outer ({s1}), got {s2}")
     return Compound("connector", (_ref(node, "connector.node"), s1, s2, r), material)

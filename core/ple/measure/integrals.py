@@ -263,7 +263,7 @@ def _incident(lat: Lattice):
     return out
 
 
-def _segments(count: int, reach: int, similar: bool):
+def row_segments(count: int, reach: int, similar: bool):
     """Index segments (start, stop, representative) along one direction: boundary indices
     one by one, the interior (where every beam-pattern's partner exists) as one segment
     when hubs along this direction are similar copies of each other."""
@@ -281,12 +281,7 @@ def _series(s: float, power: int, start: int, stop: int, rep: int) -> float:
     return geometric_sum(q, stop - start, q ** (start - rep))
 
 
-def _similar_axes(lat: Lattice) -> tuple[bool, bool, bool]:
-    """Directions along which hubs (of equal beam presence) are similar copies (``similar_axes``)."""
-    return similar_axes(lat)
-
-
-def _rep_hubs(lat: Lattice, segs):
+def rep_hubs(lat: Lattice, segs):
     """Representative hubs of every segment box: indices (H, 4) and per-hub area/volume series
     weights (the §3.6 sums over the segment box of s^2 and s^3 powers)."""
     s = (lat.U.factor, lat.V.factor, lat.W.factor)
@@ -317,7 +312,7 @@ def incidence_table(lat: Lattice):
     return offs, partner, valid
 
 
-def _hub_geometry(lat: Lattice, idx: np.ndarray, box=None, partners: bool = False):
+def hub_geometry(lat: Lattice, idx: np.ndarray, box=None, partners: bool = False):
     """Per hub (H rows of (i, j, k, n)): its node radius, partner offsets (H, B, 3) and radii
     (H, B) in the hub's own group frame (divided by the group's factor), presence mask (H, B)
     and the group factor (H,); with ``partners``, also the partners' indices (H, B, 4). Absent
@@ -364,13 +359,13 @@ def lattice_measures(lat: Lattice, method: str = "closed", grid: int = 0, max_hu
     if method not in ("closed", "sum"):
         raise PleError(f"unknown area/volume method {method!r} (closed or sum)")
     reach = [max([abs(b.offset[d]) for b in lat.beams], default=0) for d in range(3)]
-    similar = _similar_axes(lat) if method == "closed" else (False, False, False)
-    segs = [_segments(c, rch, sim) for c, rch, sim in zip(lat.counts, reach, similar)]
+    similar = similar_axes(lat) if method == "closed" else (False, False, False)
+    segs = [row_segments(c, rch, sim) for c, rch, sim in zip(lat.counts, reach, similar)]
     n_hubs = len(segs[0]) * len(segs[1]) * len(segs[2]) * len(lat.nodes)
     if n_hubs > max_hubs:
         return {"area_method": f"skipped: {n_hubs} hub classes to measure (limit {max_hubs})"}
-    idx, wa, wv = _rep_hubs(lat, segs)
-    ra, off, rb, present, f = _hub_geometry(lat, idx)
+    idx, wa, wv = rep_hubs(lat, segs)
+    ra, off, rb, present, f = hub_geometry(lat, idx)
     area, volume, shapes, geometries = _measure_hubs(idx, ra, off, rb, present, f, wa, wv, grid)
     axes = "".join(name for name, sim in zip("UVW", similar) if sim)
     label = {"UVW": "closed form O(1) (§3.7)", "VW": "closed form O(ū) (§3.6)",
@@ -422,7 +417,7 @@ def kept_measures(lat: Lattice, region=None, grid: int = 0, max_nodes: int = MAX
         idx = ev.node_index
         if not len(idx):
             continue
-        ra, off, rb, present, f, partner = _hub_geometry(lat, idx, partners=True)
+        ra, off, rb, present, f, partner = hub_geometry(lat, idx, partners=True)
         inside = np.all((partner[..., :3] >= lo) & (partner[..., :3] < hi), axis=-1)
         present &= inside
         if lat.filter is not None and present.any():

@@ -33,7 +33,7 @@ from ..errors import PleError
 from ..model.lattice import Lattice
 from ..queries.overlaps import reach, similar_axes
 from ..queries.plans import lattice_key
-from .integrals import MAX_HUBS, _hub_geometry, _segments, hub_moments, incidence_table, unique_rows
+from .integrals import MAX_HUBS, hub_geometry, hub_moments, incidence_table, row_segments, unique_rows
 
 HUB_CHUNK = 1 << 16  # kept hubs per block of the per-hub sums
 MAX_KEPT_NODES = 20_000_000  # filtered lattices are evaluated in full; beyond this, no moments
@@ -73,7 +73,7 @@ def _classes(lat: Lattice, reps: np.ndarray, box, grid: int, weights, present=No
     their own kept beams ``present`` (H, B). ``weights`` (H, 2): each hub's area and volume weight in
     the lattice's sum (for the quadrature's error control). Returns (class per hub, areas, moments,
     stats)."""
-    ra, off, rb, box_present, f = _hub_geometry(lat, reps, box)
+    ra, off, rb, box_present, f = hub_geometry(lat, reps, box)
     if present is None:
         present, hub_rep = box_present, np.arange(len(reps))
     key = np.round(np.concatenate([reps[:, 3:], ra[:, None], off.reshape(len(reps), -1), rb], axis=1), 9)
@@ -135,7 +135,7 @@ def mass_properties(lat: Lattice, region=None, method: str = "auto", grid: int =
 def _unfiltered(lat: Lattice, box, method: str, grid: int) -> dict:
     lo, hi = box
     similar = similar_axes(lat) if method == "auto" else (False, False, False)
-    segs = [[(a + x0, b + x0, rep + x0) for a, b, rep in _segments(int(x1 - x0), rch, sim)]
+    segs = [[(a + x0, b + x0, rep + x0) for a, b, rep in row_segments(int(x1 - x0), rch, sim)]
             for x0, x1, rch, sim in zip(lo, hi, reach(lat), similar)]
     n_hubs = len(segs[0]) * len(segs[1]) * len(segs[2]) * len(lat.nodes)
     if n_hubs > MAX_HUBS:

@@ -148,7 +148,7 @@ def _task_bounds(n: int) -> list:
 
 def _hub_templates_task(args):
     """``hub_templates`` of args (the last: the beam set's representatives so far), in a template
-    process (``_Tessellator.pool``) or not. Returns (templates packed for the template table,
+    process (``Tessellator.pool``) or not. Returns (templates packed for the template table,
     hint, representatives)."""
     *args, reps = args
     reps = list(reps)
@@ -232,7 +232,7 @@ def zippers(angles_a: np.ndarray, angles_b: np.ndarray) -> np.ndarray:
     return np.stack([ring, np.where(is_b[..., None], ib, ia)], axis=-1).astype(np.int64)
 
 
-class _Tessellator:
+class Tessellator:
     """Builds region meshes box by box, caching hub templates and beam strips."""
 
     def __init__(self, lat: Lattice, region: Region, style: str, levels: int, segments: int,
@@ -913,9 +913,6 @@ def check_fillet(fillet, style: str):
     return float(fillet)
 
 
-_check_fillet = check_fillet
-
-
 def resolve_style(style: str, levels: int | None, segments: int | None) -> tuple[int, int]:
     style_named(style)
     levels = DEFAULT_LEVELS if levels is None else int(levels)
@@ -941,7 +938,7 @@ def tessellation_box(lat: Lattice, region, box, style: str = "refined", levels: 
         raise PleError("a lattice filling a body by 'any' is cut at the body's surface in one piece: "
                        "mesh it without parts")
     r = lat.region(region)
-    return _Tessellator(lat, r, style, levels, segments, grid=grid).build(lat.region(box))
+    return Tessellator(lat, r, style, levels, segments, grid=grid).build(lat.region(box))
 
 
 def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,
@@ -967,7 +964,7 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
 
         ev = lat.evaluate(r)
         return balls_beams_mesh(ev.center, ev.radius, ev.beam_nodes)
-    tess = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style))
+    tess = Tessellator(lat, r, style, levels, segments, check_fillet(fillet, style))
     report = None
     if unclean is not None and lat.group_map is None:  # rows of this region's evaluation
         report, ev = unclean, lat.evaluate(r)
@@ -983,7 +980,7 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     return clip_to_bodies(mesh, bodies if cut else [], contain)  # a lattice filling a body by `any` ends at its surface
 
 
-def leave_to_unions(tess: _Tessellator, ev, report) -> list:
+def leave_to_unions(tess: Tessellator, ev, report) -> list:
     """Tell the fast path which hubs and beams the local unions of ``report`` mesh
     (``ple.meshing.unions``); returns the clusters."""
     cl = clusters(report, ev.beam_nodes, ev.center, ev.radius)
@@ -998,7 +995,7 @@ def leave_to_unions(tess: _Tessellator, ev, report) -> list:
     return cl
 
 
-def build_with_unions(tess: _Tessellator, ev, report) -> tuple[np.ndarray, np.ndarray]:
+def build_with_unions(tess: Tessellator, ev, report) -> tuple[np.ndarray, np.ndarray]:
     """The region's mesh in memory: the fast path without the clusters of ``report``, and their
     local unions, welded where they share their rings' vertices, put on the output grid (the
     mesh every float32 file of it holds)."""
@@ -1012,7 +1009,7 @@ def build_with_unions(tess: _Tessellator, ev, report) -> tuple[np.ndarray, np.nd
 MAX_CLUSTER_GROWTH = 16  # times a cluster takes in the clean junctions whose rings its union touched
 
 
-def union_pieces(tess: _Tessellator, ev, cl: list, report=None, chunk: int = 512):
+def union_pieces(tess: Tessellator, ev, cl: list, report=None, chunk: int = 512):
     """The meshes (vertices, faces) of the clusters ``cl`` (``leave_to_unions``), one by one: each
     open along the contact rings it shares with the fast path, whose vertices it takes from the
     hub templates placed as the boxes place them (``assembly.place``), ``chunk`` clusters' rings
@@ -1065,7 +1062,7 @@ MAX_WAITING = 64  # copies of batched shapes held before the batch is united (th
 class _UnionQueue:
     """The clusters of ``union_pieces`` on their way to pieces: pending, batched, settled."""
 
-    def __init__(self, tess: _Tessellator, ev, cl: list, report, chunk: int):
+    def __init__(self, tess: Tessellator, ev, cl: list, report, chunk: int):
         self.tess, self.ev, self.report, self.chunk = tess, ev, report, chunk
         self.idx = np.asarray(ev.node_index, np.int64)
         self.bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
@@ -1220,7 +1217,7 @@ class _UnionQueue:
         return c, _cluster_rings(self.tess, idx, bn, pattern, [c])[0]
 
 
-def _cluster_rings(tess: _Tessellator, idx, bn, pattern, part: list) -> list:
+def _cluster_rings(tess: Tessellator, idx, bn, pattern, part: list) -> list:
     """Per cluster of ``part``, its rings (beam row, end) -> vertices (k, 3) placed as the boxes
     place them: the contact rings of the clean junctions at the ends of its beams."""
     ends = []
@@ -1270,7 +1267,7 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
         return
     lat, r = lat.per_hub(r)  # groups not similar (Möbius, TMI): every hub its own template
     workers = max(1, int(workers))
-    tess = _tess if _tess is not None else _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style),
+    tess = _tess if _tess is not None else Tessellator(lat, r, style, levels, segments, check_fillet(fillet, style),
                                                         workers=workers)
     # a box of at most about BOX_TRIANGLES triangles (estimated from above): workers + 1 of them are alive
     per_group = len(lat.nodes) * hub_triangles(mean_degree(lat), style, levels, segments)
@@ -1281,7 +1278,7 @@ def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: in
         tess.close_pool()
 
 
-def _stream_boxes(tess: _Tessellator, boxes: list, workers: int, encode=None):
+def _stream_boxes(tess: Tessellator, boxes: list, workers: int, encode=None):
     """``iter_triangles``' boxes: prepared in order by one thread, assembled (and encoded) by ``workers``."""
 
     arrays = ArrayPool()
@@ -1424,7 +1421,7 @@ def checked_stream(lat: Lattice, region=None, style: str = "refined", levels: in
     if clip_bodies(lat):  # cut at a body's surface: one Boolean of the whole mesh, in memory
         return None, None
     lat, r = lat.per_hub(region)  # groups not similar (Möbius, TMI): every hub its own template
-    tess = _Tessellator(lat, r, style, levels, segments, _check_fillet(fillet, style), grid=grid,
+    tess = Tessellator(lat, r, style, levels, segments, check_fillet(fillet, style), grid=grid,
                         workers=max(1, int(workers)))  # grid: the region's output_grid when the caller has it
     report, ev = tess.find_unclean() if r.groups <= MAX_CHECK_GROUPS else (None, None)
     boxes = iter_triangles(lat, r, style, levels, segments, max_groups, _tess=tess, workers=workers, encode=encode)

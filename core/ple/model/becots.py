@@ -29,7 +29,7 @@ import numpy as np
 
 from ..algebra.series import geometric_sum
 from ..algebra.similarity import Similarity, Translation
-from ..algebra.vectors import _as3, unit
+from ..algebra.vectors import as3, unit
 from ..errors import PleError
 
 TWO_PI = 2.0 * math.pi
@@ -65,7 +65,7 @@ class BeCOTSField:
 
         ``branch = (ku, kv)`` adds ``2π ku`` and ``2π kv`` full turns to U's and V's rotation
         angles (the corners stay put; the map wraps more around its cone)."""
-        pts = [_as3(p, f"corner {n}") for p, n in zip((a, b, c, d), "ABCD")]
+        pts = [as3(p, f"corner {n}") for p, n in zip((a, b, c, d), "ABCD")]
         ku, kv = _branch(branch)
         A, B, C, D = pts
         names = "ABCD"
@@ -362,16 +362,16 @@ class BeCOTSField:
             raise PleError(f"{where}.kind: expected one of {', '.join(KINDS)}")
         try:
             if d["kind"] == "translation":
-                fld = BeCOTSField("translation", _as3(d["a"], f"{where}.a"), tu=_as3(d["tu"], f"{where}.tu"),
-                                  tv=_as3(d["tv"], f"{where}.tv"))
+                fld = BeCOTSField("translation", as3(d["a"], f"{where}.a"), tu=as3(d["tu"], f"{where}.tu"),
+                                  tv=as3(d["tv"], f"{where}.tv"))
             else:
                 u, v = (tuple(float(x) for x in d[k]) for k in ("u", "v"))
                 if len(u) != 2 or len(v) != 2 or not all(math.isfinite(x) for x in u + v):
                     raise PleError(f"{where}.u/v: expected two finite numbers each")
-                axis = _as3(d["axis"], f"{where}.axis")
+                axis = as3(d["axis"], f"{where}.axis")
                 if np.linalg.norm(axis) < 1e-12:
                     raise PleError(f"{where}.axis: zero vector")
-                fld = BeCOTSField(d["kind"], _as3(d["a"], f"{where}.a"), _as3(d["apex"], f"{where}.apex"),
+                fld = BeCOTSField(d["kind"], as3(d["a"], f"{where}.a"), as3(d["apex"], f"{where}.apex"),
                                   unit(axis), u, v)
         except KeyError as exc:
             raise PleError(f"{where}.{exc.args[0]}: missing") from None

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..algebra.mobius import Mobius
 from ..algebra.similarity import Similarity, similarity_from_dict
-from ..algebra.vectors import _as3
+from ..algebra.vectors import as3
 from ..errors import PleError
 from .becots import BeCOTSField, Stack
 from .budget import check_finite
@@ -323,7 +323,7 @@ def becots_from_ir(lat: Lattice, data, where: str = "becots") -> None:
 def _ir_point(p, where: str) -> np.ndarray:
     if not isinstance(p, list) or len(p) != 3 or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in p):
         raise PleError(f"{where}: expected 3 numbers, got {p!r}")
-    return _as3(p, where)
+    return as3(p, where)
 
 
 def _stack_from_ir(d, lat: Lattice, where: str) -> Stack:
@@ -331,7 +331,7 @@ def _stack_from_ir(d, lat: Lattice, where: str) -> Stack:
         raise PleError(f"{where}: expected an object")
     try:
         layers, per = int(d["layers"]), int(d["nodes_per_layer"])
-        step = _as3(d["step"], f"{where}.step")
+        step = as3(d["step"], f"{where}.step")
     except KeyError as exc:
         raise PleError(f"{where}.{exc.args[0]}: missing") from None
     except (TypeError, ValueError):

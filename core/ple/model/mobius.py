@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..algebra.mobius import Cline, Mobius, _complex, map_balls
+from ..algebra.mobius import Cline, Mobius, as_complex, map_balls
 from ..algebra.similarity import Similarity
 from ..errors import PleError
 from .groupmap import GroupMap
@@ -87,7 +87,7 @@ def mobius_lattice(template: Lattice, u: Mobius, v: Mobius | None = None, w: Mob
 def mobius_frames_lattice(template: Lattice, x, y, z, counts=(1, 1)) -> Lattice:
     """The Möbius steady 2-pattern of three Möbius frames (§11.3): frame X places the template
     (given in the identity frame), U takes X to Y and V takes X to Z."""
-    fx, fy, fz = ([_complex(p) for p in f] for f in (x, y, z))
+    fx, fy, fz = ([as_complex(p) for p in f] for f in (x, y, z))
     u, v = Mobius.between_frames(fx, fy), Mobius.between_frames(fx, fz)
     nu, nv = _pair(counts)
     return mobius_lattice(template, u, v, None, (nu, nv, 1), Mobius.from_frame(*fx))
@@ -111,7 +111,7 @@ class TMIMap:
     def from_six(a, b, c, x, y, z) -> TMIMap:
         """§11.4.1: Möbius frames H1 = {A, B, C}, H2 = {X, Y, Z}; M(0,0)=B, M(0,1)=C, M(1,0)=Y,
         M(1,1)=Z (A and X only choose the inversion)."""
-        pa, pb, pc, px, py, pz = (_complex(p) for p in (a, b, c, x, y, z))
+        pa, pb, pc, px, py, pz = (as_complex(p) for p in (a, b, c, x, y, z))
         g = Mobius.between_frames((pa, pb, pc), (px, py, pz))
         if g.is_similarity:  # H1 and H2 similar: the TMI is the COTS of B, C, Y, Z
             return TMIMap(Mobius.from_similarity(Similarity.from_point_pairs(_xy(pb), _xy(pc), _xy(py), _xy(pz))),
@@ -127,7 +127,7 @@ class TMIMap:
     @staticmethod
     def from_five(a, b, c, d, e) -> TMIMap:
         """§11.4.2: M(0,0)=A, M(1,0)=B, M(0,1)=C, M(1,1)=D, M(.5,0)=E."""
-        pa, pb, pc, pd, pe = (_complex(p) for p in (a, b, c, d, e))
+        pa, pb, pc, pd, pe = (as_complex(p) for p in (a, b, c, d, e))
         swap = Mobius.between_frames((pa, pb, pc), (pd, pc, pb))  # I: {A,B,C} -> {D,C,B}
         pz = complex(swap(np.array([pe]))[0])  # Z = I(E) = M(.5, 1)
         six = TMIMap.from_six(pe, pa, pb, pz, pc, pd)  # its u runs A->C: swap the parameters
@@ -194,7 +194,7 @@ def with_control_frames(lat: Lattice, frames: dict) -> Lattice:
     bad = sorted(set(frames) - set(have))
     if bad:
         raise PleError(f"control frame {bad[0]!r}: this lattice has only {', '.join(have)}")
-    f = {**have, **{k: tuple(_complex(p) for p in v) for k, v in frames.items()}}
+    f = {**have, **{k: tuple(as_complex(p) for p in v) for k, v in frames.items()}}
     gx = Mobius.from_frame(*f["X"])
     u, v, w = (Mobius.between_frames(f["X"], f[n]) if n in f else None for n in ("Y", "Z", "W"))
     out = lat.copy()
@@ -206,7 +206,7 @@ def frame_handles(frame) -> tuple[np.ndarray, np.ndarray]:
     """A Möbius frame {A, B, C} shown as a similarity frame and a handle: the 4x4 matrix with
     origin A, x axis along AB scaled |AB| (z up, the plane z = 0) and C in that frame's
     coordinates (3,). A similarity frame has C at (0, 1, 0); moving C bends the frame."""
-    a, b, c = (_complex(p) for p in frame)
+    a, b, c = (as_complex(p) for p in frame)
     ab = b - a
     if abs(ab) == 0:
         raise PleError("Möbius frame: A and B coincide")
@@ -235,5 +235,5 @@ def control_frames_code(frames: dict, digits: int = 6) -> str:
     def pt(z: complex) -> str:
         return f"({round(z.real, digits)!r}, {round(z.imag, digits)!r})"
 
-    body = ", ".join(f'"{k}": ({", ".join(pt(_complex(p)) for p in frames[k])})' for k in sorted(frames))
+    body = ", ".join(f'"{k}": ({", ".join(pt(as_complex(p)) for p in frames[k])})' for k in sorted(frames))
     return f"lat = with_control_frames(lat, {{{body}}})"

@@ -35,7 +35,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* one row map (rangefinder.RowMap) as packed by rangefinder._packed_map: MAP_WIDTH doubles */
+/* one row map (rangefinder.RowMap) as packed by rangefinder.packed_map: MAP_WIDTH doubles */
 enum {
     M_COUNT, M_HAS_T, M_A, M_OA = M_A + 3, M_NA, M_HAS_D, M_LOG_D, M_F, M_HAS_R = M_F + 3, M_THETA, M_AXIS,
     M_POINT = M_AXIS + 3, M_REF = M_POINT + 3, M_SIDE = M_REF + 3, M_PERIOD = M_SIDE + 3, MAP_WIDTH = 32

@@ -51,7 +51,7 @@ def query(lat: Lattice, centers, radii, method: str = "auto", beams: bool = True
     if lat.becots is not None and method != "naive":
         return _kept(lat, _nodes_only(becots_rangefinder.query(lat, c, r), beams))
     if method == "naive":
-        node_hits, beam_hits = _naive_hits(lat, c, r, beams)
+        node_hits, beam_hits = naive_hits(lat, c, r, beams)
         path = "naive"
     elif pullback.fits(lat) and (not beams or cached_plan(lat).path == "uv"):
         return _kept(lat, pullback.query(lat, c, r, beams))
@@ -87,13 +87,13 @@ def _group_map_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, method: str) -> 
     element is tested, O(elements) per query, and the path names why."""
     pl = None if method == "naive" else mobius_rangefinder.cached_plan(lat)
     if pl is None or pl.pre is None:
-        node_hits, beam_hits = _naive_hits(lat, c, r)
+        node_hits, beam_hits = naive_hits(lat, c, r)
         why = "" if pl is None else f": {pl.reason}"
         return split_hits(len(c), node_hits, beam_hits, f"naive (group map{why})")
     node_hits, beam_hits, rest, path = mobius_rangefinder.lattice_hits(lat, c, r, pl)
     if rest.any():  # query balls around the inversion centre: tested against every element
         ids = np.flatnonzero(rest)
-        nh, bh = _naive_hits(lat, c[ids], r[ids])
+        nh, bh = naive_hits(lat, c[ids], r[ids])
         nh[:, 0], bh[:, 0] = ids[nh[:, 0]], ids[bh[:, 0]]
         node_hits, beam_hits = np.concatenate([node_hits, nh]), np.concatenate([beam_hits, bh])
     return split_hits(len(c), node_hits, beam_hits, f"mobius ({path})")
@@ -188,10 +188,10 @@ def _beam_balls(lat: Lattice, beams: np.ndarray):
     return start, end
 
 
-def _naive_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True):
+def naive_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True):
     """Exact tests of every query against every node (and beam), streamed over slabs."""
     if len(c) > NAIVE_QUERY_BATCH:
-        parts = [_naive_hits(lat, c[s:s + NAIVE_QUERY_BATCH], r[s:s + NAIVE_QUERY_BATCH], beams)
+        parts = [naive_hits(lat, c[s:s + NAIVE_QUERY_BATCH], r[s:s + NAIVE_QUERY_BATCH], beams)
                  for s in range(0, len(c), NAIVE_QUERY_BATCH)]
         shift = lambda h, s: h + np.array([s, 0, 0, 0, 0])  # noqa: E731
         return (np.concatenate([shift(n, s) for (n, _), s in zip(parts, range(0, len(c), NAIVE_QUERY_BATCH))]),
@@ -223,7 +223,7 @@ def _naive_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True):
 
 def naive_any(lat: Lattice, c: np.ndarray, r: np.ndarray) -> np.ndarray:
     """Reference ``any_hit`` by the naive path."""
-    nh, bh = _naive_hits(lat, c, r)
+    nh, bh = naive_hits(lat, c, r)
     out = np.zeros(len(c), dtype=bool)
     out[nh[:, 0]] = True
     out[bh[:, 0]] = True

@@ -41,17 +41,21 @@ from .plans import cached
 from .rangefinder import (
     MAX_WRAP_STEPS,
     RANGE_SLACK,
-    _compiled,
-    _expand,
-    _frame_balls,
-    _packed_extents,
-    _packed_map,
-    _to_frame,
     ball_extents,
     cached_plan,
     candidate_range,
     compiled_fits,
+    expand_ranges,
+    frame_balls,
+    packed_extents,
+    packed_map,
+    to_frame,
 )
+
+try:  # the compiled forms (setup.py, optional), as in rangefinder
+    from . import _rangefinder as _compiled
+except ImportError:  # not built (no C compiler): numpy
+    _compiled = None
 
 MAX_SLAB_BALLS = 1 << 21  # base-slab balls × W powers kept by one plan; larger lattices use lattice_hits
 MARGIN = 1e-9  # relative widening of search radii: rounding never loses a touching element
@@ -162,7 +166,7 @@ def build(lat: Lattice) -> _Plan:
     gi, gj = (x.reshape(-1) for x in np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij"))
     idx = np.stack([np.repeat(gi, nn), np.repeat(gj, nn), np.zeros(len(gi) * nn, np.int64),
                     np.tile(np.arange(nn), len(gi))], axis=1)
-    c0, r0 = _frame_balls(lat, idx)
+    c0, r0 = frame_balls(lat, idx)
     c0, r0 = c0.reshape(nu, nv, nn, 3), r0.reshape(nu, nv, nn)
     zero = np.zeros(1)
     ext_w = _hull(ball_extents(mw, c0.reshape(-1, 3), zero))
@@ -205,8 +209,8 @@ def _kernel_arrays(pl: _Plan) -> tuple:
         balls.append(np.concatenate([c, r[..., None]], axis=-1))
     nn = pl.slab[0][1].shape[2]
     (wm, wf), (vm, vf) = pl.w_inv, pl.v_inv
-    return (np.concatenate([_packed_map(m) for m in pl.maps]), _packed_extents(pl.ext_w, 1),
-            _packed_extents(pl.ext_v, 1), _packed_extents(pl.ext_u, nn), np.ascontiguousarray(wm.reshape(-1, 12)),
+    return (np.concatenate([packed_map(m) for m in pl.maps]), packed_extents(pl.ext_w, 1),
+            packed_extents(pl.ext_v, 1), packed_extents(pl.ext_u, nn), np.ascontiguousarray(wm.reshape(-1, 12)),
             np.ascontiguousarray(wf, dtype=float), np.ascontiguousarray(vm.reshape(-1, 12)),
             np.ascontiguousarray(vf, dtype=float),
             np.ascontiguousarray(np.stack(balls)), slot, pl.clearance.bound,
@@ -232,7 +236,7 @@ def query(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True) -> BIQ
     pl = cached_pullback(lat)
     if pl.kernel is None:
         return split_hits(len(c), *_query_numpy(lat, c, r, beams), "pullback")
-    qc, qr = _to_frame(lat, c, r)
+    qc, qr = to_frame(lat, c, r)
     h = _margin(pl, beams)
     cl = pl.clearance
     params = np.array([h, h * pl.grow, pl.beam_r * (1 + MARGIN), 1 + MARGIN, TOUCH_TOL, RANGE_SLACK, MAX_WRAP_STEPS,
@@ -258,23 +262,23 @@ def _query_numpy(lat: Lattice, c: np.ndarray, r: np.ndarray, beams: bool = True)
     mu, mv, mw = pl.maps
     nu, nv, nw = lat.counts
     nn = len(lat.nodes)
-    qc, qr = _to_frame(lat, c, r)
+    qc, qr = to_frame(lat, c, r)
     h = _margin(pl, beams)
     # 1. k: W-map of the query, widened by the margin at the largest scale of W**k
     lo, hi = candidate_range(mw, pl.ext_w, ball_extents(mw, qc, (qr + h * pl.grow) * (1 + MARGIN)), (len(qc),))
-    qid, k = _expand(lo, hi)
+    qid, k = expand_ranges(lo, hi)
     y, rho = _pull(pl.w_inv, k, qc[qid], qr[qid])  # the query in the base slab's frame
     near = pl.clearance.lower_bound(y) <= (rho + h) * (1 + MARGIN)  # W**-k B reaches the slab at all
     qid, k, y, rho = qid[near], k[near], y[near], rho[near]
     # 2. j: V-map of the pulled query against the U-row
     lo, hi = candidate_range(mv, pl.ext_v, ball_extents(mv, y, (rho + h) * (1 + MARGIN)), (len(y),))
-    row, j = _expand(lo, hi)
+    row, j = expand_ranges(lo, hi)
     z, zr = _pull(pl.v_inv, j, y[row], (rho[row] + h) * (1 + MARGIN))
     # 3. i: U-map of the twice pulled query against each template node
     lo, hi = candidate_range(mu, {key: (s[None], e[None]) for key, (s, e) in pl.ext_u.items()},
                              {key: (s[:, None], e[:, None]) for key, (s, e) in ball_extents(mu, z, zr).items()},
                              (len(z), nn))
-    cand, i = _expand(lo.reshape(-1), hi.reshape(-1))
+    cand, i = expand_ranges(lo.reshape(-1), hi.reshape(-1))
     r2, n = cand // nn, cand % nn
     s, jj = row[r2], j[r2]  # s: rows of (y, rho), the query in the base slab's frame
     c0, r0 = pl.slab[0]

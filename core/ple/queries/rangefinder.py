@@ -282,7 +282,7 @@ def _invariant(rm: RowMap, s: Similarity, pts: np.ndarray) -> bool:
 
 def _sample_points(lat: Lattice) -> np.ndarray:
     rng = np.random.default_rng(12345)
-    c = _frame_balls(lat, np.array([[0, 0, 0, n] for n in range(len(lat.nodes))]))[0]
+    c = frame_balls(lat, np.array([[0, 0, 0, n] for n in range(len(lat.nodes))]))[0]
     scale = max(1.0, float(np.abs(c).max()))
     return np.concatenate([c, c[0] + rng.normal(size=(12, 3)) * scale])
 
@@ -318,7 +318,7 @@ def plan(lat: Lattice) -> _Plan:
 
 
 # ----- element geometry in the lattice frame (placement G undone) -------------------------------
-def _frame_balls(lat: Lattice, index: np.ndarray):
+def frame_balls(lat: Lattice, index: np.ndarray):
     c, r = lat.node_balls(index)
     g = lat.placement
     if g.kind == "identity":
@@ -336,7 +336,7 @@ def _element_extents(lat: Lattice, rm: RowMap, gi, gj, gk):
     nn, pats = len(lat.nodes), _pattern_table(lat)
     g = len(gi)
     idx = np.stack([np.repeat(gi, nn), np.repeat(gj, nn), np.repeat(gk, nn), np.tile(np.arange(nn), g)], axis=1)
-    nc, nr = _frame_balls(lat, idx)
+    nc, nr = frame_balls(lat, idx)
     nc, nr = nc.reshape(g, nn, 3), nr.reshape(g, nn)
     ext = {key: (s.reshape(g, nn), e.reshape(g, nn)) for key, (s, e) in ball_extents(rm, nc, nr).items()}
     centers, radii = [nc], [nr]
@@ -345,7 +345,7 @@ def _element_extents(lat: Lattice, rm: RowMap, gi, gj, gk):
         np_ = len(pats)
         end = np.stack([np.repeat(gi, np_) + np.tile(pats[:, 2], g), np.repeat(gj, np_) + np.tile(pats[:, 3], g),
                         np.repeat(gk, np_) + np.tile(pats[:, 4], g), np.tile(pats[:, 1], g)], axis=1)
-        cb, rb = _frame_balls(lat, end)
+        cb, rb = frame_balls(lat, end)
         cb, rb = cb.reshape(g, np_, 3), rb.reshape(g, np_)
         bext = beam_extents(rm, ca, ra, cb, rb)
         ext = {key: (np.concatenate([ext[key][0], bext[key][0]], axis=1),
@@ -362,7 +362,7 @@ def _take(ext: dict, rows, cols=None) -> dict:
     return {k: (s[rows, cols], e[rows, cols]) for k, (s, e) in ext.items()}
 
 
-def _expand(lo: np.ndarray, hi: np.ndarray):
+def expand_ranges(lo: np.ndarray, hi: np.ndarray):
     """For ranges [lo, hi] per row: (row index, value) of every integer inside, as arrays."""
     n = np.maximum(hi - lo + 1, 0)
     rows = np.repeat(np.arange(len(lo)), n)
@@ -506,10 +506,10 @@ def _boxes(ranges, qid, el) -> np.ndarray:
     (li, hi_i), (lj, hj), (lk, hk) = ranges
     keep = (hi_i >= li) & (hj >= lj) & (hk >= lk)
     li, hi_i, lj, hj, lk, hk, qid, el = (x[keep] for x in (li, hi_i, lj, hj, lk, hk, qid, el))
-    r1, i = _expand(li, hi_i)
-    r2, j = _expand(lj[r1], hj[r1])
+    r1, i = expand_ranges(li, hi_i)
+    r2, j = expand_ranges(lj[r1], hj[r1])
     r1 = r1[r2]
-    r3, k = _expand(lk[r1], hk[r1])
+    r3, k = expand_ranges(lk[r1], hk[r1])
     r1, i, j = r1[r3], i[r2][r3], j[r3]
     return np.stack([qid[r1], i, j, k, el[r1]], axis=1)
 
@@ -522,16 +522,16 @@ def _uv_candidates(lat: Lattice, t: dict, pl: _Plan, qc, qr) -> np.ndarray:
     nq, nb, ne, nv = len(qc), len(t["kr"]), pl.elements, lat.counts[1]
     qext = ball_extents(mw, qc, qr)
     lo, hi = candidate_range(mw, t["kext"], _q(qext, expand=1), (nq, nb))
-    rows, k = _expand(lo.reshape(-1), hi.reshape(-1))
+    rows, k = expand_ranges(lo.reshape(-1), hi.reshape(-1))
     qb, bb = rows // nb, rows % nb
     hit = _moved_ball_hits([(lat.W, k)], t["kc"][bb], t["kr"][bb], qc[qb], qr[qb])
     pairs = np.unique(qb[hit] * nb + bb[hit])
     qb, bb = pairs // nb, pairs % nb
     # W-rows (i, j) of the surviving blocks, their group ranges and moved group balls
-    pr, off = _expand(np.zeros(len(pairs), np.int64), t["starts"][bb + 1] - t["starts"][bb] - 1)
+    pr, off = expand_ranges(np.zeros(len(pairs), np.int64), t["starts"][bb + 1] - t["starts"][bb] - 1)
     row, qid = t["order"][t["starts"][bb[pr]] + off], qb[pr]
     lo, hi = candidate_range(mw, _take(t["gext"], row), _q(qext, qid), row.shape)
-    r, k = _expand(lo, hi)
+    r, k = expand_ranges(lo, hi)
     row, qid = row[r], qid[r]
     hit = _moved_ball_hits([(lat.W, k)], t["gc"][row], t["gr"][row], qc[qid], qr[qid])
     row, qid, k = row[hit], qid[hit], k[hit]
@@ -567,7 +567,7 @@ MAP_WIDTH = 32
 EXT_KEYS = ("t", "d", "r")  # the order of a template's extents, two doubles each
 
 
-def _packed_map(m: RowMap) -> np.ndarray:
+def packed_map(m: RowMap) -> np.ndarray:
     """A row map as the compiled forms read it: count, T-map (flag, a, origin·a, |a|), D-map
     (flag, log d, F), R-map (flag, θ, axis, point, ref, axis × ref, period)."""
     row = np.zeros(MAP_WIDTH)
@@ -582,7 +582,7 @@ def _packed_map(m: RowMap) -> np.ndarray:
     return row
 
 
-def _packed_extents(ext: dict, count: int) -> np.ndarray:
+def packed_extents(ext: dict, count: int) -> np.ndarray:
     """(count, 6) template extents [t_s, t_e, d_s, d_e, r_s, r_e] (zeros for a map absent)."""
     out = np.zeros((count, 2 * len(EXT_KEYS)))
     for col, key in enumerate(EXT_KEYS):
@@ -610,17 +610,17 @@ def _path_kernel(lat: Lattice, pl: _Plan) -> tuple:
         powers = [f64(x) for _, m, f in _power_rows(lat, pl) for x in (m.reshape(-1, 12), f)]
         tail = (*powers, f64(lat.template_centers), f64(lat.template_radii), _pattern_table(lat),
                 np.array([TOUCH_TOL, RANGE_SLACK, MAX_WRAP_STEPS], dtype=float))
-        maps = np.concatenate([_packed_map(m) for m in pl.maps])
+        maps = np.concatenate([packed_map(m) for m in pl.maps])
         if pl.path == "u":
             axis = np.concatenate(t["axis"]) if "axis" in t else np.zeros(0)
             band = np.stack(t["rho"], axis=1) if "axis" in t else np.zeros(0)
-            arrays = (maps, _packed_extents(t["gext_v"], nu), _packed_extents(t["gext_w"], nu),
-                      _packed_extents(t["ext_v"], nu * ne), _packed_extents(t["ext_w"], nu * ne), f64(t["gc"]),
+            arrays = (maps, packed_extents(t["gext_v"], nu), packed_extents(t["gext_w"], nu),
+                      packed_extents(t["ext_v"], nu * ne), packed_extents(t["ext_w"], nu * ne), f64(t["gc"]),
                       f64(t["gr"]), f64(axis), f64(band), *tail)
         else:
             nb = len(t["kr"])
-            arrays = (maps, _packed_extents(t["gext"], nu * nv), _packed_extents(t["ext"], nu * nv * ne),
-                      f64(t["gc"]), f64(t["gr"]), f64(t["kc"]), f64(t["kr"]), _packed_extents(t["kext"], nb),
+            arrays = (maps, packed_extents(t["gext"], nu * nv), packed_extents(t["ext"], nu * nv * ne),
+                      f64(t["gc"]), f64(t["gr"]), f64(t["kc"]), f64(t["kr"]), packed_extents(t["kext"], nb),
                       np.ascontiguousarray(t["order"], dtype=np.int64),
                       np.ascontiguousarray(t["starts"], dtype=np.int64), *tail)
         pl.tables["kernel"] = (_power_rows(lat, pl)[0][0], arrays)
@@ -671,7 +671,7 @@ def _balls_fast(lat: Lattice, pl: _Plan, idx: np.ndarray):
 
 def _exact(lat: Lattice, cand: np.ndarray, qc: np.ndarray, qr: np.ndarray, pl: _Plan | None = None):
     """Split candidates into node hits and beam hits (qid, i, j, k, n|pattern), exactly tested."""
-    balls = (lambda idx: _frame_balls(lat, idx)) if pl is None else (lambda idx: _balls_fast(lat, pl, idx))
+    balls = (lambda idx: frame_balls(lat, idx)) if pl is None else (lambda idx: _balls_fast(lat, pl, idx))
     nn = len(lat.nodes)
     nu, nv, nw = lat.counts
     is_node = cand[:, 4] < nn
@@ -697,7 +697,7 @@ def _exact(lat: Lattice, cand: np.ndarray, qc: np.ndarray, qr: np.ndarray, pl: _
     return node_hits, beams
 
 
-def _to_frame(lat: Lattice, c: np.ndarray, r: np.ndarray):
+def to_frame(lat: Lattice, c: np.ndarray, r: np.ndarray):
     g = lat.placement
     if g.kind == "identity":
         return c, r
@@ -718,7 +718,7 @@ def lattice_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, path: str | None = 
             raise PleError(f"path {path!r} is not available on this lattice (detected {pl.path!r}; "
                            f"only slower paths {PATH_ORDER[PATH_ORDER.index(pl.path):]} can be forced)")
         pl = pl.forced.setdefault(path, _Plan(path, pl.maps, pl.elements))
-    qc, qr = _to_frame(lat, c, r)
+    qc, qr = to_frame(lat, c, r)
     fast = not graded and max(lat.counts) <= MAX_POWER_TABLE  # cached powers know no field
     if pl.path in ("u", "uv") and fast and compiled_fits(lat):
         return *_hits_compiled(lat, pl, qc, qr), pl.path
