@@ -37,6 +37,7 @@ cage = core("model.cage")
 cleanup = core("filters.cleanup")
 grading = core("model.grading")  # radius fields: graded thickness
 ir = core("filters.ir")  # ple-lattice/1 data with filters
+irfile = core("io.irfile")  # ple-lattice/1 files: a body mesh resolved against its folder
 precision = core("algebra.precision")  # numbers read off float32 frames
 presets = core("program.presets")
 program = core("program.runtime")

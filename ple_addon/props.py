@@ -84,6 +84,8 @@ class PLE_ObjectSettings(bpy.types.PropertyGroup):  # noqa: N801 - Blender namin
                         description="Stable id of the lattice object (trust and state survive renaming)")
     filepath: StringProperty(name="Program file", subtype="FILE_PATH",
                              description="The file on disk the program text was loaded from (Reload / Save)")
+    folder: StringProperty(name="Folder", subtype="DIR_PATH",
+                           description="Where a body mesh the IR names is found (its file's folder, the presets')")
     status: StringProperty(name="Status", description="Last problem met while evaluating the lattice")
     message: StringProperty(name="Message", description="Progress or result of the last job (tessellate, export, LiL)")
 

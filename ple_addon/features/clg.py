@@ -209,8 +209,9 @@ class PLE_OT_clg_add(SourceAdd, bpy.types.Operator):  # noqa: N801 - Blender nam
 
     def execute(self, context):
         try:
-            text, kind, default_name, linked = self.source_text()
-            rig = sync.create(context, self.name or default_name, text, kind, tuple(self.region), clg=True)
+            text, kind, default_name, linked, folder = self.source_text()
+            rig = sync.create(context, self.name or default_name, text, kind, tuple(self.region), clg=True,
+                              folder=folder)
         except PleError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}

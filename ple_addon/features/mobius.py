@@ -239,12 +239,26 @@ def on_depsgraph_update(scene):
             refresh(obj)
 
 
+def meshed(obj):
+    """(rig, fn -> (lattice, region)) for an object of a Möbius rig: Tessellate and Export mesh the
+    lattice of its frames, whole (a ``meshed`` hook); None for other objects."""
+    rig = rig_of(obj)
+    if rig is None:
+        return None
+
+    def subject():
+        lat = mobius.with_control_frames(base_lattice(rig), frames_of(rig))
+        return lat, lat.region()
+
+    return rig, subject
+
+
 def route(preset: str) -> str | None:
     """Add › PLE Lattice of a Möbius preset makes a Möbius rig (a ``routes`` hook)."""
     return PLE_OT_mobius_add.bl_idname if preset in PRESETS else None
 
 
-HOOKS = (("updates", on_depsgraph_update), ("routes", route))
+HOOKS = (("updates", on_depsgraph_update), ("routes", route), ("meshed", meshed))
 CLASSES = (PLE_OT_mobius_add, PLE_OT_mobius_snippet, PLE_PT_mobius)
 
 

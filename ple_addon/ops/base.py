@@ -101,13 +101,14 @@ class SourceAdd:
         return context.window_manager.invoke_props_dialog(self)
 
     def source_text(self):
-        """(Text datablock, kind, default name, file on disk or ""); a new Text for presets and files."""
+        """(Text datablock, kind, default name, file on disk or "", folder a body mesh resolves
+        against or ""); a new Text for presets and files."""
         if self.source == "TEXT":
             text = bpy.data.texts.get(self.text)
             if text is None:
                 raise PleError(f"no text block named {self.text!r}")
             kind = "IR" if text.as_string().lstrip().startswith("{") else "PROGRAM"
-            return text, kind, Path(text.name).stem, ""
+            return text, kind, Path(text.name).stem, "", ""
         if self.source == "PRESET":
             path = self.preset_file()
         else:
@@ -121,7 +122,7 @@ class SourceAdd:
         text = bpy.data.texts.new(path.name)
         text.from_string(body)
         linked = str(path) if self.source == "FILE" else ""  # a preset is not the user's file
-        return text, ("IR" if path.suffix == ".json" else "PROGRAM"), path.stem, linked
+        return text, ("IR" if path.suffix == ".json" else "PROGRAM"), path.stem, linked, str(path.parent)
 
 
 MESH_FILES = (".stl", ".3mf", ".ply", ".obj", ".glb")

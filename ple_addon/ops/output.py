@@ -11,11 +11,35 @@ from bpy.props import (
 
 from .. import draw
 from ..corelink import PleError, needs
-from ..rig import model
+from ..rig import hooks, model
 from .base import BEYOND, EXPORT_STYLES, STYLES, RigOperator, SteppedOperator, budget, core_style, output_path
 
 
-class PLE_OT_tessellate(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+class MeshOperator(SteppedOperator):
+    """Tessellate and Export: of a steady rig's drawn region, or of a rig a feature meshes (the
+    ``meshed`` hook: a Möbius rig, whole)."""
+
+    def get_rig(self, context):
+        other = hooks.first("meshed", bpy.data.objects.get(self.rig) if self.rig else context.active_object)
+        return other[0] if other is not None else super().get_rig(context)
+
+    @classmethod
+    def poll(cls, context):
+        return hooks.first("meshed", getattr(context, "active_object", None)) is not None or super().poll(context)
+
+    def subject(self, rig):
+        """(lattice, region) to mesh: what is drawn (the panel's filter too) is what is meshed."""
+        other = hooks.first("meshed", rig)
+        if other is not None:
+            return other[1]()
+        lat = model.shown_lattice(rig)
+        region = model.region_of(rig, lat)
+        if region is None:
+            raise PleError("the region is empty: set Region from/to inside the repetition counts")
+        return lat, region
+
+
+class PLE_OT_tessellate(MeshOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
     """Tessellate the drawn region into a new mesh object (CHoCC, CNT or refined, CHoCC paper)"""
 
     bl_idname = "ple.tessellate"
@@ -26,10 +50,7 @@ class PLE_OT_tessellate(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Bl
 
     def steps(self, context, rig):
         self._rig = rig
-        lat = model.shown_lattice(rig)  # the panel's filter too: what is drawn is what is meshed
-        region = model.region_of(rig, lat)
-        if region is None:
-            raise PleError("the region is empty: set Region from/to inside the repetition counts")
+        lat, region = self.subject(rig)
         budget(lat, region, self.style, f"{self.style.lower()} tessellation of {region}",
                beyond=self.beyond_limit)
         yield 0.0
@@ -50,7 +71,7 @@ class PLE_OT_tessellate(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Bl
         yield 1.0
 
 
-class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+class PLE_OT_export(MeshOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
     """Export the drawn region as a mesh file (STL, 3MF, PLY, OBJ, GLB)"""
 
     bl_idname = "ple.export"
@@ -71,10 +92,7 @@ class PLE_OT_export(SteppedOperator, bpy.types.Operator):  # noqa: N801 - Blende
     def steps(self, context, rig):
         self._rig = rig
         path = output_path(self.filepath)
-        lat = model.shown_lattice(rig)  # the panel's filter too: what is drawn is what is meshed
-        region = model.region_of(rig, lat)
-        if region is None:
-            raise PleError("the region is empty: set Region from/to inside the repetition counts")
+        lat, region = self.subject(rig)
         streamed = path.suffix.lower() == ".stl"
         budget(lat, region, self.style, f"export of {region}", streamed=streamed, beyond=self.beyond_limit)
         yield 0.0

@@ -41,12 +41,12 @@ class PLE_OT_lattice_add(SourceAdd, bpy.types.Operator):  # noqa: N801 - Blender
             module, name = route.split(".")
             return getattr(getattr(bpy.ops, module), name)(preset=self.preset)
         try:
-            text, kind, default_name, linked = self.source_text()
+            text, kind, default_name, linked, folder = self.source_text()
         except PleError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         try:
-            rig = sync.create(context, self.name or default_name, text, kind, tuple(self.region))
+            rig = sync.create(context, self.name or default_name, text, kind, tuple(self.region), folder=folder)
         except PleError as exc:
             self.report({"ERROR"}, f"{exc} (the program is kept in text block {text.name!r})")
             return {"CANCELLED"}

@@ -15,13 +15,15 @@ functions here in its ``register()`` and takes them out in ``unregister()``.
 - ``appliers``: ``fn(rig)`` -> new text or None, Apply to Program of a text that is not a lattice
   program (a ``ple-clg/1`` file);
 - ``routes``: ``fn(preset)`` -> operator idname or None, presets that another operator adds (the
-  Möbius presets).
+  Möbius presets);
+- ``meshed``: ``fn(obj)`` -> (rig, fn() -> (lattice, region)) or None, objects of a rig that is not a
+  steady rig but that Tessellate and Export mesh (a Möbius rig).
 """
 
 from __future__ import annotations
 
 HOOKS: dict[str, list] = {name: [] for name in ("loaders", "shown", "filtering", "signatures", "after_draw",
-                                                "watchers", "updates", "appliers", "routes")}
+                                                "watchers", "updates", "appliers", "routes", "meshed")}
 
 
 def add(name: str, fn) -> None:

@@ -16,7 +16,7 @@ import bpy
 import numpy as np
 
 from .. import jobs, prefs
-from ..corelink import PleError, cage, core, ir, snippets, work
+from ..corelink import PleError, cage, core, ir, irfile, snippets, work
 from ..session import SESSION, RigState
 from . import hooks
 
@@ -110,7 +110,7 @@ def base_lattice(rig, st: RigState):
         raise PleError(f"{rig.name}: the program text block is missing")
     source = text.as_string()
     params = params_of(rig)
-    key = (rig.ple.source_kind, source, params_key(params))
+    key = (rig.ple.source_kind, source, params_key(params), rig.ple.folder)
     if key == st.program_key:
         return st.base
     if rig.ple.source_kind == "PROGRAM" and not trusted(rig):
@@ -121,7 +121,8 @@ def base_lattice(rig, st: RigState):
     if found is not None:
         inputs, base = found
     elif rig.ple.source_kind == "IR":
-        base, inputs = ir.lattice_from_ir(read_json(source, text.name)), None
+        loader = irfile.body_loader(bpy.path.abspath(rig.ple.folder)) if rig.ple.folder else None
+        base, inputs = ir.lattice_from_ir(read_json(source, text.name), loader), None
     else:
         base, inputs = jobs.run_text(source, text.name, params)  # contained: time and memory limits
     st.program_key, st.inputs, st.base = key, inputs, base

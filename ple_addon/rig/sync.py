@@ -238,14 +238,15 @@ def build_parts(rig, lat) -> None:
 
 
 def create(context, name: str, text, source_kind: str = "PROGRAM", region=(3, 3, 3), location=None,
-           clg: bool = False):
+           clg: bool = False, folder: str = ""):
     """Build a rig for ``text`` (a Text datablock) at ``location`` (default: the 3D cursor);
     raises PleError before creating anything if the program or IR is bad or the region is
-    beyond the work budget. With ``clg``, ``text`` holds a CLG and the rig edits its pattern."""
+    beyond the work budget. With ``clg``, ``text`` holds a CLG and the rig edits its pattern;
+    ``folder`` is where a body mesh the IR names is found."""
     st = RigState()
     probe = bpy.data.objects.new("~ple probe", None)  # evaluate before building anything
     try:
-        probe.ple.text, probe.ple.source_kind = text, source_kind
+        probe.ple.text, probe.ple.source_kind, probe.ple.folder = text, source_kind, folder
         probe.ple_clg.active = clg
         SESSION.trusted.add(uid(probe))
         base = base_lattice(probe, st)
@@ -263,7 +264,7 @@ def create(context, name: str, text, source_kind: str = "PROGRAM", region=(3, 3,
     rig.empty_display_type = "PLAIN_AXES"
     rig.empty_display_size = handle_size(base)
     rig.ple.role = "RIG"
-    rig.ple.text, rig.ple.source_kind = text, source_kind
+    rig.ple.text, rig.ple.source_kind, rig.ple.folder = text, source_kind, folder
     rig.ple_clg.active = clg
     rig.ple.region_max = clamped
     trust(rig)

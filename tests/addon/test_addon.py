@@ -495,7 +495,8 @@ def case_export():
     assert rig.ple.status == "" and sorted(p.name for p in tmp.iterdir() if p.name.startswith(".")) == []
     # Esc in the modal run closes the step generator, which stops the child: nothing is written
     op = type("Op", (), {"filepath": str(tmp / "cancelled.stl"), "style": "CHOCC", "beyond_limit": False,
-                         "report": print, "mesh_job": ple_ext.ops.base.SteppedOperator.mesh_job})()
+                         "report": print, "file_job": ple_ext.ops.base.SteppedOperator.file_job,
+                         "subject": ple_ext.ops.output.MeshOperator.subject})()
     steps = bpy.types.PLE_OT_export.steps(op, bpy.context, rig)
     first, second = next(steps), next(steps)
     assert first == 0.0 and 0.0 <= second < 1.0  # progress of the first boxes

@@ -74,3 +74,19 @@ def test_code_of_moved_frames_runs_in_a_program():
     got = compile_program(src).run(nu=3, nv=2)
     idx = lat.region().node_index(len(lat.nodes))
     assert np.allclose(got.node_balls(idx)[0], with_control_frames(lat, moved).node_balls(idx)[0], atol=1e-9)
+
+
+def test_frames_read_back_through_float32_keep_the_exact_map():
+    """An undragged frame shown by Blender's float32 matrices is the program's: the lattice keeps its
+    exact group map (so Export meshes as ple mesh does); a drag of 1e-4 is a move."""
+    lat = load_lattice("mobius_slab", {"nu": 4, "nv": 3, "bend": 0.08})
+    shown = {}
+    for name, frame in control_frames(lat).items():
+        m, h = frame_handles(frame)
+        shown[name] = frame_from_handles(m.astype(np.float32), h.astype(np.float32))
+    assert any(shown[k] != control_frames(lat)[k] for k in shown)  # float32 did round them
+    same = with_control_frames(lat, shown)
+    idx = lat.region().node_index(len(lat.nodes))
+    assert np.array_equal(same.node_balls(idx)[0], lat.node_balls(idx)[0])  # bit for bit
+    nudged = dict(shown, Y=tuple(p + 1e-4 for p in shown["Y"]))
+    assert not np.array_equal(with_control_frames(lat, nudged).node_balls(idx)[0], lat.node_balls(idx)[0])

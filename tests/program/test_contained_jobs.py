@@ -95,3 +95,26 @@ def test_without_fork_the_work_runs_in_process(monkeypatch):
     job = Job(lambda: lat.evaluate_steps(r, max_groups=4), "hier_lil2", 60, None, "the filter")
     assert job.done and job.take() == drain(lat.evaluate_steps(r, max_groups=4))[0]
     assert np.array_equal(job.result().beam_nodes, lat.evaluate(r).beam_nodes)
+
+
+def test_a_process_the_work_forks_ends_without_unwinding_the_work(tmp_path):
+    """multiprocessing ends a forked child with os._exit; in a job that must exit the child, not
+    unwind the stack it inherited (whose ``finally`` blocks, such as an atomic write's, would
+    remove the job's temporary file: an export whose local union ran in a child lost its file)."""
+    import multiprocessing
+
+    from ple.io.files import atomic_path
+
+    out = tmp_path / "out.txt"
+
+    def work():
+        with atomic_path(out) as tmp:
+            tmp.write_text("written")
+            child = multiprocessing.get_context("fork").Process(target=int)
+            child.start()
+            child.join()
+        return child.exitcode
+
+    assert Job(work, "forks", 30.0).result() == 0
+    assert out.read_text() == "written"
+    assert not [p for p in tmp_path.iterdir() if p.name != "out.txt"]  # no temporary left

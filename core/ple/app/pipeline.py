@@ -103,7 +103,7 @@ class MeshPlan:
         return self.request.lattice
 
     def describe(self) -> str:
-        return f"the {self.style} mesh of region {self.region}"
+        return f"the {self.style} tessellation of region {self.region}"
 
 
 def plan(request: MeshRequest) -> MeshPlan:

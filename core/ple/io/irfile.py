@@ -19,19 +19,25 @@ def read_body(path, placement=None, open: str = "error", name: str | None = None
     return importlib.import_module(f"{__package__}.bodyfile").load_body(path, placement, open, name)
 
 
+def body_loader(folder):
+    """The loader ``lattice_from_ir`` resolves a body filter's mesh with: its path resolves against
+    ``folder`` (the JSON file's folder; absolute paths stand), and the file is read as triangles
+    only, never executed. Every door that reads IR data with bodies (files, the add-on's text
+    blocks and presets) resolves through it."""
+    folder = Path(folder)
+
+    def loader(mesh: str, placement, opened: str, where: str):
+        return read_body(folder / mesh, placement, opened, f"{where} {mesh!r}")
+
+    return loader
+
+
 def load_ir(path) -> Lattice:
     """Load and validate a ``ple-lattice/1`` file."""
     path = Path(path)
     data = read_json(path, "lattice file")  # within limits: size, UTF-8, depth (ple.io.inputs)
-    folder = path.parent
-
-    def loader(mesh: str, placement, opened: str, where: str):
-        # a body's mesh path resolves against the JSON file's folder (absolute paths stand); the
-        # file is read as triangles only, never executed
-        return read_body(folder / mesh, placement, opened, f"{where} {mesh!r}")
-
     try:
-        return lattice_from_ir(data, loader)
+        return lattice_from_ir(data, body_loader(path.parent))
     except PleError as exc:
         raise PleError(f"{path}: {exc}") from None
 

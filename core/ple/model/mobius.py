@@ -19,6 +19,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..algebra.mobius import Cline, Mobius, as_complex, map_balls
+from ..algebra.precision import FLOAT32_TOL
 from ..algebra.similarity import Similarity
 from ..errors import PleError
 from .groupmap import GroupMap
@@ -194,12 +195,25 @@ def with_control_frames(lat: Lattice, frames: dict) -> Lattice:
     bad = sorted(set(frames) - set(have))
     if bad:
         raise PleError(f"control frame {bad[0]!r}: this lattice has only {', '.join(have)}")
-    f = {**have, **{k: tuple(as_complex(p) for p in v) for k, v in frames.items()}}
+    moved = {k: tuple(as_complex(p) for p in v) for k, v in frames.items()}
+    moved = {k: v for k, v in moved.items() if not unmoved(v, have[k])}
+    if not moved:  # every frame is the lattice's own, read back through float32: the lattice itself
+        return lat.copy()
+    f = {**have, **moved}
     gx = Mobius.from_frame(*f["X"])
     u, v, w = (Mobius.between_frames(f["X"], f[n]) if n in f else None for n in ("Y", "Z", "W"))
     out = lat.copy()
     out.set_group_map(MobiusGroups(u or Mobius.identity(), v, w, gx), lat.counts)
     return out
+
+
+def unmoved(frame, own, ulps: float = 8.0) -> bool:
+    """True when ``frame`` {A, B, C} is ``own`` read back through float32 (a control frame shown by
+    Blender's float32 matrices and not dragged): every point within ``ulps`` float32 units in the
+    last place of the frame's size. Such a frame keeps the program's exact Möbius map, so an
+    undragged rig meshes as the program does."""
+    size = max(1.0, *(abs(as_complex(p)) for p in own))
+    return all(abs(as_complex(p) - as_complex(q)) <= ulps * FLOAT32_TOL * size for p, q in zip(frame, own))
 
 
 def frame_handles(frame) -> tuple[np.ndarray, np.ndarray]:

@@ -133,7 +133,11 @@ def _child(write_fd: int, work: Callable[[], Any], name: str, memory: int | None
         faulthandler.disable()  # a crash is reported once, by the parent
         _limit_memory(memory)
 
+        me = os.getpid()
+
         def program_exit(code=0):
+            if os.getpid() != me:  # a process the work forked (multiprocessing ends its children so)
+                real_exit(code)  # exits: unwinding the inherited stack would run our finally blocks
             raise _ProgramExit(code)
 
         os._exit = program_exit
