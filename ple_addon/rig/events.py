@@ -60,8 +60,18 @@ def on_cumulative_changed(rig) -> None:
     on_settings_changed(rig)
 
 
+def count_edit(lat, axis: str, count: int, cumulative: bool):
+    """The count slider's edit of ``axis``: it keeps what the frame shows. A frame showing the
+    cumulative similarity keeps it, the span from group 0 to the last group (the step follows),
+    whether or not it was dragged; otherwise the count alone changes (the step, or a span the
+    program itself wrote with ``cumulative=True``, is kept)."""
+    if count > 1 and cage.shows_cumulative(lat, axis, cumulative):
+        return snippets.SetDirection(axis, count, cage.direction_similarity(lat, axis, True), True)
+    return snippets.SetDirection(axis, count)
+
+
 def on_counts_changed(rig) -> None:
-    """The counts slider: a count-only set_u/v/w edit per changed direction. Counts the core
+    """The counts slider: a set_u/v/w edit per changed direction (``count_edit``). Counts the core
     refuses (absurd, or a region beyond the work budget) are not stored: the slider goes back
     and the reason is the status."""
     if SESSION.busy or not is_rig(rig):
@@ -70,8 +80,8 @@ def on_counts_changed(rig) -> None:
     if st.lattice is None:
         return
     old_counts = st.lattice.counts
-    edits = [snippets.SetDirection(axis, int(c)) for axis, c, old in zip("uvw", rig.ple.counts, old_counts)
-             if int(c) != old]
+    edits = [count_edit(st.lattice, axis, int(c), rig.ple.cumulative[n])
+             for n, (axis, c, old) in enumerate(zip("uvw", rig.ple.counts, old_counts)) if int(c) != old]
     try:
         lat = lattice_of(rig, st, edits)
         lat.validate()

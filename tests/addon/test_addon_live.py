@@ -29,7 +29,8 @@ CASES = ["becots_redraw", "becots_apply_presets", "becots_named_return", "becots
          "apply_in_branch", "poll",
          "program_time_limit", "tessellate_budget", "bake", "materials_and_sizes", "render_colours",
          "program_file", "menu_keymap_prefs", "tessellate_steps", "live_errors_reported", "trust_per_file",
-         "refusal_stays_until_next_edit", "reenabled_addon_edits_live", "reload_keeps_slider_values"]
+         "refusal_stays_until_next_edit", "reenabled_addon_edits_live", "reload_keeps_slider_values",
+         "cumulative_counts_keep_span"]
 FRESH = {"region_budget"}
 ADDON = "bl_ext.user_default.ple"  # peak memory of the process: only a fresh one measures this case alone
 
@@ -230,6 +231,30 @@ def case_cumulative_off_then_counts():
     rig.ple.counts = (10, 10, 10)
     x3 = np.sort(region_arrays(rig)[0][:, 0])
     assert np.allclose(x3, [0, 0.5, 1.0, 1.5], atol=1e-5), x3
+
+
+def case_cumulative_counts_keep_span():
+    """A fresh rig, Cumulative on for U with no drag, U count 7 -> 14: the U frame and the last
+    group keep the span from group 0 to the last group (the step becomes its 13th root)."""
+    rig = new_rig("fig6_3")
+    fu = part(rig, "u")
+    rig.ple.cumulative = (True, False, False)
+    frame = matrix(fu)
+    last = ple_ext.rig.model.lattice_of(rig).evaluate("6:7,0:1,0:1").center
+    rig.ple.counts = (14, 12, 15)
+    assert rig.ple.status == "" and tuple(rig.ple.counts) == (14, 12, 15), rig.ple.status
+    assert np.allclose(matrix(fu), frame, atol=1e-5), (matrix(fu), frame)
+    lat = ple_ext.rig.model.lattice_of(rig)
+    assert np.allclose(lat.evaluate("13:14,0:1,0:1").center, last, atol=1e-9)
+    want = core.load_lattice("fig6_3")
+    want.set_u(14, want.u.incremental ** 6, cumulative=True)
+    assert np.allclose(lat.evaluate("0:14,0:2,0:2").center, want.evaluate("0:14,0:2,0:2").center, atol=1e-9)
+    edit = [e for e in ple_ext.rig.model.edits_of(rig) if e.axis == "u"][-1]
+    assert edit.cumulative and edit.count == 14, edit  # the stored edit says what the toggle shows
+    rig.ple.counts = (7, 12, 15)  # and back: the span still, so the step of the program again
+    assert np.allclose(matrix(fu), frame, atol=1e-5)
+    assert np.allclose(ple_ext.rig.model.lattice_of(rig).evaluate("0:7,0:2,0:2").center,
+                       core.load_lattice("fig6_3").evaluate("0:7,0:2,0:2").center, atol=1e-9)
 
 
 def case_lil_follows_coarse():
