@@ -11,7 +11,18 @@ from bpy.app.handlers import persistent
 from ..corelink import PleError, cage, snippets
 from ..session import SESSION
 from . import hooks, sync
-from .model import add_edits, all_rigs, check_budget, dependents, edits_of, is_rig, lattice_of, region_of, rig_of
+from .model import (
+    add_edits,
+    all_rigs,
+    check_budget,
+    dependents,
+    edits_of,
+    is_rig,
+    lattice_of,
+    programs,
+    region_of,
+    rig_of,
+)
 
 
 def set_quietly(settings, **values) -> None:
@@ -177,16 +188,29 @@ def on_depsgraph_update(scene, depsgraph):
 
 
 @persistent
+def on_load_pre(*_args):
+    """The open file is left (for another file, or File › New): its trusts are kept for the
+    programs it holds on disk."""
+    SESSION.keep_trust(bpy.data.filepath, SESSION.on_disk)
+
+
+@persistent
 def on_load(*_args):
-    """Trust belongs to the file it was given in: opening another .blend (even a copy holding the
-    same rig ids) trusts nothing; reopening the same file keeps it (Blender's own trust applies)."""
-    SESSION.forget_trust_of_other_files(bpy.data.filepath)
+    """Trust belongs to the file it was given in and to the program trusted: reopening that file,
+    even after File › New, keeps it for the rigs whose program is still the one trusted; another
+    .blend (even a copy holding the same rig ids) or a program changed on disk trusts nothing."""
+    SESSION.restore_trust(bpy.data.filepath, programs())
     sync.resync()
 
 
 @persistent
-def on_save(*_args):
-    SESSION.trust_file = bpy.data.filepath
+def on_save(filepath="", *_args):
+    """A file saved holds the trusts of its rigs' programs (a file saved under a new name, or as a
+    copy, carries them)."""
+    now = programs()
+    SESSION.keep_trust(filepath or bpy.data.filepath, now)
+    if not filepath or filepath == bpy.data.filepath:  # not a copy: the open file's programs on disk
+        SESSION.on_disk = now
 
 
 @persistent
@@ -195,7 +219,7 @@ def on_reset(*_args):
 
 
 HANDLERS = (("depsgraph_update_post", on_depsgraph_update), ("undo_post", on_reset), ("redo_post", on_reset),
-            ("load_post", on_load), ("save_post", on_save))
+            ("load_pre", on_load_pre), ("load_post", on_load), ("save_post", on_save))
 
 
 def resume() -> None:

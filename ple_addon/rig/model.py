@@ -9,6 +9,7 @@ region. Everything geometric is the core's; this module only reads Blender state
 
 from __future__ import annotations
 
+import hashlib
 import json
 import uuid
 
@@ -92,7 +93,17 @@ def trusted(rig) -> bool:
 
 def trust(rig) -> None:
     SESSION.trusted.add(uid(rig))
-    SESSION.trust_file = bpy.data.filepath
+
+
+def programs() -> dict:
+    """Rig uid -> fingerprint of its program (source kind and text) for the rigs of the open file:
+    what trust kept across files is checked against (``Session.restore_trust``)."""
+    out = {}
+    for rig in all_rigs():
+        if rig.ple.text is not None:
+            data = f"{rig.ple.source_kind}\0{rig.ple.text.as_string()}".encode()
+            out[uid(rig)] = hashlib.sha256(data).hexdigest()
+    return out
 
 
 def read_json(source: str, name: str):

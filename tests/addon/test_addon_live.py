@@ -30,7 +30,7 @@ CASES = ["becots_redraw", "becots_apply_presets", "becots_named_return", "becots
          "program_time_limit", "tessellate_budget", "bake", "materials_and_sizes", "render_colours",
          "program_file", "menu_keymap_prefs", "tessellate_steps", "live_errors_reported", "trust_per_file",
          "refusal_stays_until_next_edit", "reenabled_addon_edits_live", "reload_keeps_slider_values",
-         "cumulative_counts_keep_span"]
+         "cumulative_counts_keep_span", "trust_after_file_new", "trust_not_for_changed_program"]
 FRESH = {"region_budget"}
 ADDON = "bl_ext.user_default.ple"  # peak memory of the process: only a fresh one measures this case alone
 
@@ -382,6 +382,58 @@ def case_trust_per_file():
     bpy.ops.wm.open_mainfile(filepath=str(tmp / "b.blend"))
     rig = bpy.data.objects["cubic"]
     assert not ple_ext.rig.model.trusted(rig) and "trust" in rig.ple.status, rig.ple.status
+
+
+def _drag_u_works(rig):
+    """A drag of U redraws the region (the rig is trusted: its program runs without Run Program)."""
+    fu = part(rig, "u")
+    fu.location = (2.0, 0, 0)
+    update()
+    assert rig.ple.status == "", rig.ple.status
+    want = rerun(rig)
+    want.set_u(10, core.Translation(core.Vec(2, 0, 0)))
+    assert_region_is(rig, want, "0:2,0:2,0:2")
+
+
+def case_trust_after_file_new():
+    """Trust given in a file survives File › New (``read_homefile``) and reopening it: drags work
+    without Run Program."""
+    tmp = Path(tempfile.mkdtemp())
+    new_rig("cubic", region=(2, 2, 2))
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "a.blend"))
+    bpy.ops.wm.read_homefile()
+    assert not ple_ext.rig.model.all_rigs()
+    bpy.ops.wm.open_mainfile(filepath=str(tmp / "a.blend"))
+    rig = bpy.data.objects["cubic"]
+    assert ple_ext.rig.model.trusted(rig) and rig.ple.status == "", rig.ple.status
+    _drag_u_works(rig)
+
+
+def case_trust_not_for_changed_program():
+    """Trust never survives a file whose program changed on disk since it was trusted (the same
+    path, the same rig id, another program): neither after File › New nor on a direct reopen."""
+    import shutil
+
+    tmp = Path(tempfile.mkdtemp())
+    rig = new_rig("cubic", region=(2, 2, 2))
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "a.blend"))
+    text = rig.ple.text
+    text.from_string(text.as_string().replace("radius * cell", "1.5 * radius * cell"))
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "changed.blend"), copy=True)  # the program changed elsewhere
+    shutil.copy(tmp / "changed.blend", tmp / "a.blend")
+    for leave in (None, bpy.ops.wm.read_homefile):  # a direct reopen, then File › New and reopen
+        if leave is not None:
+            leave()
+        bpy.ops.wm.open_mainfile(filepath=str(tmp / "a.blend"))
+        rig = bpy.data.objects["cubic"]
+        assert not ple_ext.rig.model.trusted(rig) and "trust" in rig.ple.status, rig.ple.status
+    select_only(rig)
+    assert bpy.ops.ple.program_run() == {"FINISHED"}  # the new program trusted, in this file
+    bpy.ops.wm.read_homefile()
+    bpy.ops.wm.open_mainfile(filepath=str(tmp / "a.blend"))
+    rig = bpy.data.objects["cubic"]
+    assert ple_ext.rig.model.trusted(rig) and rig.ple.status == "", rig.ple.status
+    _drag_u_works(rig)
 
 
 def case_shift_d_copy():
