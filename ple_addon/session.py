@@ -29,6 +29,7 @@ class RigState:
     cumulative: tuple = (False, False, False)  # the Cumulative toggles when last drawn
     region: tuple = ()  # (region_min, region_max) last drawn without error
     refused: bool = False  # the status is a refused setting: it stays until the user's next edit
+    clamped: str = ""  # inputs set beyond their Range and clamped, for the status of the next drawing
 
 
 @dataclass

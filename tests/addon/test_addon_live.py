@@ -30,7 +30,8 @@ CASES = ["becots_redraw", "becots_apply_presets", "becots_named_return", "becots
          "program_time_limit", "tessellate_budget", "bake", "materials_and_sizes", "render_colours",
          "program_file", "menu_keymap_prefs", "tessellate_steps", "live_errors_reported", "trust_per_file",
          "refusal_stays_until_next_edit", "reenabled_addon_edits_live", "reload_keeps_slider_values",
-         "cumulative_counts_keep_span", "trust_after_file_new", "trust_not_for_changed_program"]
+         "cumulative_counts_keep_span", "trust_after_file_new", "trust_not_for_changed_program",
+         "slider_clamped_to_range"]
 FRESH = {"region_budget"}
 ADDON = "bl_ext.user_default.ple"  # peak memory of the process: only a fresh one measures this case alone
 
@@ -925,6 +926,27 @@ def case_reload_keeps_slider_values():
     assert rig["ple:thickness"] == 0.2 and ui["default"] == 0.15 and ui["max"] == 0.5, (rig["ple:thickness"], ui)
     assert rig["ple:m"] == 2 and rig.id_properties_ui("ple:m").as_dict()["max"] == 5
     assert np.allclose(region_arrays(rig)[1], 0.2)  # drawn with the user's value
+
+
+def case_slider_clamped_to_range():
+    """A script sets an input beyond its slider's Range (Blender limits only the slider): the
+    value is clamped to the Range, drawn so, and the rig's status says so until the next edit."""
+    rig = new_rig("fig6_3", region=(2, 2, 2))
+    for asked, want in ((5.0, 0.12), (-1.0, 0.02)):
+        rig["ple:thickness"] = asked
+        rig.update_tag()
+        update()
+        assert rig["ple:thickness"] == want, rig["ple:thickness"]
+        assert_region_is(rig, core.compile_program(rig.ple.text.as_string()).run(thickness=want), "0:2,0:2,0:2")
+        status = rig.ple.status
+        assert "thickness" in status and "clamped" in status and "0.02" in status and "0.12" in status, status
+        update()
+        assert rig.ple.status == status  # it stays until the user's next edit
+    rig["ple:thickness"] = 0.05
+    rig.update_tag()
+    update()
+    assert rig.ple.status == "" and rig["ple:thickness"] == 0.05, rig.ple.status
+    assert_region_is(rig, core.compile_program(rig.ple.text.as_string()).run(thickness=0.05), "0:2,0:2,0:2")
 
 
 def case_bad_frame_named_once():
