@@ -29,14 +29,16 @@ class RigState:
     cumulative: tuple = (False, False, False)  # the Cumulative toggles when last drawn
     region: tuple = ()  # (region_min, region_max) last drawn without error
     refused: bool = False  # the status is a refused setting: it stays until the user's next edit
+    clamped: str = ""  # inputs set beyond their Range and clamped, for the status of the next drawing
 
 
 @dataclass
 class Session:
     states: dict = field(default_factory=dict)  # rig uid -> RigState
     owner: dict = field(default_factory=dict)  # rig uid -> session_uid of the object holding it (a copy has another)
-    trusted: set = field(default_factory=set)  # uids of rigs whose program the user ran in this session
-    trust_file: str = ""  # the .blend the trusts were given in (a file saved under a new name carries them)
+    trusted: set = field(default_factory=set)  # uids of the open file's rigs whose program the user trusts
+    kept_trust: dict = field(default_factory=dict)  # .blend path -> {rig uid: program fingerprint} (keep_trust)
+    on_disk: dict = field(default_factory=dict)  # rig uid -> fingerprint of its program as the open file holds it
     busy: bool = False  # the add-on itself writes to a rig: its update callbacks stay quiet
     reports: list = field(default_factory=list)  # messages of live editing for the Info editor
     object_count: int | None = None  # objects in the scene at the last update (None: not yet counted)
@@ -64,16 +66,27 @@ class Session:
         self.owner.clear()
         self.object_count = None
 
-    def forget_trust_of_other_files(self, path: str) -> None:
-        if path != self.trust_file:
-            self.trusted.clear()
-            self.trust_file = path
+    def keep_trust(self, path: str, programs: dict) -> None:
+        """The trusts of the file ``path`` (saved, or left for another file or File › New), for the
+        programs it holds on disk (``programs``: rig uid -> fingerprint)."""
+        if path:
+            self.kept_trust[path] = {u: fp for u, fp in programs.items() if u in self.trusted}
+
+    def restore_trust(self, path: str, programs: dict) -> None:
+        """The file ``path`` was opened, holding ``programs``: a rig is trusted if the user trusted
+        it in this file, for the very program it holds; another file, or another program under the
+        same path and rig id, trusts nothing."""
+        kept = self.kept_trust.get(path, {}) if path else {}
+        self.trusted.clear()
+        self.trusted.update(u for u, fp in programs.items() if u in kept and kept[u] == fp)
+        self.on_disk = dict(programs)
 
     def reset(self) -> None:
         """Everything forgotten, as in a new Blender session."""
         self.forget_drawn()
         self.trusted.clear()
-        self.trust_file = ""
+        self.kept_trust.clear()
+        self.on_disk.clear()
         self.busy = False
         self.reports.clear()
         self.caches.clear()

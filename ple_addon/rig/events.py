@@ -11,7 +11,18 @@ from bpy.app.handlers import persistent
 from ..corelink import PleError, cage, snippets
 from ..session import SESSION
 from . import hooks, sync
-from .model import add_edits, all_rigs, check_budget, dependents, edits_of, is_rig, lattice_of, region_of, rig_of
+from .model import (
+    add_edits,
+    all_rigs,
+    check_budget,
+    dependents,
+    edits_of,
+    is_rig,
+    lattice_of,
+    programs,
+    region_of,
+    rig_of,
+)
 
 
 def set_quietly(settings, **values) -> None:
@@ -60,8 +71,18 @@ def on_cumulative_changed(rig) -> None:
     on_settings_changed(rig)
 
 
+def count_edit(lat, axis: str, count: int, cumulative: bool):
+    """The count slider's edit of ``axis``: it keeps what the frame shows. A frame showing the
+    cumulative similarity keeps it, the span from group 0 to the last group (the step follows),
+    whether or not it was dragged; otherwise the count alone changes (the step, or a span the
+    program itself wrote with ``cumulative=True``, is kept)."""
+    if count > 1 and cage.shows_cumulative(lat, axis, cumulative):
+        return snippets.SetDirection(axis, count, cage.direction_similarity(lat, axis, True), True)
+    return snippets.SetDirection(axis, count)
+
+
 def on_counts_changed(rig) -> None:
-    """The counts slider: a count-only set_u/v/w edit per changed direction. Counts the core
+    """The counts slider: a set_u/v/w edit per changed direction (``count_edit``). Counts the core
     refuses (absurd, or a region beyond the work budget) are not stored: the slider goes back
     and the reason is the status."""
     if SESSION.busy or not is_rig(rig):
@@ -70,8 +91,8 @@ def on_counts_changed(rig) -> None:
     if st.lattice is None:
         return
     old_counts = st.lattice.counts
-    edits = [snippets.SetDirection(axis, int(c)) for axis, c, old in zip("uvw", rig.ple.counts, old_counts)
-             if int(c) != old]
+    edits = [count_edit(st.lattice, axis, int(c), rig.ple.cumulative[n])
+             for n, (axis, c, old) in enumerate(zip("uvw", rig.ple.counts, old_counts)) if int(c) != old]
     try:
         lat = lattice_of(rig, st, edits)
         lat.validate()
@@ -167,16 +188,29 @@ def on_depsgraph_update(scene, depsgraph):
 
 
 @persistent
+def on_load_pre(*_args):
+    """The open file is left (for another file, or File › New): its trusts are kept for the
+    programs it holds on disk."""
+    SESSION.keep_trust(bpy.data.filepath, SESSION.on_disk)
+
+
+@persistent
 def on_load(*_args):
-    """Trust belongs to the file it was given in: opening another .blend (even a copy holding the
-    same rig ids) trusts nothing; reopening the same file keeps it (Blender's own trust applies)."""
-    SESSION.forget_trust_of_other_files(bpy.data.filepath)
+    """Trust belongs to the file it was given in and to the program trusted: reopening that file,
+    even after File › New, keeps it for the rigs whose program is still the one trusted; another
+    .blend (even a copy holding the same rig ids) or a program changed on disk trusts nothing."""
+    SESSION.restore_trust(bpy.data.filepath, programs())
     sync.resync()
 
 
 @persistent
-def on_save(*_args):
-    SESSION.trust_file = bpy.data.filepath
+def on_save(filepath="", *_args):
+    """A file saved holds the trusts of its rigs' programs (a file saved under a new name, or as a
+    copy, carries them)."""
+    now = programs()
+    SESSION.keep_trust(filepath or bpy.data.filepath, now)
+    if not filepath or filepath == bpy.data.filepath:  # not a copy: the open file's programs on disk
+        SESSION.on_disk = now
 
 
 @persistent
@@ -185,7 +219,7 @@ def on_reset(*_args):
 
 
 HANDLERS = (("depsgraph_update_post", on_depsgraph_update), ("undo_post", on_reset), ("redo_post", on_reset),
-            ("load_post", on_load), ("save_post", on_save))
+            ("load_pre", on_load_pre), ("load_post", on_load), ("save_post", on_save))
 
 
 def resume() -> None:

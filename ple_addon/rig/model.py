@@ -9,6 +9,7 @@ region. Everything geometric is the core's; this module only reads Blender state
 
 from __future__ import annotations
 
+import hashlib
 import json
 import uuid
 
@@ -80,6 +81,23 @@ def params_of(rig) -> dict:
             for k, v in rig.items() if k.startswith(PARAM_PREFIX)}
 
 
+def clamp_inputs(rig) -> str:
+    """Set the inputs a script put beyond their slider's Range (Blender limits only the slider,
+    not ``rig["ple:x"] = v``) to the nearest end of it; what was clamped, or ""."""
+    said = []
+    for key in [k for k in rig.keys() if k.startswith(PARAM_PREFIX)]:
+        value = rig[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            continue
+        ui = rig.id_properties_ui(key).as_dict()
+        lo, hi = ui.get("min"), ui.get("max")
+        if lo is None or hi is None or lo <= value <= hi:
+            continue
+        rig[key] = lo if value < lo else hi
+        said.append(f"{key[len(PARAM_PREFIX):]} {value:g} clamped to {rig[key]:g} (its Range {lo:g}–{hi:g})")
+    return f"input {'; '.join(said)}" if said else ""
+
+
 def params_key(params: dict) -> tuple:
     return tuple(sorted((k, repr(v)) for k, v in params.items()))
 
@@ -92,7 +110,17 @@ def trusted(rig) -> bool:
 
 def trust(rig) -> None:
     SESSION.trusted.add(uid(rig))
-    SESSION.trust_file = bpy.data.filepath
+
+
+def programs() -> dict:
+    """Rig uid -> fingerprint of its program (source kind and text) for the rigs of the open file:
+    what trust kept across files is checked against (``Session.restore_trust``)."""
+    out = {}
+    for rig in all_rigs():
+        if rig.ple.text is not None:
+            data = f"{rig.ple.source_kind}\0{rig.ple.text.as_string()}".encode()
+            out[uid(rig)] = hashlib.sha256(data).hexdigest()
+    return out
 
 
 def read_json(source: str, name: str):
@@ -109,6 +137,7 @@ def base_lattice(rig, st: RigState):
     if text is None:
         raise PleError(f"{rig.name}: the program text block is missing")
     source = text.as_string()
+    st.clamped = clamp_inputs(rig) or st.clamped  # shown by the next drawing (``sync.refresh``)
     params = params_of(rig)
     key = (rig.ple.source_kind, source, params_key(params), rig.ple.folder)
     if key == st.program_key:

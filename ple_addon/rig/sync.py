@@ -79,6 +79,10 @@ def refresh(rig, force: bool = False, prepared=None) -> str | None:
         st.signature = signature(rig)
         st.cumulative = tuple(rig.ple.cumulative)
         st.region = (tuple(rig.ple.region_min), tuple(rig.ple.region_max))
+        if st.clamped:  # an input beyond its Range was clamped: said until the user's next edit
+            refuse(rig, st.clamped)
+            st.clamped = ""
+            return None
         st.refused = False
         if rig.ple.status:
             rig.ple.status = ""

@@ -29,7 +29,9 @@ CASES = ["becots_redraw", "becots_apply_presets", "becots_named_return", "becots
          "apply_in_branch", "poll",
          "program_time_limit", "tessellate_budget", "bake", "materials_and_sizes", "render_colours",
          "program_file", "menu_keymap_prefs", "tessellate_steps", "live_errors_reported", "trust_per_file",
-         "refusal_stays_until_next_edit", "reenabled_addon_edits_live", "reload_keeps_slider_values"]
+         "refusal_stays_until_next_edit", "reenabled_addon_edits_live", "reload_keeps_slider_values",
+         "cumulative_counts_keep_span", "trust_after_file_new", "trust_not_for_changed_program",
+         "slider_clamped_to_range"]
 FRESH = {"region_budget"}
 ADDON = "bl_ext.user_default.ple"  # peak memory of the process: only a fresh one measures this case alone
 
@@ -232,6 +234,30 @@ def case_cumulative_off_then_counts():
     assert np.allclose(x3, [0, 0.5, 1.0, 1.5], atol=1e-5), x3
 
 
+def case_cumulative_counts_keep_span():
+    """A fresh rig, Cumulative on for U with no drag, U count 7 -> 14: the U frame and the last
+    group keep the span from group 0 to the last group (the step becomes its 13th root)."""
+    rig = new_rig("fig6_3")
+    fu = part(rig, "u")
+    rig.ple.cumulative = (True, False, False)
+    frame = matrix(fu)
+    last = ple_ext.rig.model.lattice_of(rig).evaluate("6:7,0:1,0:1").center
+    rig.ple.counts = (14, 12, 15)
+    assert rig.ple.status == "" and tuple(rig.ple.counts) == (14, 12, 15), rig.ple.status
+    assert np.allclose(matrix(fu), frame, atol=1e-5), (matrix(fu), frame)
+    lat = ple_ext.rig.model.lattice_of(rig)
+    assert np.allclose(lat.evaluate("13:14,0:1,0:1").center, last, atol=1e-9)
+    want = core.load_lattice("fig6_3")
+    want.set_u(14, want.u.incremental ** 6, cumulative=True)
+    assert np.allclose(lat.evaluate("0:14,0:2,0:2").center, want.evaluate("0:14,0:2,0:2").center, atol=1e-9)
+    edit = [e for e in ple_ext.rig.model.edits_of(rig) if e.axis == "u"][-1]
+    assert edit.cumulative and edit.count == 14, edit  # the stored edit says what the toggle shows
+    rig.ple.counts = (7, 12, 15)  # and back: the span still, so the step of the program again
+    assert np.allclose(matrix(fu), frame, atol=1e-5)
+    assert np.allclose(ple_ext.rig.model.lattice_of(rig).evaluate("0:7,0:2,0:2").center,
+                       core.load_lattice("fig6_3").evaluate("0:7,0:2,0:2").center, atol=1e-9)
+
+
 def case_lil_follows_coarse():
     """A LiL-filtered rig follows its coarse rig's location, sliders and frames."""
     fine = new_rig("cubic", region=(10, 10, 10))
@@ -357,6 +383,58 @@ def case_trust_per_file():
     bpy.ops.wm.open_mainfile(filepath=str(tmp / "b.blend"))
     rig = bpy.data.objects["cubic"]
     assert not ple_ext.rig.model.trusted(rig) and "trust" in rig.ple.status, rig.ple.status
+
+
+def _drag_u_works(rig):
+    """A drag of U redraws the region (the rig is trusted: its program runs without Run Program)."""
+    fu = part(rig, "u")
+    fu.location = (2.0, 0, 0)
+    update()
+    assert rig.ple.status == "", rig.ple.status
+    want = rerun(rig)
+    want.set_u(10, core.Translation(core.Vec(2, 0, 0)))
+    assert_region_is(rig, want, "0:2,0:2,0:2")
+
+
+def case_trust_after_file_new():
+    """Trust given in a file survives File › New (``read_homefile``) and reopening it: drags work
+    without Run Program."""
+    tmp = Path(tempfile.mkdtemp())
+    new_rig("cubic", region=(2, 2, 2))
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "a.blend"))
+    bpy.ops.wm.read_homefile()
+    assert not ple_ext.rig.model.all_rigs()
+    bpy.ops.wm.open_mainfile(filepath=str(tmp / "a.blend"))
+    rig = bpy.data.objects["cubic"]
+    assert ple_ext.rig.model.trusted(rig) and rig.ple.status == "", rig.ple.status
+    _drag_u_works(rig)
+
+
+def case_trust_not_for_changed_program():
+    """Trust never survives a file whose program changed on disk since it was trusted (the same
+    path, the same rig id, another program): neither after File › New nor on a direct reopen."""
+    import shutil
+
+    tmp = Path(tempfile.mkdtemp())
+    rig = new_rig("cubic", region=(2, 2, 2))
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "a.blend"))
+    text = rig.ple.text
+    text.from_string(text.as_string().replace("radius * cell", "1.5 * radius * cell"))
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "changed.blend"), copy=True)  # the program changed elsewhere
+    shutil.copy(tmp / "changed.blend", tmp / "a.blend")
+    for leave in (None, bpy.ops.wm.read_homefile):  # a direct reopen, then File › New and reopen
+        if leave is not None:
+            leave()
+        bpy.ops.wm.open_mainfile(filepath=str(tmp / "a.blend"))
+        rig = bpy.data.objects["cubic"]
+        assert not ple_ext.rig.model.trusted(rig) and "trust" in rig.ple.status, rig.ple.status
+    select_only(rig)
+    assert bpy.ops.ple.program_run() == {"FINISHED"}  # the new program trusted, in this file
+    bpy.ops.wm.read_homefile()
+    bpy.ops.wm.open_mainfile(filepath=str(tmp / "a.blend"))
+    rig = bpy.data.objects["cubic"]
+    assert ple_ext.rig.model.trusted(rig) and rig.ple.status == "", rig.ple.status
+    _drag_u_works(rig)
 
 
 def case_shift_d_copy():
@@ -848,6 +926,27 @@ def case_reload_keeps_slider_values():
     assert rig["ple:thickness"] == 0.2 and ui["default"] == 0.15 and ui["max"] == 0.5, (rig["ple:thickness"], ui)
     assert rig["ple:m"] == 2 and rig.id_properties_ui("ple:m").as_dict()["max"] == 5
     assert np.allclose(region_arrays(rig)[1], 0.2)  # drawn with the user's value
+
+
+def case_slider_clamped_to_range():
+    """A script sets an input beyond its slider's Range (Blender limits only the slider): the
+    value is clamped to the Range, drawn so, and the rig's status says so until the next edit."""
+    rig = new_rig("fig6_3", region=(2, 2, 2))
+    for asked, want in ((5.0, 0.12), (-1.0, 0.02)):
+        rig["ple:thickness"] = asked
+        rig.update_tag()
+        update()
+        assert rig["ple:thickness"] == want, rig["ple:thickness"]
+        assert_region_is(rig, core.compile_program(rig.ple.text.as_string()).run(thickness=want), "0:2,0:2,0:2")
+        status = rig.ple.status
+        assert "thickness" in status and "clamped" in status and "0.02" in status and "0.12" in status, status
+        update()
+        assert rig.ple.status == status  # it stays until the user's next edit
+    rig["ple:thickness"] = 0.05
+    rig.update_tag()
+    update()
+    assert rig.ple.status == "" and rig["ple:thickness"] == 0.05, rig.ple.status
+    assert_region_is(rig, core.compile_program(rig.ple.text.as_string()).run(thickness=0.05), "0:2,0:2,0:2")
 
 
 def case_bad_frame_named_once():
