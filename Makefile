@@ -16,7 +16,7 @@ WHEELS := build/wheels/.fetched
 # workers, Blender), and each would otherwise compile the package from source again
 TEST_WORKERS ?= 2
 
-.PHONY: setup syslibs consumers demo test lint bench wheels extension docs clean
+.PHONY: setup syslibs consumers demo test test-blender lint bench wheels extension docs clean
 
 setup: $(STAMP)
 
@@ -55,7 +55,19 @@ demo: $(STAMP)
 
 test: $(STAMP) $(WHEELS)
 	$(BIN)/ruff check .
-	OPENBLAS_NUM_THREADS=1 PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest tests -n $(TEST_WORKERS) --dist loadfile --durations=20
+	OPENBLAS_NUM_THREADS=1 PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest tests -n $(TEST_WORKERS) --dist loadfile --durations=20 \
+	  -m "not bpy_only"
+
+# the add-on in the Blender users have: a venv holding only bpy==5.0.1 (Blender's own numpy, requests,
+# zstandard), the zip installed with its wheels (tests/addon/test_bpy_only.py); .ci/run calls it after make test
+BPY_VENV := build/bpy-venv
+$(BPY_VENV)/.installed:
+	test -x $(BPY_VENV)/bin/python || $(PYTHON) -m venv $(BPY_VENV)
+	$(BPY_VENV)/bin/pip install $(PIP_FLAGS) bpy==5.0.1
+	touch $@
+
+test-blender: $(STAMP) $(WHEELS) $(BPY_VENV)/.installed
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest tests/addon/test_bpy_only.py -m bpy_only
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
@@ -66,16 +78,16 @@ bench: $(STAMP)
 clean:
 	rm -rf $(VENV) dist build out *.egg-info core/*.egg-info
 
-# the pure-Python wheels the extension bundles (trimesh), downloaded once: building the extension,
-# and every test that builds it, then needs no network
+# the wheels the extension bundles (trimesh, scipy, manifold3d, rtree) for every platform, downloaded
+# once: building the extension, and every test that builds it, then needs no network
 $(WHEELS): ple_addon/build.py | $(STAMP)
 	@$(BIN)/python -m ple_addon.build --fetch-wheels && touch $@ \
-	  || echo "warning: no wheels downloaded (offline?): the extension is built without trimesh"
+	  || echo "warning: the wheels were not downloaded (offline?): the extension cannot be built until make wheels gets them"
 
 wheels: $(WHEELS)
 
 extension: $(STAMP) $(WHEELS)
-	$(BIN)/python -m ple_addon.build
+	$(BIN)/python -m ple_addon.build --platform all
 
 docs: $(STAMP)
 	$(BIN)/python -m tools.docs_build

@@ -2,9 +2,13 @@
 
 Stages the add-on (``ple_addon/``), a vendored copy of the core package ``ple`` as the
 relative sub-package ``vendor.ple`` (no global ``sys.path`` changes inside Blender), the
-presets and the trimesh wheel (for tessellation and export), with the repository's
-``blender_manifest.toml`` (plus its ``wheels`` list); then builds and validates
-``dist/ple-<version>.zip`` with Blender's ``blender_ext.py``.
+presets and the wheels of every package the core imports beyond Blender's own numpy (``WHEELS``:
+trimesh, scipy, manifold3d, rtree), with the repository's ``blender_manifest.toml`` plus its
+``platforms`` and ``wheels``; then builds and validates one zip per platform,
+``dist/ple-<version>-<platform>.zip``, with Blender's ``blender_ext.py``. ``--platform this`` (the
+default) builds this machine's; ``--platform all`` one zip for each of ``PLATFORMS``;
+``--no-wheels`` one pure-Python ``ple-<version>.zip`` that needs the packages installed in
+Blender's Python.
 
 The wheels are downloaded once, by ``python -m ple_addon.build --fetch-wheels`` (``make wheels``,
 which ``make extension`` and ``make test`` run first), into ``build/wheels/``; a build only copies
@@ -14,6 +18,7 @@ what that folder holds, so building (and every test that builds) needs no networ
 from __future__ import annotations
 
 import argparse
+import platform as host
 import shutil
 import subprocess
 import sys
@@ -26,8 +31,57 @@ NOT_SHIPPED = {"build.py", "batch.py"}  # repository tools, not part of the add-
 IGNORE_NAMES = ("__pycache__", "*.pyc", "*.so", "*.c")  # pure Python: numpy encodes STL, assembles boxes
 IGNORE = shutil.ignore_patterns(*IGNORE_NAMES)
 NOT_VENDORED = ("cli", "bench")  # the core's doors for the command line: the extension needs only the library layers
-WHEELS = ["trimesh>=4.0"]  # pure-Python packages the core needs beyond Blender's own numpy
+# every package the vendored core imports beyond Blender's own (numpy, requests, zstandard), pinned to
+# versions the test suite runs: trimesh (meshes, files), scipy (body fill, pullback queries, checks),
+# manifold3d (local unions of unclean hubs, skins, CLG meshes), rtree (trimesh's proximity queries)
+WHEELS = ["trimesh==5.2.0", "scipy==1.17.1", "manifold3d==3.5.4", "rtree==1.4.1"]
+# Blender's platforms and the pip platform tags their wheels may carry (Blender's Python 3.11)
+PLATFORMS = {
+    "linux-x64": ("manylinux_2_28_x86_64", "manylinux_2_17_x86_64", "manylinux2014_x86_64"),
+    "windows-x64": ("win_amd64",),
+    "macos-arm64": ("macosx_14_0_arm64", "macosx_12_0_arm64", "macosx_11_0_arm64"),
+    "macos-x64": ("macosx_10_15_x86_64", "macosx_10_14_x86_64", "macosx_10_13_x86_64", "macosx_10_9_x86_64"),
+}
 WHEEL_DIR = ROOT / "build" / "wheels"  # filled by --fetch-wheels (make wheels), read by every build
+
+
+def this_platform() -> str:
+    """This machine's Blender platform name (``linux-x64``, ``macos-arm64``, …)."""
+    system = {"Linux": "linux", "Windows": "windows", "Darwin": "macos"}.get(host.system(), host.system().lower())
+    machine = {"x86_64": "x64", "AMD64": "x64", "amd64": "x64", "arm64": "arm64", "aarch64": "arm64"}.get(
+        host.machine(), host.machine())
+    return f"{system}-{machine}"
+
+
+def wheel_platforms(name: str) -> set[str]:
+    """The Blender platforms a wheel file serves, read from its platform tags (PEP 425): ``any``
+    serves all of them, ``universal2`` both macOS ones."""
+    out = set()
+    for tag in name.removesuffix(".whl").split("-")[-1].split("."):
+        if tag == "any":
+            return set(PLATFORMS)
+        if tag.startswith(("manylinux", "musllinux")) and tag.endswith("x86_64"):
+            out.add("linux-x64")
+        elif tag == "win_amd64":
+            out.add("windows-x64")
+        elif tag.startswith("macosx"):
+            out |= {p for p, arch in (("macos-arm64", "arm64"), ("macos-x64", "x86_64"))
+                    if tag.endswith((arch, "universal2"))}
+    return out
+
+
+def _package(spec_or_wheel: str) -> str:
+    return spec_or_wheel.split("=")[0].split("-")[0].lower().replace("_", "-")
+
+
+def wheels_for(plat: str, folder: Path) -> list[Path]:
+    """The wheels in ``folder`` that serve ``plat``, one per package of ``WHEELS``; SystemExit
+    naming the packages that have none there (``make wheels`` fetches them)."""
+    found = {_package(w.name): w for w in sorted(folder.glob("*.whl")) if plat in wheel_platforms(w.name)}
+    missing = [_package(spec) for spec in WHEELS if _package(spec) not in found]
+    if missing:
+        sys.exit(f"error: no {plat} wheel of {', '.join(missing)} in {folder} (make wheels downloads them)")
+    return [found[_package(spec)] for spec in WHEELS]
 
 
 def blender_ext_tool() -> Path:
@@ -44,51 +98,41 @@ def blender_ext_tool() -> Path:
 
 
 def fetch_wheels(dest: Path = WHEEL_DIR) -> bool:
-    """Download the wheels of ``WHEELS`` (no dependencies: numpy ships with Blender) with pip into
-    ``dest``, replacing what it held (the network, once: ``make wheels``); False with a warning, and
-    ``dest`` unchanged, when pip cannot get them."""
+    """Download the wheels of ``WHEELS`` for every platform of ``PLATFORMS`` (no dependencies:
+    numpy ships with Blender) with pip into ``dest``, replacing what it held (the network, once:
+    ``make wheels``); False with a warning, and ``dest`` unchanged, when pip cannot get them all."""
     with tempfile.TemporaryDirectory(prefix="ple-wheels-") as tmp:
-        cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:", "--python-version",
-               "3.11", "--retries", "0", "--timeout", "15", "-d", tmp, *WHEELS]  # fail fast when offline
-        res = subprocess.run(cmd, capture_output=True, text=True)
-        found = sorted(Path(tmp).glob("*.whl"))
-        if res.returncode != 0 or not found:
-            print(f"warning: could not download {', '.join(WHEELS)} ({res.stderr.strip()[-300:]}); the extension is "
-                  "then built without them and tessellate/export need trimesh installed in Blender's Python",
-                  file=sys.stderr)
-            return False
+        for plat, tags in PLATFORMS.items():
+            cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:", "--python-version",
+                   "3.11", "--implementation", "cp", *(f"--platform={t}" for t in tags), "--retries", "0",
+                   "--timeout", "15", "-d", tmp, *WHEELS]  # fail fast when offline
+            res = subprocess.run(cmd, capture_output=True, text=True)
+            if res.returncode != 0:
+                print(f"warning: could not download the {plat} wheels of {', '.join(WHEELS)} "
+                      f"({res.stderr.strip()[-300:]})", file=sys.stderr)
+                return False
         dest.mkdir(parents=True, exist_ok=True)
         for old in dest.glob("*.whl"):
             old.unlink()
-        for w in found:
+        for w in sorted(Path(tmp).glob("*.whl")):
             shutil.copy2(w, dest / w.name)
     return True
 
 
-def cached_wheels(src: Path, dest: Path) -> list[str]:
-    """Copy the wheels found in ``src`` (never downloading) into ``dest``; their manifest paths, or []
-    with a warning when ``src`` holds none."""
-    found = sorted(src.glob("*.whl")) if src.is_dir() else []
-    if not found:
-        print(f"warning: no wheels in {src} (make wheels downloads them); tessellate/export then need trimesh "
-              "installed in Blender's Python", file=sys.stderr)
-        return []
-    dest.mkdir(parents=True, exist_ok=True)
-    for w in found:
-        shutil.copy2(w, dest / w.name)
-    return [f"./wheels/{w.name}" for w in found]
-
-
-def stage(dest: Path, wheels: Path | None = WHEEL_DIR) -> dict:
-    """Copy manifest, add-on, vendored core and presets into ``dest`` (and the wheels found in the
-    folder ``wheels``, listed in the staged manifest; None: none); returns the manifest."""
+def stage(dest: Path, wheels: list[Path], plat: str) -> dict:
+    """Copy manifest, add-on, vendored core and presets into ``dest``, and ``wheels`` (listed in
+    the staged manifest with ``platforms = [plat]``; none: a pure-Python package for any
+    platform); returns the manifest."""
     manifest = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
     dest.mkdir(parents=True, exist_ok=True)
     text = (ROOT / "blender_manifest.toml").read_text()
-    paths = cached_wheels(wheels, dest / "wheels") if wheels is not None else []
-    if paths:  # a top-level key: it goes before the first [table]
+    if wheels:  # top-level keys: they go before the first [table]
+        (dest / "wheels").mkdir()
+        for w in wheels:
+            shutil.copy2(w, dest / "wheels" / w.name)
         head, sep, tail = text.partition("\n[")
-        text = head + "\nwheels = [" + ", ".join(f'"{p}"' for p in paths) + "]\n" + sep + tail
+        listed = ", ".join(f'"./wheels/{w.name}"' for w in wheels)
+        text = f'{head}\nplatforms = ["{plat}"]\nwheels = [{listed}]\n{sep}{tail}'
     (dest / "blender_manifest.toml").write_text(text)
     for f in sorted((ROOT / "ple_addon").iterdir()):
         if f.name in NOT_SHIPPED or f.name.startswith((".", "__pycache__")):
@@ -105,13 +149,19 @@ def stage(dest: Path, wheels: Path | None = WHEEL_DIR) -> dict:
     return manifest
 
 
-def build(out_dir: Path, wheels: Path | None = WHEEL_DIR) -> Path:
+def build(out_dir: Path, wheels: Path | None = WHEEL_DIR, plat: str | None = None) -> Path:
+    """The zip of ``plat`` (default: this machine's) with its wheels from the folder ``wheels``,
+    ``ple-<version>-<plat>.zip`` in ``out_dir``; with ``wheels`` None the pure-Python
+    ``ple-<version>.zip``."""
     tool = blender_ext_tool()
+    plat = plat or this_platform()
+    bundled = wheels_for(plat, wheels) if wheels is not None else []
     with tempfile.TemporaryDirectory(prefix="ple-ext-") as tmp:
         src = Path(tmp) / "ple"
-        manifest = stage(src, wheels)
+        manifest = stage(src, bundled, plat)
         out_dir.mkdir(parents=True, exist_ok=True)
-        zip_path = out_dir / f"{manifest['id']}-{manifest['version']}.zip"
+        suffix = f"-{plat}" if bundled else ""
+        zip_path = out_dir / f"{manifest['id']}-{manifest['version']}{suffix}.zip"
         for cmd in (["validate", str(src)],
                     ["build", "--source-dir", str(src), "--output-filepath", str(zip_path)],
                     ["validate", str(zip_path)]):
@@ -126,13 +176,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default=str(ROOT / "dist"), help="output folder (default: dist/)")
     parser.add_argument("--wheels", default=str(WHEEL_DIR),
                         help="folder of the wheels to bundle (default: build/wheels/)")
-    parser.add_argument("--no-wheels", action="store_true", help=f"do not bundle {', '.join(WHEELS)}")
+    parser.add_argument("--platform", default="this", choices=["this", "all", *PLATFORMS],
+                        help="whose zip is built (default: this machine's; all: one zip per platform)")
+    parser.add_argument("--no-wheels", action="store_true",
+                        help=f"bundle no wheels ({', '.join(WHEELS)} must then be in Blender's Python)")
     parser.add_argument("--fetch-wheels", action="store_true",
-                        help=f"only download {', '.join(WHEELS)} into --wheels (the network; exit 1 if it cannot)")
+                        help="only download every platform's wheels into --wheels (the network; exit 1 if it cannot)")
     args = parser.parse_args(argv)
     if args.fetch_wheels:
         return 0 if fetch_wheels(Path(args.wheels)) else 1
-    print(build(Path(args.out), wheels=None if args.no_wheels else Path(args.wheels)))
+    if args.no_wheels:
+        print(build(Path(args.out), wheels=None))
+        return 0
+    plats = list(PLATFORMS) if args.platform == "all" else [None if args.platform == "this" else args.platform]
+    for plat in plats:
+        print(build(Path(args.out), Path(args.wheels), plat))
     return 0
 
 

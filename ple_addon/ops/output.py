@@ -11,7 +11,7 @@ from bpy.props import (
 
 from .. import draw
 from ..corelink import PleError, needs
-from ..rig import hooks, model
+from ..rig import hooks, model, sync
 from .base import BEYOND, EXPORT_STYLES, STYLES, RigOperator, SteppedOperator, budget, core_style, output_path
 
 
@@ -106,8 +106,12 @@ class PLE_OT_export(MeshOperator, bpy.types.Operator):  # noqa: N801 - Blender n
 
 
 def say_unclean(rig, report) -> None:
-    """The rig's status: the unclean hubs the mesh united locally (empty when clean)."""
-    rig.ple.status = report if report else ""
+    """The rig's status: the unclean hubs the mesh united locally, until the next edit (empty when
+    clean)."""
+    if report and model.is_rig(rig):
+        sync.note(rig, report)
+    else:
+        rig.ple.status = report or ""
 
 
 class PLE_OT_bake(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming

@@ -89,6 +89,13 @@ def refresh(rig, force: bool = False, prepared=None) -> str | None:
         return None
 
 
+def note(rig, message: str) -> None:
+    """A word on the rig's last result (the unclean hubs a mesh united locally): its status until
+    the user's next edit, as a refusal's is."""
+    rig.ple.status = message
+    SESSION.state(uid(rig)).refused = True
+
+
 def refuse(rig, message: str, report: bool = True) -> None:
     """A setting the user made was refused and set back (a region beyond the work budget, absurd
     counts): ``message`` is the rig's status, and a report, until the user's next edit."""

@@ -39,15 +39,18 @@ CORE_MODULES = ("algebra.precision", "algebra.similarity", "filters", "filters.b
 class Worker:
     """A Blender worker process running cases on request (started again after a crash or hang)."""
 
-    def __init__(self, zip_path: Path, timeout: float = 600.0):
-        self.zip_path, self.timeout = zip_path, timeout
+    def __init__(self, zip_path: Path, timeout: float = 600.0, python: str = sys.executable, env: dict | None = None):
+        """``python`` runs the worker (another one: a Blender with only its own packages), with
+        ``env`` (default: this process's environment)."""
+        self.zip_path, self.timeout, self.python, self.env = zip_path, timeout, python, env
         self.proc = None
         self.lines: queue.Queue = queue.Queue()
         self.installs = 0  # how many times the zip was installed (a restart installs it again)
 
     def _start(self) -> None:
-        env = dict(os.environ, BLENDER_USER_RESOURCES=tempfile.mkdtemp(prefix="ple-blender-"))
-        self.proc = subprocess.Popen([sys.executable, str(HERE / "blender_worker.py"), str(self.zip_path)],
+        env = dict(os.environ if self.env is None else self.env,
+                   BLENDER_USER_RESOURCES=tempfile.mkdtemp(prefix="ple-blender-"))
+        self.proc = subprocess.Popen([self.python, str(HERE / "blender_worker.py"), str(self.zip_path)],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                      text=True, env=env, cwd=tempfile.gettempdir())
         self.lines = queue.Queue()
@@ -111,14 +114,18 @@ def run_fresh(zip_path: Path, module_file: str, case: str, cwd: Path, timeout: f
 
 # ----- worker (Blender side) ----------------------------------------------------------------------------
 def install(zip_path: str):
-    """Install and enable the zip in this headless bpy; (bpy, the environment's core)."""
+    """Install and enable the zip in this headless bpy; (bpy, the environment's core, or None in
+    a Blender whose Python has only its own packages: ``PLE_WORKER_TRUTH=none``)."""
     import importlib
 
     import bpy
-    import ple
 
-    for name in CORE_MODULES:
-        importlib.import_module(f"ple.{name}")
+    ple = None
+    if os.environ.get("PLE_WORKER_TRUTH") != "none":
+        import ple
+
+        for name in CORE_MODULES:
+            importlib.import_module(f"ple.{name}")
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)
     return bpy, ple
@@ -152,7 +159,7 @@ def run_case(bpy, core, module: str, case: str) -> dict:
         mod = importlib.import_module(module)
         ext = sys.modules[ADDON]
         for m in list(sys.modules.values()):
-            if getattr(m, "__name__", "").startswith("test_") and hasattr(m, "ple_ext"):
+            if getattr(m, "__name__", "").startswith(("test_", "bpy_only_")) and hasattr(m, "ple_ext"):
                 m.bpy, m.ple_ext, m.core = bpy, ext, core
         getattr(mod, f"case_{case}")()
         return {"ok": True}
