@@ -181,6 +181,9 @@ def mesh_from_arrays(name: str, verts, faces, me=None):
         me = bpy.data.meshes.new(name)
     else:
         me.clear_geometry()
+    if not len(verts):  # nothing (an empty region): an empty mesh has no attribute arrays to fill
+        me.update()
+        return me
     k = faces.shape[1] if len(faces) else 3
     me.vertices.add(len(verts))
     me.loops.add(k * len(faces))

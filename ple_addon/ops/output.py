@@ -60,6 +60,8 @@ class PLE_OT_tessellate(MeshOperator, bpy.types.Operator):  # noqa: N801 - Blend
         request = pipeline.MeshRequest(lat, region, core_style(self.style))
         chunks, report = yield from self.mesh_job(request)
         verts, faces = pipeline.weld_chunks(chunks)  # the boxes share their hubs' grid points
+        if not len(faces):
+            raise PleError(f"nothing to tessellate: region {region} keeps no ball (move Region from/to)")
         yield 0.9
         me = draw.mesh_from_arrays(f"{rig.name}.{self.style.lower()}", verts, faces)
         obj = bpy.data.objects.new(me.name, me)

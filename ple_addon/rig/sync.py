@@ -262,8 +262,11 @@ def create(context, name: str, text, source_kind: str = "PROGRAM", region=(3, 3,
         SESSION.trusted.add(uid(probe))
         base = base_lattice(probe, st)
         inputs = st.inputs
-        clamped = tuple(min(r, c) for r, c in zip(region, base.counts))
-        check_budget(base, f"0:{clamped[0]},0:{clamped[1]},0:{clamped[2]}", "drawing the region")
+        size = tuple(min(r, c) for r, c in zip(region, base.counts))
+        start = base.first_kept_group() or (0, 0, 0)  # a filter keeping nothing at the origin: where it keeps
+        lo = tuple(max(0, min(s, c - n)) for s, c, n in zip(start, base.counts, size))
+        hi = tuple(a + n for a, n in zip(lo, size))
+        check_budget(base, ",".join(f"{a}:{b}" for a, b in zip(lo, hi)), "drawing the region")
     finally:
         SESSION.trusted.discard(uid(probe))
         bpy.data.objects.remove(probe)
@@ -277,7 +280,7 @@ def create(context, name: str, text, source_kind: str = "PROGRAM", region=(3, 3,
     rig.ple.role = "RIG"
     rig.ple.text, rig.ple.source_kind, rig.ple.folder = text, source_kind, folder
     rig.ple_clg.active = clg
-    rig.ple.region_max = clamped
+    rig.ple.region_min, rig.ple.region_max = lo, hi
     trust(rig)
     claim(rig)
     if inputs is not None:

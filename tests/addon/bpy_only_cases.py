@@ -132,3 +132,19 @@ def case_clg_preview():
     assert bpy.ops.ple.clg_preview() == {"FINISHED"}
     me = ple_ext.rig.model.parts(rig)["clg"].data
     save("clg.json", {"vertices": len(me.vertices), "polygons": len(me.polygons), "status": rig.ple_clg.status})
+
+
+def case_every_preset():
+    """Every preset of the Add menu added, tessellated and exported with its defaults."""
+    out = {}
+    for name in ple_ext.corelink.presets.preset_names():
+        assert bpy.ops.ple.lattice_add(source="PRESET", preset=name) == {"FINISHED"}, name
+        rig = bpy.context.active_object
+        before = {o.name for o in bpy.data.objects}
+        assert bpy.ops.ple.tessellate() == {"FINISHED"}, name
+        made = [bpy.data.objects[n] for n in {o.name for o in bpy.data.objects} - before]
+        assert len(made) == 1 and len(made[0].data.polygons) > 0, name
+        assert bpy.ops.ple.export(rig=rig.name, filepath=str(Path.cwd() / f"{name}.stl")) == {"FINISHED"}, name
+        out[name] = {"tessellated": len(made[0].data.polygons), "status": rig.ple.status}
+        bpy.ops.wm.read_homefile(use_empty=True)  # the next preset in an empty scene
+    save("presets.json", out)

@@ -124,3 +124,15 @@ def test_clg_preview(bare_blender, tmp_path):
     run(bare_blender, tmp_path, "clg_preview")
     made = json.loads((tmp_path / "clg.json").read_text())
     assert made["status"] == "" and made["polygons"] > 0 and made["vertices"] > 0
+
+
+def test_every_preset_adds_tessellates_and_exports(bare_blender, tmp_path):
+    from ple.program.presets import preset_names
+
+    run(bare_blender, tmp_path, "every_preset")
+    made = json.loads((tmp_path / "presets.json").read_text())
+    assert sorted(made) == sorted(preset_names())
+    for name, entry in made.items():
+        mesh = trimesh.load(tmp_path / f"{name}.stl")
+        assert len(mesh.faces) > 0 and entry["tessellated"] > 0, name
+        assert mesh.is_watertight, name  # the default export style (refined) is a closed solid

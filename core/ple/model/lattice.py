@@ -546,6 +546,22 @@ class Lattice:
         ev.beam_index, ev.beam_nodes = beams_between(self, r, rows, r, rows)
         return ev
 
+    def first_kept_group(self, max_groups: int = 1 << 12) -> tuple[int, int, int] | None:
+        """(i, j, k) of the first node-group, in ``iter_slabs`` order, of which the filter keeps a
+        node: (0, 0, 0) without a filter, None when it keeps nothing. The filter is asked box by
+        box and the search stops at the first box that keeps a node (where a drawing of a
+        filtered lattice starts, when its first corner keeps nothing)."""
+        if self.filter is None:
+            return (0, 0, 0)
+        nn = len(self.nodes)
+        for box in self.iter_slabs(max_groups, self.region()):
+            centers, radii = self.region_balls(box)
+            idx = box.node_index(nn)
+            keep = np.asarray(self.keeps(idx, centers.reshape(-1, 3), radii.reshape(-1)), bool)
+            if keep.any():
+                return tuple(int(x) for x in idx[np.flatnonzero(keep)[0], :3])
+        return None
+
     def evaluate_unfiltered(self, region=None) -> Evaluation:
         """Every node and beam of a region, ignoring the filter (the steady program itself)."""
         r = self.region(region)
