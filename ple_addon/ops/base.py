@@ -171,10 +171,12 @@ def core_style(style: str) -> str:
 
 
 def budget(lat, region, style: str, what: str, streamed: bool = False, beyond: bool = False):
-    """Refuse work beyond the add-on preferences' limits, with the estimate
-    (``meshing.styles.mesh_estimate``), unless the user said to go ``beyond`` them. A streamed
-    STL export holds one box at a time: only its triangle count is limited."""
-    est = styles.mesh_estimate(lat, region, core_style(style))
+    """Refuse work beyond the add-on preferences' limits, with the core's one estimate of a mesh
+    (``ple.app.pipeline.estimate``, as ``ple mesh``'s), unless the user said to go ``beyond``
+    them. A streamed STL export holds one box at a time: only its triangle count is limited."""
+    pipeline = needs("app.pipeline")  # trimesh and manifold3d: bundled wheels
+    plan = pipeline.plan(pipeline.MeshRequest(lat, region, core_style(style)))
+    est = pipeline.estimate(plan, "stl" if streamed else "memory").work
     if beyond:
         return est
     return work.check(est, max_bytes=None if streamed else prefs.max_bytes(),

@@ -359,7 +359,8 @@ def case_errors():
     vendored = "bl_ext.user_default.ple.vendor.ple"
     saved = {k: sys.modules.pop(k) for k in list(sys.modules)
              if k == "trimesh" or k.startswith("trimesh.") or k in (f"{vendored}.meshing.tessellate",
-                                                                   f"{vendored}.meshing.preview")}
+                                                                   f"{vendored}.meshing.preview",
+                                                                   f"{vendored}.app.pipeline")}
     sys.modules["trimesh"] = None
     try:
         fails(bpy.ops.ple.tessellate, "'trimesh'", style="CNT")

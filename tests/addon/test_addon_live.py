@@ -65,7 +65,7 @@ def stepped_op(cls, **props):
     import types
 
     op = types.SimpleNamespace(rig="", beyond_limit=False, report=lambda *a: None, result="", **props)
-    for name in ("steps", "mesh_job"):
+    for name in ("steps", "mesh_job", "file_job", "subject"):
         if hasattr(cls, name):
             setattr(op, name, types.MethodType(getattr(cls, name), op))
     return op
@@ -653,7 +653,9 @@ def case_tessellate_budget():
     assert "triangles" in msg and "M" in msg and rig.ple.status and "refused" in rig.ple.status
     assert len(bpy.data.meshes) == meshes
     lat = core.load_lattice("cubic")
-    est = core.meshing.styles.mesh_estimate(lat, "0:10,0:10,0:10", "refined")
+    from ple.app import pipeline
+
+    est = pipeline.estimate(pipeline.plan(pipeline.MeshRequest(lat, "0:10,0:10,0:10", "refined")))
     assert 0.5 * 8_138_240 < est.triangles < 2 * 8_138_240  # the measured refined count (docs/tessellation.md)
     tmp = Path(tempfile.mkdtemp())
     fails(bpy.ops.ple.export, "refused", filepath=str(tmp / "x.stl"), style="REFINED")

@@ -21,18 +21,19 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import trimesh
 
 from ..errors import PleError
-from ..io.export import export_mesh
 from ..io.files import atomic_write_text, check_output_dir, plain_name, write_marker
 from ..io.formats import format_named
 from ..meshing.styles import style as style_named
-from ..meshing.tessellate import resolve_style, tessellate
+from ..meshing.tessellate import resolve_style
 from ..model.budget import MESH_TRIANGLE_BYTES, default_max_memory, mesh_triangles, require
 from ..program.runner import DEFAULT_TIMEOUT, run_program
 from ..program.runtime import Param, load_program_file, parse_param_value
 from ..program.sources import resolve_source
 from .cluster import check_scheduler, dask_client, run_tasks, showing
+from .pipeline import MeshRequest, write_mesh
 
 KIND = "ple-batch"  # the output-folder marker's kind
 MAX_VARIANTS = 10_000  # per batch (the plan is listed before anything is written)
@@ -104,16 +105,11 @@ def plan(source: str, sweeps: list[str], fmt: str) -> tuple[str, list[Variant]]:
     return str(path), variants
 
 
-def build_mesh(lat, style: str, levels: int | None = None, region=None):
-    """Mesh of a lattice (region) in a style: the core's tessellation or the preview."""
-    style_named(style)  # balls-beams too, with the program's filter applied
-    kwargs = {"levels": levels} if levels is not None else {}
-    return tessellate(lat, region=region, style=style, **kwargs)
-
-
 def _run_variant(source: str, params: dict, style: str, levels, region, out: str, limits=None) -> dict:
     """Worker: build (contained, ``limits`` = (timeout, memory); ``ple.program.runner``), check
-    the work budget, mesh and write one variant; returns its manifest entry."""
+    the work budget, and write one variant through the one mesh pipeline (``pipeline.write_mesh``,
+    as ``ple mesh``: unclean hubs united locally, the float32 grid); returns its manifest entry
+    (``watertight`` read back from the file written)."""
     t0 = time.perf_counter()
     timeout, memory = limits or (DEFAULT_TIMEOUT, None)
     memory = memory or default_max_memory()
@@ -123,12 +119,12 @@ def _run_variant(source: str, params: dict, style: str, levels, region, out: str
     tris = mesh_triangles(lat, r, style, lv, seg)
     require(tris * MESH_TRIANGLE_BYTES, f"{Path(out).name}: {tris:,.3g} triangles", memory,
             "choose a smaller --region or fewer --levels")
-    mesh = build_mesh(lat, style, levels, region)
-    export_mesh(mesh, Path(out))
+    count = write_mesh(MeshRequest(lat, r, style, levels=levels, max_memory=memory), Path(out))
     size, digest = file_digest(Path(out))
-    return {"file": Path(out).name, "params": params, "triangles": int(len(mesh.faces)),
+    closed = style_named(style).solid and bool(trimesh.load(Path(out), force="mesh").is_watertight)
+    return {"file": Path(out).name, "params": params, "triangles": int(count),
             "bytes": size, "sha256": digest, "seconds": round(time.perf_counter() - t0, 3),
-            "watertight": bool(mesh.is_watertight) if style != "balls-beams" else False}
+            "watertight": closed}
 
 
 def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", fmt: str = "stl",

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import fsspec
 import numpy as np
+import trimesh
 
 from ..clg.grid import iter_slices, layer_grid
 from ..errors import PleError
@@ -40,11 +41,11 @@ from ..io.files import TMP_TAG, atomic_path, plain_name
 from ..io.formats import format_named
 from ..io.slices import slice_meta, write_slices
 from ..meshing.styles import style as style_named
-from ..meshing.tessellate import checked_stream, output_grid, tessellate, tessellation_box
 from ..model.lattice import Evaluation, Lattice, Region
 from ..program.runner import run_program
 from ..program.sources import load_lattice, resolve_source
 from ..queries.biq import pmc
+from . import pipeline
 
 FORMAT = "ple-job/1"
 MANIFEST = "manifest.json"
@@ -196,9 +197,10 @@ def mesh_job(source: str, params: dict, style: str = "refined", levels=None, reg
     lat = run_program(source, params)  # contained (ple.program.runner), as every command's program
     r = lat.region(region)
     _check_parts(r, box_groups, "--box-groups")
+    p = pipeline.plan(pipeline.MeshRequest(lat, r, style, levels))  # the one mesh pipeline, as ple mesh
     settings = {"source": str(resolve_source(source)), "params": _params(params), "style": style, "levels": levels,
-                "region": str(r), "grid": output_grid(lat, r), "unclean": None}
-    report, _ = checked_stream(lat, r, style, levels)  # the stream itself is lazy: only the check runs
+                "region": str(r), "grid": p.grid, "unclean": None}
+    report = pipeline.check(p)
     if report is not None and len(report.nodes):
         settings["unclean"] = report.line()
         return Job("mesh", settings, [Part("part_000000.stl", {"box": str(r), "unions": True})])
@@ -303,7 +305,8 @@ def compute_part(kind: str, settings: dict, part: Part, url: str) -> dict:
 
 def _sweep_part(settings: dict, part: Part) -> tuple[bytes, dict]:
     lat = load_lattice(settings["source"], part.params)
-    mesh = tessellate(lat, settings["region"], settings["style"], settings["levels"])
+    p = pipeline.plan(pipeline.MeshRequest(lat, settings["region"], settings["style"], settings["levels"]))
+    mesh = trimesh.Trimesh(*pipeline.mesh(p), process=False)  # the triangles ple mesh writes
     extra = {"triangles": int(len(mesh.faces))}
     if settings["style"] != "balls-beams":
         extra["watertight"] = bool(mesh.is_watertight)
@@ -312,13 +315,12 @@ def _sweep_part(settings: dict, part: Part) -> tuple[bytes, dict]:
 
 def _mesh_part(settings: dict, part: Part) -> tuple[bytes, dict]:
     lat = job_lattice(settings)
+    p = pipeline.plan(pipeline.MeshRequest(lat, settings["region"], settings["style"], settings["levels"]))
     if part.params.get("unions") or part.params.get("whole"):  # an unclean or group-mapped region: one mesh,
-        # with its unions, written as ``ple mesh`` writes it
-        data = mesh_bytes(tessellate(lat, settings["region"], settings["style"], settings["levels"]), "stl")
-        return data, {"triangles": (len(data) - 84) // 50}
-    verts, faces = tessellation_box(lat, settings["region"], part.params["box"], settings["style"],
-                                    settings["levels"], grid=settings["grid"])
-    # the whole region's float32 grid, as the streamed STL (``write_mesh``): the parts close up
+        # with its unions, the triangles ``ple mesh`` writes
+        verts, faces = pipeline.mesh(p)
+    else:  # one box, on the whole region's float32 grid (as the streamed STL's boxes): the parts close up
+        verts, faces = pipeline.box(p, part.params["box"])
     rec = stl_chunk((verts, faces), settings["grid"])
     return STL_HEADER + np.uint32(len(rec)).tobytes() + rec.tobytes(), {"triangles": int(len(rec))}
 

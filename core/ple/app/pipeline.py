@@ -6,7 +6,8 @@ into a sink:
 - a file: ``write_mesh`` (STL streamed box by box; PLY, OBJ, 3MF, GLB welded in memory),
   ``write_beam_lattice`` (the beam-lattice 3MF and its fallback triangles);
 - arrays: ``stream`` (boxes of float32 vertices on the output grid and int32 faces, the local
-  unions of unclean hubs included: what the add-on's Tessellate draws) and ``mesh`` (them welded).
+  unions of unclean hubs included: what the add-on's Tessellate draws), ``mesh`` (them welded)
+  and ``box`` (one box of the region: a Dask part); ``check`` runs the unclean check alone.
 
 ``ple mesh``, ``ple batch``, Dask parts and the add-on's Tessellate and Export all come here, so
 that the same request gives the same triangles from every door: the unclean check (CHoCC paper
@@ -17,6 +18,7 @@ encode what this module hands them.
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -36,21 +38,38 @@ from ..io.export import (
     write_stl,
 )
 from ..io.formats import DEFAULT_UNIT, mesh_format, unit_name
+from ..meshing.selfcheck import BLOCK_TRIANGLES
 from ..meshing.skin import clip_bodies
 from ..meshing.styles import DEFAULT_STYLE
 from ..meshing.styles import style as style_named
 from ..meshing.tessellate import (
     MAX_CHECK_GROUPS,
+    check_bytes,
     check_fillet,
     checked_stream,
     iter_triangles,
     resolve_style,
     smallest_radius,
     tessellate,
+    tessellation_box,
     weld_chunks,
 )
 from ..meshing.weld import grid_spacing, snap, weld
-from ..model.budget import evaluation_bytes, require
+from ..model.budget import (
+    CHECK_TRIANGLE_BYTES,
+    MESH_TRIANGLE_BYTES,
+    Estimate,
+    big,
+    evaluation_bytes,
+    hub_triangles,
+    human,
+    mean_degree,
+    mesh_triangles,
+    region_nodes,
+    require,
+    streamed_stl_bytes,
+)
+from ..model.budget import estimate as budget_estimate
 from ..model.lattice import Lattice, Region
 
 FALLBACK_STYLES = ("cnt", "chocc", "refined", "none")
@@ -122,6 +141,86 @@ def plan(request: MeshRequest) -> MeshPlan:
     return MeshPlan(request, r, request.style, levels, segments, fillet, bounds, grid, checked, cut)
 
 
+TRIANGLES_PER_SECOND = 1.0e6  # a CPU-second's triangles, all-unclean lattices included (ple bench unclean: 1.06-1.44 M)
+
+
+@dataclass(frozen=True)
+class MeshEstimate:
+    """The work of a plan, before anything is meshed: the one estimate every door checks its
+    limits with (``ple mesh``, batch, the add-on's Tessellate and Export).
+
+    ``what``: the triangles and the region in words; ``triangles``
+    (``model.budget.mesh_triangles``); ``needs``: (bytes, what, hint) for each
+    memory the run holds at once (the mesh in memory, or one node-group's triangles, the
+    cleanliness check and, for ``--check``, the file read back), each refused on its own;
+    ``memory``: the largest of them; ``disk``: the binary STL's bytes at most (0 when the file is
+    not an STL); ``seconds``: at ``TRIANGLES_PER_SECOND``; ``box_groups``: node-groups per streamed
+    box such that the boxes alive at once fit ``limit``; ``work``: the add-on's form (balls, beams,
+    triangles and the memory of tessellating them in Blender)."""
+
+    what: str
+    triangles: int
+    needs: tuple
+    disk: int
+    seconds: float
+    box_groups: int
+    work: Estimate
+
+    @property
+    def memory(self) -> int:
+        return int(max((b for b, _, _ in self.needs), default=0))
+
+    def describe(self) -> str:
+        return (f"{big(self.triangles)} triangles, about {human(self.memory)} at once, "
+                f"{human(self.disk)} of STL, about {self.seconds:.3g} CPU s")
+
+
+def estimate(p: MeshPlan, fmt: str = "stl", limit: float | None = None, workers: int = 1,
+             check_file: bool = False, in_memory: bool | None = None) -> MeshEstimate:
+    """The plan's ``MeshEstimate`` for a file of format ``fmt``: streamed box by box when it is a
+    binary STL of a steady lattice, else held whole (``in_memory`` says so where the door knows
+    better: a skin, a beam lattice, arrays for Blender); ``workers`` threads assembling boxes,
+    ``check_file`` the file read back and checked; ``limit`` sizes the boxes."""
+    lat, r, style = p.lattice, p.region, p.style
+    tris = int(mesh_triangles(lat, r, style, p.levels, p.segments))
+    what = f"region {r} ({region_nodes(lat, r):,} nodes)"
+    in_memory = (fmt != "stl" or p.cut) if in_memory is None else in_memory
+    needs = []
+    if check_file:  # the written file, checked block by block (an STL) or read back whole
+        per = CHECK_TRIANGLE_BYTES
+        needs.append((min(tris, BLOCK_TRIANGLES) * per if fmt == "stl" else tris * per,
+                      f"checking {tris:,.3g} triangles ({style}) of {what}",
+                      "choose a smaller --region or fewer --levels, or leave out --check"))
+    box_groups, disk = 1 << 14, 0
+    if in_memory or lat.group_map is not None:  # a group map's region is one box of hubs (Lattice.per_hub)
+        how = f"in memory for .{fmt}" if in_memory else f"in one box (a {lat.group_map.kind} lattice is meshed per hub)"
+        needs.append((tris * MESH_TRIANGLE_BYTES + evaluation_bytes(lat, r),
+                      f"{tris:,.3g} triangles ({style}) of {what} {how}",
+                      f"{'write .stl (streamed), ' if in_memory else ''}choose a smaller --region or fewer --levels"))
+    else:
+        per_group = len(lat.nodes) * hub_triangles(mean_degree(lat), style, p.levels, p.segments) * MESH_TRIANGLE_BYTES
+        needs.append((per_group, f"one node-group of {style} mesh", "choose fewer --levels"))
+        needs.append((check_bytes(lat, r), f"the cleanliness check of {what}", "choose a smaller --region"))
+        disk = int(streamed_stl_bytes(tris))
+        if limit is not None:  # the boxes alive at once: one per worker and the one being written
+            box_groups = int(max(1, min(1 << 14, limit // (per_group * (workers + 1)))))
+    work = budget_estimate(lat, r).with_triangles(tris)
+    return MeshEstimate(f"{tris:,.3g} triangles ({style}) of {what}", tris, tuple(needs), disk,
+                        tris / TRIANGLES_PER_SECOND, box_groups, work)
+
+
+def within(est: MeshEstimate, limit: float, folder=None) -> MeshEstimate:
+    """``est`` if every memory it needs is within ``limit`` and its STL fits the free space of
+    ``folder`` (None: not checked); else a PleError naming the estimate, the limit and the way out."""
+    for need, what, hint in est.needs:
+        require(need, what, limit, hint)
+    free = shutil.disk_usage(folder).free if folder is not None and Path(folder).is_dir() else None
+    if free is not None and est.disk > free:
+        raise PleError(f"{est.what} make a binary STL of up to {human(est.disk)}, more than the {human(free)} free "
+                       f"in {folder}; choose a smaller --region or fewer --levels")
+    return est
+
+
 def _checked(p: MeshPlan, encode=None):
     """(report, chunks) of the plan's checked stream (``checked_stream``): chunks None when the
     region is one mesh in memory (cut at a body)."""
@@ -146,6 +245,34 @@ def _in_memory(p: MeshPlan, report=None) -> trimesh.Trimesh:
                       check_clean=p.style != "balls-beams", contain=q.contain)
 
 
+def _run(p: MeshPlan, encode, info: dict, fmt: str = "float32"):
+    """The one sequence every sink runs: the float32 range checked, the unclean check (its
+    report in ``info["unclean"]``), the local unions refused when their estimate passes the
+    limit; returns the checked stream's boxes, each passed through ``encode`` by the thread that
+    assembled it (None: the region is one mesh in memory, cut at a body)."""
+    check_float32_range(p.bounds, smallest_radius(p.lattice, p.region), fmt)
+    report, chunks = _checked(p, encode) if not p.cut else (None, None)
+    info["unclean"] = report
+    _union_limit(p, report)
+    return report, chunks
+
+
+def check(p: MeshPlan):
+    """The unclean check of the plan alone (its ``UncleanReport``; None when the plan is not
+    checked): what a partitioned job decides its parts by. Nothing is meshed."""
+    if not p.checked:
+        return None
+    report, _ = _checked(p)  # the stream is lazy: only the check runs
+    return report
+
+
+def box(p: MeshPlan, part) -> tuple[np.ndarray, np.ndarray]:
+    """The triangles of one box ``part`` of the plan's region (a Dask part): the hubs of the box
+    and their beams, on the region's float32 grid, so that the parts close up as the streamed
+    file's boxes do. Only for a clean region of a steady lattice (``check``)."""
+    return tessellation_box(p.lattice, p.region, part, p.style, p.levels, p.segments, grid=p.grid)
+
+
 def stream(p: MeshPlan, info: dict | None = None) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """The plan's mesh as boxes (vertices float32 (V, 3) on the output grid, faces int32 (F, 3)):
     the triangles a file of it holds, the local unions of unclean hubs first. ``info["unclean"]``
@@ -162,10 +289,7 @@ def stream(p: MeshPlan, info: dict | None = None) -> Iterator[tuple[np.ndarray, 
         verts, faces = chunk
         return snap(verts, grid).astype(np.float32), np.array(faces, np.int32)  # copies
 
-    check_float32_range(p.bounds, smallest_radius(p.lattice, p.region), "float32")
-    report, chunks = _checked(p, keep) if not p.cut else (None, None)
-    info["unclean"] = report
-    _union_limit(p, report)
+    report, chunks = _run(p, keep, info)
     if chunks is None:  # one mesh in memory (cut at a body's surface, or not streamable)
         mesh = _in_memory(p, report)
         info["unclean"] = mesh.metadata.get("ple_unclean")
@@ -196,20 +320,18 @@ def write_mesh(request: MeshRequest, path, info: dict | None = None) -> int:
     fmt = mesh_format(path)
     info = {} if info is None else info
     info["unclean"] = None
-    if p.bounds is not None:
-        check_float32_range(p.bounds, smallest_radius(p.lattice, p.region), fmt)
     report = None
     if fmt == "stl" and p.style != "balls-beams":
         pool = RecordPool()
-        report, chunks = _checked(p, lambda chunk: stl_chunk(chunk, p.grid, pool)) if not p.cut else (None, None)
-        info["unclean"] = report
-        _union_limit(p, report)
+        report, chunks = _run(p, lambda chunk: stl_chunk(chunk, p.grid, pool), info, fmt)
         if chunks is not None:  # each box encoded by the thread that assembled it; then the unions
             return write_stl(path, chunks, header=stl_header(request.unit), pool=pool)
     elif fmt == "stl":
         return write_stl(path, iter_triangles(p.lattice, p.region, p.style, p.levels, p.segments, request.max_groups,
                                               workers=request.workers),
                          header=stl_header(request.unit), workers=request.workers)
+    if p.bounds is not None and fmt != "stl":
+        check_float32_range(p.bounds, smallest_radius(p.lattice, p.region), fmt)
     mesh_ = _in_memory(p, report)
     info["unclean"] = mesh_.metadata.get("ple_unclean")
     stats = export_mesh(mesh_, path, request.unit)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import shutil
 import sys
 import time
 from functools import partial
@@ -14,7 +13,16 @@ import numpy as np
 from ..algebra.elements import beam_distance
 from ..app.cluster import run_job
 from ..app.jobs import assemble_stl, mesh_job
-from ..app.pipeline import DEFAULT_FALLBACK, FALLBACK_STYLES, MeshRequest, write_beam_lattice, write_mesh
+from ..app.pipeline import (
+    DEFAULT_FALLBACK,
+    FALLBACK_STYLES,
+    MeshRequest,
+    estimate,
+    plan,
+    within,
+    write_beam_lattice,
+    write_mesh,
+)
 from ..errors import PleError
 from ..filters.body import body_of
 from ..io.export import STL_RECORD, export_mesh, read_back
@@ -22,17 +30,14 @@ from ..io.files import strict_json
 from ..io.formats import DEFAULT_UNIT, UNITS, mesh_format
 from ..io.spill import SpillFiles
 from ..measure.check import is_clean, solid_volume
-from ..meshing.selfcheck import BLOCK_TRIANGLES, check_triangles
+from ..meshing.selfcheck import check_triangles
 from ..meshing.skin import skin
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
-from ..meshing.tessellate import check_bytes, check_fillet, resolve_style, tessellate
+from ..meshing.tessellate import check_fillet, resolve_style, tessellate
 from ..model.budget import (
-    CHECK_TRIANGLE_BYTES,
     MESH_TRIANGLE_BYTES,
     evaluation_bytes,
-    hub_triangles,
     human,
-    mean_degree,
     mesh_triangles,
     region_beams,
     region_nodes,
@@ -223,29 +228,9 @@ def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
                 + tris * MESH_TRIANGLE_BYTES, f"the beam lattice of {what} with {tris:,.3g} triangles ({style})",
                 limit, "choose a smaller --region, fewer --levels or --fallback cnt")
         return 1 << 14
-    tris = mesh_triangles(lat, region, args.style, levels, segments)
-    if args.check:  # the written file, checked block by block (an STL) or read back whole
-        per = CHECK_TRIANGLE_BYTES
-        require(min(tris, BLOCK_TRIANGLES) * per if fmt == "stl" else tris * per,
-                f"checking {tris:,.3g} triangles ({args.style}) of {what}", limit,
-                "choose a smaller --region or fewer --levels, or leave out --check")
-    if in_memory or lat.group_map is not None:  # a group map's region is one box of hubs (Lattice.per_hub)
-        how = f"in memory for .{fmt}" if in_memory else f"in one box (a {lat.group_map.kind} lattice is meshed per hub)"
-        require(tris * MESH_TRIANGLE_BYTES + evaluation_bytes(lat, region),
-                f"{tris:,.3g} triangles ({args.style}) of {what} {how}",
-                limit, f"{'write .stl (streamed), ' if in_memory else ''}choose a smaller --region or fewer --levels")
-        return 1 << 14
-    per_group = len(lat.nodes) * hub_triangles(mean_degree(lat), args.style, levels, segments) * MESH_TRIANGLE_BYTES
-    require(per_group, f"one node-group of {args.style} mesh", limit, "choose fewer --levels")
-    require(check_bytes(lat, region), f"the cleanliness check of {what}", limit, "choose a smaller --region")
-    out_dir = Path(args.out).resolve().parent
-    free = shutil.disk_usage(out_dir).free if out_dir.is_dir() else None
-    if free is not None and streamed_stl_bytes(tris) > free:
-        raise PleError(f"{tris:,.3g} triangles ({args.style}) of {what} make a binary STL of up to "
-                       f"{human(streamed_stl_bytes(tris))}, more than the {human(free)} free in {out_dir}; "
-                       "choose a smaller --region or fewer --levels")
-    boxes = stream_workers(args.workers) + 1  # boxes alive at once: one per worker and the one being written
-    return int(max(1, min(1 << 14, limit // (per_group * boxes))))
+    request = MeshRequest(lat, region, args.style, levels, segments)
+    est = estimate(plan(request), fmt, limit, stream_workers(args.workers), args.check, in_memory)
+    return within(est, limit, Path(args.out).resolve().parent).box_groups
 
 
 def fallback_style(args) -> None:

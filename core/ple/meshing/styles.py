@@ -7,8 +7,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..errors import PleError
-from ..model.budget import Estimate, estimate, mesh_triangles
-from ..model.lattice import Lattice
 
 DEFAULT_LEVELS = 4
 DEFAULT_SEGMENTS = 16
@@ -41,14 +39,3 @@ def style(name: str) -> Style:
     if name not in STYLES:
         raise PleError(f"style {name!r}: expected one of {', '.join(STYLE_NAMES)}")
     return STYLES[name]
-
-
-def mesh_estimate(lat: Lattice, region=None, name: str | None = None, levels: int = DEFAULT_LEVELS,
-                  segments: int = DEFAULT_SEGMENTS) -> Estimate:
-    """``model.budget.estimate`` of a region with the triangles of style ``name`` (none if None)
-    counted (``model.budget.mesh_triangles``): the work of tessellating it, before evaluating."""
-    est = estimate(lat, region)
-    if name is None:
-        return est
-    style(name)
-    return est.with_triangles(mesh_triangles(lat, lat.region(region), name, levels, segments))
