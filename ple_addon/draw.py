@@ -188,8 +188,9 @@ def mesh_from_arrays(name: str, verts, faces, me=None):
     me.vertices.add(len(verts))
     me.loops.add(k * len(faces))
     me.polygons.add(len(faces))
-    me.attributes["position"].data.foreach_set("vector", verts.astype(np.float32).ravel())
-    me.attributes[".corner_vert"].data.foreach_set("value", faces.astype(np.int32).ravel())
+    # views, not copies, of float32 / int32 C-contiguous arrays (a Tessellate's mapped files)
+    me.attributes["position"].data.foreach_set("vector", np.ascontiguousarray(verts, np.float32).reshape(-1))
+    me.attributes[".corner_vert"].data.foreach_set("value", np.ascontiguousarray(faces, np.int32).reshape(-1))
     me.polygons.foreach_set("loop_start", np.arange(0, k * len(faces), k, dtype=np.int32))
     me.update(calc_edges=True)
     return me

@@ -9,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import bpy
+import numpy as np
 from bpy.props import BoolProperty, IntVectorProperty, StringProperty
 
 from .. import jobs, prefs
@@ -301,21 +302,24 @@ class SteppedOperator(RigOperator):
         if context.workspace is not None:
             context.workspace.status_text_set(None)
 
-    def mesh_job(self, request):
-        """Steps meshing ``request`` (``ple.app.pipeline``) in a child process, box by box;
-        returns (boxes (vertices, faces), the unclean-hubs line or None)."""
+    def mesh_job(self, request, folder: Path):
+        """Steps meshing ``request`` (``ple.app.pipeline.mesh_steps``) in a child process, box by
+        box; the child welds the boxes and leaves the arrays in ``folder``, which this process
+        maps (Blender's mesh is then the only copy it holds). Returns (vertices (V, 3) float32,
+        faces (F, 3) int32, both mapped from ``folder``, the unclean-hubs line or None)."""
         pipeline = needs("app.pipeline")  # trimesh and manifold3d: bundled wheels
         p = pipeline.plan(request)
-        boxes = max(1, len(range(0, p.region.groups, request.max_groups)))
 
         def work():
             info: dict = {}
-            yield from pipeline.stream(p, info)
+            verts, faces = yield from pipeline.mesh_steps(p, info)
+            np.save(folder / "vertices.npy", verts)
+            np.save(folder / "faces.npy", faces)
             return unclean_line(info)
 
         job = jobs.start(work, self._rig.name, p.describe(), self.beyond_limit)
-        chunks, line = yield from jobs.follow(job, lambda items: 0.8 * min(1.0, len(items) / boxes))
-        return chunks, line
+        _, line = yield from jobs.follow(job, lambda items: 0.8 * (items[-1] if items else 0.0))
+        return np.load(folder / "vertices.npy", mmap_mode="r"), np.load(folder / "faces.npy", mmap_mode="r"), line
 
     def file_job(self, request, path):
         """Steps writing ``request``'s mesh to ``path`` in a child process (``pipeline.write_mesh``,

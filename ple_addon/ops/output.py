@@ -3,6 +3,9 @@ file (both jobs: progress, Esc cancels), bake the drawing into a plain mesh."""
 
 from __future__ import annotations
 
+import tempfile
+from pathlib import Path
+
 import bpy
 from bpy.props import (
     EnumProperty,
@@ -56,19 +59,19 @@ class PLE_OT_tessellate(MeshOperator, bpy.types.Operator):  # noqa: N801 - Blend
         yield 0.0
         # the core's one mesh pipeline (``ple.app.pipeline``): checked for unclean hubs, their
         # local unions included, on the region's float32 grid: the triangles `ple mesh` writes
-        pipeline = needs("app.pipeline")
-        request = pipeline.MeshRequest(lat, region, core_style(self.style))
-        chunks, report = yield from self.mesh_job(request)
-        verts, faces = pipeline.weld_chunks(chunks)  # the boxes share their hubs' grid points
-        if not len(faces):
-            raise PleError(f"nothing to tessellate: region {region} keeps no ball (move Region from/to)")
-        yield 0.9
-        me = draw.mesh_from_arrays(f"{rig.name}.{self.style.lower()}", verts, faces)
+        request = needs("app.pipeline").MeshRequest(lat, region, core_style(self.style))
+        with tempfile.TemporaryDirectory(prefix="ple-tessellate-", ignore_cleanup_errors=True) as tmp:
+            verts, faces, report = yield from self.mesh_job(request, Path(tmp))  # mapped, welded in the child
+            if not len(faces):
+                raise PleError(f"nothing to tessellate: region {region} keeps no ball (move Region from/to)")
+            yield 0.9
+            me = draw.mesh_from_arrays(f"{rig.name}.{self.style.lower()}", verts, faces)
+            del verts, faces  # the maps closed before their folder goes
         obj = bpy.data.objects.new(me.name, me)
         for coll in rig.users_collection:
             coll.objects.link(obj)
         obj.matrix_world = rig.matrix_world
-        self.result = f"{obj.name}: {len(faces)} triangles"
+        self.result = f"{obj.name}: {len(me.polygons)} triangles"
         say_unclean(rig, report)
         yield 1.0
 

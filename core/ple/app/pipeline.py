@@ -6,7 +6,8 @@ into a sink:
 - a file: ``write_mesh`` (STL streamed box by box; PLY, OBJ, 3MF, GLB welded in memory),
   ``write_beam_lattice`` (the beam-lattice 3MF and its fallback triangles);
 - arrays: ``stream`` (boxes of float32 vertices on the output grid and int32 faces, the local
-  unions of unclean hubs included: what the add-on's Tessellate draws), ``mesh`` (them welded)
+  unions of unclean hubs included), ``mesh`` and ``mesh_steps`` (them welded: what the add-on's
+  Tessellate draws)
   and ``box`` (one box of the region: a Dask part); ``check`` runs the unclean check alone.
 
 ``ple mesh``, ``ple batch``, Dask parts and the add-on's Tessellate and Export all come here, so
@@ -299,13 +300,31 @@ def stream(p: MeshPlan, info: dict | None = None) -> Iterator[tuple[np.ndarray, 
     yield from chunks
 
 
+def mesh_steps(p: MeshPlan, info: dict | None = None):
+    """``mesh`` as steps: a generator yielding the fraction of the region's boxes streamed so far
+    and returning the welded mesh (vertices (V, 3) float32 on the output grid, faces (F, 3)
+    int32, both C-contiguous): a caller shows progress and can stop between boxes."""
+    boxes = max(1, -(-p.region.groups // p.request.max_groups))
+    chunks = []
+    for chunk in stream(p, info):
+        chunks.append(chunk)
+        yield min(1.0, len(chunks) / boxes)  # the local unions come first: more pieces than boxes
+    v, f = weld_chunks(chunks)  # the boxes share their hubs' grid points
+    chunks.clear()
+    if p.grid is not None and len(f):
+        v, f, _ = weld(v, f, p.grid)
+    return np.ascontiguousarray(v, np.float32), np.ascontiguousarray(f, np.int32)
+
+
 def mesh(p: MeshPlan, info: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The plan's mesh welded into one (vertices (V, 3) float32 values on the output grid, faces
     (F, 3)): the triangle set of ``write_mesh``'s file of the same request."""
-    v, f = weld_chunks(stream(p, info))
-    if p.grid is not None and len(f):
-        v, f, _ = weld(v, f, p.grid)
-    return v, f
+    steps = mesh_steps(p, info)
+    while True:
+        try:
+            next(steps)
+        except StopIteration as stop:
+            return stop.value
 
 
 def write_mesh(request: MeshRequest, path, info: dict | None = None) -> int:
