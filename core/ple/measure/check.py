@@ -44,7 +44,10 @@ def is_clean(lat: Lattice, region=None, max_elements: int = QUICK_ELEMENTS) -> b
     r = lat.region(region)
     if (r.groups * len(lat.nodes) + lat.beam_count() * r.groups / max(1, lat.groups)) > max_elements:
         return None
-    return unclean_pairs(lat, lat.evaluate(r), first=True)["clean"]
+    try:
+        return unclean_pairs(lat, lat.evaluate(r), first=True)["clean"]
+    except PairLimitError:  # elements of sizes too far apart for one grid, or overlapping too many
+        return None
 
 
 def solid_volume(lat: Lattice, region=None) -> dict | None:

@@ -15,7 +15,7 @@ from ..algebra.similarity import Similarity, similarity_from_dict
 from ..algebra.vectors import as3
 from ..errors import PleError
 from .becots import BeCOTSField, Stack
-from .budget import check_finite
+from .budget import check_lattice
 from .grading import grade_from_dict, grade_to_dict
 from .lattice import Lattice
 from .mobius import MobiusGroups, mobius_lattice
@@ -145,7 +145,7 @@ def lattice_from_dict(data, filter_from_dict=None, surface_grade=None) -> Lattic
         becots_from_ir(lat, data["becots"], "becots")
     if "description" in data:
         lat.meta["description"] = str(data["description"])
-    check_finite(lat)
+    check_lattice(lat)
     if "filter" in data:  # validated by filter_from_dict (ple.filters.ir), not by the schema
         if filter_from_dict is None:
             raise PleError("filter: this reader cannot apply filters (load the file with ple.io.irfile.load_ir)")

@@ -14,7 +14,7 @@ Lattice object, pickled by the child and unpickled by the parent with an allowli
 this package, numpy arrays and scalars, plain containers), its filter included: the IR
 (``ple-lattice/1``) would lose a program's metadata and its canonical similarities are not
 bit-exact for composed similarities. Nothing outside the allowlist can be constructed by the
-parent; a lattice is then checked as an IR file is (``ple.model.budget.check_finite``).
+parent; a lattice is then checked as an IR file is (``ple.model.budget.check_lattice``).
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ from ..algebra.similarity import Similarity
 from ..errors import PleError
 from ..filters.base import Filter
 from ..model.becots import BeCOTS
-from ..model.budget import check_finite, human
+from ..model.budget import check_lattice, human
 from ..model.grading import RadiusField
 from ..model.groupmap import GroupMap
 from ..model.lattice import MAX_COUNT, BeamPattern, Direction, Lattice, Node
@@ -315,7 +315,7 @@ def _checked(lat, name: str) -> Lattice:
         raise PleError(f"{name}: lattice() must return a Lattice")
     check_structure(lat, name)
     lat.validate()
-    check_finite(lat, name)
+    check_lattice(lat, name)
     return lat
 
 
