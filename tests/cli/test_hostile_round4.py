@@ -149,3 +149,59 @@ def test_a_query_of_every_element_is_answered(tmp_path):
     lat = load_lattice("cubic")
     counts = json.loads((tmp_path / "h.json").read_text())["queries"][0]
     assert counts == {"nodes": lat.node_count(), "beams": lat.beam_count()}
+
+
+# ----- messages bounded: an echoed key or value is cut to 80 characters ----------------------------------
+def test_cut_keeps_short_text_and_cuts_long_text_to_the_limit():
+    from ple.errors import ECHO_LIMIT, cut, echo
+    assert cut("offset") == "offset"
+    assert cut("x" * ECHO_LIMIT) == "x" * ECHO_LIMIT
+    long = cut("x" * (ECHO_LIMIT + 1))
+    assert len(long) == ECHO_LIMIT and long.endswith("…") and long.startswith("x" * (ECHO_LIMIT - 1))
+    assert echo("ab") == "'ab'" and len(echo("y" * 10**6)) == ECHO_LIMIT
+
+
+def _bounded(run, needle: str) -> None:
+    """Exit 2, one error line (after argparse's usage, for its errors) quoting ``needle``, short."""
+    if "usage:" in run.stderr:
+        assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
+        last = run.stderr.strip().splitlines()[-1]
+        assert last.startswith("ple ") and needle in last, run.stderr
+    else:
+        assert_clean_failure(run, needle)
+    assert len(run.stderr) < 2000, len(run.stderr)
+
+
+KEY = "k" * 1_000_000
+
+
+@pytest.mark.parametrize("where", ["top", "node", "similarity", "filter"])
+def test_a_key_of_a_million_characters_is_cut(tmp_path, where):
+    data = _ir(U=_dir(3, "translation", vector=[1, 0, 0]))
+    {"top": data, "node": data["nodes"][0], "similarity": data["U"]["similarity"]}.get(where, {})[KEY] = 1
+    if where == "filter":
+        data["filter"] = {"cleanup": {KEY: 1}}
+    path = tmp_path / "l.json"
+    path.write_text(json.dumps(data))
+    _bounded(ple("info", path), "k" * 79 + "…")
+
+
+def test_a_clg_key_of_a_million_characters_is_cut(tmp_path):
+    from pathlib import Path
+    plate = json.loads((Path(__file__).resolve().parents[2] / "presets" / "clg" / "plate.json").read_text())
+    plate[KEY] = 1
+    path = tmp_path / "c.json"
+    path.write_text(json.dumps(plate))
+    _bounded(ple("clg", "info", path), "k" * 79 + "…")
+
+
+VALUE = "v" * 100_000  # an argument of the command line (at most 128 KiB each on Linux)
+
+
+@pytest.mark.parametrize("args", [("info", VALUE), ("info", "cubic", "--param", f"n={VALUE}"),
+                                  ("info", "cubic", "--param", f"{VALUE}=1"),
+                                  ("mesh", "cubic", "--style", VALUE, "--out", "m.stl"),
+                                  ("mesh", "cubic", "--unit", VALUE, "--out", "m.stl")],
+                         ids=["preset", "param value", "param name", "style", "unit"])
+def test_a_long_argument_is_cut(tmp_path, args):
+    _bounded(ple(*args, cwd=tmp_path), "v" * 78 + "…")

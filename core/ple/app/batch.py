@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, cut, echo
 from ..io.export import export_mesh
 from ..io.files import atomic_write_text, check_output_dir, plain_name, write_marker
 from ..io.formats import format_named
@@ -88,10 +88,10 @@ def plan(source: str, sweeps: list[str], fmt: str) -> tuple[str, list[Variant]]:
     axes: dict[str, list] = {}
     for s in sweeps:
         if "=" not in s:
-            raise PleError(f"--param {s!r}: expected NAME=VALUES")
+            raise PleError(f"--param {echo(s)}: expected NAME=VALUES")
         name, text = (x.strip() for x in s.split("=", 1))
         if name not in known:
-            raise PleError(f"--param {name}: unknown parameter (inputs: {', '.join(known) or 'none'})")
+            raise PleError(f"--param {cut(name)}: unknown parameter (inputs: {', '.join(known) or 'none'})")
         axes[name] = parse_sweep(known[name], text)
     total = math.prod(len(v) for v in axes.values())
     if total > MAX_VARIANTS:

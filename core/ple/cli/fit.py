@@ -18,7 +18,7 @@ import numpy as np
 import trimesh
 
 from ..clg.field import FieldSolid, field_to_dict
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..filters.fit import fit_mesh
 from ..io.bodyfile import read_mesh
 from ..io.files import atomic_write_text, save_npz, strict_json
@@ -75,9 +75,9 @@ def run(args) -> int:
     try:
         orders = [int(x) for x in args.orders.split(",") if x.strip()]
     except ValueError:
-        raise PleError(f"--orders {args.orders!r}: expected integers like 8,16,32") from None
+        raise PleError(f"--orders {echo(args.orders)}: expected integers like 8,16,32") from None
     if not orders or not all(2 <= n <= MAX_ORDER for n in orders):
-        raise PleError(f"--orders {args.orders!r}: each order must be in 2..{MAX_ORDER}")
+        raise PleError(f"--orders {echo(args.orders)}: each order must be in 2..{MAX_ORDER}")
     require(max(orders) ** 3 * GRID_BYTES, f"--orders {args.orders}: a {max(orders)}³ grid", max_memory(args),
             "choose smaller --orders")
     if not (math.isfinite(args.bound) and args.bound > 0):

@@ -12,7 +12,7 @@ import numpy as np
 import trimesh
 
 from ..algebra.similarity import Similarity
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..filters.body import Body
 from .inputs import check_input_file
 
@@ -34,7 +34,7 @@ def read_mesh(path, name: str | None = None) -> trimesh.Trimesh:
     name = name or str(path)
     suffix = path.suffix.lower().lstrip(".")
     if suffix not in BODY_SUFFIXES:
-        raise PleError(f"{name}: unknown body mesh format {suffix!r} (expected .{', .'.join(BODY_SUFFIXES)})")
+        raise PleError(f"{name}: unknown body mesh format {echo(suffix)} (expected .{', .'.join(BODY_SUFFIXES)})")
     try:  # a regular file within the limit: a folder, FIFO (would block) or device is named as such
         check_input_file(path, "body mesh file", MAX_BODY_BYTES)
     except PleError as exc:

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..algebra.elements import beam_distance
 from ..algebra.series import geometric_sum
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.lattice import Lattice
 from ..queries.overlaps import similar_axes
 
@@ -357,7 +357,7 @@ def lattice_measures(lat: Lattice, method: str = "closed", grid: int = 0, max_hu
                                    f"(limit {max_hubs})"}
         return dict(lattice_measures(lat.explicit(), "sum", grid, max_hubs), area_method="sum over hubs (per-hub path)")
     if method not in ("closed", "sum"):
-        raise PleError(f"unknown area/volume method {method!r} (closed or sum)")
+        raise PleError(f"unknown area/volume method {echo(method)} (closed or sum)")
     reach = [max([abs(b.offset[d]) for b in lat.beams], default=0) for d in range(3)]
     similar = similar_axes(lat) if method == "closed" else (False, False, False)
     segs = [row_segments(c, rch, sim) for c, rch, sim in zip(lat.counts, reach, similar)]

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.budget import Estimate, estimate, mesh_triangles
 from ..model.lattice import Lattice
 
@@ -39,7 +39,7 @@ DEFAULT_STYLE = "refined"
 def style(name: str) -> Style:
     """The style called ``name``; an unknown name is a user error listing the styles."""
     if name not in STYLES:
-        raise PleError(f"style {name!r}: expected one of {', '.join(STYLE_NAMES)}")
+        raise PleError(f"style {echo(name)}: expected one of {', '.join(STYLE_NAMES)}")
     return STYLES[name]
 
 

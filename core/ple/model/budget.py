@@ -21,7 +21,7 @@ from itertools import product
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from .lattice import Lattice, Region
 
 ENV = "PLE_MAX_MEMORY"
@@ -43,10 +43,10 @@ def parse_size(text: str, flag: str = "--max-memory") -> int:
     """``2G``, ``512M``, ``1.5GB``, ``1000000`` to bytes."""
     m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*([KMGT]?B?)\s*", str(text), re.IGNORECASE)
     if not m:
-        raise PleError(f"{flag} {text!r}: expected a size such as 2G, 512M or 1.5GB")
+        raise PleError(f"{flag} {echo(text)}: expected a size such as 2G, 512M or 1.5GB")
     value = float(m.group(1)) * _UNITS[m.group(2).upper()]
     if not math.isfinite(value) or value < 1 << 20:
-        raise PleError(f"{flag} {text!r}: expected at least 1M")
+        raise PleError(f"{flag} {echo(text)}: expected at least 1M")
     return int(value)
 
 

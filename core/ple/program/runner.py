@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from ..algebra.similarity import Similarity
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..filters.base import Filter
 from ..model.becots import BeCOTS
 from ..model.budget import check_lattice, human
@@ -324,7 +324,7 @@ def check_structure(lat: Lattice, name: str) -> None:
     may assign them directly (``lat.filter = 5``, ``lat.u = 'hello'``), which ``add_node`` and the
     setters would have refused. Raises PleError naming the attribute."""
     def bad(attr: str, value, expected: str) -> PleError:
-        return PleError(f"{name}: the returned lattice's {attr} is {type(value).__name__} {_short(value)}; "
+        return PleError(f"{name}: the returned lattice's {attr} is {type(value).__name__} {echo(value)}; "
                         f"expected {expected}")
 
     def integer(x) -> bool:
@@ -372,11 +372,6 @@ def check_structure(lat: Lattice, name: str) -> None:
             raise bad(attr, value, expected)
     if not isinstance(getattr(lat, "meta", None), dict):
         raise bad("meta", getattr(lat, "meta", None), "a dict")
-
-
-def _short(value) -> str:
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
 
 
 def run_program(source: str, params=None, timeout: float | None = DEFAULT_TIMEOUT,

@@ -33,7 +33,7 @@ import numpy as np
 from ..algebra.elements import beam_beam_gap, beam_distance, enclosing_ball, segment_closest, segment_distance
 from ..algebra.similarity import commute
 from ..algebra.vectors import runs
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.lattice import Evaluation, Lattice
 from .rangefinder import lattice_hits
 
@@ -542,7 +542,7 @@ def unclean_pairs(lat: Lattice, ev: Evaluation | None = None, margin: float = 0.
     ``max_pairs`` (None: ``check_pairs``'s default, which grows with the elements) is a PleError."""
     lat.validate()
     if path not in ("auto", "steady", "explicit"):
-        raise PleError(f"unclean-pair path {path!r}: expected auto, steady or explicit")
+        raise PleError(f"unclean-pair path {echo(path)}: expected auto, steady or explicit")
     if ev is None and path != "explicit" and lat.becots is None:
         out = _steady(lat, float(margin), force=path == "steady", max_pairs=max_pairs)
         if out is not None:
