@@ -205,3 +205,57 @@ VALUE = "v" * 100_000  # an argument of the command line (at most 128 KiB each o
                          ids=["preset", "param value", "param name", "style", "unit"])
 def test_a_long_argument_is_cut(tmp_path, args):
     _bounded(ple(*args, cwd=tmp_path), "v" * 78 + "…")
+
+
+# ----- bodies of extreme sizes and inside-out bodies: one reader -------------------------------------------
+def _box(path, side: float, inverted: bool = False) -> str:
+    import trimesh
+    box = trimesh.creation.box((side, side, side))
+    if inverted:
+        box.invert()
+    box.export(path)
+    return str(path)
+
+
+def _fit(tmp_path, mesh: str, *flags) -> tuple[int, dict | None, str]:
+    run = ple("fit", mesh, "--orders", "8", *flags, "--out", tmp_path / "f.npz")
+    _no_noise(run)
+    return run.returncode, json.loads(run.stdout.split("\nnote:")[0]) if run.returncode == 0 else None, run.stderr
+
+
+@pytest.mark.parametrize("side", [1e30, 1e-30, 4e10])
+def test_fit_reads_a_closed_box_at_any_scale_as_a_box_of_side_1(tmp_path, side):
+    """--normalize maps every box to the same cell: the fit of a box of side 1e30 or 1e-30 is the
+    fit of a box of side 1 (the reader merges with a tolerance relative to the box)."""
+    code, unit, err = _fit(tmp_path, _box(tmp_path / "unit.stl", 1.0), "--normalize")
+    assert code == 0, err
+    code, rep, err = _fit(tmp_path, _box(tmp_path / "box.stl", side), "--normalize")
+    assert code == 0, err
+    assert rep["order"] == unit["order"] and rep["hausdorff"] == pytest.approx(unit["hausdorff"], rel=1e-6)
+    assert rep["scale"] == pytest.approx(0.9 / side, rel=1e-6)
+
+
+@pytest.mark.parametrize("flags", [(), ("--normalize",), ("--distance",), ("--normalize", "--distance"),
+                                   ("--normalize", "--no-symmetric")])
+def test_an_inverted_mesh_is_named_so_for_every_flag(tmp_path, flags):
+    code, _, err = _fit(tmp_path, _box(tmp_path / "inv.stl", 0.8, inverted=True), *flags)
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert "inverted (inside out" in err and "--flip" in err
+    assert not (tmp_path / "f.npz").exists()
+
+
+def test_flip_fits_an_inverted_mesh_as_the_right_one(tmp_path):
+    code, right, err = _fit(tmp_path, _box(tmp_path / "box.stl", 0.8), "--normalize")
+    assert code == 0, err
+    code, flipped, err = _fit(tmp_path, _box(tmp_path / "inv.stl", 0.8, inverted=True), "--normalize", "--flip")
+    assert code == 0, err
+    assert flipped["hausdorff"] == pytest.approx(right["hausdorff"], rel=1e-9) and flipped["met"] == right["met"]
+
+
+def test_a_body_fill_reads_an_inverted_box_as_the_box(tmp_path):
+    right = ple("info", "cubic", "--param", "n=4", "--body", _box(tmp_path / "box.stl", 2.5))
+    inverted = ple("info", "cubic", "--param", "n=4", "--body", _box(tmp_path / "inv.stl", 2.5, inverted=True))
+    assert right.returncode == 0 and inverted.returncode == 0, (right.stderr, inverted.stderr)
+    _no_noise(inverted)
+    assert "8 of 64" in right.stdout  # the balls at 0 and 1 on each axis lie inside [-1.25, 1.25]³
+    assert right.stdout == inverted.stdout.replace("inv.stl", "box.stl")
