@@ -179,3 +179,12 @@ def test_members_finds_descendants_and_the_session(tmp_path):
     finally:
         proctree.end_tree(pid)
     assert all(_gone(p) for p in expected | {pid})
+
+
+def test_without_proc_the_process_group_is_ended(tmp_path, monkeypatch):
+    """Where /proc is missing (macOS), end_tree kills the child's process group: a grandchild that
+    stays in it is ended too."""
+    monkeypatch.setattr(proctree, "members", lambda pid: None)
+    pids = str(tmp_path / "pids.txt")
+    assert Job(_forking_work(pids, daemon=False), "w", timeout=GUARD).result() == 42
+    assert all(_gone(p) for p in _sleepers(pids))

@@ -139,13 +139,12 @@ def end_tree(pid: int) -> int | None:
     Its wait status, or None if it was reaped already."""
     _signal([pid], signal.SIGSTOP)  # a stopped subreaper keeps its orphans while its tree is ended
     stopped: set[int] = set()
+    group = False
     for _ in range(ROUNDS):
         tree = members(pid)
         if tree is None:  # no /proc: the process group the child leads
-            try:
-                os.killpg(pid, signal.SIGKILL)
-            except (ProcessLookupError, PermissionError):
-                pass
+            group = True
+            _signal_group(pid, signal.SIGKILL)
             break
         new = tree - stopped
         if not new:
@@ -156,9 +155,25 @@ def end_tree(pid: int) -> int | None:
     _signal([pid], signal.SIGKILL)
     _wait_gone(stopped)
     try:
-        return os.waitpid(pid, 0)[1]
+        status = os.waitpid(pid, 0)[1]
     except ChildProcessError:
-        return None
+        status = None
+    if group:  # the group outlives its reaped leader while a member lives: wait for it to empty
+        end = time.monotonic() + KILL_WAIT
+        while _signal_group(pid, 0) and time.monotonic() < end:
+            time.sleep(0.002)
+    return status
+
+
+def _signal_group(pgid: int, sig: int) -> bool:
+    """Send ``sig`` to process group ``pgid``; False once no process is in it."""
+    try:
+        os.killpg(pgid, sig)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass
+    return True
 
 
 def _running(pid: int) -> bool:
