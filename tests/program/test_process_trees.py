@@ -188,3 +188,18 @@ def test_without_proc_the_process_group_is_ended(tmp_path, monkeypatch):
     pids = str(tmp_path / "pids.txt")
     assert Job(_forking_work(pids, daemon=False), "w", timeout=GUARD).result() == 42
     assert all(_gone(p) for p in _sleepers(pids))
+
+
+def test_end_tree_leaves_a_process_that_is_not_its_child_alone():
+    """A pid that is no longer (or never was) this process's child may name another process: it
+    is neither signalled nor scanned."""
+    shell = subprocess.Popen(["sh", "-c", f"sleep {SLEEP} & echo $!; wait"], stdout=subprocess.PIPE, text=True)
+    try:
+        grandchild = int(shell.stdout.readline())
+        assert proctree.end_tree(grandchild) is None
+        assert psutil.Process(grandchild).status() != psutil.STATUS_STOPPED and not _gone(grandchild)
+    finally:
+        for p in psutil.Process(shell.pid).children():
+            p.kill()
+        shell.kill()
+        shell.wait()

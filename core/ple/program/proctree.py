@@ -10,7 +10,9 @@ stay its own until the parent ends them with it. When the run ends, errs,
 times out or is cancelled, the parent calls ``end_tree``: every descendant of the child (read
 from ``/proc``), every process of its session and of its process group is stopped, looked for
 again (a fork racing the scan is caught stopped), then killed; the child is reaped last, so its
-pid, and the group and session named by it, are not reused meanwhile.
+pid, and the group and session named by it, are not reused meanwhile. A pid that is no longer
+this process's child (reaped elsewhere, SIGCHLD ignored) is left alone: it may name another
+process by then.
 
 Elsewhere: macOS (no ``/proc``, no subreaper) ends the child's process group; a descendant
 that calls ``setsid`` or ``setpgid`` there escapes. Windows has no ``fork``: the runner works
@@ -137,6 +139,8 @@ def _signal(pids, sig) -> None:
 def end_tree(pid: int) -> int | None:
     """Kill the child ``pid`` (a ``detach``ed one) and every process of its tree; reap the child.
     Its wait status, or None if it was reaped already."""
+    if not _is_child(pid):  # reaped elsewhere (SIGCHLD ignored): its pid may name a stranger now
+        return None
     _signal([pid], signal.SIGSTOP)  # a stopped subreaper keeps its orphans while its tree is ended
     stopped: set[int] = set()
     group = False
@@ -163,6 +167,15 @@ def end_tree(pid: int) -> int | None:
         while _signal_group(pid, 0) and time.monotonic() < end:
             time.sleep(0.002)
     return status
+
+
+def _is_child(pid: int) -> bool:
+    """Whether ``pid`` is still this process's child, alive or a zombie (not reaped)."""
+    try:
+        os.waitid(os.P_PID, pid, os.WEXITED | os.WNOHANG | os.WNOWAIT)
+    except ChildProcessError:
+        return False
+    return True
 
 
 def _signal_group(pgid: int, sig: int) -> bool:
