@@ -175,6 +175,38 @@ def _write_inputs(d: Path) -> None:
             "def lattice():\n    lat = Lattice()\n    a = lat.add_node(Pt(0, 0, 0), 0.1)\n"
             "    lat.add_beam(a, a, 1, 0, 0)\n    lat.set_u(3, Translation(Vec(1, 0, 0)))\n"
             f"    {line}\n    return lat\n")
+    _write_round4(d)
+
+
+def _write_round4(d: Path) -> None:
+    """The fourth round's inputs: numbers beyond float64, a repeated beam-pattern, a key of a
+    million characters, bodies of side 1e±30 and inside out, a query ball of radius 1e300."""
+    import trimesh
+
+    def lattice(radius=0.1, beams=None, **directions) -> dict:
+        out = {"format": "ple-lattice/1",
+               "nodes": [{"id": "a", "center": [0, 0, 0], "radius": radius},
+                         {"id": "b", "center": [0.5, 0, 0], "radius": radius}],
+               "beams": beams or [{"from": "a", "to": "b", "offset": [0, 0, 0]},
+                                  {"from": "a", "to": "a", "offset": [1, 0, 0]}]}
+        out.update(directions)
+        return out
+
+    step = {"count": 3, "similarity": {"kind": "translation", "vector": [1, 0, 0]}}
+    for name, data in (
+            ("r4_scale2.json", lattice(U={"count": 100, "similarity": {"kind": "scaling", "factor": 2,
+                                                                        "point": [0, 0, 0]}})),
+            ("r4_far.json", lattice(U={"count": 3, "similarity": {"kind": "translation", "vector": [1e99, 0, 0]}})),
+            ("r4_tiny.json", lattice(radius=5e-324, U=step)),
+            ("r4_twice.json", lattice(beams=[{"from": "a", "to": "b", "offset": [0, 0, 0]}] * 50, U=step)),
+            ("r4_key.json", {**lattice(U=step), "k" * 1_000_000: 1})):
+        (d / name).write_text(json.dumps(data))
+    for side in (1e30, 1e-30):
+        trimesh.creation.box((side,) * 3).export(d / f"r4_box_{side:g}.stl")
+    inverted = trimesh.creation.box((0.8,) * 3)
+    inverted.invert()
+    inverted.export(d / "r4_inverted.stl")
+    np.save(d / "r4_q.npy", np.array([[0, 0, 0, 1e300]]))
 
 
 @pytest.fixture(scope="module")
@@ -399,6 +431,19 @@ for preset, params in (("mobius_slab", ("nu=1e9", "nu=0", "nv=-1", "radius=1e308
                        ("warped", ("n=1e6", "bend=nan"))):
     for p in params:
         case(REFUSE, "info", preset, "--param", p)
+
+# ----- the fourth round: numbers beyond float64, bounded messages, extreme and inside-out bodies ----------
+for lattice_file, needle in (("r4_scale2.json", "loses all precision: the powers of U"),
+                             ("r4_far.json", "loses all precision: the powers of U"),
+                             ("r4_tiny.json", "underflows to zero scale"), ("r4_twice.json", "repeats beams[0]"),
+                             ("r4_key.json", "k" * 79 + "…: unknown field")):
+    for cmd in ("info", "check"):
+        case(REFUSE, cmd, lattice_file, needle=needle)
+case(REFUSE, "biq", "cubic", "--queries", "r4_q.npy", "--out", "h.json", needle="beyond 1e+100")
+for side in ("1e+30", "1e-30"):
+    case(ANY, "fit", f"r4_box_{side}.stl", "--normalize", "--orders", "8", "--out", "f.npz", outs=("f.npz",))
+for extra in ((), ("--normalize",), ("--distance",)):
+    case(REFUSE, "fit", "r4_inverted.stl", *extra, "--orders", "8", "--out", "f.npz", needle="--flip")
 
 # ----- bench --------------------------------------------------------------------------------------------
 for extra, needle in ((("body", "--sample", "-1"), "--sample"), (("body", "--repeat", "0"), "--repeat"),

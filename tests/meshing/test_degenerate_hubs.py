@@ -248,14 +248,26 @@ def test_ball_inside_an_unjoined_ball_is_united():
 
 
 def test_cli_exits_2_naming_the_hub(tmp_path, capsys):
+    src = tmp_path / "zero.json"
+    save_ir(_lattice([([0, 0, 0], 0.1), ([1, 0, 0], 0.08)], [(0, 0, (1, 0, 0)), (0, 1, (-1, 0, 0))]), src)
+    out = tmp_path / "zero.stl"
+    assert main(["mesh", str(src), "--style", "cnt", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "(i, j, k, n) = (1, 0, 0, 0)" in err and "length 0" in err and "Traceback" not in err
+    assert not out.exists()
+    assert json.loads(src.read_text())["format"] == "ple-lattice/1"
+
+
+def test_cli_refuses_a_beam_pattern_given_twice_before_meshing(tmp_path, capsys):
+    """The same beams given twice (a pattern and its reverse) are refused when the file is read
+    (``budget.check_lattice``), naming both beam-patterns, before any hub is built."""
     src = tmp_path / "twice.json"
     save_ir(_lattice([([0, 0, 0], 0.1)], [(0, 0, (1, 0, 0)), (0, 0, (-1, 0, 0))], (2, 2, 2)), src)
     out = tmp_path / "twice.stl"
     assert main(["mesh", str(src), "--style", "cnt", "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert "hub (i, j, k, n)" in err and "same direction" in err and "Traceback" not in err
+    assert "beams[1]" in err and "repeats beams[0]" in err and "Traceback" not in err
     assert not out.exists()
-    assert json.loads(src.read_text())["format"] == "ple-lattice/1"
 
 
 # ----- near-singular Apollonius systems and values that are not numbers ------------------------

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from .similarity import Similarity, Translation
 from .vectors import Vec
 
@@ -35,10 +35,10 @@ def as_complex(p) -> complex:
     else:
         q = np.asarray(p, dtype=float).reshape(-1)
         if q.shape not in ((2,), (3,)):
-            raise PleError(f"point {p!r}: expected a complex number or 2D/3D coordinates")
+            raise PleError(f"point {echo(p)}: expected a complex number or 2D/3D coordinates")
         z = complex(q[0], q[1])
     if not (math.isfinite(z.real) and math.isfinite(z.imag)):
-        raise PleError(f"point {p!r} is not finite")
+        raise PleError(f"point {echo(p)} is not finite")
     return z
 
 
@@ -300,7 +300,7 @@ class Cline:
     def circle(center, radius: float) -> Cline:
         r = float(radius)
         if not (math.isfinite(r) and r > 0):
-            raise PleError(f"circle radius must be positive, got {radius!r}")
+            raise PleError(f"circle radius must be positive, got {echo(radius)}")
         return Cline(as_complex(center), r)
 
     @staticmethod

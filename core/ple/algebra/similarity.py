@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from .vectors import Pt, Vec, as3, rotation_matrices, unit
 
 # Below these the rotation axis (or the swirl's fixed point) is numerically meaningless:
@@ -304,14 +304,14 @@ def Translation(vec) -> Similarity:  # noqa: N802
 def _angle(angle) -> float:
     a = float(angle)
     if not math.isfinite(a):
-        raise PleError(f"angle must be finite, got {angle!r}")
+        raise PleError(f"angle must be finite, got {echo(angle)}")
     return a
 
 
 def _factor(factor) -> float:
     s = float(factor)
     if not math.isfinite(s) or s <= 0:
-        raise PleError(f"scaling factor must be a positive number, got {factor!r}")
+        raise PleError(f"scaling factor must be a positive number, got {echo(factor)}")
     return s
 
 
@@ -330,7 +330,7 @@ def Swirl(angle, axis, point, factor) -> Similarity:  # noqa: N802
 def Screw(angle, axis, point, distance) -> Similarity:  # noqa: N802
     d = float(distance)
     if not math.isfinite(d):
-        raise PleError(f"screw distance must be finite, got {distance!r}")
+        raise PleError(f"screw distance must be finite, got {echo(distance)}")
     return Similarity(1.0, _angle(angle), tuple(unit(axis, "screw axis")), tuple(Pt(point)), d)
 
 
@@ -348,11 +348,11 @@ def similarity_from_dict(d: dict, where: str = "similarity") -> Similarity:
         "screw": ("angle", "axis", "point", "distance"),
     }
     if kind not in need:
-        raise PleError(f"{where}.kind: unknown kind {kind!r} (expected one of {', '.join(need)})")
+        raise PleError(f"{where}.kind: unknown kind {echo(kind)} (expected one of {', '.join(need)})")
     args = []
     for name in need[kind]:
         if name not in d:
-            raise PleError(f"{where}.{name}: missing for kind {kind!r}")
+            raise PleError(f"{where}.{name}: missing for kind {echo(kind)}")
         args.append(d[name])
     build = {"identity": Identity, "translation": Translation, "rotation": Rotation,
              "scaling": Scaling, "swirl": Swirl, "screw": Screw}[kind]

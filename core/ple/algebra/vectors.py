@@ -5,15 +5,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, echo
 
 
 def as3(values, what: str) -> np.ndarray:
     arr = np.asarray(values, dtype=float).reshape(-1)
     if arr.shape != (3,):
-        raise PleError(f"{what}: expected 3 coordinates, got {np.asarray(values).tolist()!r}")
+        raise PleError(f"{what}: expected 3 coordinates, got {echo(np.asarray(values).tolist())}")
     if not np.all(np.isfinite(arr)):
-        raise PleError(f"{what}: coordinates must be finite, got {arr.tolist()!r}")
+        raise PleError(f"{what}: coordinates must be finite, got {echo(arr.tolist())}")
     return arr
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from ..errors import PleError
+from ..errors import PleError, cut, echo
 from ..io.files import atomic_write_text, check_output_dir, plain_name, write_marker
 from ..io.formats import format_named
 from ..meshing.styles import style as style_named
@@ -89,10 +89,10 @@ def plan(source: str, sweeps: list[str], fmt: str) -> tuple[str, list[Variant]]:
     axes: dict[str, list] = {}
     for s in sweeps:
         if "=" not in s:
-            raise PleError(f"--param {s!r}: expected NAME=VALUES")
+            raise PleError(f"--param {echo(s)}: expected NAME=VALUES")
         name, text = (x.strip() for x in s.split("=", 1))
         if name not in known:
-            raise PleError(f"--param {name}: unknown parameter (inputs: {', '.join(known) or 'none'})")
+            raise PleError(f"--param {cut(name)}: unknown parameter (inputs: {', '.join(known) or 'none'})")
         axes[name] = parse_sweep(known[name], text)
     total = math.prod(len(v) for v in axes.values())
     if total > MAX_VARIANTS:

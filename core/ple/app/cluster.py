@@ -23,7 +23,7 @@ import urllib.error
 import urllib.request
 from collections.abc import Iterator
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from .jobs import (
     FORMAT,
     MANIFEST,
@@ -66,7 +66,7 @@ def dask_client(scheduler: str | None = "local", workers: int | None = None,
             yield client
         return
     if "://" not in scheduler:
-        raise PleError(f"--scheduler {scheduler!r}: expected local, sync or an address such as tcp://HOST:8786")
+        raise PleError(f"--scheduler {echo(scheduler)}: expected local, sync or an address such as tcp://HOST:8786")
     try:
         client = Client(scheduler, timeout=CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as exc:
@@ -234,7 +234,7 @@ def dashboard_link(client) -> str | None:
 def check_scheduler(scheduler: str | None, workers: int | None) -> None:
     """``--scheduler``/``--workers`` as ``dask_client`` takes them, checked before any work."""
     if scheduler not in (None, "local", "sync") and "://" not in str(scheduler):
-        raise PleError(f"--scheduler {scheduler!r}: expected local, sync or an address such as tcp://HOST:8786")
+        raise PleError(f"--scheduler {echo(scheduler)}: expected local, sync or an address such as tcp://HOST:8786")
     if workers is not None and workers < 1:
         raise PleError(f"--workers {workers}: must be at least 1")
 

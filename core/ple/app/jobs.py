@@ -34,7 +34,7 @@ import numpy as np
 import trimesh
 
 from ..clg.grid import iter_slices, layer_grid
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..filters.ir import filter_from_dict
 from ..io.export import mesh_bytes, stl_chunk, stl_header
 from ..io.files import TMP_TAG, atomic_path, plain_name
@@ -458,7 +458,7 @@ def _complete(url: str, fs, root: str, kind: str) -> dict:
     """The manifest of a finished job of ``kind`` (every part present and valid)."""
     manifest = read_manifest(fs, root)
     if manifest.get("kind") != kind:
-        raise PleError(f"{url}: not a partitioned {kind} job (kind {manifest.get('kind')!r})")
+        raise PleError(f"{url}: not a partitioned {kind} job (kind {echo(manifest.get('kind'))})")
     if not manifest.get("order"):
         raise PleError(f"{url}: the job manifest lists no parts (its \"order\"); re-run the job")
     missing = [p for p in manifest["order"] if p not in valid_parts(fs, root, manifest)]

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..io.export import (
     RecordPool,
     check_float32_range,
@@ -367,7 +367,7 @@ def write_beam_lattice(request: MeshRequest, path, fallback: str = DEFAULT_FALLB
     if mesh_format(path) != "3mf":
         raise PleError(f"{path}: a beam lattice is written as .3mf")
     if fallback not in FALLBACK_STYLES:
-        raise PleError(f"fallback mesh {fallback!r}: expected one of {', '.join(FALLBACK_STYLES)}")
+        raise PleError(f"fallback mesh {echo(fallback)}: expected one of {', '.join(FALLBACK_STYLES)}")
     unit_name(request.unit)
     lat = request.lattice
     info = {} if info is None else info

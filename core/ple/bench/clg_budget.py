@@ -11,7 +11,7 @@ from pathlib import Path
 
 from ..clg.ir import clg_from_dict
 from ..clg.query import compiled
-from ..errors import PleError
+from ..errors import PleError, cut
 from ..meshing.clg import estimated_triangles, solid_triangles
 from ..model.budget import CLG_TRIANGLE_BYTES
 from ..program.clg_sources import resolve_clg
@@ -73,7 +73,7 @@ def run(args) -> dict:
     names = [x for x in args.cases.split(",") if x] or list(CASES)
     unknown = [x for x in names if x not in CASES]
     if unknown:
-        raise PleError(f"--cases: unknown {', '.join(unknown)}; expected some of {', '.join(CASES)}")
+        raise PleError(f"--cases: unknown {cut(', '.join(unknown))}; expected some of {', '.join(CASES)}")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..algebra.similarity import Rotation, Swirl, Translation
 from ..app.pipeline import MeshRequest, write_mesh
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..io.export import RecordPool, StlWriter, direct_writer, stl_chunk, stl_header, write_stl
 from ..meshing.tessellate import Tessellator, iter_triangles, output_grid
 from ..model.lattice import Lattice
@@ -86,7 +86,7 @@ def bench_lattice(name: str, n: int) -> Lattice:
         return regular_lattice(n)
     if name == "warped":
         return load_lattice("warped", {"n": n})
-    raise PleError(f"unknown bench lattice {name!r}")
+    raise PleError(f"unknown bench lattice {echo(name)}")
 
 
 def _stream(lat: Lattice, style: str, levels: int, batched: bool, workers: int, path: str | None) -> dict:
@@ -251,7 +251,7 @@ def run(args) -> dict:
     styles = [s.strip() for s in args.styles.split(",") if s.strip()]
     bad = [s for s in styles if s not in ("cnt", "chocc", "refined")]
     if bad or not styles:
-        raise PleError(f"--styles {args.styles!r}: expected some of cnt, chocc, refined")
+        raise PleError(f"--styles {echo(args.styles)}: expected some of cnt, chocc, refined")
     return {"benchmark": "curved", "n": args.n, "machine": f"{os.cpu_count()} cores",
             "load_average_at_start": list(os.getloadavg()),
             "repeat": args.repeat,

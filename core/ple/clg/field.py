@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, cut, echo
 from ..filters.implicit import FourierField
 
 MAX_TERMS = 200_000  # coefficients of an inline field in a ple-clg/1 file
@@ -81,13 +81,13 @@ def field_from_dict(data, where: str) -> FieldSolid:
         raise PleError(f"{where}: expected an object with n, freqs, coeffs")
     bad = sorted(set(data) - FIELD_KEYS)
     if bad:
-        raise PleError(f"{where}.{bad[0]}: unknown field (expected some of {', '.join(sorted(FIELD_KEYS))})")
+        raise PleError(f"{where}.{cut(bad[0])}: unknown field (expected some of {', '.join(sorted(FIELD_KEYS))})")
     for key in ("n", "freqs", "coeffs"):
         if key not in data:
             raise PleError(f"{where}.{key}: missing")
     n = data["n"]
     if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 1024:
-        raise PleError(f"{where}.n: expected an integer order 1..1024, got {n!r}")
+        raise PleError(f"{where}.n: expected an integer order 1..1024, got {echo(n)}")
     freqs, coeffs = _array(data["freqs"], f"{where}.freqs"), _array(data["coeffs"], f"{where}.coeffs")
     if freqs.shape[0] != coeffs.shape[0]:
         raise PleError(f"{where}.coeffs: {coeffs.shape[0]} coefficients for {freqs.shape[0]} frequencies")
@@ -99,15 +99,15 @@ def field_from_dict(data, where: str) -> FieldSolid:
         raise PleError(f"{where}.coeffs: expected [real, imaginary] pairs")
     sym = data.get("symmetric", False)
     if not isinstance(sym, bool):
-        raise PleError(f"{where}.symmetric: expected true or false, got {sym!r}")
+        raise PleError(f"{where}.symmetric: expected true or false, got {echo(sym)}")
     cell = data.get("cell", 1.0)
     if not (isinstance(cell, (int, float)) and not isinstance(cell, bool)) and not (
             isinstance(cell, list) and len(cell) == 3
             and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in cell)):
-        raise PleError(f"{where}.cell: expected a positive number or three, got {cell!r}")
+        raise PleError(f"{where}.cell: expected a positive number or three, got {echo(cell)}")
     level = data.get("level", 0.0)
     if isinstance(level, bool) or not isinstance(level, (int, float)):
-        raise PleError(f"{where}.level: expected a number, got {level!r}")
+        raise PleError(f"{where}.level: expected a number, got {echo(level)}")
     try:
         fld = FourierField(freqs.astype(np.int64), coeffs[:, 0] + 1j * coeffs[:, 1], n, cell=cell, symmetric=sym)
         return FieldSolid(fld, level)

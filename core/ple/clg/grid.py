@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterator
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.budget import HUGE, require
 
 MAX_VOXELS = 1 << 32  # 4 GiB of bool output
@@ -27,14 +27,14 @@ def parse_bounds(text: str | None, lo, hi) -> tuple[np.ndarray, np.ndarray]:
     try:
         vals = [float(x) for x in text.split(",")]
     except ValueError:
-        raise PleError(f"--bounds {text!r}: expected six numbers x0,y0,z0,x1,y1,z1") from None
+        raise PleError(f"--bounds {echo(text)}: expected six numbers x0,y0,z0,x1,y1,z1") from None
     if len(vals) != 6 or not np.all(np.isfinite(vals)):
-        raise PleError(f"--bounds {text!r}: expected six finite numbers x0,y0,z0,x1,y1,z1")
+        raise PleError(f"--bounds {echo(text)}: expected six finite numbers x0,y0,z0,x1,y1,z1")
     a, b = np.array(vals[:3]), np.array(vals[3:])
     if np.any(b <= a):
-        raise PleError(f"--bounds {text!r}: each upper bound must exceed its lower bound")
+        raise PleError(f"--bounds {echo(text)}: each upper bound must exceed its lower bound")
     if not np.all(np.abs(np.concatenate([a, b])) <= HUGE):  # sizes b - a stay finite
-        raise PleError(f"--bounds {text!r}: coordinates must lie within ±{HUGE:g}")
+        raise PleError(f"--bounds {echo(text)}: coordinates must lie within ±{HUGE:g}")
     return a, b
 
 

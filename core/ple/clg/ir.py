@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from ..errors import PleError
+from ..errors import PleError, cut, echo
 from ..model.ir import lattice_from_dict, lattice_to_dict
 from .field import FieldSolid, field_from_dict, field_to_dict
 from .model import (
@@ -40,10 +40,10 @@ def clg_from_dict(data, where: str = "", depth: int = 1) -> CLG:
     if not isinstance(data, dict):
         raise PleError(f"{where or 'clg file'}: expected a JSON object")
     if data.get("format") != FORMAT:
-        raise PleError(f"{pre}format: expected {FORMAT!r}, got {data.get('format')!r}")
+        raise PleError(f"{pre}format: expected {echo(FORMAT)}, got {echo(data.get('format'))}")
     unknown = sorted(set(data) - TOP_KEYS)
     if unknown:
-        raise PleError(f"{pre}{unknown[0]}: unknown field (expected some of {', '.join(sorted(TOP_KEYS))})")
+        raise PleError(f"{pre}{cut(unknown[0])}: unknown field (expected some of {', '.join(sorted(TOP_KEYS))})")
     for key in ("pattern", "chunks", "solid"):
         if key not in data:
             raise PleError(f"{pre}{key}: missing")
@@ -61,10 +61,10 @@ def clg_from_dict(data, where: str = "", depth: int = 1) -> CLG:
             raise PleError(f"{w}: expected an object with replace and frame")
         bad = sorted(set(m) - {"replace", "frame", "color"})
         if bad:
-            raise PleError(f"{w}.{bad[0]}: unknown field")
+            raise PleError(f"{w}.{cut(bad[0])}: unknown field")
         frame = m.get("frame", "world")
         if frame not in ("world", "beam"):
-            raise PleError(f"{w}.frame: expected 'world' or 'beam', got {frame!r}")
+            raise PleError(f"{w}.frame: expected 'world' or 'beam', got {echo(frame)}")
         rep = m.get("replace")
         if isinstance(rep, dict) and "fourier" in rep:  # a fitted field, inline (ple.clg.field)
             if len(rep) != 1:
@@ -87,7 +87,7 @@ def clg_from_dict(data, where: str = "", depth: int = 1) -> CLG:
 
 def _one_key(e, where: str) -> tuple[str, object]:
     if not isinstance(e, dict) or len(e) != 1:
-        raise PleError(f"{where}: expected an object with one key (a primitive or an operator), got {e!r}")
+        raise PleError(f"{where}: expected an object with one key (a primitive or an operator), got {echo(e)}")
     return next(iter(e.items()))
 
 
@@ -95,11 +95,11 @@ def _node(x, where: str):
     if isinstance(x, list) and len(x) == 4:
         for v, name in zip(x[:3], ("di", "dj", "dk")):
             if isinstance(v, bool) or not isinstance(v, int):
-                raise PleError(f"{where}: {name} must be an integer, got {v!r}")
+                raise PleError(f"{where}: {name} must be an integer, got {echo(v)}")
         if isinstance(x[3], bool) or not isinstance(x[3], (int, str)):
-            raise PleError(f"{where}: unknown node {x[3]!r}")
+            raise PleError(f"{where}: unknown node {echo(x[3])}")
         return tuple(x)
-    raise PleError(f"{where}: expected [di, dj, dk, n], got {x!r}")
+    raise PleError(f"{where}: expected [di, dj, dk, n], got {echo(x)}")
 
 
 def _num_field(d: dict, key: str, where: str) -> float:
@@ -122,11 +122,11 @@ def _expr(e, where: str, materials: set):
         raise PleError(f"{w}: expected an object")
     bad = sorted(set(val) - PRIM_KEYS[key])
     if bad:
-        raise PleError(f"{w}.{bad[0]}: unknown field")
+        raise PleError(f"{w}.{cut(bad[0])}: unknown field")
     mat = val.get("material")
     if mat is not None:
         if str(mat) not in materials:
-            raise PleError(f"{w}.material: unknown material {mat!r}")
+            raise PleError(f"{w}.material: unknown material {echo(mat)}")
         mat = str(mat)
     for k in PRIM_KEYS[key] - {"material", "scale"}:
         if k not in val:
@@ -148,20 +148,20 @@ def _expr(e, where: str, materials: set):
         return Prim(a, s1, b, s2, mat)
     h = val["hollow"]
     if isinstance(h, bool) or not isinstance(h, (int, float)) or not math.isfinite(h) or not 0 < h < 1:
-        raise PleError(f"{w}.hollow: must be in (0, 1), got {h!r}")
+        raise PleError(f"{w}.hollow: must be in (0, 1), got {echo(h)}")
     return Compound(key, (a, b, s1, s2, float(h)), mat)
 
 
 def _solid(e, where: str, names: set):
     if isinstance(e, str):
         if e not in names:
-            raise PleError(f"{where}: unknown chunk {e!r} (chunks: {', '.join(sorted(names))})")
+            raise PleError(f"{where}: unknown chunk {echo(e)} (chunks: {', '.join(sorted(names))})")
         return ChunkRef(e)
     key, val = _one_key(e, where)
     if key == "chunk":
         return _solid(val, f"{where}.chunk", names)
     if key not in OPS:
-        raise PleError(f"{where}.{key}: unknown operator (expected {', '.join(OPS)} over chunk names)")
+        raise PleError(f"{where}.{cut(key)}: unknown operator (expected {', '.join(OPS)} over chunk names)")
     if not isinstance(val, list) or not val:
         raise PleError(f"{where}.{key}: expected a non-empty list")
     return Op(key, tuple(_solid(x, f"{where}.{key}[{n}]", names) for n, x in enumerate(val)))

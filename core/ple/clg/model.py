@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.lattice import MAX_COUNT, Lattice
 from .field import FieldSolid
 
@@ -66,7 +66,7 @@ class Op:
 
     def __post_init__(self):
         if self.kind not in OPS:
-            raise PleError(f"unknown operator {self.kind!r} (expected {', '.join(OPS)})")
+            raise PleError(f"unknown operator {echo(self.kind)} (expected {', '.join(OPS)})")
         if not self.args:
             raise PleError(f"{self.kind}: needs at least one operand")
 
@@ -97,17 +97,17 @@ class Material:
 
     def __post_init__(self):
         if self.frame not in FRAMES:
-            raise PleError(f"frame: expected world or beam, got {self.frame!r}")
+            raise PleError(f"frame: expected world or beam, got {echo(self.frame)}")
 
 
 # ----- building expressions (the Python API of programs) --------------------------------------------
 def scale_value(s, where: str) -> float:
     if isinstance(s, bool) or not isinstance(s, (int, float)) or not math.isfinite(float(s)):
-        raise PleError(f"{where}: expected a number, got {s!r}")
+        raise PleError(f"{where}: expected a number, got {echo(s)}")
     if s <= 0:
-        raise PleError(f"{where}: must be > 0, got {s!r}")
+        raise PleError(f"{where}: must be > 0, got {echo(s)}")
     if s > MAX_SCALE:
-        raise PleError(f"{where}: {s!r} is beyond the largest scale {MAX_SCALE:g} of a node's radius")
+        raise PleError(f"{where}: {echo(s)} is beyond the largest scale {MAX_SCALE:g} of a node's radius")
     return float(s)
 
 
@@ -115,7 +115,7 @@ def scale_pair(s, where: str) -> tuple[float, float]:
     if isinstance(s, (int, float)) and not isinstance(s, bool):
         s = (s, s)
     if not isinstance(s, (list, tuple)) or len(s) != 2:
-        raise PleError(f"{where}: expected two scales [s1, s2], got {s!r}")
+        raise PleError(f"{where}: expected two scales [s1, s2], got {echo(s)}")
     return scale_value(s[0], f"{where}[0]"), scale_value(s[1], f"{where}[1]")
 
 
@@ -125,10 +125,10 @@ def _ref(node, where: str):
         return node
     if isinstance(node, (list, tuple)):
         if len(node) != 4:
-            raise PleError(f"{where}: expected [di, dj, dk, n], got {list(node)!r}")
+            raise PleError(f"{where}: expected [di, dj, dk, n], got {echo(list(node))}")
         for x, name in zip(node[:3], ("di", "dj", "dk")):
             if isinstance(x, bool) or not isinstance(x, int):
-                raise PleError(f"{where}: {name} must be an integer, got {x!r}")
+                raise PleError(f"{where}: {name} must be an integer, got {echo(x)}")
         return (int(node[0]), int(node[1]), int(node[2]), node[3])
     return (0, 0, 0, node)
 
@@ -149,7 +149,7 @@ def HollowBeam(a, b, scale=(1.0, 1.0), hollow: float = 0.5, material=None) -> Co
     s1, s2 = scale_pair(scale, "hollow_beam.scale")
     h = scale_value(hollow, "hollow_beam.hollow")
     if not 0 < h < 1:
-        raise PleError(f"hollow_beam.hollow: must be in (0, 1), got {hollow!r}")
+        raise PleError(f"hollow_beam.hollow: must be in (0, 1), got {echo(hollow)}")
     return Compound("hollow_beam", (_ref(a, "hollow_beam.from"), _ref(b, "hollow_beam.to"), s1, s2, h), material)
 
 
@@ -231,7 +231,7 @@ class CLG:
         if callable(rep) and not isinstance(rep, CLG):
             rep = rep(prim)  # R(X) (§10.1), once per template primitive
             if rep is not None and not isinstance(rep, (CLG, FieldSolid)):
-                raise PleError(f"{where}: material {prim.material!r} returned {type(rep).__name__}, "
+                raise PleError(f"{where}: material {echo(prim.material)} returned {type(rep).__name__}, "
                                f"not a CLG or a FieldSolid")
             if rep is not None and rep.depth >= MAX_DEPTH:
                 raise PleError(f"materials.{prim.material}.replace: nesting deeper than {MAX_DEPTH} levels")
@@ -256,7 +256,7 @@ class CLG:
         if chunk is None:
             return self
         if chunk not in self.chunks:
-            raise PleError(f"unknown chunk {chunk!r} (chunks: {', '.join(sorted(self.chunks))})")
+            raise PleError(f"unknown chunk {echo(chunk)} (chunks: {', '.join(sorted(self.chunks))})")
         return CLG(self.pattern, self.chunks, ChunkRef(chunk), self.materials, self.description)
 
     def used_chunks(self) -> list[str]:
@@ -266,21 +266,21 @@ class CLG:
 def _node(lat: Lattice, ref, where: str) -> NodeRef:
     di, dj, dk, n = (ref.di, ref.dj, ref.dk, ref.n) if isinstance(ref, NodeRef) else ref
     if isinstance(n, bool):
-        raise PleError(f"{where}: unknown node {n!r}")
+        raise PleError(f"{where}: unknown node {echo(n)}")
     for d, name in ((di, "di"), (dj, "dj"), (dk, "dk")):
         if not -MAX_COUNT <= d <= MAX_COUNT:  # as a beam's offset (ple.model.schema)
             raise PleError(f"{where}: {name} {d} is outside ±{MAX_COUNT:,}")
     try:
         return NodeRef(int(di), int(dj), int(dk), lat.node_id(n))
     except PleError:
-        raise PleError(f"{where}: unknown node {n!r} (the pattern has {len(lat.nodes)} nodes)") from None
+        raise PleError(f"{where}: unknown node {echo(n)} (the pattern has {len(lat.nodes)} nodes)") from None
 
 
 def expand(expr, lat: Lattice, where: str, materials: set):
     """Resolve node references and expand compound primitives into Prim/Op trees."""
     if isinstance(expr, Prim):
         if expr.material is not None and str(expr.material) not in materials:
-            raise PleError(f"{where}.material: unknown material {expr.material!r}")
+            raise PleError(f"{where}.material: unknown material {echo(expr.material)}")
         mat = None if expr.material is None else str(expr.material)
         w = f"{where}.{expr.kind}"
         b = None if expr.b is None else _node(lat, expr.b, f"{w}.to")
@@ -291,10 +291,10 @@ def expand(expr, lat: Lattice, where: str, materials: set):
     if isinstance(expr, Compound):
         mat = expr.material
         if mat is not None and str(mat) not in materials:
-            raise PleError(f"{where}.material: unknown material {mat!r}")
+            raise PleError(f"{where}.material: unknown material {echo(mat)}")
         return expand(_expand_compound(expr, lat, where), lat, where, materials)
     if isinstance(expr, ChunkRef):
-        raise PleError(f"{where}: a chunk cannot use another chunk ({expr.name!r}); chunks are built of primitives")
+        raise PleError(f"{where}: a chunk cannot use another chunk ({echo(expr.name)}); chunks are built of primitives")
     raise PleError(f"{where}: expected a primitive or an operator, got {type(expr).__name__}")
 
 
@@ -312,7 +312,7 @@ def _expand_compound(c: Compound, lat: Lattice, where: str):
         ref = _node(lat, node, f"{where}.connector.node")
         return Op("difference", (Op("intersection", (Prim(ref, r, None, 0.0, m), _hub(lat, ref, s1, s1, m, where))),
                                  _hub(lat, ref, s2, s2, m, where)))
-    raise PleError(f"{where}: unknown compound primitive {c.kind!r}")
+    raise PleError(f"{where}: unknown compound primitive {echo(c.kind)}")
 
 
 def _hub(lat: Lattice, node: NodeRef, s1: float, s2: float, m, where: str) -> Op:
@@ -335,7 +335,7 @@ def _check_solid(expr, names: set, where: str):
         expr = ChunkRef(expr)
     if isinstance(expr, ChunkRef):
         if expr.name not in names:
-            raise PleError(f"{where}: unknown chunk {expr.name!r} (chunks: {', '.join(sorted(names))})")
+            raise PleError(f"{where}: unknown chunk {echo(expr.name)} (chunks: {', '.join(sorted(names))})")
         return expr
     if isinstance(expr, Op):
         return Op(expr.kind, tuple(_check_solid(x, names, f"{where}.{expr.kind}[{n}]")

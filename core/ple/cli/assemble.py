@@ -7,7 +7,7 @@ from __future__ import annotations
 import posixpath
 
 from ..app.jobs import assemble_slices, assemble_stl, count_totals, load_filter_parts, location, read_manifest
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..io.files import check_apart, save_npz
 
 
@@ -46,5 +46,5 @@ def run(args) -> int:
         save_npz(args.out, ev.arrays())
         print(f"wrote {args.out}: {len(ev.node_index):,} nodes, {len(ev.beam_index):,} beams")
     else:
-        raise PleError(f"{args.parts}: no job manifest there (kind {kind!r})")
+        raise PleError(f"{args.parts}: no job manifest there (kind {echo(kind)})")
     return 0

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..io.export import export_connectors
 from ..io.files import atomic_path, atomic_write_text, strict_json
 from ..io.inputs import load_npy
@@ -46,15 +46,15 @@ def register(sub) -> None:
 def parse_corners(text: str) -> list[np.ndarray]:
     parts = text.split()
     if len(parts) != 4:
-        raise PleError(f"--corners {text!r}: expected 4 points 'ax,ay,az bx,by,bz cx,cy,cz dx,dy,dz'")
+        raise PleError(f"--corners {echo(text)}: expected 4 points 'ax,ay,az bx,by,bz cx,cy,cz dx,dy,dz'")
     out = []
     for name, part in zip("ABCD", parts):
         try:
             xyz = [float(v) for v in part.split(",")]
         except ValueError:
-            raise PleError(f"--corners: corner {name} {part!r} is not three numbers") from None
+            raise PleError(f"--corners: corner {name} {echo(part)} is not three numbers") from None
         if len(xyz) != 3 or not all(np.isfinite(xyz)):
-            raise PleError(f"--corners: corner {name} {part!r} must be three finite numbers")
+            raise PleError(f"--corners: corner {name} {echo(part)} must be three finite numbers")
         out.append(np.array(xyz))
     return out
 
@@ -63,7 +63,7 @@ def _branch(text: str) -> tuple[int, int]:
     try:
         ku, kv = (int(v) for v in text.split(","))
     except ValueError:
-        raise PleError(f"--branch {text!r}: expected two integers KU,KV") from None
+        raise PleError(f"--branch {echo(text)}: expected two integers KU,KV") from None
     return ku, kv
 
 

@@ -7,7 +7,7 @@ import numpy as np
 from ..errors import PleError
 from ..io.files import atomic_write_text, strict_json
 from ..io.inputs import load_npy
-from ..model.budget import HIT_ARRAY_BYTES, HIT_LISTED_BYTES, estimate_hits, rangefinder_bytes, require
+from ..model.budget import HIT_ARRAY_BYTES, HIT_LISTED_BYTES, HUGE, estimate_hits, rangefinder_bytes, require
 from ..queries.biq import query
 from ..queries.rangefinder import cached_plan
 from .common import add_lattice_args, lattice_from_args, max_memory
@@ -37,6 +37,10 @@ def load_queries(path: str) -> np.ndarray:
     q = q.astype(float)
     if not np.all(np.isfinite(q)):
         raise PleError(f"--queries {path}: NaN or infinite values")
+    if np.any(np.abs(q) > HUGE):  # their squares must stay finite in the exact tests
+        row = int(np.argmax(np.abs(q).max(axis=1) > HUGE))
+        raise PleError(f"--queries {path}: values beyond {HUGE:.0e} in row {row} "
+                       "(coordinates and radii are at most 1e100, as in lattices)")
     if np.any(q[:, 3] < 0):
         raise PleError(f"--queries {path}: negative radius in row {int(np.argmax(q[:, 3] < 0))}")
     return q

@@ -12,7 +12,7 @@ from ..app.progress import Progress
 from ..clg.grid import check_grid, layer_grid, parse_bounds, voxel_tiles, voxelize_clg
 from ..clg.query import compiled
 from ..clg.rays import render, trace
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..io.export import export_mesh
 from ..io.files import atomic_path, strict_json
 from ..io.inputs import load_npy
@@ -124,9 +124,9 @@ def run_voxelize(args) -> int:
     try:
         shape = [int(x) for x in args.grid.split(",")]
     except ValueError:
-        raise PleError(f"--grid {args.grid!r}: expected NX,NY,NZ integers") from None
+        raise PleError(f"--grid {echo(args.grid)}: expected NX,NY,NZ integers") from None
     if len(shape) != 3:
-        raise PleError(f"--grid {args.grid!r}: expected NX,NY,NZ")
+        raise PleError(f"--grid {echo(args.grid)}: expected NX,NY,NZ")
     if not args.out.endswith(".npy"):
         raise PleError(f"--out {args.out}: expected a .npy file")
     comp = _load(args)
@@ -169,7 +169,7 @@ def _pair(text: str, what: str, kind=float):
     try:
         a, b = (kind(x) for x in text.split(","))
     except ValueError:
-        raise PleError(f"{what} {text!r}: expected two numbers A,B") from None
+        raise PleError(f"{what} {echo(text)}: expected two numbers A,B") from None
     return a, b
 
 
@@ -184,9 +184,9 @@ def run_render(args) -> int:
     size = _pair(args.size, "--size", int)
     view = _pair(args.view, "--view")
     if not all(np.isfinite(view)):
-        raise PleError(f"--view {args.view!r}: expected two finite angles")
+        raise PleError(f"--view {echo(args.view)}: expected two finite angles")
     if min(size) < 1 or size[0] * size[1] > 1 << 24:
-        raise PleError(f"--size {args.size!r}: expected 1..16M pixels")
+        raise PleError(f"--size {echo(args.size)}: expected 1..16M pixels")
     # camera rays (48 B), the picture and its masks, and one pass's trace temporaries
     require(size[0] * size[1] * RENDER_PIXEL_BYTES, f"--size {args.size}: a {size[0]}x{size[1]} picture",
             max_memory(args), "choose a smaller --size")

@@ -8,7 +8,7 @@ import argparse
 import sys
 
 from ..algebra.similarity import Translation
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..filters.body import MODES, OPEN_MODES, BodyFilter, SurfaceDistanceField, body_of
 from ..filters.cleanup import cleanup
 from ..filters.implicit import VARIANTS, Field, FourierField, ImplicitFilter, TPMSField
@@ -100,7 +100,7 @@ def parse_grade(text: str, body=None) -> RadiusField:
     """``AX,AY,AZ:BX,BY,BZ:F0:F1`` (a linear gradient) or ``surface:DEPTH:F0:F1`` (with a body)."""
     parts = text.split(":")
     if parts[0] == "surface" and body is None:
-        raise PleError(f"--grade {text!r}: a surface gradient needs --body")
+        raise PleError(f"--grade {echo(text)}: a surface gradient needs --body")
     try:
         if parts[0] == "surface":
             if len(parts) != 4:
@@ -113,9 +113,9 @@ def parse_grade(text: str, body=None) -> RadiusField:
             raise ValueError
         return LinearGradient(a, b, float(parts[2]), float(parts[3]))
     except PleError as exc:
-        raise PleError(f"--grade {text!r}: {exc}") from None
+        raise PleError(f"--grade {echo(text)}: {exc}") from None
     except ValueError:
-        raise PleError(f"--grade {text!r}: expected AX,AY,AZ:BX,BY,BZ:F0:F1 or surface:DEPTH:F0:F1") from None
+        raise PleError(f"--grade {echo(text)}: expected AX,AY,AZ:BX,BY,BZ:F0:F1 or surface:DEPTH:F0:F1") from None
 
 
 def parse_stencil(text: str) -> Stencil:
@@ -127,9 +127,9 @@ def parse_stencil(text: str) -> Stencil:
         period = [int(p) for p in parts[1].split("x")] if len(parts) > 1 else [4]
         width = int(parts[2]) if len(parts) > 2 else 1
     except ValueError:
-        raise PleError(f"--stencil {text!r}: expected NAME[:PERIOD or PxQxR][:WIDTH]") from None
+        raise PleError(f"--stencil {echo(text)}: expected NAME[:PERIOD or PxQxR][:WIDTH]") from None
     if len(period) not in (1, 3) or len(parts) > 3:
-        raise PleError(f"--stencil {text!r}: expected NAME[:PERIOD or PxQxR][:WIDTH]")
+        raise PleError(f"--stencil {echo(text)}: expected NAME[:PERIOD or PxQxR][:WIDTH]")
     return Stencil.named(parts[0], period[0] if len(period) == 1 else period, width)
 
 
@@ -145,22 +145,22 @@ def parse_implicit(text: str) -> ImplicitFilter:
             if key in VARIANTS:
                 opts["variant"] = key
                 continue
-            raise PleError(f"--implicit {text!r}: expected key=value, got {item!r}")
+            raise PleError(f"--implicit {echo(text)}: expected key=value, got {echo(item)}")
         opts[key.strip()] = value.strip()
     unknown = set(opts) - {"cell", "level", "variant", "origin", "file"}
     if unknown:
-        raise PleError(f"--implicit {text!r}: unknown key(s) {', '.join(sorted(unknown))}")
+        raise PleError(f"--implicit {echo(text)}: unknown key(s) {', '.join(sorted(unknown))}")
     try:
         cell_parts = [float(x) for x in opts.get("cell", "1").split("x")]
         cell = cell_parts[0] if len(cell_parts) == 1 else cell_parts
         level = float(opts.get("level", "0"))
         origin = [float(x) for x in opts["origin"].split("/")] if "origin" in opts else None
     except ValueError:
-        raise PleError(f"--implicit {text!r}: cell, level and origin must be numbers") from None
+        raise PleError(f"--implicit {echo(text)}: cell, level and origin must be numbers") from None
     placement = Translation(origin) if origin is not None else None
     if kind == "fourier":
         if "file" not in opts:
-            raise PleError(f"--implicit {text!r}: a fourier field needs file=COEFFS.npz")
+            raise PleError(f"--implicit {echo(text)}: a fourier field needs file=COEFFS.npz")
         field: Field = FourierField.load(opts["file"], cell, placement)
     else:
         field = TPMSField(kind, cell, placement)

@@ -15,12 +15,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import trimesh
 
 from ..clg.field import FieldSolid, field_to_dict
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..filters.fit import fit_mesh
-from ..io.bodyfile import read_mesh
+from ..io.bodyfile import closed_mesh
 from ..io.files import atomic_write_text, save_npz, strict_json
 from ..model.budget import require
 from .common import add_budget_args, max_memory
@@ -38,31 +37,17 @@ def register(sub) -> None:
     p.add_argument("--no-symmetric", action="store_true", help="plain Fourier fit (no T_d projection)")
     p.add_argument("--distance", action="store_true",
                    help="fit the mesh's sampled signed distance (negative inside) instead of inside/outside")
+    p.add_argument("--flip", action="store_true",
+                   help="reverse the faces of an inverted (inside-out) mesh before fitting")
     p.add_argument("--normalize", action="store_true",
                    help="centre the mesh's box at the origin and scale its largest side to 0.9")
     p.set_defaults(func=run)
 
 
-def load_mesh(path: str):
-    """Vertices and faces of a closed mesh file that encloses a volume, read within limits
-    (``ple.io.bodyfile.read_mesh``): an open, flat or one-point mesh has no inside to fit."""
-    mesh = read_mesh(path, f"mesh {path}")
-    closed = trimesh.Trimesh(np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64),
-                             process=False)
-    closed.merge_vertices()
-    v = np.asarray(closed.vertices, dtype=float)
-    extent = float((v.max(axis=0) - v.min(axis=0)).max())
-    if not extent > 0:
-        raise PleError(f"mesh {path}: all its vertices are one point; it encloses nothing to fit")
-    if not closed.is_watertight:
-        _, uses = np.unique(closed.edges_sorted, axis=0, return_counts=True)
-        raise PleError(f"mesh {path}: not closed ({int(np.count_nonzero(uses != 2)):,} edges not shared by exactly "
-                       "two triangles); ple fit needs a closed mesh")
-    with np.errstate(all="ignore"):  # a flat mesh's centre of mass divides by its zero volume
-        volume = abs(float(closed.volume))
-    if not volume > 1e-9 * extent ** 3:
-        raise PleError(f"mesh {path}: encloses no volume (flat); ple fit needs a closed mesh around a volume")
-    return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
+def load_mesh(path: str, flip: bool = False):
+    """Vertices and faces of a closed mesh file that encloses a volume, outward: the body reader
+    of every door (``ple.io.bodyfile.closed_mesh``); ``flip`` reverses an inverted mesh."""
+    return closed_mesh(path, f"mesh {path}", flip)
 
 
 MAX_ORDER = 256  # the fit samples an N³ grid
@@ -75,16 +60,16 @@ def run(args) -> int:
     try:
         orders = [int(x) for x in args.orders.split(",") if x.strip()]
     except ValueError:
-        raise PleError(f"--orders {args.orders!r}: expected integers like 8,16,32") from None
+        raise PleError(f"--orders {echo(args.orders)}: expected integers like 8,16,32") from None
     if not orders or not all(2 <= n <= MAX_ORDER for n in orders):
-        raise PleError(f"--orders {args.orders!r}: each order must be in 2..{MAX_ORDER}")
+        raise PleError(f"--orders {echo(args.orders)}: each order must be in 2..{MAX_ORDER}")
     require(max(orders) ** 3 * GRID_BYTES, f"--orders {args.orders}: a {max(orders)}³ grid", max_memory(args),
             "choose smaller --orders")
     if not (math.isfinite(args.bound) and args.bound > 0):
         raise PleError(f"--bound {args.bound}: must be a positive number")
     if args.max_terms is not None and args.max_terms < 1:
         raise PleError(f"--max-terms {args.max_terms}: must be at least 1")
-    v, f = load_mesh(args.mesh)
+    v, f = load_mesh(args.mesh, args.flip)
     transform = {"scale": 1.0, "offset": [0.0, 0.0, 0.0]}
     if args.normalize:
         lo, hi = v.min(axis=0), v.max(axis=0)

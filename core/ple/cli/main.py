@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 from .. import cli
-from ..errors import PleError
+from ..errors import ECHO_LIMIT, PleError, cut
 from ..io.files import check_apart, install_signal_handlers, is_user_oserror, oserror_message, restore_signal_handlers
 
 NOT_COMMANDS = {"main", "common", "__main__"}  # the modules of ple.cli that add no sub-command
@@ -40,6 +40,12 @@ class Parser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r"^-\.?\d")
+
+    def error(self, message: str):
+        """argparse's usage error, every value it quotes cut (``ple.errors.cut``): an invalid
+        choice of 1 MB is one short line."""
+        long_quote = "'([^']{" + str(ECHO_LIMIT + 1) + ",})'"
+        super().error(re.sub(long_quote, lambda m: f"'{cut(m.group(1))}'", message))
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:

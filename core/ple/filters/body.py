@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from ..algebra.similarity import Similarity
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.grading import RadiusField
 from ..model.lattice import Lattice
 from .base import And, Filter
@@ -50,7 +50,7 @@ class Body:
     def __init__(self, vertices, faces, placement: Similarity | None = None, source: str | None = None,
                  open: str = "error", name: str = "body") -> None:  # noqa: A002 - the documented option name
         if open not in OPEN_MODES:
-            raise PleError(f"{name}: open must be one of {', '.join(OPEN_MODES)}, got {open!r}")
+            raise PleError(f"{name}: open must be one of {', '.join(OPEN_MODES)}, got {echo(open)}")
         if placement is not None and not isinstance(placement, Similarity):
             raise PleError(f"{name}: placement must be a Similarity")
         v = np.asarray(vertices, dtype=float)
@@ -251,7 +251,7 @@ class Body:
         """Unsigned distance (N,) from points to the surface, clamped to ``cap`` (exact below it)."""
         p = np.asarray(points, dtype=float).reshape(-1, 3)
         if not cap > 0:
-            raise PleError(f"{self.name}: distance cap must be positive, got {cap!r}")
+            raise PleError(f"{self.name}: distance cap must be positive, got {echo(cap)}")
         out = np.full(len(p), float(cap) ** 2)
         reach = np.full(len(p), float(cap))
         for rows, tris in self._surface_pairs(p, reach):
@@ -406,7 +406,7 @@ class BodyFilter(Filter):
         if not isinstance(body, Body):
             raise PleError(f"a body filter needs a Body, got {type(body).__name__}")
         if mode not in MODES:
-            raise PleError(f"fill mode must be one of {', '.join(MODES)}, got {mode!r}")
+            raise PleError(f"fill mode must be one of {', '.join(MODES)}, got {echo(mode)}")
         self.body, self.mode = body, mode
 
     def node_mask(self, lat: Lattice, node_index, center, radius) -> np.ndarray:

@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.lattice import Evaluation, Lattice
 from .base import Filter
 from .body import Body, body_of
@@ -57,7 +57,7 @@ def skin_anchored(body: Body, thickness: float, center, radius) -> np.ndarray:
     the shell when d < r + t (the distance from the centre to the shell is d - t); a ball whose
     centre is outside meets it when it touches the body (d < r)."""
     if not thickness > 0:
-        raise PleError(f"cleanup: skin thickness must be positive, got {thickness!r}")
+        raise PleError(f"cleanup: skin thickness must be positive, got {echo(thickness)}")
     c = np.asarray(center, dtype=float).reshape(-1, 3)
     r = np.asarray(radius, dtype=float).reshape(-1)
     inside = body.contains(c)
@@ -149,7 +149,7 @@ class Cleanup(Filter):
         if part is not None and not isinstance(part, Filter):
             raise PleError(f"a cleanup needs a filter, got {type(part).__name__}")
         if skin is not None and not skin > 0:
-            raise PleError(f"cleanup: skin thickness must be positive, got {skin!r}")
+            raise PleError(f"cleanup: skin thickness must be positive, got {echo(skin)}")
         self.part, self.largest, self.skin = part, bool(largest), skin
         self.report: CleanupReport | None = None
         self._cache: tuple | None = None

@@ -16,7 +16,7 @@ from abc import ABC, abstractmethod
 import numpy as np
 
 from ..algebra.similarity import Similarity
-from ..errors import PleError
+from ..errors import PleError, echo
 from .base import Filter
 
 EVAL_CHUNK = 1 << 12  # points per vectorized Fourier evaluation (small chunks stay in cache: measured best)
@@ -45,7 +45,7 @@ class Field(ABC):
     def __init__(self, cell=1.0, placement: Similarity | None = None) -> None:
         cell = np.asarray(cell, dtype=float)
         if cell.shape not in ((), (3,)) or not np.all(np.isfinite(cell)) or np.any(cell <= 0):
-            raise PleError(f"field cell size must be a positive number (or three), got {cell!r}")
+            raise PleError(f"field cell size must be a positive number (or three), got {echo(cell)}")
         if placement is not None and not isinstance(placement, Similarity):
             raise PleError("field placement must be a Similarity")
         self.cell = cell
@@ -96,7 +96,7 @@ class TPMSField(Field):
 
     def __init__(self, kind: str, cell=1.0, placement: Similarity | None = None) -> None:
         if kind not in TPMS:
-            raise PleError(f"unknown implicit field {kind!r}; known: {', '.join(TPMS)}, fourier")
+            raise PleError(f"unknown implicit field {echo(kind)}; known: {', '.join(TPMS)}, fourier")
         super().__init__(cell, placement)
         self.kind = kind
 
@@ -323,7 +323,7 @@ class ImplicitFilter(Filter):
         if not isinstance(field, Field):
             raise PleError(f"implicit filter needs a Field, got {type(field).__name__}")
         if variant not in VARIANTS:
-            raise PleError(f"implicit filter variant {variant!r}: expected network or sheet")
+            raise PleError(f"implicit filter variant {echo(variant)}: expected network or sheet")
         level = float(level)
         if not math.isfinite(level):
             raise PleError(f"implicit filter level must be finite, got {level}")

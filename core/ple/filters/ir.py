@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..algebra.similarity import Similarity, similarity_from_dict
-from ..errors import PleError
+from ..errors import PleError, cut, echo
 from ..model.grading import grade_to_dict
 from ..model.ir import lattice_from_dict, lattice_to_dict
 from ..model.lattice import Lattice
@@ -133,9 +133,9 @@ def filter_from_dict(data, where: str = "filter", depth: int = 0, loader=None) -
         _keys(body, here, set(), {"filter", "largest", "skin"})
         largest, skin = body.get("largest", True), body.get("skin")
         if not isinstance(largest, bool):
-            raise PleError(f"{here}.largest: expected true or false, got {largest!r}")
+            raise PleError(f"{here}.largest: expected true or false, got {echo(largest)}")
         if skin is not None and _number(skin, f"{here}.skin") <= 0:
-            raise PleError(f"{here}.skin: must be positive, got {skin!r}")
+            raise PleError(f"{here}.skin: must be positive, got {echo(skin)}")
         part = filter_from_dict(body["filter"], f"{here}.filter", depth + 1, loader) if "filter" in body else None
         return Cleanup(part, largest, skin)
     raise PleError(f"{here}: unknown filter (expected stencil, lil, implicit, body, cleanup, and, or, not)")
@@ -147,12 +147,13 @@ def _keys(body, here: str, required: set, optional: set = frozenset()) -> None:
     for key in sorted(required - set(body)):
         raise PleError(f"{here}.{key}: missing")
     for key in sorted(set(body) - required - set(optional)):
-        raise PleError(f"{here}.{key}: unknown field (expected some of {', '.join(sorted(required | set(optional)))})")
+        raise PleError(f"{here}.{cut(key)}: unknown field "
+                       f"(expected some of {', '.join(sorted(required | set(optional)))})")
 
 
 def _number(x, where: str) -> float:
     if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-        raise PleError(f"{where}: expected a finite number, got {x!r}")
+        raise PleError(f"{where}: expected a finite number, got {echo(x)}")
     return float(x)
 
 
@@ -161,7 +162,7 @@ def _stencil(body, here: str) -> Stencil:
     shape, cells = body["shape"], body["cells"]
     if (not isinstance(shape, list) or len(shape) not in (3, 4)
             or any(isinstance(s, bool) or not isinstance(s, int) or s < 1 for s in shape)):
-        raise PleError(f"{here}.shape: expected 3 (or 4, with a node column) positive integers, got {shape!r}")
+        raise PleError(f"{here}.shape: expected 3 (or 4, with a node column) positive integers, got {echo(shape)}")
     size = math.prod(shape)
     if size > MAX_STENCIL_CELLS:
         raise PleError(f"{here}.shape: {size:,} cells (limit {MAX_STENCIL_CELLS:,})")
@@ -175,7 +176,7 @@ def _lil(body, here: str, depth: int, loader=None) -> LiL:
     _keys(body, here, {"coarse"}, {"method"})
     method = body.get("method", "auto")
     if method not in ("auto", "elements", "biq"):
-        raise PleError(f"{here}.method: expected auto, elements or biq, got {method!r}")
+        raise PleError(f"{here}.method: expected auto, elements or biq, got {echo(method)}")
     try:
         coarse = lattice_from_dict(body["coarse"], lambda d, w: filter_from_dict(d, w, depth + 1, loader),
                                    _surface_grade)
@@ -189,11 +190,11 @@ def _implicit(body, here: str) -> ImplicitFilter:
     fourier = {"n", "symmetric", "freqs", "coeffs"}
     _keys(body, here, {"kind"}, {"cell", "level", "sheet", "placement"} | (fourier if kind == "fourier" else set()))
     if kind != "fourier" and kind not in TPMS:
-        raise PleError(f"{here}.kind: expected one of {', '.join(TPMS)}, fourier; got {kind!r}")
+        raise PleError(f"{here}.kind: expected one of {', '.join(TPMS)}, fourier; got {echo(kind)}")
     cell = body.get("cell", 1.0)
     if isinstance(cell, list):
         if len(cell) != 3:
-            raise PleError(f"{here}.cell: expected a number or three, got {cell!r}")
+            raise PleError(f"{here}.cell: expected a number or three, got {echo(cell)}")
         cell = [_number(c, f"{here}.cell[{n}]") for n, c in enumerate(cell)]
     else:
         cell = _number(cell, f"{here}.cell")
@@ -218,7 +219,7 @@ def _fourier(body, here: str, cell, placement) -> FourierField:
             raise PleError(f"{here}.{key}: missing (a fourier field is given by its coefficients)")
     n = body["n"]
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-        raise PleError(f"{here}.n: expected a positive integer, got {n!r}")
+        raise PleError(f"{here}.n: expected a positive integer, got {echo(n)}")
     freqs, coeffs = body["freqs"], body["coeffs"]
     if not isinstance(freqs, list) or not isinstance(coeffs, list) or len(freqs) != len(coeffs):
         raise PleError(f"{here}.freqs: expected as many [i, j, k] frequencies as coeffs")
@@ -226,11 +227,11 @@ def _fourier(body, here: str, cell, placement) -> FourierField:
         raise PleError(f"{here}.freqs: {len(freqs):,} terms (limit {MAX_FOURIER_TERMS:,})")
     for m, f in enumerate(freqs):
         if not isinstance(f, list) or len(f) != 3 or any(isinstance(x, bool) or not isinstance(x, int) for x in f):
-            raise PleError(f"{here}.freqs[{m}]: expected 3 integers, got {f!r}")
+            raise PleError(f"{here}.freqs[{m}]: expected 3 integers, got {echo(f)}")
     values = []
     for m, c in enumerate(coeffs):
         if not isinstance(c, list) or len(c) != 2:
-            raise PleError(f"{here}.coeffs[{m}]: expected [real, imaginary], got {c!r}")
+            raise PleError(f"{here}.coeffs[{m}]: expected [real, imaginary], got {echo(c)}")
         values.append(complex(_number(c[0], f"{here}.coeffs[{m}][0]"), _number(c[1], f"{here}.coeffs[{m}][1]")))
     symmetric = body.get("symmetric", False)
     if not isinstance(symmetric, bool):
@@ -258,11 +259,11 @@ def _body(body, here: str, loader) -> BodyFilter:
     _keys(body, here, {"mesh"}, {"mode", "placement", "open"})
     path, mode, opened = body["mesh"], body.get("mode", "inside"), body.get("open", "error")
     if not isinstance(path, str) or not path.strip():
-        raise PleError(f"{here}.mesh: expected the path of a mesh file, got {path!r}")
+        raise PleError(f"{here}.mesh: expected the path of a mesh file, got {echo(path)}")
     if mode not in MODES:
-        raise PleError(f"{here}.mode: expected one of {', '.join(MODES)}, got {mode!r}")
+        raise PleError(f"{here}.mode: expected one of {', '.join(MODES)}, got {echo(mode)}")
     if opened not in OPEN_MODES:
-        raise PleError(f"{here}.open: expected one of {', '.join(OPEN_MODES)}, got {opened!r}")
+        raise PleError(f"{here}.open: expected one of {', '.join(OPEN_MODES)}, got {echo(opened)}")
     placement = similarity_from_dict(body["placement"], f"{here}.placement") if "placement" in body else None
     if placement is not None and not isinstance(placement, Similarity):
         raise PleError(f"{here}.placement: expected a similarity")

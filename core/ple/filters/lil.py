@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.lattice import Evaluation, Lattice
 from ..queries import biq
 from ..queries.element_grid import ElementSet
@@ -35,7 +35,7 @@ class LiL(Filter):
         if not isinstance(coarse, Lattice):
             raise PleError(f"LiL coarse must be a Lattice (filtered or not), got {type(coarse).__name__}")
         if method not in ("auto", "elements", "biq"):
-            raise PleError(f"LiL method {method!r}: expected auto, elements or biq")
+            raise PleError(f"LiL method {echo(method)}: expected auto, elements or biq")
         coarse.validate()
         self.coarse = coarse
         self.method = "elements" if method == "auto" else method

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from .base import Filter
 
 MAX_STENCIL_CELLS = 10**8  # a named stencil's period box (a Boolean array of this size)
@@ -44,9 +44,9 @@ class Stencil(Filter):
         of a 2x2x2 checkerboard, ``layers`` the first ``width`` k-layers of every period."""
         per = (period,) * 3 if np.isscalar(period) else tuple(period)
         if len(per) != 3 or any(int(p) != p or p < 1 for p in per):
-            raise PleError(f"stencil period must be a positive integer or three of them, got {period!r}")
+            raise PleError(f"stencil period must be a positive integer or three of them, got {echo(period)}")
         if int(width) != width or width < 1:
-            raise PleError(f"stencil width must be a positive integer, got {width!r}")
+            raise PleError(f"stencil width must be a positive integer, got {echo(width)}")
         x, y, z = (int(p) for p in per)
         if x * y * z > MAX_STENCIL_CELLS:
             raise PleError(f"stencil period {x}x{y}x{z} has more than {MAX_STENCIL_CELLS:,} cells")
@@ -64,5 +64,5 @@ class Stencil(Filter):
         elif name == "layers":
             s = on[2]
         else:
-            raise PleError(f"unknown stencil {name!r}; named stencils: {', '.join(STENCIL_NAMES)}")
+            raise PleError(f"unknown stencil {echo(name)}; named stencils: {', '.join(STENCIL_NAMES)}")
         return Stencil(s)

@@ -12,7 +12,7 @@ import numpy as np
 import trimesh
 
 from ..algebra.similarity import Similarity
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..filters.body import Body
 from .inputs import check_input_file
 
@@ -34,7 +34,7 @@ def read_mesh(path, name: str | None = None) -> trimesh.Trimesh:
     name = name or str(path)
     suffix = path.suffix.lower().lstrip(".")
     if suffix not in BODY_SUFFIXES:
-        raise PleError(f"{name}: unknown body mesh format {suffix!r} (expected .{', .'.join(BODY_SUFFIXES)})")
+        raise PleError(f"{name}: unknown body mesh format {echo(suffix)} (expected .{', .'.join(BODY_SUFFIXES)})")
     try:  # a regular file within the limit: a folder, FIFO (would block) or device is named as such
         check_input_file(path, "body mesh file", MAX_BODY_BYTES)
     except PleError as exc:
@@ -93,15 +93,63 @@ def check_stl_count(path: Path, name: str) -> None:
                        f"({size:,} bytes) holds {(size - 84) / 50:,.6g}; the file is truncated or damaged")
 
 
-def body_from_trimesh(mesh, placement: Similarity | None = None, source: str | None = None,
-                      open: str = "error", name: str = "body") -> Body:  # noqa: A002
-    """A Body from a trimesh mesh: vertices merged, a closed surface oriented consistently."""
+def surface(mesh, name: str = "body") -> tuple[trimesh.Trimesh, bool]:
+    """The one preparation of a read mesh, for bodies and fits alike: vertices merged within a
+    tolerance relative to its size (``merged_vertices``), and a closed surface whose faces point
+    both ways oriented consistently. Returns the surface and whether the file's own orientation
+    was consistent (then a negative volume means the file is inside out, ``inverted``)."""
     v = np.asarray(mesh.vertices, dtype=float)
     bad = int(np.count_nonzero(~np.isfinite(v).all(axis=1))) if v.ndim == 2 else 0
     if bad:
         raise PleError(f"{name}: {bad} of {len(v)} vertices are NaN or infinite")
     v, f = merged_vertices(v, np.asarray(mesh.faces))
-    mesh = trimesh.Trimesh(v, f, process=False)
-    if mesh.is_watertight and not mesh.is_winding_consistent:
-        trimesh.repair.fix_winding(mesh)
+    out = trimesh.Trimesh(v, f, process=False)
+    consistent = bool(out.is_winding_consistent)
+    if out.is_watertight and not consistent:
+        trimesh.repair.fix_winding(out)
+    return out, consistent
+
+
+def signed_volume(v: np.ndarray, f: np.ndarray) -> float:
+    """The signed volume of triangles ``f`` (F, 3) of vertices ``v`` (V, 3), in a frame centred and
+    scaled to the mesh (no overflow at 1e100, no underflow at 1e-100): positive when the faces
+    point outward."""
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    scale = float((hi - lo).max()) or 1.0
+    tri = ((v - (lo + hi) / 2) / scale)[f]
+    return float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6.0) * scale ** 3
+
+
+def closed_mesh(path, name: str | None = None, flip: bool = False,
+                flag: str = "--flip") -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) and faces (F, 3) of a closed mesh file enclosing a volume, outward
+    (``read_mesh`` and ``surface``): a one-point, open or flat mesh is refused, and so is an
+    inverted one (consistently oriented, negative volume: inside out) unless ``flip`` reverses
+    its faces (``flag`` names the option that does)."""
+    name = name or str(path)
+    mesh, consistent = surface(read_mesh(path, name), name)
+    v, f = np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
+    extent = float((v.max(axis=0) - v.min(axis=0)).max())
+    if not extent > 0:
+        raise PleError(f"{name}: all its vertices are one point; it encloses nothing")
+    if not mesh.is_watertight:
+        _, uses = np.unique(mesh.edges_sorted, axis=0, return_counts=True)
+        raise PleError(f"{name}: not closed ({int(np.count_nonzero(uses != 2)):,} edges not shared by exactly "
+                       "two triangles); a closed mesh is needed")
+    volume = signed_volume(v, f)
+    if not abs(volume) > 1e-9 * extent ** 3:
+        raise PleError(f"{name}: encloses no volume (flat); a closed mesh around a volume is needed")
+    if volume < 0:
+        if consistent and not flip:
+            raise PleError(f"{name}: the mesh is inverted (inside out: its faces point inward, volume "
+                           f"{volume:.6g}); pass {flag} to reverse them, or flip its normals in the modeller")
+        f = f[:, ::-1].copy()
+    return v, f
+
+
+def body_from_trimesh(mesh, placement: Similarity | None = None, source: str | None = None,
+                      open: str = "error", name: str = "body") -> Body:  # noqa: A002
+    """A Body from a trimesh mesh: vertices merged, a closed surface oriented consistently
+    (``surface``; Body turns an inside-out surface outward)."""
+    mesh, _ = surface(mesh, name)
     return Body(mesh.vertices, mesh.faces, placement, source, open, name)

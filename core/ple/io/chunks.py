@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.budget import EVAL_BEAM_BYTES, EVAL_NODE_BYTES, human, region_beams, region_nodes
 from ..model.lattice import Evaluation, Lattice
 from .files import atomic_dir, check_output_dir, remove_stale_temporaries, strict_json
@@ -95,7 +95,7 @@ def read_manifest(folder) -> dict:
     except (OSError, ValueError) as exc:
         raise PleError(f"{folder}: not a chunk directory ({exc})") from None
     if manifest.get("format") != FORMAT:
-        raise PleError(f"{path}: format {manifest.get('format')!r}, expected {FORMAT}")
+        raise PleError(f"{path}: format {echo(manifest.get('format'))}, expected {FORMAT}")
     return manifest
 
 

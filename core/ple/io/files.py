@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, echo
 
 WRITE_BEHIND = 128 << 20  # bytes of a streamed file between write-behind steps (``WriteBehind``)
 DIRECT_BLOCK = 4096  # alignment of O_DIRECT buffers, offsets and sizes (the largest logical block in use)
@@ -323,7 +323,7 @@ def plain_name(name, what: str) -> str:
     PleError: names read from a manifest stay inside their folder."""
     if (not isinstance(name, str) or not name or name in (".", "..") or "/" in name or "\\" in name
             or "\0" in name or os.path.isabs(name)):
-        raise PleError(f"{what}: {name!r} is not a plain file name inside the folder; move the manifest away "
+        raise PleError(f"{what}: {echo(name)} is not a plain file name inside the folder; move the manifest away "
                        "to start afresh")
     return name
 

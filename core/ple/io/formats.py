@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, echo
 
 # unit: (3MF name, metres per unit)
 UNITS = {"um": ("micron", 1e-6), "mm": ("millimeter", 1e-3), "cm": ("centimeter", 1e-2),
@@ -49,20 +49,20 @@ FORMAT_NAMES = tuple(MESH_FORMATS)
 def mesh_format(path) -> str:
     """The output format named by ``path``'s suffix (one of FORMAT_NAMES)."""
     suffix = Path(path).suffix.lower().lstrip(".")
-    return format_named(suffix, f"{path}: unknown mesh format {suffix!r}")
+    return format_named(suffix, f"{path}: unknown mesh format {echo(suffix)}")
 
 
 def format_named(name: str, what: str | None = None) -> str:
     """``name`` if it is a mesh format, else a user error listing them."""
     if name not in MESH_FORMATS:
-        raise PleError(f"{what or f'--format {name!r}'} (expected one of .{', .'.join(FORMAT_NAMES)})")
+        raise PleError(f"{what or f'--format {echo(name)}'} (expected one of .{', .'.join(FORMAT_NAMES)})")
     return name
 
 
 def unit_name(unit: str) -> str:
     """The 3MF name of a unit ("mm" -> "millimeter"); a user error for an unknown unit."""
     if unit not in UNITS:
-        raise PleError(f"--unit {unit!r}: expected one of {', '.join(UNITS)}")
+        raise PleError(f"--unit {echo(unit)}: expected one of {', '.join(UNITS)}")
     return UNITS[unit][0]
 
 

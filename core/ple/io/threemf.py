@@ -20,7 +20,7 @@ import zipfile
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from .files import atomic_path
 
 NS_CORE = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
@@ -55,7 +55,7 @@ def write_model(fh, vertices: np.ndarray, faces: np.ndarray, unit: str = "millim
     large mesh is never one string). ``vertices`` (V, 3) (float32 values), ``faces`` (F, 3) outward;
     ``lattice``: None or (center (B, 3), radius (B,), beam_nodes (E, 2)) for a Beam Lattice."""
     if unit not in UNITS_3MF:
-        raise PleError(f"3MF unit {unit!r}: expected one of {', '.join(UNITS_3MF)}")
+        raise PleError(f"3MF unit {echo(unit)}: expected one of {', '.join(UNITS_3MF)}")
     v = np.asarray(vertices, np.float32).reshape(-1, 3)
     f = np.asarray(faces).reshape(-1, 3)
     if not np.all(np.isfinite(v)):

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.lattice import Evaluation, Lattice
 from ..queries.overlaps import PairLimitError, similar_axes, unclean_pairs
 from .integrals import kept_measures, lattice_measures
@@ -44,7 +44,10 @@ def is_clean(lat: Lattice, region=None, max_elements: int = QUICK_ELEMENTS) -> b
     r = lat.region(region)
     if (r.groups * len(lat.nodes) + lat.beam_count() * r.groups / max(1, lat.groups)) > max_elements:
         return None
-    return unclean_pairs(lat, lat.evaluate(r), first=True)["clean"]
+    try:
+        return unclean_pairs(lat, lat.evaluate(r), first=True)["clean"]
+    except PairLimitError:  # elements of sizes too far apart for one grid, or overlapping too many
+        return None
 
 
 def solid_volume(lat: Lattice, region=None) -> dict | None:
@@ -80,7 +83,7 @@ def check_lattice(lat: Lattice, region=None, min_feature: float | None = None,
     for name, value in (("--min-feature", min_feature), ("--max-slenderness", max_slenderness),
                         ("--max-pairs", max_pairs)):
         if value is not None and not (np.isfinite(value) and value > 0):
-            raise PleError(f"{name} must be a positive number, got {value!r}")
+            raise PleError(f"{name} must be a positive number, got {echo(value)}")
     ev = _evaluation(lat, region)
     rules = {}
     margin = float(min_feature) if min_feature is not None else float(np.median(ev.radius)) if len(ev.radius) else 0.0

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..algebra.elements import beam_distance
 from ..algebra.series import geometric_sum
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.lattice import Lattice
 from ..queries.overlaps import similar_axes
 
@@ -357,7 +357,7 @@ def lattice_measures(lat: Lattice, method: str = "closed", grid: int = 0, max_hu
                                    f"(limit {max_hubs})"}
         return dict(lattice_measures(lat.explicit(), "sum", grid, max_hubs), area_method="sum over hubs (per-hub path)")
     if method not in ("closed", "sum"):
-        raise PleError(f"unknown area/volume method {method!r} (closed or sum)")
+        raise PleError(f"unknown area/volume method {echo(method)} (closed or sum)")
     reach = [max([abs(b.offset[d]) for b in lat.beams], default=0) for d in range(3)]
     similar = similar_axes(lat) if method == "closed" else (False, False, False)
     segs = [row_segments(c, rch, sim) for c, rch, sim in zip(lat.counts, reach, similar)]
@@ -654,7 +654,10 @@ def _adaptive_overlaps(sub, numbers, weights, base):
         for x, wcol, total in ((oa, weights[:, 0], base[0]), (om[:, 3, 3], weights[:, 1], base[1])):
             all_k = np.concatenate([x[:nv][sample][:, None], x[nv:].reshape(-1, k - 1)], axis=1)  # (S, K)
             measure = total - x[:nv]
-            rel_var = float(np.mean(np.var(all_k, axis=1, ddof=1) / np.maximum(measure[sample], 1e-300) ** 2))
+            # special case: a hub its beams cover (nearly) wholly is weighed against 10⁻¹² of its
+            # measure before the overlaps, not divided by zero
+            scale = np.maximum(np.abs(measure[sample]), 1e-12 * np.abs(total[sample]))
+            rel_var = float(np.mean((np.std(all_k, axis=1, ddof=1) / scale) ** 2))
             per_geo = np.zeros(geos)
             np.add.at(per_geo, local, wcol * measure)
             rel = max(rel, 3 * math.sqrt(rel_var * float(np.sum(per_geo**2))) / max(float(per_geo.sum()), 1e-300))

@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..algebra.series import operator_geometric_sum
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.lattice import Lattice
 from ..queries.overlaps import reach, similar_axes
 from ..queries.plans import lattice_key
@@ -113,7 +113,7 @@ def mass_properties(lat: Lattice, region=None, method: str = "auto", grid: int =
     lattice object, keyed by its program, filter, region and arguments."""
     lat.validate()
     if method not in ("auto", "sum"):
-        raise PleError(f"unknown mass-properties method {method!r} (auto or sum)")
+        raise PleError(f"unknown mass-properties method {echo(method)} (auto or sum)")
     r = lat.region(region)
     key = (lattice_key(lat), id(lat.filter), str(r), method, int(grid))
     cache = lat.__dict__.setdefault(CACHE_ATTR, {})

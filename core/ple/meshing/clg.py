@@ -18,7 +18,7 @@ import trimesh
 from ..clg.field import FieldSolid
 from ..clg.model import CLG, Prim
 from ..clg.query import compiled, frame_of
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.budget import CLG_TRIANGLE_BYTES, require, sphere_triangles
 from .unions import unit_ball
 
@@ -118,7 +118,7 @@ def check_budget(comp, segments: int, max_bytes: float | None = None, nested: di
     for ci in range(len(comp.names)):
         est = chunk_triangles(comp, ci, segments, nested) * groups
         if est > MAX_TRIANGLES:
-            raise PleError(f"chunk {comp.names[ci]!r}: about {est:.3g} triangles exceed the meshing limit "
+            raise PleError(f"chunk {echo(comp.names[ci])}: about {est:.3g} triangles exceed the meshing limit "
                            f"{MAX_TRIANGLES:.0e}; use fewer groups or --segments")
     if max_bytes is not None:
         total = solid_triangles(comp, segments, nested)

@@ -11,7 +11,7 @@ import numpy as np
 import trimesh
 
 from ..algebra.vectors import unit
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.becots import TWO_PI, becots_of
 from ..model.lattice import Lattice
 
@@ -130,7 +130,8 @@ def constant_radius_connectors(lat: Lattice, radius: float, beam_radius: float |
     radius = float(radius)
     beam_radius = radius * 0.5 if beam_radius is None else float(beam_radius)
     if not (radius > 0 and 0 < beam_radius <= radius):
-        raise PleError(f"constant radius {radius!r} / beam radius {beam_radius!r}: need 0 < beam radius <= radius")
+        raise PleError(f"constant radius {echo(radius)} / beam radius {echo(beam_radius)}: "
+                       "need 0 < beam radius <= radius")
     ev = lat.evaluate(region)
     centers = ev.center
     ends: list[list[tuple]] = [[] for _ in range(len(centers))]

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..algebra.elements import beam_distance
 from ..algebra.vectors import perpendicular_frames
-from ..errors import PleError
+from ..errors import PleError, echo
 from .achocc import HubGeometry, contact_circles, hub_geometry
 
 MAX_STEPS = 400
@@ -43,7 +43,7 @@ def blobbiness(size: float, radius: float) -> float:
     """b of Eq. 6 for a fillet of ``size`` ball radii."""
     size = float(size)
     if not (math.isfinite(size) and size > 0):
-        raise PleError(f"fillet size must be a positive fraction of the ball radius, got {size!r}")
+        raise PleError(f"fillet size must be a positive fraction of the ball radius, got {echo(size)}")
     return math.log(2.0) / (size * radius)
 
 

@@ -19,7 +19,7 @@ import math
 import numpy as np
 import trimesh
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..filters.body import Body, body_filters
 from .selfcheck import self_intersections
 from .weld import COLLAPSE_GRIDS, grid_spacing
@@ -67,7 +67,7 @@ def inward_offset(body: Body, thickness: float, edge: float | None = None):
     from manifold3d import Manifold
 
     if not thickness > 0:
-        raise PleError(f"skin thickness must be positive, got {thickness!r}")
+        raise PleError(f"skin thickness must be positive, got {echo(thickness)}")
     edge = float(edge or thickness / 2)
     g = edge / 2  # samples twice as fine as the level set's grid
     lo, hi = body.lo - 2 * edge, body.hi + 2 * edge

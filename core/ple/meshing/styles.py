@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..errors import PleError
+from ..errors import PleError, echo
 
 DEFAULT_LEVELS = 4
 DEFAULT_SEGMENTS = 16
@@ -37,5 +37,5 @@ DEFAULT_STYLE = "refined"
 def style(name: str) -> Style:
     """The style called ``name``; an unknown name is a user error listing the styles."""
     if name not in STYLES:
-        raise PleError(f"style {name!r}: expected one of {', '.join(STYLE_NAMES)}")
+        raise PleError(f"style {echo(name)}: expected one of {', '.join(STYLE_NAMES)}")
     return STYLES[name]

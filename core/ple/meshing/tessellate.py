@@ -40,7 +40,7 @@ import numpy as np
 import trimesh
 
 from ..algebra.vectors import perpendicular_frames, runs, unit_rows
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.budget import hub_triangles, mean_degree, region_beams, region_nodes
 from ..model.lattice import Lattice, Region
 from ..queries.overlaps import grid_pairs
@@ -909,7 +909,7 @@ def check_fillet(fillet, style: str):
     if not (math.isfinite(fillet) and 0 < fillet <= MAX_FILLET):
         raise PleError(f"--fillet {fillet}: expected a size in ball radii in (0, {MAX_FILLET:g}]")
     if style != "refined":
-        raise PleError(f"--fillet: a fillet needs the refined style, not {style!r}")
+        raise PleError(f"--fillet: a fillet needs the refined style, not {echo(style)}")
     return float(fillet)
 
 

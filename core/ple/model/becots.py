@@ -30,7 +30,7 @@ import numpy as np
 from ..algebra.series import geometric_sum
 from ..algebra.similarity import Similarity, Translation
 from ..algebra.vectors import as3, unit
-from ..errors import PleError
+from ..errors import PleError, echo
 
 TWO_PI = 2.0 * math.pi
 NEAR_UNIT_FACTOR = 1e-12  # |ln m| below this: no dilation (m == 1), the cylinder/translation kinds
@@ -101,7 +101,7 @@ class BeCOTSField:
         F = origin, A = (1, 0, 0), flat normal = z."""
         lu, wu, lv, wv = (float(x) for x in warp)
         if not all(math.isfinite(x) for x in (lu, wu, lv, wv)):
-            raise PleError(f"warp {warp!r}: values must be finite")
+            raise PleError(f"warp {echo(warp)}: values must be finite")
         ku, kv = _branch(branch)
         flat = BeCOTSField("cone", np.array([1.0, 0.0, 0.0]), np.zeros(3), np.array([0.0, 0.0, 1.0]),
                            (lu, wu + TWO_PI * ku), (lv, wv + TWO_PI * kv))
@@ -271,7 +271,7 @@ class BeCOTSField:
         self._need_cone("raise")
         z = float(z)
         if not math.isfinite(z):
-            raise PleError(f"raise height {z!r} must be finite")
+            raise PleError(f"raise height {echo(z)} must be finite")
         return replace(self, a=self.apex + self.radial + z * self.axis)
 
     def projected(self) -> BeCOTSField:
@@ -292,7 +292,7 @@ class BeCOTSField:
         self._need_cone("bend")
         beta = float(beta)
         if not 0.0 < beta < math.pi:
-            raise PleError(f"bend angle beta={beta!r}: must lie strictly between 0 and π")
+            raise PleError(f"bend angle beta={echo(beta)}: must lie strictly between 0 and π")
         flat = self.unbent()
         sb = math.sin(beta)
         t = sb * flat.axis + math.cos(beta) * unit(self.a - self.apex)
@@ -405,9 +405,9 @@ def _branch(branch) -> tuple[int, int]:
     try:
         ku, kv = branch
     except (TypeError, ValueError):
-        raise PleError(f"branch {branch!r}: expected two integers (ku, kv)") from None
+        raise PleError(f"branch {echo(branch)}: expected two integers (ku, kv)") from None
     if any(isinstance(k, bool) or int(k) != k for k in (ku, kv)):
-        raise PleError(f"branch {branch!r}: expected two integers (ku, kv)")
+        raise PleError(f"branch {echo(branch)}: expected two integers (ku, kv)")
     return int(ku), int(kv)
 
 
@@ -576,10 +576,10 @@ def becots_counts(counts) -> tuple[int, int]:
     try:
         nu, nv = counts
     except (TypeError, ValueError):
-        raise PleError(f"becots counts {counts!r}: expected two integers (nu, nv)") from None
+        raise PleError(f"becots counts {echo(counts)}: expected two integers (nu, nv)") from None
     for name, n in (("nu", nu), ("nv", nv)):
         if isinstance(n, bool) or int(n) != n or int(n) < 1:
-            raise PleError(f"becots counts: {name} must be an integer >= 1, got {n!r}")
+            raise PleError(f"becots counts: {name} must be an integer >= 1, got {echo(n)}")
     return int(nu), int(nv)
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..algebra.vectors import rotate, unit
-from ..errors import PleError
+from ..errors import PleError, echo
 from .becots import BeCOTSField, Stack, becots_counts, becots_of
 from .lattice import Lattice
 
@@ -36,11 +36,11 @@ def becots_lattice(fld: BeCOTSField, counts, connectivity: str = "triangle", rad
     offset (da, db) — decides which fine beams stay (default: keep one diagonal beam
     (da = db = 1) per p × p block, the one of its last cell, and every other beam)."""
     if connectivity not in CONNECTIVITIES:
-        raise PleError(f"connectivity {connectivity!r}: expected one of {', '.join(CONNECTIVITIES)}")
+        raise PleError(f"connectivity {echo(connectivity)}: expected one of {', '.join(CONNECTIVITIES)}")
     nu, nv = becots_counts(counts)
     p = int(period)
     if p < 1 or nu % p or nv % p:
-        raise PleError(f"period {period!r}: must be >= 1 and divide the counts ({nu}, {nv})")
+        raise PleError(f"period {echo(period)}: must be >= 1 and divide the counts ({nu}, {nv})")
     if keep is None:
         keep = (lambda a, b, n1, n2, da, db: not (da == 1 and db == 1) or (a == p - 1 and b == p - 1)) \
             if p > 1 else (lambda *args: True)
@@ -74,7 +74,7 @@ def stack_lattice(fld: BeCOTSField, counts, layers: int, spacing: float, mode: s
     Stored as one BeCOTS slab whose template node-group holds every layer (node id
     ``layer * nodes_per_layer + n``), so every command works unchanged."""
     if mode not in ("raise", "normal"):
-        raise PleError(f"stack mode {mode!r}: expected raise or normal")
+        raise PleError(f"stack mode {echo(mode)}: expected raise or normal")
     if fld.kind == "translation":
         direction = unit(np.cross(fld.tu, fld.tv))
     elif mode == "raise":

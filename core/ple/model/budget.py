@@ -21,7 +21,7 @@ from itertools import product
 
 import numpy as np
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from .lattice import Lattice, Region
 
 ENV = "PLE_MAX_MEMORY"
@@ -43,10 +43,10 @@ def parse_size(text: str, flag: str = "--max-memory") -> int:
     """``2G``, ``512M``, ``1.5GB``, ``1000000`` to bytes."""
     m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*([KMGT]?B?)\s*", str(text), re.IGNORECASE)
     if not m:
-        raise PleError(f"{flag} {text!r}: expected a size such as 2G, 512M or 1.5GB")
+        raise PleError(f"{flag} {echo(text)}: expected a size such as 2G, 512M or 1.5GB")
     value = float(m.group(1)) * _UNITS[m.group(2).upper()]
     if not math.isfinite(value) or value < 1 << 20:
-        raise PleError(f"{flag} {text!r}: expected at least 1M")
+        raise PleError(f"{flag} {echo(text)}: expected at least 1M")
     return int(value)
 
 
@@ -197,43 +197,97 @@ def check(est: Estimate, max_bytes: float | None = None, max_triangles: float | 
 
 
 # ----- finiteness --------------------------------------------------------------------------------
+TINY = 1e-100  # radii below this are refused: volumes (cubes) must stay normal, non-zero floats
+PRECISION = 2.0 ** -48  # a ball smaller than this share of the lattice's largest coordinate is placed
+# to less than a sixteenth of its radius (float64 keeps 52 bits): its digits are lost
+
+
+def _ball_problem(centers: np.ndarray, radii: np.ndarray) -> tuple[str, str] | None:
+    """What is wrong with these balls (centres (N, 3), radii (N,)) of one lattice, as (what
+    happens, the numbers), or None: overflow (non-finite, or beyond ``HUGE``), underflow (radii
+    zero or below ``TINY``) or total loss of precision (a radius below ``PRECISION`` of the largest
+    coordinate)."""
+    with np.errstate(all="ignore"):
+        if not (np.isfinite(centers).all() and np.isfinite(radii).all()):
+            return "overflows", "infinite or undefined coordinates or radii"
+        far, top = float(np.abs(centers).max(initial=0.0)), float(radii.max(initial=0.0))
+        if far >= HUGE or top >= HUGE:
+            return "overflows", f"coordinates or radii up to {max(far, top):.3g}, beyond {HUGE:.0e}"
+        low = float(radii.min(initial=np.inf))
+        if low < TINY:
+            return "underflows to zero scale", (f"radii down to {low:.3g}, below the smallest meaningful "
+                                                f"size {TINY:.0e}")
+        if low < PRECISION * far:
+            return ("loses all precision", f"balls of radius {low:.3g} at coordinates up to {far:.3g}, which "
+                    "float64 cannot place")
+    return None
+
+
+def _corner_balls(lat: Lattice, corners) -> tuple[np.ndarray, np.ndarray]:
+    """Centres and radii of every node of the groups ``corners`` (G, 3)."""
+    idx = np.asarray(corners, dtype=np.int64).reshape(-1, 3)
+    nn = len(lat.nodes)
+    full = np.column_stack([np.repeat(idx, nn, axis=0), np.tile(np.arange(nn), len(idx))])
+    with np.errstate(all="ignore"):
+        return lat.node_balls(full)
+
+
+def check_lattice(lat: Lattice, what: str = "the lattice") -> None:
+    """The one check of a built lattice that every door calls (IR files, programs run for the
+    CLI, batch and the add-on): no beam-pattern given twice (``check_beam_patterns``) and every
+    number representable (``check_finite``)."""
+    check_beam_patterns(lat, what)
+    check_finite(lat, what)
+
+
+def check_beam_patterns(lat: Lattice, what: str = "the lattice") -> None:
+    """Refuse a beam-pattern that repeats an earlier one, as given or reversed ((n1, n2, d) and
+    (n2, n1, -d) join the same balls): the same beams twice would be measured twice (areas and
+    volumes) and meshed as overlapping copies."""
+    seen: dict[tuple, int] = {}
+    for pos, b in enumerate(lat.beams):
+        key = (b.n1, b.n2, b.offset)
+        rev = (b.n2, b.n1, tuple(-x for x in b.offset))
+        first = seen.get(min(key, rev))
+        if first is not None:
+            raise PleError(f"{what}: beam-pattern beams[{pos}] (node {b.n1} to node {b.n2}, offset {b.offset}) repeats "
+                           f"beams[{first}]: each beam would be there twice; remove the copy")
+        seen[min(key, rev)] = pos
+
+
 def check_finite(lat: Lattice, what: str = "the lattice") -> None:
-    """Every corner group's similarity and balls are finite and the radii positive; the powers of
-    the similarities are monotone in scale, so an overflow shows at a corner. Raises PleError
-    naming the direction whose powers overflow."""
+    """The one check of a lattice's numbers that every door calls (IR files, programs, the
+    add-on's rigs through the runner): at every corner group the balls are finite and under
+    ``HUGE``, the radii at least ``TINY``, and no radius below ``PRECISION`` of the largest
+    coordinate. The powers of the similarities are monotone in scale, so an overflow,
+    an underflow to zero scale or a loss of precision shows at a corner. Raises PleError naming
+    the direction (U, V, W), its similarity and its repetition count, or the template."""
     if not lat.nodes:
         return
-    corners = [(0, n - 1) if n > 1 else (0,) for n in lat.counts]
-    idx = np.array(list(product(*corners)), dtype=np.int64)
-    if lat.group_map is not None:  # groups placed by a map: check the corner groups' balls only
-        nn = len(lat.nodes)
-        with np.errstate(all="ignore"):
-            c, r = lat.node_balls(np.column_stack([np.repeat(idx, nn, axis=0), np.tile(np.arange(nn), len(idx))]))
-        if np.isfinite(c).all() and np.isfinite(r).all() and (r > 0).all() and np.abs(c).max() < HUGE:
-            return
-        raise PleError(f"{what} overflows: its {lat.group_map.kind} map gives infinite, zero or huge balls")
-    with np.errstate(all="ignore"):
-        factors = lat.group_factors(idx[:, 0], idx[:, 1], idx[:, 2])
-        mats = lat.group_matrices(idx[:, 0], idx[:, 1], idx[:, 2])
-        ok = np.isfinite(mats).all(axis=(1, 2)) & np.isfinite(factors) & (factors > 0)
-        if ok.all():
-            nn = len(lat.nodes)
-            full = np.column_stack([np.repeat(idx, nn, axis=0), np.tile(np.arange(nn), len(idx))])
-            centers, radii = lat.node_balls(full)
-            ok = np.isfinite(centers).all() and np.isfinite(radii).all() and (radii > 0).all()
-            if ok and np.abs(centers).max() < HUGE and radii.max() < HUGE:
-                return
+    corners = np.array(list(product(*[(0, n - 1) if n > 1 else (0,) for n in lat.counts])), dtype=np.int64)
+    problem = _ball_problem(*_corner_balls(lat, corners))
+    if problem is None:
+        return
+    verb, numbers = problem
+    if lat.group_map is not None:  # groups placed by a map: no direction to blame
+        raise PleError(f"{what} {verb}: its {lat.group_map.kind} map gives {numbers}")
+    if _ball_problem(*_corner_balls(lat, [(0, 0, 0)])) is not None:
+        raise PleError(f"{what} {verb}: node-group (0, 0, 0) already has {numbers}; check the template's "
+                       "radii and the placement")
     blame = []
-    for name, d, n in (("U", lat.u, lat.u.count), ("V", lat.v, lat.v.count), ("W", lat.w, lat.w.count)):
-        f = d.incremental.factor
-        with np.errstate(all="ignore"):
-            m = d.incremental.power_matrices(np.array([n - 1, 0]))
-            fn = np.float64(f) ** (n - 1)
-        if not np.isfinite(m).all() or not np.isfinite(fn) or fn == 0 or np.abs(m).max() > HUGE:
-            size = f"entries up to {np.abs(m).max():.3g}" if np.isfinite(m).all() else "non-finite entries"
-            blame.append(f"{name} ({d.incremental.kind}, factor {f:.6g}: {size} after {n - 1} steps)")
-    cause = f"the powers of {', '.join(blame)}" if blame else "the template or placement"
-    raise PleError(f"{what} overflows: {cause} give infinite, zero or huge (> 1e100) coordinates or radii")
+    for axis, (name, d) in enumerate((("U", lat.u), ("V", lat.v), ("W", lat.w))):
+        if d.count > 1:
+            end = [0, 0, 0]
+            end[axis] = d.count - 1
+            if _ball_problem(*_corner_balls(lat, [(0, 0, 0), end])) is not None:
+                s = d.incremental
+                factor = f", factor {s.factor:.6g}" if s.factor != 1 else ""
+                blame.append(f"{name} (a {s.kind}{factor}, count {d.count})")
+    if not blame:
+        blame = ["U, V and W together"]
+    cause = ", ".join(blame[:-1]) + " and " + blame[-1] if len(blame) > 1 else blame[0]
+    raise PleError(f"{what} {verb}: the powers of {cause} give {numbers}; use a smaller count or a "
+                   "milder similarity")
 
 
 # ----- cheap answers for huge lattices -----------------------------------------------------------

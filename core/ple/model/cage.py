@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..algebra.similarity import Similarity, Translation
-from ..errors import PleError
+from ..errors import PleError, echo
 from .lattice import Lattice
 
 AXES = ("u", "v", "w")
@@ -92,7 +92,7 @@ def base_frame(lat: Lattice) -> np.ndarray:
 
 def _direction(lat: Lattice, axis: str):
     if axis not in AXES:
-        raise PleError(f"frame axis must be one of u, v, w, got {axis!r}")
+        raise PleError(f"frame axis must be one of u, v, w, got {echo(axis)}")
     return getattr(lat, axis)
 
 

@@ -23,7 +23,7 @@ from abc import ABC, abstractmethod
 import numpy as np
 
 from ..algebra.vectors import Pt
-from ..errors import PleError
+from ..errors import PleError, cut, echo
 
 GRADE_KINDS = ("linear", "grid", "surface")
 MAX_GRID_VALUES = 1 << 21  # samples of a grid field written as data
@@ -43,10 +43,11 @@ class RadiusField(ABC):
         p = np.asarray(points, dtype=float).reshape(-1, 3)
         f = np.asarray(self.values(p), dtype=float).reshape(-1)
         if f.shape != (len(p),):
-            raise PleError(f"{self!r}: returned {f.size} factors for {len(p)} points")
+            raise PleError(f"{echo(self)}: returned {f.size} factors for {len(p)} points")
         bad = ~np.isfinite(f) | (f <= 0) | (f > self.bound * (1 + 1e-12))
         if bad.any():
-            raise PleError(f"{self!r}: factor {f[bad][0]!r} at {p[bad][0].tolist()} is not in (0, {self.bound:g}]")
+            raise PleError(f"{echo(self)}: factor {echo(f[bad][0])} at {p[bad][0].tolist()} "
+                           f"is not in (0, {self.bound:g}]")
         return f
 
 
@@ -56,7 +57,7 @@ MAX_FACTOR = 1e6  # a radius factor beyond this is a typo, and f0 + (f1 - f0) t 
 def _positive(x, what: str) -> float:
     x = float(x)
     if not np.isfinite(x) or x <= 0 or x > MAX_FACTOR:
-        raise PleError(f"{what} must be a positive number up to {MAX_FACTOR:g}, got {x!r}")
+        raise PleError(f"{what} must be a positive number up to {MAX_FACTOR:g}, got {echo(x)}")
     return x
 
 
@@ -146,20 +147,20 @@ def _keys(d, where: str, required: tuple, optional: tuple = ()) -> None:
             raise PleError(f"{where}.{key}: missing")
     for key in d:
         if key not in required and key not in optional:
-            raise PleError(f"{where}.{key}: unknown field (expected some of {', '.join(required + optional)})")
+            raise PleError(f"{where}.{cut(key)}: unknown field (expected some of {', '.join(required + optional)})")
 
 
 def _number(x, where: str, positive: bool = False) -> float:
     if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-        raise PleError(f"{where}: expected a finite number, got {x!r}")
+        raise PleError(f"{where}: expected a finite number, got {echo(x)}")
     if positive and x <= 0:
-        raise PleError(f"{where}: must be positive, got {x!r}")
+        raise PleError(f"{where}: must be positive, got {echo(x)}")
     return float(x)
 
 
 def _point(x, where: str) -> list[float]:
     if not isinstance(x, list) or len(x) != 3:
-        raise PleError(f"{where}: expected a list of 3 numbers, got {x!r}")
+        raise PleError(f"{where}: expected a list of 3 numbers, got {echo(x)}")
     return [_number(c, f"{where}[{n}]") for n, c in enumerate(x)]
 
 
@@ -169,7 +170,7 @@ def _grid_values(v, where: str) -> np.ndarray:
     probe = v
     for _ in range(3):
         if not isinstance(probe, list) or not probe:
-            raise PleError(f"{where}: expected a non-empty 3-D list (x, then y, then z), got {probe!r}"[:200])
+            raise PleError(f"{where}: expected a non-empty 3-D list (x, then y, then z), got {echo(probe)}"[:200])
         shape.append(len(probe))
         probe = probe[0]
     if math.prod(shape) > MAX_GRID_VALUES:
@@ -194,7 +195,7 @@ def grade_from_dict(d, where: str = "grade", surface=None) -> RadiusField:
     if kind not in GRADE_KINDS:
         if not isinstance(d, dict):
             raise PleError(f"{where}: expected an object with kind ({', '.join(GRADE_KINDS)})")
-        raise PleError(f"{where}.kind: expected one of {', '.join(GRADE_KINDS)}, got {kind!r}")
+        raise PleError(f"{where}.kind: expected one of {', '.join(GRADE_KINDS)}, got {echo(kind)}")
     try:
         if kind == "linear":
             _keys(d, where, ("kind", "a", "b"), ("f0", "f1"))

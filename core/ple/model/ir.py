@@ -13,9 +13,9 @@ import numpy as np
 from ..algebra.mobius import Mobius
 from ..algebra.similarity import Similarity, similarity_from_dict
 from ..algebra.vectors import as3
-from ..errors import PleError
+from ..errors import PleError, cut, echo
 from .becots import BeCOTSField, Stack
-from .budget import check_finite
+from .budget import check_lattice
 from .grading import grade_from_dict, grade_to_dict
 from .lattice import Lattice
 from .mobius import MobiusGroups, mobius_lattice
@@ -26,15 +26,15 @@ FORMAT = "ple-lattice/1"
 
 def _num(x, where: str) -> float:
     if isinstance(x, bool) or not isinstance(x, (int, float)):
-        raise PleError(f"{where}: expected a number, got {x!r}")
+        raise PleError(f"{where}: expected a number, got {echo(x)}")
     if not math.isfinite(float(x)):
-        raise PleError(f"{where}: must be finite, got {x!r}")
+        raise PleError(f"{where}: must be finite, got {echo(x)}")
     return float(x)
 
 
 def _vec3(x, where: str) -> list[float]:
     if not isinstance(x, list) or len(x) != 3:
-        raise PleError(f"{where}: expected a list of 3 numbers, got {x!r}")
+        raise PleError(f"{where}: expected a list of 3 numbers, got {echo(x)}")
     return [_num(c, f"{where}[{n}]") for n, c in enumerate(x)]
 
 
@@ -69,7 +69,7 @@ def lattice_from_dict(data, filter_from_dict=None, surface_grade=None) -> Lattic
     if not isinstance(data, dict):
         raise PleError("lattice file: expected a JSON object at the top level")
     if data.get("format") != FORMAT:
-        raise PleError(f"format: expected {FORMAT!r}, got {data.get('format')!r}")
+        raise PleError(f"format: expected {echo(FORMAT)}, got {echo(data.get('format'))}")
     check_ir(data)  # the one schema: unknown keys, types, ranges, sizes (ple.model.schema)
     lat = Lattice()
     nodes = data.get("nodes")
@@ -94,7 +94,7 @@ def lattice_from_dict(data, filter_from_dict=None, surface_grade=None) -> Lattic
             raise PleError(f"{where}.id: an integer id must equal the node's position {n}")
         label = name if isinstance(name, str) else None
         if label is not None and label in labels:
-            raise PleError(f"{where}.id: {label!r} is used twice")
+            raise PleError(f"{where}.id: {echo(label)} is used twice")
         labels.add(label)
         lat.add_node(center, radius, label)
     for b, beam in enumerate(data.get("beams", [])):
@@ -107,11 +107,11 @@ def lattice_from_dict(data, filter_from_dict=None, surface_grade=None) -> Lattic
             try:
                 lat.node_id(beam[key])
             except PleError:
-                raise PleError(f"{where}.{key}: unknown node id {beam[key]!r}") from None
+                raise PleError(f"{where}.{key}: unknown node id {echo(beam[key])}") from None
         offset = beam.get("offset", [0, 0, 0])
         if (not isinstance(offset, list) or len(offset) != 3
                 or any(isinstance(x, bool) or not isinstance(x, int) for x in offset)):
-            raise PleError(f"{where}.offset: expected 3 integers, got {offset!r}")
+            raise PleError(f"{where}.offset: expected 3 integers, got {echo(offset)}")
         try:
             lat.add_beam(beam["from"], beam["to"], *offset)
         except PleError as exc:
@@ -130,7 +130,7 @@ def lattice_from_dict(data, filter_from_dict=None, surface_grade=None) -> Lattic
             raise PleError(f"{name}: expected an object with count and a similarity")
         count = d.get("count", 1)
         if isinstance(count, bool) or not isinstance(count, int):
-            raise PleError(f"{name}.count: expected an integer, got {count!r}")
+            raise PleError(f"{name}.count: expected an integer, got {echo(count)}")
         cumulative = d.get("cumulative", False)
         if not isinstance(cumulative, bool):
             raise PleError(f"{name}.cumulative: expected true or false")
@@ -145,7 +145,7 @@ def lattice_from_dict(data, filter_from_dict=None, surface_grade=None) -> Lattic
         becots_from_ir(lat, data["becots"], "becots")
     if "description" in data:
         lat.meta["description"] = str(data["description"])
-    check_finite(lat)
+    check_lattice(lat)
     if "filter" in data:  # validated by filter_from_dict (ple.filters.ir), not by the schema
         if filter_from_dict is None:
             raise PleError("filter: this reader cannot apply filters (load the file with ple.io.irfile.load_ir)")
@@ -292,7 +292,7 @@ def becots_from_ir(lat: Lattice, data, where: str = "becots") -> None:
         raise PleError(f"{where}: expected an object with corners and counts")
     unknown = sorted(set(data) - {"corners", "counts", "branch", "closed", "field", "stack"})
     if unknown:
-        raise PleError(f"{where}.{unknown[0]}: unknown field")
+        raise PleError(f"{where}.{cut(unknown[0])}: unknown field")
     if ("corners" in data) == ("field" in data):
         raise PleError(f"{where}: give exactly one of 'corners' or 'field'")
     if "counts" not in data:
@@ -300,7 +300,7 @@ def becots_from_ir(lat: Lattice, data, where: str = "becots") -> None:
     counts = data["counts"]
     if not isinstance(counts, list) or len(counts) != 2 or any(isinstance(n, bool) or not isinstance(n, int)
                                                                for n in counts):
-        raise PleError(f"{where}.counts: expected two integers [nu, nv], got {counts!r}")
+        raise PleError(f"{where}.counts: expected two integers [nu, nv], got {echo(counts)}")
     closed = data.get("closed", False)
     if not isinstance(closed, bool):
         raise PleError(f"{where}.closed: expected true or false")
@@ -322,7 +322,7 @@ def becots_from_ir(lat: Lattice, data, where: str = "becots") -> None:
 
 def _ir_point(p, where: str) -> np.ndarray:
     if not isinstance(p, list) or len(p) != 3 or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in p):
-        raise PleError(f"{where}: expected 3 numbers, got {p!r}")
+        raise PleError(f"{where}: expected 3 numbers, got {echo(p)}")
     return as3(p, where)
 
 

@@ -17,7 +17,7 @@ import numpy as np
 from ..algebra.series import geometric_sum
 from ..algebra.similarity import Similarity
 from ..algebra.vectors import Pt
-from ..errors import PleError
+from ..errors import PleError, echo
 from .becots import BeCOTS, BeCOTSField, Stack, becots_counts
 from .grading import RadiusField
 from .groupmap import GroupMap
@@ -108,17 +108,17 @@ class Region:
         """Parse ``I0:I1,J0:J1,K0:K1`` (half-open; an empty bound means the lattice's)."""
         parts = text.split(",")
         if len(parts) != 3:
-            raise PleError(f"region {text!r}: expected I0:I1,J0:J1,K0:K1")
+            raise PleError(f"region {echo(text)}: expected I0:I1,J0:J1,K0:K1")
         vals: list[int | None] = []
         for part in parts:
             ab = part.split(":")
             if len(ab) != 2:
-                raise PleError(f"region {text!r}: each axis must read A:B, got {part!r}")
+                raise PleError(f"region {echo(text)}: each axis must read A:B, got {echo(part)}")
             for x in ab:
                 try:
                     vals.append(int(x) if x.strip() else None)
                 except ValueError:
-                    raise PleError(f"region {text!r}: {x!r} is not an integer") from None
+                    raise PleError(f"region {echo(text)}: {echo(x)} is not an integer") from None
         return _OpenRegion(*vals)  # resolved against the lattice by Lattice.region()
 
 
@@ -184,10 +184,10 @@ class Lattice:
         c = Pt(center)
         r = float(radius)
         if not math.isfinite(r) or r <= 0:
-            raise PleError(f"node radius must be a positive number, got {radius!r}")
+            raise PleError(f"node radius must be a positive number, got {echo(radius)}")
         names = self._names()
         if name is not None and name in names and any(n.name == name for n in self.nodes):
-            raise PleError(f"node id {name!r} is used twice")
+            raise PleError(f"node id {echo(name)} is used twice")
         self.nodes.append(Node(c, r, name))
         if name is not None:
             names[name] = len(self.nodes) - 1
@@ -209,18 +209,18 @@ class Lattice:
     def node_id(self, ref) -> int:
         """Resolve a node reference (int position or string name) to its position."""
         if isinstance(ref, (bool, np.bool_)):
-            raise PleError(f"unknown node id {ref!r}")
+            raise PleError(f"unknown node id {echo(ref)}")
         if isinstance(ref, (int, np.integer)):
             if 0 <= int(ref) < len(self.nodes):
                 return int(ref)
-            raise PleError(f"unknown node id {ref!r} (the template has {len(self.nodes)} nodes)")
+            raise PleError(f"unknown node id {echo(ref)} (the template has {len(self.nodes)} nodes)")
         idx = self._names().get(ref)
         if idx is not None and self.nodes[idx].name == ref:
             return idx
         for idx, node in enumerate(self.nodes):  # a node renamed in place since the names were listed
             if node.name == ref:
                 return idx
-        raise PleError(f"unknown node id {ref!r}")
+        raise PleError(f"unknown node id {echo(ref)}")
 
     def add_beam(self, n1, n2, di: int = 0, dj: int = 0, dk: int = 0) -> int:
         """Add beam-pattern (n1, di, dj, dk, n2); returns its index."""
@@ -228,10 +228,10 @@ class Lattice:
         offs = []
         for name, d in (("di", di), ("dj", dj), ("dk", dk)):
             if int(d) != d:
-                raise PleError(f"beam offset {name} must be an integer, got {d!r}")
+                raise PleError(f"beam offset {name} must be an integer, got {echo(d)}")
             offs.append(int(d))
         if a == b and offs == [0, 0, 0]:
-            raise PleError(f"beam from node {n1!r} to itself with offset 0,0,0 has no length")
+            raise PleError(f"beam from node {echo(n1)} to itself with offset 0,0,0 has no length")
         self.beams.append(BeamPattern(a, b, *offs))
         return len(self.beams) - 1
 
@@ -250,7 +250,7 @@ class Lattice:
 
     def _direction(self, name: str, count, similarity: Similarity, cumulative: bool) -> Direction:
         if isinstance(count, bool) or int(count) != count:
-            raise PleError(f"{name} count must be an integer, got {count!r}")
+            raise PleError(f"{name} count must be an integer, got {echo(count)}")
         count = int(count)
         if count < 1:
             raise PleError(f"{name} count must be at least 1, got {count}")
@@ -298,7 +298,7 @@ class Lattice:
             raise PleError(f"group map must be a GroupMap, got {type(gmap).__name__}")
         counts = tuple(counts)
         if not 1 <= len(counts) <= 3:
-            raise PleError(f"group map counts {counts!r}: expected (nu, nv[, nw])")
+            raise PleError(f"group map counts {echo(counts)}: expected (nu, nv[, nw])")
         nu, nv, nw = counts + (1,) * (3 - len(counts))
         self.u, self.v, self.w = (self._direction(name, c, Similarity(), False)
                                   for name, c in (("U", nu), ("V", nv), ("W", nw)))

@@ -21,7 +21,7 @@ import numpy as np
 from ..algebra.mobius import Cline, Mobius, as_complex, map_balls
 from ..algebra.precision import FLOAT32_TOL
 from ..algebra.similarity import Similarity
-from ..errors import PleError
+from ..errors import PleError, echo
 from .groupmap import GroupMap
 from .lattice import Lattice
 
@@ -98,7 +98,7 @@ def _pair(counts) -> tuple[int, int]:
     try:
         nu, nv = (int(c) for c in counts)
     except (TypeError, ValueError):
-        raise PleError(f"counts {counts!r}: expected two integers") from None
+        raise PleError(f"counts {echo(counts)}: expected two integers") from None
     return nu, nv
 
 
@@ -157,7 +157,7 @@ class TMIMap:
         (nu + 1) x (nv + 1) groups so that the corner groups sit at the control corners."""
         nu, nv = _pair(counts)
         if nu < 1 or nv < 1:
-            raise PleError(f"TMI counts {counts!r}: need at least one cell per direction")
+            raise PleError(f"TMI counts {echo(counts)}: need at least one cell per direction")
         return mobius_lattice(template, self.u ** (1.0 / nu), self.v ** (1.0 / nv), None, (nu + 1, nv + 1, 1))
 
 
@@ -194,7 +194,7 @@ def with_control_frames(lat: Lattice, frames: dict) -> Lattice:
     have = control_frames(lat)
     bad = sorted(set(frames) - set(have))
     if bad:
-        raise PleError(f"control frame {bad[0]!r}: this lattice has only {', '.join(have)}")
+        raise PleError(f"control frame {echo(bad[0])}: this lattice has only {', '.join(have)}")
     moved = {k: tuple(as_complex(p) for p in v) for k, v in frames.items()}
     moved = {k: v for k, v in moved.items() if not unmoved(v, have[k])}
     if not moved:  # every frame is the lattice's own, read back through float32: the lattice itself

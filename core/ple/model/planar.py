@@ -22,7 +22,7 @@ import numpy as np
 
 from ..algebra.similarity import Similarity
 from ..algebra.vectors import Pt
-from ..errors import PleError
+from ..errors import PleError, echo
 from .becots import BeCOTSField
 from .lattice import Lattice
 
@@ -56,9 +56,9 @@ class SteadyMap2:
         try:
             nu, nv = (int(c) for c in counts)
         except (TypeError, ValueError):
-            raise PleError(f"counts {counts!r}: expected two integers") from None
+            raise PleError(f"counts {echo(counts)}: expected two integers") from None
         if nu < 1 or nv < 1:
-            raise PleError(f"counts {counts!r}: at least one tile per direction")
+            raise PleError(f"counts {echo(counts)}: at least one tile per direction")
         out = template.copy()
         out.set_u(nu + 1, self.u ** (1.0 / nu))
         out.set_v(nv + 1, self.v ** (1.0 / nv))
@@ -110,13 +110,13 @@ def snap_corner(fld: BeCOTSField, counts, vertex) -> BeCOTSField:
         nu, nv = (int(c) for c in counts)
         i, j = (int(c) for c in vertex)
     except (TypeError, ValueError):
-        raise PleError(f"snap: counts {counts!r} and vertex {vertex!r} must be integer pairs") from None
+        raise PleError(f"snap: counts {echo(counts)} and vertex {echo(vertex)} must be integer pairs") from None
     p, q = 1.0 - i / nu, -j / nv  # S(p, q) must be a whole number of turns
     if abs(p) < 1e-12:
-        raise PleError(f"snap: vertex {vertex!r} lies on D's own column; choose i != nu")
+        raise PleError(f"snap: vertex {echo(vertex)} lies on D's own column; choose i != nu")
     wu, (rv, wv) = fld.u[1], fld.v
     k = round((wu * p + wv * q) / (2 * math.pi))
     if k == 0:
-        raise PleError(f"snap: the tiling does not wrap around the apex to reach vertex {vertex!r} (0 turns)")
+        raise PleError(f"snap: the tiling does not wrap around the apex to reach vertex {echo(vertex)} (0 turns)")
     new_u = (-rv * q / p, (2 * math.pi * k - wv * q) / p)
     return replace(fld, u=new_u)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import difflib
 import math
 
-from ..errors import PleError
+from ..errors import PleError, cut, echo
 from .lattice import MAX_COUNT
 
 MAX_NODES = 100_000
@@ -65,7 +65,7 @@ LIST_LIMITS = {"node": MAX_NODES, "beam": MAX_BEAMS, "vec3": 4}
 
 def nearest(name: str, valid) -> str:
     """`` (did you mean 'x'?)`` for the closest valid name, or a list of the valid names."""
-    close = difflib.get_close_matches(str(name), list(valid), n=1, cutoff=0.5)
+    close = difflib.get_close_matches(cut(name), list(valid), n=1, cutoff=0.5)
     return f" (did you mean {close[0]!r}?)" if close else f" (expected one of {', '.join(sorted(valid))})"
 
 
@@ -75,33 +75,28 @@ def _fail(where: str, msg: str):
 
 def _number(x, where: str, lo: float = -MAX_ABS, hi: float = MAX_ABS) -> float:
     if isinstance(x, bool) or not isinstance(x, (int, float)):
-        _fail(where, f"expected a number, got {_show(x)}")
+        _fail(where, f"expected a number, got {echo(x)}")
     v = float(x) if not isinstance(x, int) or abs(x) < 1e300 else math.inf
     if not math.isfinite(v):
-        _fail(where, f"must be finite, got {_show(x)}")
+        _fail(where, f"must be finite, got {echo(x)}")
     if not lo <= v <= hi:
-        _fail(where, f"must lie in [{lo:g}, {hi:g}], got {_show(x)}")
+        _fail(where, f"must lie in [{lo:g}, {hi:g}], got {echo(x)}")
     return v
 
 
 def _integer(x, where: str, lo: int, hi: int) -> int:
     if isinstance(x, bool) or not isinstance(x, int):
-        _fail(where, f"expected an integer, got {_show(x)}")
+        _fail(where, f"expected an integer, got {echo(x)}")
     if x < lo:
-        _fail(where, f"must be at least {lo}, got {_show(x)}")
+        _fail(where, f"must be at least {lo}, got {echo(x)}")
     if x > hi:
-        _fail(where, f"must be at most {hi}, got {_show(x)}")
+        _fail(where, f"must be at most {hi}, got {echo(x)}")
     return x
-
-
-def _show(x) -> str:
-    text = repr(x)
-    return text if len(text) <= 40 else text[:37] + "..."
 
 
 def _list(x, where: str, n: int | None = None, what: str = "values") -> list:
     if not isinstance(x, list):
-        _fail(where, f"expected a list of {what}, got {_show(x)}")
+        _fail(where, f"expected a list of {what}, got {echo(x)}")
     if n is not None and len(x) != n:
         _fail(where, f"expected {n} {what}, got {len(x)}")
     return x
@@ -120,12 +115,12 @@ def _check_value(kind: str, x, where: str) -> None:
             _check_value("@" + item if item in SCHEMA else item, v, f"{where}[{n}]")
     elif kind == "format":
         if x != "ple-lattice/1":
-            _fail(where, f"expected 'ple-lattice/1', got {_show(x)}")
+            _fail(where, f"expected 'ple-lattice/1', got {echo(x)}")
     elif kind == "number":
         _number(x, where)
     elif kind == "positive":
         if _number(x, where) <= 0:
-            _fail(where, f"must be positive, got {_show(x)}")
+            _fail(where, f"must be positive, got {echo(x)}")
     elif kind == "vec3":
         for n, c in enumerate(_list(x, where, 3, "numbers")):
             _number(c, f"{where}[{n}]")
@@ -142,10 +137,10 @@ def _check_value(kind: str, x, where: str) -> None:
         _integer(x, where, 1, MAX_COUNT)
     elif kind == "bool":
         if not isinstance(x, bool):
-            _fail(where, f"expected true or false, got {_show(x)}")
+            _fail(where, f"expected true or false, got {echo(x)}")
     elif kind == "ref":
         if isinstance(x, bool) or not isinstance(x, (str, int)):
-            _fail(where, f"expected a node id (a name or a position), got {_show(x)}")
+            _fail(where, f"expected a node id (a name or a position), got {echo(x)}")
         if isinstance(x, int):
             _integer(x, where, 0, MAX_NODES)
         elif len(x) > 200:
@@ -166,7 +161,7 @@ def _check_value(kind: str, x, where: str) -> None:
         valid = {"similarity_kind": SIMILARITY_KINDS, "field_kind": FIELD_KINDS,
                  "stack_mode": ("raise", "normal")}[kind]
         if not isinstance(x, str) or x not in valid:
-            _fail(where, f"unknown kind {_show(x)}{nearest(x, valid) if isinstance(x, str) else ''}")
+            _fail(where, f"unknown kind {echo(x)}{nearest(x, valid) if isinstance(x, str) else ''}")
     elif kind == "json":
         pass  # free-form (meta); depth and size are bounded by ple.io.inputs.read_json
     elif kind == "filter":
@@ -182,11 +177,11 @@ def check_object(name: str, x, where: str) -> None:
     every value of its type; and the per-kind keys of similarities and fields."""
     spec = SCHEMA[name]
     if not isinstance(x, dict):
-        _fail(where or name, f"expected an object ({name}), got {_show(x)}")
+        _fail(where or name, f"expected an object ({name}), got {echo(x)}")
     prefix = f"{where}." if where else ""
     for key in x:
         if key not in spec:
-            raise PleError(f"{prefix}{key}: unknown field{nearest(key, spec)}")
+            raise PleError(f"{prefix}{cut(key)}: unknown field{nearest(key, spec)}")
     for key, (kind, required) in spec.items():
         if key not in x:
             if required:
@@ -197,11 +192,11 @@ def check_object(name: str, x, where: str) -> None:
         allowed = (SIMILARITY_KINDS if name == "similarity" else FIELD_KINDS)[x["kind"]]
         for key in x:
             if key != "kind" and key not in allowed:
-                raise PleError(f"{prefix}{key}: not a parameter of a {x['kind']} "
+                raise PleError(f"{prefix}{cut(key)}: not a parameter of a {x['kind']} "
                                f"(it takes {', '.join(allowed) or 'none'})")
         for key in allowed:
             if key not in x:
-                raise PleError(f"{prefix}{key}: missing for kind {x['kind']!r}")
+                raise PleError(f"{prefix}{key}: missing for kind {echo(x['kind'])}")
     if name in ("direction", "transform") and "matrix" in x and "similarity" in x:
         raise PleError(f"{where}: give one of 'matrix' or 'similarity', not both")
     if name == "transform" and "matrix" not in x and "similarity" not in x:

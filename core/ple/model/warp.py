@@ -18,7 +18,7 @@ import numpy as np
 
 from ..algebra.similarity import Similarity
 from ..algebra.vectors import Pt
-from ..errors import PleError
+from ..errors import PleError, echo
 from .lattice import Lattice, Node
 
 # four equally spaced points on the unit sphere (a regular tetrahedron), §3.4
@@ -61,9 +61,9 @@ class RectifiedWarp:
         try:
             nu, nv, nw = (int(c) for c in tuple(counts) + (1,) * (3 - len(tuple(counts))))
         except (TypeError, ValueError):
-            raise PleError(f"rectified warp: counts {counts!r} must be integers") from None
+            raise PleError(f"rectified warp: counts {echo(counts)} must be integers") from None
         if min(nu, nv, nw) < 1:
-            raise PleError(f"rectified warp: counts {counts!r} must be at least 1")
+            raise PleError(f"rectified warp: counts {echo(counts)} must be at least 1")
         self.u, self.v = u, v
         self.slab = w is None  # a slab: height z lifts the origin (innermost), W is the identity
         self.w = Similarity() if w is None else w

@@ -9,7 +9,7 @@ from ..clg import model
 from ..clg.field import FieldSolid
 from ..clg.ir import clg_from_dict
 from ..clg.model import CLG
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..io.inputs import check_input_file, read_input_file, read_json
 from .presets import preset_dir
 from .runner import CLI_HINTS, DEFAULT_TIMEOUT, Hints, Job, check_timeout
@@ -67,7 +67,7 @@ def resolve_clg(source: str) -> Path:
         entry = clg_preset_folder() / (source + ext)
         if entry.is_file():
             return Path(str(entry))
-    raise PleError(f"{source!r} is neither a .py CLG program, a .json ple-clg/1 file, nor a CLG preset "
+    raise PleError(f"{echo(source)} is neither a .py CLG program, a .json ple-clg/1 file, nor a CLG preset "
                    f"(presets: {', '.join(clg_preset_names())})")
 
 

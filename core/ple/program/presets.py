@@ -7,7 +7,7 @@ import json
 from importlib import resources
 from pathlib import Path
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..io.inputs import read_input_file
 
 ROOT_PACKAGE = __package__.rsplit(".", 1)[0]  # "ple", or the vendored copy's full name in Blender
@@ -15,6 +15,9 @@ ROOT_PACKAGE = __package__.rsplit(".", 1)[0]  # "ple", or the vendored copy's fu
 
 def preset_dir():
     return resources.files(f"{ROOT_PACKAGE}.presets")  # also when vendored inside the Blender extension
+
+
+MAX_NAME = 200  # characters: longer names are no preset (a file name holds at most 255 bytes)
 
 
 def preset_names() -> list[str]:
@@ -27,7 +30,8 @@ def preset_names() -> list[str]:
 
 def preset_path(name: str) -> Path | None:
     """The file of a preset; only plain names, so a name cannot reach outside the presets."""
-    if not name or not all(c.isalnum() or c in "_-" for c in name) or name.startswith(("_", "-")):
+    if (not name or len(name) > MAX_NAME or not all(c.isalnum() or c in "_-" for c in name)
+            or name.startswith(("_", "-"))):
         return None
     for ext in (".py", ".json"):
         entry = preset_dir() / (name + ext)
@@ -39,7 +43,7 @@ def preset_path(name: str) -> Path | None:
 def preset_description(name: str) -> str:
     path = preset_path(name)
     if path is None:
-        raise PleError(f"unknown preset {name!r}")
+        raise PleError(f"unknown preset {echo(name)}")
     if path.suffix == ".json":
         return str(json.loads(path.read_text()).get("description", ""))
     # the first line of the program's docstring, read without running it (``ple presets`` starts at once)

@@ -14,7 +14,7 @@ Lattice object, pickled by the child and unpickled by the parent with an allowli
 this package, numpy arrays and scalars, plain containers), its filter included: the IR
 (``ple-lattice/1``) would lose a program's metadata and its canonical similarities are not
 bit-exact for composed similarities. Nothing outside the allowlist can be constructed by the
-parent; a lattice is then checked as an IR file is (``ple.model.budget.check_finite``).
+parent; a lattice is then checked as an IR file is (``ple.model.budget.check_lattice``).
 """
 
 from __future__ import annotations
@@ -38,17 +38,19 @@ from typing import Any
 import numpy as np
 
 from ..algebra.similarity import Similarity
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..filters.base import Filter
 from ..model.becots import BeCOTS
-from ..model.budget import check_finite, human
+from ..model.budget import check_lattice, human
 from ..model.grading import RadiusField
 from ..model.groupmap import GroupMap
 from ..model.lattice import MAX_COUNT, BeamPattern, Direction, Lattice, Node
+from . import proctree
 from .runtime import ROOT_PACKAGE, compile_program
 from .sources import load_lattice, resolve_source
 
 DEFAULT_TIMEOUT = 30.0
+EXIT_CHECK = 0.1  # seconds between looks at whether the child exited, where there is no pidfd
 _ROOT = ROOT_PACKAGE  # "ple", or the vendored package name inside the Blender extension
 _SAFE_BUILTINS = {"set", "frozenset", "complex", "slice", "range", "tuple", "list", "dict", "bytearray",
                   "getattr", "object"}
@@ -125,10 +127,13 @@ def _limit_memory(memory: int | None) -> None:
 
 def _child(write_fd: int, work: Callable[[], Any], name: str, memory: int | None, hints: Hints,
            what: str) -> None:
-    """In the forked child: run ``work``, send what it yields and then (status, payload); never return."""
+    """In the forked child: run ``work``, send what it yields and then (status, payload), wait to
+    be ended with the processes the work started (``proctree``); never return."""
     real_exit = os._exit
     status, payload = "error", f"{name}: the work did not finish"
+    child, parent = os.getpid(), os.getppid()
     try:
+        proctree.detach()  # its own session: the parent ends the whole tree (end_tree)
         signal.signal(signal.SIGINT, signal.SIG_DFL)  # the parent reports Ctrl-C
         faulthandler.disable()  # a crash is reported once, by the parent
         _limit_memory(memory)
@@ -148,11 +153,14 @@ def _child(write_fd: int, work: Callable[[], Any], name: str, memory: int | None
     except BaseException as exc:  # noqa: BLE001 - a program may raise anything; report it
         payload = _describe(exc, name, memory, hints, what)
     os._exit = real_exit
+    if os.getpid() != child:  # a process the work forked, come back here: only the child answers
+        real_exit(1)
     try:
         try:
             _send(write_fd, (status, payload))
         except Exception as exc:  # noqa: BLE001 - e.g. a filter holding a lambda
             _send(write_fd, ("error", f"{name}: the result cannot be returned to PLE ({type(exc).__name__}: {exc})"))
+        proctree.wait_for_end(parent)
     finally:
         real_exit(0)
 
@@ -206,6 +214,7 @@ class Job:
         self._buffer = bytearray()
         self._pid = None
         self._fd = None
+        self._exit_fd = None  # readable once the child has exited (a pidfd; None: looked at by waitid)
         self._deadline = None
         self._start(work)
 
@@ -222,6 +231,10 @@ class Job:
             _child(write_fd, work, self.name, self.memory, self.hints, self.what)
         os.close(write_fd)
         self._pid, self._fd = pid, read_fd
+        try:
+            self._exit_fd = os.pidfd_open(pid)
+        except (AttributeError, OSError):  # macOS, Linux before 5.3
+            self._exit_fd = None
         self._deadline = None if self.timeout is None else time.monotonic() + self.timeout
 
     def poll(self, wait: float = 0.0) -> bool:
@@ -232,19 +245,27 @@ class Job:
             left = max(0.0, end - time.monotonic())
             if self._deadline is not None:
                 left = min(left, max(0.0, self._deadline - time.monotonic()))
-            ready, _, _ = select.select([self._fd], [], [], left)
-            if not ready:
+            watch = [self._fd] if self._exit_fd is None else [self._fd, self._exit_fd]
+            ready, _, _ = select.select(watch, [], [], left if self._exit_fd is not None else min(left, EXIT_CHECK))
+            if self._fd not in ready:
+                if self._exited():  # a process it started may hold the pipe open: no end of file
+                    self._ended()
+                    break
                 if self._deadline is not None and time.monotonic() >= self._deadline:
                     self.cancel()
                     raise PleError(f"{self.name}: {self.what} ran longer than {self.timeout:g} s; "
                                    f"{self.hints.timeout}")
-                return False
+                if time.monotonic() >= end:
+                    return False
+                continue
             data = os.read(self._fd, 1 << 20)
             if not data:
                 self._ended()
                 break
             self._buffer += data
             self._messages()
+            if self.done:  # its answer is in: end the child and whatever it started
+                self._finish()
         if self._error is not None:
             raise PleError(self._error)
         return True
@@ -267,16 +288,51 @@ class Job:
             else:
                 self._error, self.done = str(payload), True
 
+    def _exited(self) -> bool:
+        """Whether the child has exited (it is not reaped: ``end_tree`` does that)."""
+        if self._pid is None:
+            return True
+        if self._exit_fd is not None:
+            return bool(select.select([self._exit_fd], [], [], 0)[0])
+        try:
+            info = os.waitid(os.P_PID, self._pid, os.WEXITED | os.WNOHANG | os.WNOWAIT)
+        except ChildProcessError:
+            return True
+        return info is not None
+
+    def _finish(self) -> int | None:
+        """The run is over: its pipe closed, the child and every process of its tree ended
+        (``proctree.end_tree``); the child's wait status (None if there was no child)."""
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+        status = None
+        if self._pid is not None:
+            status = proctree.end_tree(self._pid)
+            self._pid = None
+        if self._exit_fd is not None:
+            os.close(self._exit_fd)
+            self._exit_fd = None
+        return status
+
     def _ended(self) -> None:
-        """The child closed its end: collect it and say why if it sent no result."""
-        os.close(self._fd)
-        self._fd = None
-        _, status = os.waitpid(self._pid, 0)
-        self._pid = None
+        """The child ended (its pipe closed, or it exited while a process it started holds the
+        pipe): end its tree, and say why if it sent no result."""
+        if self._fd is not None:  # what it sent before it ended
+            os.set_blocking(self._fd, False)
+            try:
+                while data := os.read(self._fd, 1 << 20):
+                    self._buffer += data
+            except BlockingIOError:
+                pass
+            self._messages()
+        status = self._finish()
         if self.done:
             return
         self.done = True
-        if os.WIFSIGNALED(status):
+        if status is None:
+            self._error = f"{self.name}: {self.what} ended without an answer"
+        elif os.WIFSIGNALED(status):
             sig = signal.Signals(os.WTERMSIG(status)).name
             why = " (out of memory?)" if sig == "SIGKILL" else ""
             self._error = f"{self.name}: {self.what} crashed with {sig}{why}"
@@ -301,13 +357,9 @@ class Job:
         return self._result
 
     def cancel(self) -> None:
-        """Stop the child now (Esc, a time limit); nothing it computed is kept."""
-        if self._fd is not None:
-            os.close(self._fd)
-            self._fd = None
-        if self._pid is not None:
-            _kill(self._pid)
-            self._pid = None
+        """Stop the child and every process it started now (Esc, a time limit); nothing it
+        computed is kept."""
+        self._finish()
         self.done = True
 
     def __del__(self):
@@ -319,7 +371,7 @@ def _checked(lat, name: str) -> Lattice:
         raise PleError(f"{name}: lattice() must return a Lattice")
     check_structure(lat, name)
     lat.validate()
-    check_finite(lat, name)
+    check_lattice(lat, name)
     return lat
 
 
@@ -328,7 +380,7 @@ def check_structure(lat: Lattice, name: str) -> None:
     may assign them directly (``lat.filter = 5``, ``lat.u = 'hello'``), which ``add_node`` and the
     setters would have refused. Raises PleError naming the attribute."""
     def bad(attr: str, value, expected: str) -> PleError:
-        return PleError(f"{name}: the returned lattice's {attr} is {type(value).__name__} {_short(value)}; "
+        return PleError(f"{name}: the returned lattice's {attr} is {type(value).__name__} {echo(value)}; "
                         f"expected {expected}")
 
     def integer(x) -> bool:
@@ -378,11 +430,6 @@ def check_structure(lat: Lattice, name: str) -> None:
         raise bad("meta", getattr(lat, "meta", None), "a dict")
 
 
-def _short(value) -> str:
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
-
-
 def run_program(source: str, params=None, timeout: float | None = DEFAULT_TIMEOUT,
                 memory: int | None = None, hints: Hints = CLI_HINTS) -> Lattice:
     """Build the lattice of ``source`` (program, IR file or preset) contained in a child process:
@@ -409,10 +456,3 @@ def run_text(text: str, name: str, params: dict | None = None, timeout: float | 
     lat, inputs = Job(build, name, timeout, memory, hints=hints).result()
     return _checked(lat, name), inputs
 
-
-def _kill(pid: int) -> None:
-    try:
-        os.kill(pid, signal.SIGKILL)
-        os.waitpid(pid, 0)
-    except (ProcessLookupError, ChildProcessError):
-        pass

@@ -22,7 +22,7 @@ from typing import Any
 from ..algebra.mobius import Cline, Mobius
 from ..algebra.similarity import Identity, Rotation, Scaling, Screw, Similarity, Swirl, Translation
 from ..algebra.vectors import Pt, Vec
-from ..errors import PleError
+from ..errors import PleError, cut, echo
 from ..filters.base import FilteredLattice
 from ..filters.implicit import FourierField, ImplicitFilter, TPMSField
 from ..filters.lil import LiL
@@ -101,7 +101,7 @@ class Program:
             if p.kind not in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY):
                 continue
             if p.default is inspect.Parameter.empty:
-                raise PleError(f"{self.name}: input {p.name!r} of lattice() needs a default value")
+                raise PleError(f"{self.name}: input {echo(p.name)} of lattice() needs a default value")
             rng = p.annotation if isinstance(p.annotation, Range) else None
             out.append(Param(p.name, p.default, rng))
         return out
@@ -120,7 +120,7 @@ class Program:
         known = {p.name: p for p in self.parameters()}
         for name in params:
             if name not in known:
-                raise PleError(f"{self.name}: unknown parameter {name!r} (inputs: {', '.join(known) or 'none'})")
+                raise PleError(f"{self.name}: unknown parameter {echo(name)} (inputs: {', '.join(known) or 'none'})")
         try:
             return self.function(**params)
         except PleError as exc:
@@ -220,7 +220,7 @@ def parse_param_value(param: Param, text: str):
             return text
         return json.loads(text)
     except ValueError:
-        raise PleError(f"parameter {param.name}: {text!r} is not a valid {kind.__name__}") from None
+        raise PleError(f"parameter {param.name}: {echo(text)} is not a valid {kind.__name__}") from None
 
 
 def parse_params(program: Program, assignments: list[str]) -> dict:
@@ -229,11 +229,11 @@ def parse_params(program: Program, assignments: list[str]) -> dict:
     out = {}
     for a in assignments:
         if "=" not in a:
-            raise PleError(f"--param {a!r}: expected NAME=VALUE")
+            raise PleError(f"--param {echo(a)}: expected NAME=VALUE")
         name, value = a.split("=", 1)
         name = name.strip()
         if name not in known:
-            raise PleError(f"--param {name}: unknown parameter (inputs: {', '.join(known) or 'none'})")
+            raise PleError(f"--param {cut(name)}: unknown parameter (inputs: {', '.join(known) or 'none'})")
         out[name] = parse_param_value(known[name], value)
     return out
 

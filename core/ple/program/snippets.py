@@ -20,7 +20,7 @@ import numpy as np
 
 from ..algebra.similarity import Similarity, similarity_from_dict
 from ..algebra.vectors import Pt
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.lattice import Lattice
 from .runtime import compile_program, trace_program
 
@@ -48,7 +48,7 @@ class SetDirection:
 
     def __post_init__(self):
         if self.axis not in ("u", "v", "w"):
-            raise PleError(f"edit: axis must be u, v or w, got {self.axis!r}")
+            raise PleError(f"edit: axis must be u, v or w, got {echo(self.axis)}")
         if self.count is None and self.similarity is None:
             raise PleError(f"edit set_{self.axis}: nothing to change")
 
@@ -247,7 +247,7 @@ def edits_from_json(text: str) -> list:
     for n, d in enumerate(data):
         cls = EDIT_TYPES.get(d.get("type")) if isinstance(d, dict) else None
         if cls is None:
-            raise PleError(f"edit list[{n}]: unknown edit {d!r}")
+            raise PleError(f"edit list[{n}]: unknown edit {echo(d)}")
         args = {k: v for k, v in d.items() if k != "type"}
         for key in ("similarity",):
             if args.get(key) is not None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..io.inputs import check_input_file
 from ..io.irfile import load_ir
 from ..model.lattice import Lattice
@@ -20,7 +20,7 @@ def resolve_source(source: str) -> Path:
         return p
     found = preset_path(source)
     if found is None:
-        raise PleError(f"{source!r} is neither a .py program, a .json lattice file, nor a preset "
+        raise PleError(f"{echo(source)} is neither a .py program, a .json lattice file, nor a preset "
                        f"(presets: {', '.join(preset_names())})")
     return found
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..algebra.elements import ball_ball_interfere, ball_beam_interfere, beam_distance
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.lattice import Lattice
 from . import becots_rangefinder, mobius_rangefinder, pullback
 from .hits import BIQResult, BIQResults, check_queries, split_hits
@@ -42,7 +42,7 @@ def query(lat: Lattice, centers, radii, method: str = "auto", beams: bool = True
     c, r = check_queries(centers, radii)
     lat.validate()
     if method not in ("auto", "naive", "rangefinder"):
-        raise PleError(f"method {method!r}: expected auto, naive or rangefinder")
+        raise PleError(f"method {echo(method)}: expected auto, naive or rangefinder")
     if lat.group_map is not None:  # Möbius lattices: the pre-image's RangeFinder where it is exact
         found = _kept(lat, _group_map_hits(lat, c, r, method))
         return found if beams else [BIQResult(x.nodes, x.beams[:0], x.path) for x in found]

@@ -33,7 +33,7 @@ import numpy as np
 from ..algebra.elements import beam_beam_gap, beam_distance, enclosing_ball, segment_closest, segment_distance
 from ..algebra.similarity import commute
 from ..algebra.vectors import runs
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.lattice import Evaluation, Lattice
 from .rangefinder import lattice_hits
 
@@ -42,6 +42,8 @@ WORST = 10  # worst offenders listed
 MAX_ANCHOR_FRACTION = 0.02  # "auto" takes the steady path when the anchors are at most this share of all groups
 MAX_EXPLICIT = 2_000_000  # ... or when more elements than this would be evaluated
 PAIR_CHUNK = 1 << 18  # candidate pairs per vectorized block
+GRID_ENTRIES_PER_ELEMENT = 64  # grid cells listed per element (elements of similar sizes cover at most 8)
+MIN_GRID_ENTRIES = 1 << 24  # ... and at least this many (16 B each)
 ROW_CHUNK = 1 << 16  # boxes whose grid cells are listed at once (their entries' temporaries)
 QUERY_CHUNK = 1 << 10  # anchor blocks per RangeFinder batch
 ANCHOR_BLOCK = 4  # anchor groups per block side: one RangeFinder query per block
@@ -238,12 +240,23 @@ def grid_pairs(box_lo: np.ndarray, box_hi: np.ndarray, margin: float, split: int
 
 def _grid(box_lo, box_hi, margin: float):
     """The uniform grid of ``grid_pairs``: boxes grown by margin / 2 (blo, bhi (E, 3)), the first
-    cell (E, 3) and the number of cells (E, 3) each covers, and the grid's cells per axis (3,)."""
+    cell (E, 3) and the number of cells (E, 3) each covers, and the grid's cells per axis (3,).
+    Refused (``PairLimitError``) when the boxes would make more than ``GRID_ENTRIES_PER_ELEMENT``
+    entries per element (at least ``MIN_GRID_ENTRIES``) or more cells than int64 keys hold:
+    elements of sizes far apart (a scaling's powers), where cells of the median size are tiny
+    beside the largest boxes. Counted as floats first, so nothing overflows."""
     blo, bhi = box_lo - margin / 2, box_hi + margin / 2
-    h = max(float(np.median(np.max(bhi - blo, axis=1))), 1e-12)
+    size = np.max(bhi - blo, axis=1)
+    h = max(float(np.median(size)), 1e-12)
     origin = blo.min(axis=0)
-    lo = np.floor((blo - origin) / h).astype(np.int64)
-    hi = np.floor((bhi - origin) / h).astype(np.int64)
+    lo_f, hi_f = np.floor((blo - origin) / h), np.floor((bhi - origin) / h)
+    entries = float(np.sum(np.prod(hi_f - lo_f + 1, axis=1)))
+    limit = max(MIN_GRID_ENTRIES, GRID_ENTRIES_PER_ELEMENT * len(blo))
+    if not (entries <= limit and float(np.prod(hi_f.max(axis=0) + 1)) < 2.0**62):
+        raise PairLimitError(f"the clean check's grid would list its {len(blo):,} elements in {entries:.3g} cells "
+                             f"(more than {limit:.3g}): their sizes range from {size.min():.3g} to {size.max():.3g}, "
+                             "too far apart for one grid; check a smaller --region")
+    lo, hi = lo_f.astype(np.int64), hi_f.astype(np.int64)
     return blo, bhi, lo, hi - lo + 1, hi.max(axis=0) + 1
 
 
@@ -529,7 +542,7 @@ def unclean_pairs(lat: Lattice, ev: Evaluation | None = None, margin: float = 0.
     ``max_pairs`` (None: ``check_pairs``'s default, which grows with the elements) is a PleError."""
     lat.validate()
     if path not in ("auto", "steady", "explicit"):
-        raise PleError(f"unclean-pair path {path!r}: expected auto, steady or explicit")
+        raise PleError(f"unclean-pair path {echo(path)}: expected auto, steady or explicit")
     if ev is None and path != "explicit" and lat.becots is None:
         out = _steady(lat, float(margin), force=path == "steady", max_pairs=max_pairs)
         if out is not None:

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..algebra.elements import TOUCH_TOL, ball_ball_interfere, ball_beam_interfere, beam_distance, enclosing_ball
 from ..algebra.similarity import Similarity, commute
-from ..errors import PleError
+from ..errors import PleError, echo
 from ..model.lattice import Lattice
 from .plans import cached
 
@@ -715,7 +715,7 @@ def lattice_hits(lat: Lattice, c: np.ndarray, r: np.ndarray, path: str | None = 
     pl = cached_plan(search)
     if path is not None and path != pl.path:
         if path not in PATH_ORDER or PATH_ORDER.index(path) < PATH_ORDER.index(pl.path):
-            raise PleError(f"path {path!r} is not available on this lattice (detected {pl.path!r}; "
+            raise PleError(f"path {echo(path)} is not available on this lattice (detected {echo(pl.path)}; "
                            f"only slower paths {PATH_ORDER[PATH_ORDER.index(pl.path):]} can be forced)")
         pl = pl.forced.setdefault(path, _Plan(path, pl.maps, pl.elements))
     qc, qr = to_frame(lat, c, r)
