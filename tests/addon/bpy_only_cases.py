@@ -13,6 +13,21 @@ import numpy as np
 
 bpy = ple_ext = core = None  # bound by the worker (core is None here)
 
+SHRUNK = '''
+def lattice():
+    lat = Lattice()
+    a = lat.add_node(Pt(0, 0, 0), 0.12)
+    b = lat.add_node(Pt(0.2, 0, 0), 0.12)
+    lat.add_beam(a, b, 0, 0, 0)
+    lat.add_beam(b, a, 1, 0, 0)
+    lat.add_beam(a, a, 0, 1, 0)
+    lat.add_beam(a, a, 0, 0, 1)
+    lat.set_u(4, Scaling(1.025, Pt(-16, 0, 0)))
+    lat.set_v(3, Translation(Vec(0, 0.4, 0)))
+    lat.set_w(3, Translation(Vec(0, 0, 0.4)))
+    return lat
+'''
+
 CROSSING = '''
 def lattice():
     lat = Lattice()
@@ -148,3 +163,29 @@ def case_every_preset():
         out[name] = {"tessellated": len(made[0].data.polygons), "status": rig.ple.status}
         bpy.ops.wm.read_homefile(use_empty=True)  # the next preset in an empty scene
     save("presets.json", out)
+
+
+def case_same_triangles_every_door():
+    """The add-on's Export of clean, unclean (crossing, shrunk), stencil-filtered (an IR file the
+    test wrote), Möbius and body-cut lattices; the test runs ple mesh on the same sources and
+    regions and compares the files."""
+    out = []
+
+    def export(label, rig, source, style="CNT", whole=False):
+        model = ple_ext.rig.model
+        region = None if whole else str(model.region_of(rig, model.shown_lattice(rig)))
+        assert bpy.ops.ple.export(rig=rig.name, filepath=str(Path.cwd() / f"{label}.stl"), style=style) == {"FINISHED"}
+        bpy.context.view_layer.update()  # a redraw: the unclean line stays the rig's status until the next edit
+        out.append({"label": label, "source": source, "region": region, "style": style.lower(),
+                    "status": rig.ple.status})
+
+    export("clean", preset_rig("cubic"), "cubic")
+    export("crossing", rig_from_text("crossing.py", CROSSING), "crossing.py")
+    shrunk = rig_from_text("shrunk.py", SHRUNK)
+    export("shrunk", shrunk, "shrunk.py")
+    export("shrunk_chocc", shrunk, "shrunk.py", "CHOCC")
+    assert bpy.ops.ple.lattice_add(source="FILE", filepath=str(Path.cwd() / "stencil.json")) == {"FINISHED"}
+    export("filtered", bpy.context.active_object, "stencil.json")
+    export("mobius", preset_rig("mobius_slab"), "mobius_slab", whole=True)
+    export("bracket", preset_rig("bracket_fill"), "bracket_fill")
+    save("doors.json", out)

@@ -1,8 +1,10 @@
 """The extension in the Blender users have (issue 37): a venv holding only ``bpy==5.0.1`` (its own
 numpy, requests, zstandard; no scipy, manifold3d, rtree, trimesh, no ``ple``) with the zip
 installed. Body fill, skin, unclean Export and Tessellate, LiL on a curved lattice, Check and the
-CLG preview run there from the zip's own wheels (``bpy_only_cases.py``); what they made is checked
-here against this checkout's core, run in this process or as ``ple`` commands.
+CLG preview run there from the zip's own wheels (``bpy_only_cases.py``), Export gives the triangles
+``ple mesh`` writes for clean, unclean, filtered, Möbius and body-cut lattices, and every preset
+adds, tessellates and exports; what they made is checked here against this checkout's core, run
+in this process or as ``ple`` commands.
 
 The venv is ``build/bpy-venv`` (``make test-blender`` creates it: ``pip install bpy==5.0.1``);
 without it these tests skip, saying how to make it. They run in ``make test-blender`` (which
@@ -20,7 +22,6 @@ import numpy as np
 import pytest
 import trimesh
 from blender_worker import Worker
-from test_addon_doors import triangle_set
 
 ROOT = Path(__file__).resolve().parents[2]
 BPY_PYTHON = Path(os.environ.get("PLE_BPY_ONLY_PYTHON", ROOT / "build" / "bpy-venv" / "bin" / "python"))
@@ -60,6 +61,38 @@ def ple_cli(*args, ok=(0,)) -> subprocess.CompletedProcess:
                          env={**os.environ, "PYTHONPATH": str(ROOT / "core")}, timeout=600)
     assert res.returncode in ok, (args, res.stdout, res.stderr)
     return res
+
+
+def triangle_set(path: Path) -> np.ndarray:
+    """The triangles of a binary STL, each as its three float32 corners rotated to start at the
+    smallest (orientation kept), sorted: two files hold the same triangles iff these are equal."""
+    data = path.read_bytes()
+    n = int(np.frombuffer(data, "<u4", 1, 80)[0])
+    tri = np.frombuffer(data, np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]), n, 84)["v"].copy()
+    first = np.array([min(range(3), key=lambda i, t=t: tuple(t[i])) for t in tri], np.int64)
+    tri = tri[np.arange(n)[:, None], (first[:, None] + np.arange(3)) % 3]
+    flat = tri.reshape(n, 9)
+    return flat[np.lexsort(flat.T[::-1])]
+
+
+def test_same_triangles_every_door(bare_blender, tmp_path):
+    """The add-on's file and ple mesh's file of the same lattice, region and style hold the same
+    triangles: clean, crossing and shrunk (unclean), stencil-filtered, Möbius and body-cut."""
+    ple_cli("ir", "cubic", "--out", tmp_path / "cubic.json")
+    data = json.loads((tmp_path / "cubic.json").read_text())
+    data["filter"] = {"stencil": {"shape": [2, 2, 2], "cells": [1, 0, 0, 1, 0, 1, 1, 1]}}
+    (tmp_path / "stencil.json").write_text(json.dumps(data))
+    run(bare_blender, tmp_path, "same_triangles_every_door")
+    made = {e["label"]: e for e in json.loads((tmp_path / "doors.json").read_text())}
+    for label, e in made.items():
+        src = e["source"] if (tmp_path / e["source"]).suffix not in (".py", ".json") else tmp_path / e["source"]
+        where = ["--region", e["region"]] if e["region"] else []
+        ple_cli("mesh", src, *where, "--style", e["style"], "--out", tmp_path / f"{label}.cli.stl")
+        mine, theirs = triangle_set(tmp_path / f"{label}.stl"), triangle_set(tmp_path / f"{label}.cli.stl")
+        assert len(mine) > 0 and mine.shape == theirs.shape and np.array_equal(mine, theirs), label
+    assert made["clean"]["status"] == ""
+    assert all("unclean" in made[k]["status"] for k in ("crossing", "shrunk", "shrunk_chocc"))
+    assert 0 < len(triangle_set(tmp_path / "filtered.stl")) < len(triangle_set(tmp_path / "clean.stl"))
 
 
 def test_the_packages_come_from_the_zip(bare_blender, tmp_path):

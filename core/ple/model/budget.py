@@ -198,8 +198,9 @@ def check(est: Estimate, max_bytes: float | None = None, max_triangles: float | 
 
 # ----- finiteness --------------------------------------------------------------------------------
 TINY = 1e-100  # radii below this are refused: volumes (cubes) must stay normal, non-zero floats
-PRECISION = 2.0 ** -48  # a ball smaller than this share of the lattice's largest coordinate is placed
-# to less than a sixteenth of its radius (float64 keeps 52 bits): its digits are lost
+PRECISION = 2.0 ** -50  # a ball smaller than this share of the lattice's largest coordinate is placed
+# to less than about a quarter of its radius (float64 keeps 52 bits): its digits are lost (a Möbius
+# slab's far balls, 23 units in the last place of their coordinates, are kept)
 
 
 def _ball_problem(centers: np.ndarray, radii: np.ndarray) -> tuple[str, str] | None:
