@@ -296,8 +296,8 @@ class PLE_OT_skin_solid(bpy.types.Operator):  # noqa: N801 - Blender naming
             region = model.region_of(rig, lat)
             if region is None:
                 raise PleError("the region is empty: set Region from/to inside the repetition counts")
-            tess, skinning = needs("meshing.tessellate"), needs("meshing.skin")
-            solid = skinning.skin(body_of(rig, s), s.skin, tess.tessellate(lat, region, "refined", cut=False))
+            pipeline = needs("app.pipeline")  # the one mesh pipeline: as ple mesh --skin
+            solid = pipeline.skin_solid(pipeline.MeshRequest(lat, region, "refined"), body_of(rig, s), s.skin)
         except PleError as exc:
             rig.ple.status = str(exc)
             self.report({"ERROR"}, str(exc))

@@ -3,6 +3,7 @@ segments, fillet, unit, limits) is planned once (``plan``: normalised, bounds an
 output grid computed once, whether the unclean check and its local unions run) and then run
 into a sink:
 
+- a solid: ``skin_solid`` (a body's shell united with the lattice);
 - a file: ``write_mesh`` (STL streamed box by box; PLY, OBJ, 3MF, GLB welded in memory),
   ``write_beam_lattice`` (the beam-lattice 3MF and its fallback triangles);
 - arrays: ``stream`` (boxes of float32 vertices on the output grid and int32 faces, the local
@@ -40,7 +41,7 @@ from ..io.export import (
 )
 from ..io.formats import DEFAULT_UNIT, mesh_format, unit_name
 from ..meshing.selfcheck import BLOCK_TRIANGLES
-from ..meshing.skin import clip_bodies
+from ..meshing.skin import clip_bodies, skin
 from ..meshing.styles import DEFAULT_STYLE
 from ..meshing.styles import style as style_named
 from ..meshing.tessellate import (
@@ -355,6 +356,22 @@ def write_mesh(request: MeshRequest, path, info: dict | None = None) -> int:
     info["unclean"] = mesh_.metadata.get("ple_unclean")
     stats = export_mesh(mesh_, path, request.unit)
     return len(mesh_.faces) - stats["dropped_faces"]  # as written (the weld may drop slivers)
+
+
+def skin_solid(request: MeshRequest, body, thickness: float, edge: float | None = None) -> trimesh.Trimesh:
+    """The request's lattice mesh, not cut at the body (the skin cuts and unites it), united with
+    the body's inward shell of ``thickness`` (``meshing.skin.skin``): one closed solid in memory.
+    Its Booleans run through ``request.contain`` when given (in a child: a signal stops them at
+    once); ``metadata["ple_unclean"]`` is the lattice's unclean report."""
+    p = plan(request)
+    lattice = tessellate(p.lattice, p.region, p.style, p.levels, p.segments, fillet=p.fillet, cut=False)
+
+    def unite():
+        return skin(body, thickness, lattice, edge)
+
+    solid = request.contain(unite) if request.contain is not None else unite()
+    solid.metadata["ple_unclean"] = lattice.metadata.get("ple_unclean")
+    return solid
 
 
 def write_beam_lattice(request: MeshRequest, path, fallback: str = DEFAULT_FALLBACK, info: dict | None = None) -> dict:

@@ -19,6 +19,7 @@ from ..app.pipeline import (
     MeshRequest,
     estimate,
     plan,
+    skin_solid,
     within,
     write_beam_lattice,
     write_mesh,
@@ -31,7 +32,6 @@ from ..io.formats import DEFAULT_UNIT, UNITS, mesh_format
 from ..io.spill import SpillFiles
 from ..measure.check import is_clean, solid_volume
 from ..meshing.selfcheck import check_triangles
-from ..meshing.skin import skin
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
 from ..meshing.tessellate import check_fillet, resolve_style, tessellate
 from ..model.budget import (
@@ -116,10 +116,10 @@ def run(args) -> int:
         if args.beam_lattice or args.check:
             raise PleError("--skin makes one solid of shell and lattice: not with --beam-lattice or --check")
         style = args.style if args.style != "balls-beams" else "refined"
-        lattice = tessellate(lat, region, style, args.levels, args.segments, cut=False)  # skin cuts and unites
-        body = body_of(lat, "--skin")
-        mesh = mesh_contained(lambda: skin(body, args.skin, lattice), args.lattice, "the skin")  # a signal stops it
-        info["unclean"] = lattice.metadata.get("ple_unclean")
+        request = MeshRequest(lat, region, style, args.levels, args.segments,
+                              contain=partial(mesh_contained, name=args.lattice, what="the skin"))
+        mesh = skin_solid(request, body_of(lat, "--skin"), args.skin)  # the skin cuts and unites the lattice
+        info["unclean"] = mesh.metadata.get("ple_unclean")
         n = len(mesh.faces) - export_mesh(mesh, args.out, args.unit)["dropped_faces"]
     elif args.beam_lattice:
         request = MeshRequest(lat, region, args.fallback if args.fallback != "none" else DEFAULT_FALLBACK,

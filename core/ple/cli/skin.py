@@ -4,13 +4,13 @@ with the lattice that fills it (by ``--fill``, default any) into one watertight 
 from __future__ import annotations
 
 import math
+from functools import partial
 
+from ..app.pipeline import MeshRequest, skin_solid
 from ..errors import PleError
 from ..filters.body import body_of
 from ..io.export import export_mesh
-from ..meshing.skin import skin
 from ..meshing.styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS, STYLES
-from ..meshing.tessellate import tessellate
 from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, mesh_triangles, require
 from ..program.meshes import mesh_contained
 from .common import add_lattice_args, lattice_from_args, max_memory
@@ -47,8 +47,8 @@ def run(args) -> int:
             f"{tris:,.3g} triangles ({args.style}) of the lattice to skin", max_memory(args),
             "choose a smaller lattice or --style cnt")
     body = body_of(lat, "ple skin")
-    solid = mesh_contained(lambda: skin(body, args.skin, tessellate(lat, style=args.style, cut=False), args.edge),
-                           args.lattice, "the skin")  # in a child: a signal ends its Booleans at once
+    request = MeshRequest(lat, None, args.style, contain=partial(mesh_contained, name=args.lattice, what="the skin"))
+    solid = skin_solid(request, body, args.skin, args.edge)  # its Booleans in a child: a signal ends them at once
     export_mesh(solid, args.out)
     print(f"wrote {args.out}: {len(solid.faces):,} triangles, volume {solid.volume:.6g}, "
           f"watertight {solid.is_watertight}")
