@@ -67,6 +67,7 @@ from ..model.budget import (
     human,
     mean_degree,
     mesh_triangles,
+    region_beams,
     region_nodes,
     require,
     streamed_stl_bytes,
@@ -209,6 +210,24 @@ def estimate(p: MeshPlan, fmt: str = "stl", limit: float | None = None, workers:
     work = budget_estimate(lat, r).with_triangles(tris)
     return MeshEstimate(f"{tris:,.3g} triangles ({style}) of {what}", tris, tuple(needs), disk,
                         tris / TRIANGLES_PER_SECOND, box_groups, work)
+
+
+BEAM_LATTICE_ELEMENT_BYTES = 150  # per ball and beam of a beam-lattice 3MF, as its XML is streamed
+
+
+def estimate_beam_lattice(lat: Lattice, region, fallback: str, levels=None, segments=None) -> MeshEstimate:
+    """The ``MeshEstimate`` of ``write_beam_lattice``: the region's evaluation, its balls and beams
+    as 3MF rows, and the fallback mesh (``"none"``: no triangles) welded in memory."""
+    r = lat.region(region)
+    tris = 0 if fallback == "none" else int(mesh_triangles(lat, r, fallback,
+                                                           *resolve_style(fallback, levels, segments)))
+    what = f"region {r} ({region_nodes(lat, r):,} nodes)"
+    need = (evaluation_bytes(lat, r) + BEAM_LATTICE_ELEMENT_BYTES * (region_nodes(lat, r) + region_beams(lat, r))
+            + tris * MESH_TRIANGLE_BYTES)
+    needs = ((need, f"the beam lattice of {what} with {tris:,.3g} triangles ({fallback})",
+              "choose a smaller --region, fewer --levels or --fallback cnt"),)
+    return MeshEstimate(f"the beam lattice of {what}", tris, needs, 0, tris / TRIANGLES_PER_SECOND, 1 << 14,
+                        budget_estimate(lat, r).with_triangles(tris))
 
 
 def within(est: MeshEstimate, limit: float, folder=None) -> MeshEstimate:

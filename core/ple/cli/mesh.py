@@ -18,6 +18,7 @@ from ..app.pipeline import (
     FALLBACK_STYLES,
     MeshRequest,
     estimate,
+    estimate_beam_lattice,
     plan,
     skin_solid,
     within,
@@ -35,13 +36,8 @@ from ..meshing.selfcheck import check_triangles
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
 from ..meshing.tessellate import check_fillet, resolve_style, tessellate
 from ..model.budget import (
-    MESH_TRIANGLE_BYTES,
-    evaluation_bytes,
     human,
     mesh_triangles,
-    region_beams,
-    region_nodes,
-    require,
     streamed_stl_bytes,
 )
 from ..program.meshes import mesh_contained
@@ -219,15 +215,8 @@ def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
     limit."""
     limit = max_memory(args)
     levels, segments = resolve_style(args.style, args.levels, args.segments)
-    what = f"region {region} ({region_nodes(lat, region):,} nodes)"
     if args.beam_lattice:  # balls and beams, and the triangle mesh that rides along in the 3MF
-        style = args.fallback
-        tris = 0 if style == "none" else mesh_triangles(lat, region, style, *resolve_style(style, args.levels,
-                                                                                           args.segments))
-        require(evaluation_bytes(lat, region) + 150 * (region_nodes(lat, region) + region_beams(lat, region))
-                + tris * MESH_TRIANGLE_BYTES, f"the beam lattice of {what} with {tris:,.3g} triangles ({style})",
-                limit, "choose a smaller --region, fewer --levels or --fallback cnt")
-        return 1 << 14
+        return within(estimate_beam_lattice(lat, region, args.fallback, args.levels, args.segments), limit).box_groups
     request = MeshRequest(lat, region, args.style, levels, segments)
     est = estimate(plan(request), fmt, limit, stream_workers(args.workers), args.check, in_memory)
     return within(est, limit, Path(args.out).resolve().parent).box_groups
