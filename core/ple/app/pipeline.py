@@ -3,6 +3,7 @@ segments, fillet, unit, limits) is planned once (``plan``: normalised, bounds an
 output grid computed once, whether the unclean check and its local unions run) and then run
 into a sink:
 
+- connectors: ``write_connectors`` (a BeCOTS lattice's connector classes and beams);
 - a solid: ``skin_solid`` (a body's shell united with the lattice);
 - a file: ``write_mesh`` (STL streamed box by box; PLY, OBJ, 3MF, GLB welded in memory),
   ``write_beam_lattice`` (the beam-lattice 3MF and its fallback triangles);
@@ -39,7 +40,9 @@ from ..io.export import (
     write_3mf,
     write_stl,
 )
+from ..io.files import atomic_dir, check_finite_array, check_output_dir, strict_json
 from ..io.formats import DEFAULT_UNIT, mesh_format, unit_name
+from ..meshing.connectors import constant_radius_connectors
 from ..meshing.selfcheck import BLOCK_TRIANGLES
 from ..meshing.skin import clip_bodies, skin
 from ..meshing.styles import DEFAULT_STYLE
@@ -430,3 +433,34 @@ def write_chunks(path, chunks, unit: str = DEFAULT_UNIT) -> int:
     verts, faces = weld_chunks(chunks)
     export_mesh(trimesh.Trimesh(verts, faces, process=False), path, unit)
     return len(faces)
+
+
+def write_connectors(lat: Lattice, folder, radius: float, beam_radius: float | None = None,
+                      grow: float = 0.5, region=None) -> dict:
+    """Write one mesh per connector class of a BeCOTS lattice (``connector_<n>.stl``,
+    ``meshing.connectors``), the beams as constant-radius cylinders (``beams.stl``) and
+    ``connectors.json`` (class keys, instance motions) into ``folder``, complete or not at all."""
+    folder = Path(folder)
+    check_output_dir(folder, "ple-connectors")  # ours, new or empty: never another folder's files
+    with np.errstate(all="ignore"):  # a non-finite result is refused below, before anything is written
+        classes, beams = constant_radius_connectors(lat, radius, beam_radius, grow, region)
+        cyl = [trimesh.creation.cylinder(radius=beams["radius"], segment=np.stack([a, b]), sections=12)
+               for a, b in zip(beams["start"], beams["end"]) if np.linalg.norm(b - a) > 1e-12]
+    what = f"the connectors of radius {radius:g}{f' (beam radius {beam_radius:g})' if beam_radius else ''}"
+    for n, cls in enumerate(classes):
+        check_finite_array(cls.mesh.vertices, f"{what}: connector {n}")
+        check_finite_array(cls.instances, f"{what}: connector {n}'s motions")
+    for c in cyl:
+        check_finite_array(c.vertices, f"{what}: the beams")
+    summary = {"classes": [], "beams": len(beams["start"]), "radius": radius, "beam_radius": beams["radius"]}
+    with atomic_dir(folder, "ple-connectors", "ple becots connectors") as tmp:  # complete or not at all
+        for n, cls in enumerate(classes):
+            name = f"connector_{n}.stl"
+            cls.mesh.export(tmp / name, file_type="stl")
+            summary["classes"].append({"file": name, "node": cls.key[0], "ends": [list(e) for e in cls.key[1]],
+                                       "count": len(cls.instances), "nodes": cls.nodes.tolist(),
+                                       "motions": cls.instances.round(12).tolist()})
+        if cyl:
+            trimesh.util.concatenate(cyl).export(tmp / "beams.stl", file_type="stl")
+        (tmp / "connectors.json").write_text(strict_json(summary, "the connectors summary") + "\n")
+    return summary

@@ -68,7 +68,7 @@ print("@@" + json.dumps({"seconds": seconds, "triangles": len(me.polygons), "pea
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--cases", default=",".join(f"{a}:{b}:{c}" for a, b, c in CASES),
+    p.add_argument("--cases", default=",".join(f"{a}:{b.replace(',', ';')}:{c}" for a, b, c in CASES),
                    help="PRESET:REGION:STYLE, comma-separated (REGION as I0:I1;J0:J1;K0:K1)")
 
 

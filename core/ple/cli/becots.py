@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 
+from ..app.pipeline import write_connectors
 from ..errors import PleError, echo
-from ..io.export import export_connectors
 from ..io.files import atomic_path, atomic_write_text, strict_json
 from ..io.inputs import load_npy
 from ..model.becots import BeCOTSField
@@ -88,7 +88,7 @@ def run(args) -> int:
         require(2 * evaluation_bytes(lat, region) + beams * 48 * MESH_TRIANGLE_BYTES,
                 f"the connectors of region {region} ({region_nodes(lat, region):,} nodes, {beams:,} beams)",
                 max_memory(args), "choose a smaller --region")
-        summary = export_connectors(lat, args.out, args.radius, args.beam_radius, region=args.region)
+        summary = write_connectors(lat, args.out, args.radius, args.beam_radius, region=args.region)
         print(f"wrote {len(summary['classes'])} connector classes and {summary['beams']} beams to {args.out}")
         return 0
     fld = BeCOTSField.from_corners(*parse_corners(args.corners), branch=_branch(args.branch))

@@ -25,7 +25,6 @@ import numpy as np
 import trimesh
 
 from ..errors import PleError
-from ..meshing.connectors import constant_radius_connectors
 from ..meshing.tessellate import ArrayPool, ordered_map  # buffers and ordered threads, no meshing
 from ..meshing.weld import (
     COLLAPSE_GRIDS,
@@ -37,15 +36,11 @@ from ..meshing.weld import (
     unique_rows,
     weld,
 )
-from ..model.lattice import Lattice
 from .files import (
     DirectWriter,
     WriteBehind,
-    atomic_dir,
     atomic_path,
     check_finite_array,
-    check_output_dir,
-    strict_json,
 )
 from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, from_file_axes, mesh_format, to_file_axes, unit_name
 from .threemf import NS_BALLS, NS_BEAM, NS_CORE, package_bytes, write_3mf  # noqa: F401 - NS_* re-exported
@@ -411,33 +406,3 @@ def write_beam_lattice_3mf(path, center, radius, beam_nodes, mesh=None, unit: st
     else:
         v, f, _ = prepare_closed(mesh, "3mf", unit, name=Path(path).name)
     write_3mf(path, v, f, unit_name(unit), (center, radius, beam_nodes))
-
-
-def export_connectors(lat: Lattice, folder, radius: float, beam_radius: float | None = None,
-                      grow: float = 0.5, region=None) -> dict:
-    """Write one mesh per connector class (``connector_<n>.stl``), the beams as constant-
-    radius cylinders (``beams.stl``) and ``connectors.json`` (class keys, instance motions)."""
-    folder = Path(folder)
-    check_output_dir(folder, "ple-connectors")  # ours, new or empty: never another folder's files
-    with np.errstate(all="ignore"):  # a non-finite result is refused below, before anything is written
-        classes, beams = constant_radius_connectors(lat, radius, beam_radius, grow, region)
-        cyl = [trimesh.creation.cylinder(radius=beams["radius"], segment=np.stack([a, b]), sections=12)
-               for a, b in zip(beams["start"], beams["end"]) if np.linalg.norm(b - a) > 1e-12]
-    what = f"the connectors of radius {radius:g}{f' (beam radius {beam_radius:g})' if beam_radius else ''}"
-    for n, cls in enumerate(classes):
-        check_finite_array(cls.mesh.vertices, f"{what}: connector {n}")
-        check_finite_array(cls.instances, f"{what}: connector {n}'s motions")
-    for c in cyl:
-        check_finite_array(c.vertices, f"{what}: the beams")
-    summary = {"classes": [], "beams": len(beams["start"]), "radius": radius, "beam_radius": beams["radius"]}
-    with atomic_dir(folder, "ple-connectors", "ple becots connectors") as tmp:  # complete or not at all
-        for n, cls in enumerate(classes):
-            name = f"connector_{n}.stl"
-            cls.mesh.export(tmp / name, file_type="stl")
-            summary["classes"].append({"file": name, "node": cls.key[0], "ends": [list(e) for e in cls.key[1]],
-                                       "count": len(cls.instances), "nodes": cls.nodes.tolist(),
-                                       "motions": cls.instances.round(12).tolist()})
-        if cyl:
-            trimesh.util.concatenate(cyl).export(tmp / "beams.stl", file_type="stl")
-        (tmp / "connectors.json").write_text(strict_json(summary, "the connectors summary") + "\n")
-    return summary
