@@ -15,7 +15,7 @@ from bpy.props import (
 from .. import draw
 from ..corelink import PleError, needs
 from ..rig import hooks, model, sync
-from .base import BEYOND, EXPORT_STYLES, STYLES, RigOperator, SteppedOperator, budget, core_style, output_path
+from .base import BEYOND, EXPORT_STYLES, STYLES, SteppedOperator, budget, core_style, output_path
 
 
 class MeshOperator(SteppedOperator):
@@ -29,6 +29,25 @@ class MeshOperator(SteppedOperator):
     @classmethod
     def poll(cls, context):
         return hooks.first("meshed", getattr(context, "active_object", None)) is not None or super().poll(context)
+
+    def mesh_object(self, rig, lat, region, style: str, name: str, collections):
+        """Steps: the region's mesh in ``style`` from the core's one pipeline, welded in a child
+        job and mapped from its files, as a new object ``name`` in ``collections`` placed as the
+        rig; the rig's status names unclean hubs the mesh united. Returns the object."""
+        request = needs("app.pipeline").MeshRequest(lat, region, style)
+        with tempfile.TemporaryDirectory(prefix="ple-mesh-", ignore_cleanup_errors=True) as tmp:
+            verts, faces, report = yield from self.mesh_job(request, Path(tmp))  # mapped, welded in the child
+            if not len(faces):
+                raise PleError(f"nothing to mesh: region {region} keeps no ball (move Region from/to)")
+            yield 0.9
+            me = draw.mesh_from_arrays(name, verts, faces)
+            del verts, faces  # the maps closed before their folder goes
+        obj = bpy.data.objects.new(me.name, me)
+        for coll in collections:
+            coll.objects.link(obj)
+        obj.matrix_world = rig.matrix_world
+        say_unclean(rig, report)
+        return obj
 
     def subject(self, rig):
         """(lattice, region) to mesh: what is drawn (the panel's filter too) is what is meshed."""
@@ -59,20 +78,9 @@ class PLE_OT_tessellate(MeshOperator, bpy.types.Operator):  # noqa: N801 - Blend
         yield 0.0
         # the core's one mesh pipeline (``ple.app.pipeline``): checked for unclean hubs, their
         # local unions included, on the region's float32 grid: the triangles `ple mesh` writes
-        request = needs("app.pipeline").MeshRequest(lat, region, core_style(self.style))
-        with tempfile.TemporaryDirectory(prefix="ple-tessellate-", ignore_cleanup_errors=True) as tmp:
-            verts, faces, report = yield from self.mesh_job(request, Path(tmp))  # mapped, welded in the child
-            if not len(faces):
-                raise PleError(f"nothing to tessellate: region {region} keeps no ball (move Region from/to)")
-            yield 0.9
-            me = draw.mesh_from_arrays(f"{rig.name}.{self.style.lower()}", verts, faces)
-            del verts, faces  # the maps closed before their folder goes
-        obj = bpy.data.objects.new(me.name, me)
-        for coll in rig.users_collection:
-            coll.objects.link(obj)
-        obj.matrix_world = rig.matrix_world
-        self.result = f"{obj.name}: {len(me.polygons)} triangles"
-        say_unclean(rig, report)
+        obj = yield from self.mesh_object(rig, lat, region, core_style(self.style),
+                                          f"{rig.name}.{self.style.lower()}", rig.users_collection)
+        self.result = f"{obj.name}: {len(obj.data.polygons)} triangles"
         yield 1.0
 
 
@@ -119,28 +127,25 @@ def say_unclean(rig, report) -> None:
         rig.ple.status = report or ""
 
 
-class PLE_OT_bake(RigOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
-    """Freeze the drawn region (balls and beams as Blender draws them) into a plain mesh object"""
+class PLE_OT_bake(MeshOperator, bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Freeze the drawn region into a plain mesh object of balls and beams: the preview style of the
+    core's one mesh pipeline, the triangles `ple mesh --style balls-beams` writes (a job: Esc cancels)"""
 
     bl_idname = "ple.bake"
     bl_label = "Bake Region"
 
-    def run(self, context, rig):
-        region = model.parts(rig).get("region")
-        if region is None or not len(region.data.vertices):
-            raise PleError("nothing to bake: the region is empty")
-        depsgraph = context.evaluated_depsgraph_get()
-        me = bpy.data.meshes.new_from_object(region.evaluated_get(depsgraph), preserve_all_data_layers=False,
-                                             depsgraph=depsgraph)
-        me.name = f"{rig.name}.baked"
-        obj = bpy.data.objects.new(me.name, me)
-        coll = context.scene.collection
-        coll.objects.link(obj)
-        obj.matrix_world = region.matrix_world
-        self.report({"INFO"}, f"{obj.name}: {len(me.polygons)} faces")
-        return {"FINISHED"}
+    beyond_limit: BEYOND
 
-
+    def steps(self, context, rig):
+        self._rig = rig
+        lat, region = self.subject(rig)
+        budget(lat, region, "BALLS_BEAMS", f"baking region {region}", beyond=self.beyond_limit)
+        yield 0.0
+        obj = yield from self.mesh_object(rig, lat, region, "balls-beams", f"{rig.name}.baked",
+                                          [context.scene.collection])
+        draw.set_material(obj, draw.REGION_MATERIAL)
+        self.result = f"{obj.name}: {len(obj.data.polygons)} faces"
+        yield 1.0
 
 
 CLASSES = (PLE_OT_tessellate, PLE_OT_export, PLE_OT_bake)

@@ -65,7 +65,7 @@ def stepped_op(cls, **props):
     import types
 
     op = types.SimpleNamespace(rig="", beyond_limit=False, report=lambda *a: None, result="", **props)
-    for name in ("steps", "mesh_job", "file_job", "subject"):
+    for name in ("steps", "mesh_job", "file_job", "subject", "mesh_object"):
         if hasattr(cls, name):
             setattr(op, name, types.MethodType(getattr(cls, name), op))
     return op

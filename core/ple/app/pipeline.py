@@ -324,18 +324,17 @@ def stream(p: MeshPlan, info: dict | None = None) -> Iterator[tuple[np.ndarray, 
 
 
 def mesh_steps(p: MeshPlan, info: dict | None = None):
-    """``mesh`` as steps: a generator yielding the fraction of the region's boxes streamed so far
-    and returning the welded mesh (vertices (V, 3) float32 on the output grid, faces (F, 3)
-    int32, both C-contiguous): a caller shows progress and can stop between boxes."""
+    """The plan's boxes as steps: a generator yielding the fraction of the region's boxes streamed
+    so far and returning them joined at their shared grid points (vertices (V, 3) float32 on the
+    output grid, faces (F, 3) int32, both C-contiguous): the binary STL's very triangles, indexed.
+    A caller shows progress and can stop between boxes."""
     boxes = max(1, -(-p.region.groups // p.request.max_groups))
     chunks = []
     for chunk in stream(p, info):
         chunks.append(chunk)
         yield min(1.0, len(chunks) / boxes)  # the local unions come first: more pieces than boxes
-    v, f = weld_chunks(chunks)  # the boxes share their hubs' grid points
+    v, f = weld_chunks(chunks)  # the boxes share their hubs' grid points: the file's very triangles
     chunks.clear()
-    if p.grid is not None and len(f):
-        v, f, _ = weld(v, f, p.grid)
     return np.ascontiguousarray(v, np.float32), np.ascontiguousarray(f, np.int32)
 
 
@@ -347,7 +346,11 @@ def mesh(p: MeshPlan, info: dict | None = None) -> tuple[np.ndarray, np.ndarray]
         try:
             next(steps)
         except StopIteration as stop:
-            return stop.value
+            v, f = stop.value
+            break
+    if p.grid is not None and len(f):  # one indexed mesh: slivers of float32 collapsed (as a PLY's)
+        v, f, _ = weld(v, f, p.grid)
+    return v, f
 
 
 def write_mesh(request: MeshRequest, path, info: dict | None = None) -> int:

@@ -19,7 +19,8 @@ from pathlib import Path
 from ..errors import PleError
 
 ROOT = Path(__file__).resolve().parents[3]
-CASES = [("cubic", "0:40,0:40,0:20", "cnt"), ("fig6_3", "0:7,0:12,0:8", "cnt"), ("octet", "0:16,0:16,0:8", "chocc")]
+CASES = [("thesis_regular", "0:16,0:16,0:16", "cnt"), ("fig6_3", "0:7,0:12,0:15", "cnt"),
+         ("cylindrical", "0:8,0:32,0:8", "chocc")]
 
 BLENDER = r'''
 import json, os, resource, sys, tempfile, time
