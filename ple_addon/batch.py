@@ -79,8 +79,8 @@ def run(args) -> int:
                 with start, dask_client(args.scheduler, workers) as client:
                     data = build_zip(Path(tmp)).read_bytes()
                     addon = (hashlib.sha256(data).hexdigest(), data)
-                    if client is not None:
-                        addon = client.scatter(addon, broadcast=True)  # the zip travels once per worker
+                    if client is not None:  # a task, not scattered data: a worker's death cannot lose it
+                        addon = client.submit(_held, addon, pure=False)  # the scheduler keeps it to run again
                     tasks = [(addon, job, v.params, str((out / v.filename).resolve())) for v in todo]
                     for v, result in run_tasks(client, blender_variant, tasks, todo, "blender batch",
                                                [v.filename for v in todo]):
@@ -100,6 +100,13 @@ def run(args) -> int:
         print(f"failed {failure['file']}: {failure['error']}", file=sys.stderr)
     print(json.dumps(summary, indent=1))
     return 2 if manifest["failures"] else 0
+
+
+def _held(value):
+    """``value`` itself, as a Dask task: the zip goes to each worker once (from the worker that ran
+    this, as any task's result), and a worker killed with the only copy costs one rerun, whereas a
+    scattered copy lost with its worker cancels every variant that needs it."""
+    return value
 
 
 @contextlib.contextmanager

@@ -314,9 +314,7 @@ def test_a_full_disk_is_one_line_and_keeps_the_old_file(tmp_path, capsys, monkey
                     f"m.{fmt}", "No space left")
         # a streamed STL larger than its estimate passes the free-space check, then meets the full disk
         import ple.app.pipeline as pipeline
-        import ple.cli.mesh as cli_mesh
 
-        monkeypatch.setattr(cli_mesh, "mesh_triangles", lambda *a, **k: 1.0)  # the levels chosen
         monkeypatch.setattr(pipeline, "mesh_triangles", lambda *a, **k: 1.0)  # the one estimate
         refused(["mesh", "cubic", "--param", "n=6", "--out", d / "s.stl"], capsys, "s.stl", "No space left")
         refused(["becots", "connectors", "becots_annulus", "--radius", "0.05", "--out", d / "cn"], capsys,

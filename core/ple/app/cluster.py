@@ -22,6 +22,7 @@ import time
 import urllib.error
 import urllib.request
 from collections.abc import Iterator
+from concurrent.futures import CancelledError
 
 from ..errors import PleError, echo
 from .jobs import (
@@ -112,17 +113,27 @@ def run_tasks(client, fn, args_list: list[tuple], items: list, label: str = "tas
         return
     from dask.distributed import as_completed  # optional: only distributed runs need Dask
 
-    futures = {client.submit(_kept_errors, fn, *args, retries=RETRIES, pure=False): item
+    futures = {client.submit(_kept_errors, fn, *args, retries=RETRIES, pure=False): (item, args)
                for item, args in zip(items, args_list)}
     bar = DaskBar(client, futures, label) if showing(progress) else None
-    finished = False
+    finished, resubmitted = False, 0
     try:
-        for fut in as_completed(futures):
+        running = as_completed(futures)
+        for fut in running:
+            item, args = futures[fut]
             try:
                 result = fut.result()
+            except CancelledError as exc:  # its result was lost with a worker and Dask let it go: run it again
+                if resubmitted < RETRIES * len(items):
+                    resubmitted += 1
+                    again = client.submit(_kept_errors, fn, *args, retries=RETRIES, pure=False)
+                    futures[again] = (item, args)
+                    running.add(again)
+                    continue
+                result = exc
             except Exception as exc:  # KilledWorker (its worker died too often), or a bug: reported by name
                 result = exc
-            yield futures[fut], result
+            yield item, result
             if bar is not None:
                 bar.follow(futures)
         finished = True

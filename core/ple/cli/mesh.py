@@ -37,7 +37,6 @@ from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
 from ..meshing.tessellate import check_fillet, resolve_style, tessellate
 from ..model.budget import (
     human,
-    mesh_triangles,
     streamed_stl_bytes,
 )
 from ..program.meshes import mesh_contained
@@ -191,13 +190,14 @@ def _default_levels(args, lat, region, fmt: str, in_memory: bool) -> int:
     default, segments = resolve_style(args.style, None, args.segments)
     why = None
     for levels, capped in [(default, False), *((k, True) for k in range(default - 1, -1, -1)), (0, False)]:
-        tris = mesh_triangles(lat, region, args.style, levels, segments)
         args.levels = levels
+        est = _estimate(args, lat, region, fmt, in_memory)  # the pipeline's one estimate, at these levels
+        tris = est.triangles
         try:
             if capped and streamed_stl_bytes(tris) > DEFAULT_MESH_BYTES:
                 raise PleError(f"{tris:,.3g} triangles make up to {human(streamed_stl_bytes(tris))} of binary STL, "
                                f"more than {human(DEFAULT_MESH_BYTES)}")
-            got = _within_budget(args, lat, region, fmt, in_memory)
+            got = within(est, max_memory(args), Path(args.out).resolve().parent).box_groups
         except PleError as exc:
             why = why or exc
             continue
@@ -209,17 +209,21 @@ def _default_levels(args, lat, region, fmt: str, in_memory: bool) -> int:
     return _within_budget(args, lat, region, fmt, in_memory)  # nothing fits: the default's own refusal
 
 
+def _estimate(args, lat, region, fmt: str, in_memory: bool):
+    """The pipeline's estimate of the mesh the arguments ask for (``pipeline.estimate``, or
+    ``estimate_beam_lattice`` for --beam-lattice), its boxes sized to fit --max-memory."""
+    if args.beam_lattice:  # balls and beams, and the triangle mesh that rides along in the 3MF
+        return estimate_beam_lattice(lat, region, args.fallback, args.levels, args.segments)
+    request = MeshRequest(lat, region, args.style, *resolve_style(args.style, args.levels, args.segments))
+    return estimate(plan(request), fmt, max_memory(args), stream_workers(args.workers), args.check, in_memory)
+
+
 def _within_budget(args, lat, region, fmt: str, in_memory: bool) -> int:
     """Refuse a mesh whose estimated memory (or, streamed, file) exceeds the limits; returns the
     node-groups per streamed box so that the boxes alive at once (--workers + 1) fit the memory
     limit."""
-    limit = max_memory(args)
-    levels, segments = resolve_style(args.style, args.levels, args.segments)
-    if args.beam_lattice:  # balls and beams, and the triangle mesh that rides along in the 3MF
-        return within(estimate_beam_lattice(lat, region, args.fallback, args.levels, args.segments), limit).box_groups
-    request = MeshRequest(lat, region, args.style, levels, segments)
-    est = estimate(plan(request), fmt, limit, stream_workers(args.workers), args.check, in_memory)
-    return within(est, limit, Path(args.out).resolve().parent).box_groups
+    folder = None if args.beam_lattice else Path(args.out).resolve().parent
+    return within(_estimate(args, lat, region, fmt, in_memory), max_memory(args), folder).box_groups
 
 
 def fallback_style(args) -> None:
