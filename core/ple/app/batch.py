@@ -21,7 +21,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import trimesh
 
 from ..errors import PleError, cut, echo
 from ..io.files import atomic_write_text, check_output_dir, plain_name, write_marker
@@ -110,6 +109,7 @@ def _run_variant(source: str, params: dict, style: str, levels, region, out: str
     the work budget, and write one variant through the one mesh pipeline (``pipeline.write_mesh``,
     as ``ple mesh``: unclean hubs united locally, the float32 grid); returns its manifest entry
     (``watertight`` read back from the file written)."""
+    import trimesh
     t0 = time.perf_counter()
     timeout, memory = limits or (DEFAULT_TIMEOUT, None)
     memory = memory or default_max_memory()

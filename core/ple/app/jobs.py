@@ -31,7 +31,6 @@ from pathlib import Path
 
 import fsspec
 import numpy as np
-import trimesh
 
 from ..clg.grid import iter_slices, layer_grid
 from ..errors import PleError, echo
@@ -304,6 +303,7 @@ def compute_part(kind: str, settings: dict, part: Part, url: str) -> dict:
 
 
 def _sweep_part(settings: dict, part: Part) -> tuple[bytes, dict]:
+    import trimesh
     lat = load_lattice(settings["source"], part.params)
     p = pipeline.plan(pipeline.MeshRequest(lat, settings["region"], settings["style"], settings["levels"]))
     mesh = trimesh.Trimesh(*pipeline.mesh(p), process=False)  # the triangles ple mesh writes

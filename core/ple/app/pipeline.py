@@ -25,9 +25,9 @@ import shutil
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
 from ..errors import PleError, echo
 from ..io.export import (
@@ -77,6 +77,9 @@ from ..model.budget import (
 )
 from ..model.budget import estimate as budget_estimate
 from ..model.lattice import Lattice, Region
+
+if TYPE_CHECKING:  # imported where used: a run that writes no mesh object pays no trimesh import
+    import trimesh
 
 FALLBACK_STYLES = ("cnt", "chocc", "refined", "none")
 DEFAULT_FALLBACK = "cnt"  # the cheapest closed style: a fallback for consumers without beam support
@@ -433,6 +436,7 @@ def write_beam_lattice(request: MeshRequest, path, fallback: str = DEFAULT_FALLB
 def write_chunks(path, chunks, unit: str = DEFAULT_UNIT) -> int:
     """Boxes (pairs vertices, faces) written as one mesh, welded by ``weld_chunks``, in the format
     of ``path``'s suffix; returns the number of triangles."""
+    import trimesh
     verts, faces = weld_chunks(chunks)
     export_mesh(trimesh.Trimesh(verts, faces, process=False), path, unit)
     return len(faces)
@@ -443,6 +447,7 @@ def write_connectors(lat: Lattice, folder, radius: float, beam_radius: float | N
     """Write one mesh per connector class of a BeCOTS lattice (``connector_<n>.stl``,
     ``meshing.connectors``), the beams as constant-radius cylinders (``beams.stl``) and
     ``connectors.json`` (class keys, instance motions) into ``folder``, complete or not at all."""
+    import trimesh
     folder = Path(folder)
     check_output_dir(folder, "ple-connectors")  # ours, new or empty: never another folder's files
     with np.errstate(all="ignore"):  # a non-finite result is refused below, before anything is written

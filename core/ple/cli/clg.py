@@ -6,7 +6,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-import trimesh
 
 from ..app.progress import Progress
 from ..clg.grid import check_grid, layer_grid, parse_bounds, voxel_tiles, voxelize_clg
@@ -207,6 +206,7 @@ def run_render(args) -> int:
 
 
 def run_mesh(args) -> int:
+    import trimesh
     comp = _load(args)
     verts, faces = mesh_clg_contained(comp, args.segments, max_memory(args), args.source)  # a signal ends it at once
     mesh = trimesh.Trimesh(verts, faces, process=False)

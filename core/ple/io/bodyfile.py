@@ -7,14 +7,17 @@ every other defect is named: a missing or unreadable file, an empty mesh, NaN ve
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
 from ..algebra.similarity import Similarity
 from ..errors import PleError, echo
 from ..filters.body import Body
 from .inputs import check_input_file
+
+if TYPE_CHECKING:  # imported where used: a run that writes no mesh object pays no trimesh import
+    import trimesh
 
 BODY_SUFFIXES = ("stl", "obj", "ply", "3mf", "glb", "gltf", "off")
 MAX_BODY_TRIANGLES = 20_000_000
@@ -30,6 +33,7 @@ def read_mesh(path, name: str | None = None) -> trimesh.Trimesh:
     """The triangles of mesh file ``path`` (STL, OBJ, PLY, 3MF, GLB, OFF), read within limits: a
     regular file of at most 1 GiB, at most 20 M triangles, finite vertices; every failure of the
     reader is one error naming the file (``name``: how the user gave it, e.g. ``--body F``)."""
+    import trimesh
     path = Path(path)
     name = name or str(path)
     suffix = path.suffix.lower().lstrip(".")
@@ -98,6 +102,7 @@ def surface(mesh, name: str = "body") -> tuple[trimesh.Trimesh, bool]:
     tolerance relative to its size (``merged_vertices``), and a closed surface whose faces point
     both ways oriented consistently. Returns the surface and whether the file's own orientation
     was consistent (then a negative volume means the file is inside out, ``inverted``)."""
+    import trimesh
     v = np.asarray(mesh.vertices, dtype=float)
     bad = int(np.count_nonzero(~np.isfinite(v).all(axis=1))) if v.ndim == 2 else 0
     if bad:

@@ -20,9 +20,9 @@ import struct
 import sys
 from collections.abc import Iterable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
 from ..errors import PleError
 from ..meshing.tessellate import ArrayPool, ordered_map  # buffers and ordered threads, no meshing
@@ -44,6 +44,9 @@ from .files import (
 )
 from .formats import DEFAULT_UNIT, MESH_FORMATS, format_named, from_file_axes, mesh_format, to_file_axes, unit_name
 from .threemf import NS_BALLS, NS_BEAM, NS_CORE, package_bytes, write_3mf  # noqa: F401 - NS_* re-exported
+
+if TYPE_CHECKING:  # imported where used: a run that writes no mesh object pays no trimesh import
+    import trimesh
 
 try:  # the compiled encoder (setup.py, optional): the numpy one's bytes, about 10x faster
     from . import _stlcodec as _codec
@@ -254,6 +257,8 @@ def encode_mesh(vertices, faces, fmt: str, unit: str = DEFAULT_UNIT) -> bytes:
         return ply_bytes(vertices, faces, unit)
     if fmt == "obj":
         return obj_bytes(vertices, faces, unit)
+    import trimesh  # GLB only: the other formats are encoded here
+
     out = trimesh.Trimesh(np.asarray(vertices, np.float32), faces, process=False)
     return glb_with_targets(trimesh.exchange.gltf.export_glb(out, include_normals=False))
 
@@ -360,6 +365,7 @@ def read_back(path, unit: str = DEFAULT_UNIT, as_stored: bool = False) -> trimes
     PLE's axes and ``unit`` again (``ple.io.formats.from_file_axes``; ``as_stored``: the file's
     own coordinates, as a consumer checks them); vertices no face uses (a beam-lattice 3MF also
     lists the ball centres) are dropped."""
+    import trimesh
     fmt = mesh_format(path)
     m = trimesh.load(path, force="mesh", process=False)
     v = np.asarray(m.vertices, float)

@@ -13,7 +13,6 @@ inscribed polyhedron would lose ~1 % at 32 segments); beams are hulls of two suc
 from __future__ import annotations
 
 import numpy as np
-import trimesh
 
 from ..clg.field import FieldSolid
 from ..clg.model import CLG, Prim
@@ -173,6 +172,7 @@ def mesh_clg(clg: CLG, segments: int = 32, region=None, max_bytes: float | None 
 
 def mesh_compiled(comp, segments: int = 32, max_bytes: float | None = None):
     """``mesh_clg`` of a compiled CLG (``ple.clg.query.Compiled``, its copies placed as it places them)."""
+    import trimesh
     return trimesh.Trimesh(*mesh_arrays(comp, segments, max_bytes), process=False)
 
 

@@ -8,7 +8,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import trimesh
 
 from ..algebra.vectors import unit
 from ..errors import PleError, echo
@@ -76,6 +75,7 @@ def connector_mesh(center, directions, radius: float, beam_radius: float, grow: 
     is the node ball (radius) with rods (beam_radius) along the incident beam directions, the
     grown hub uses radii × (1 + grow) and the enlarged node has radius (1 + 2 grow)·radius.
     Built in the local frame with manifold3d Booleans, then placed."""
+    import trimesh
     from manifold3d import Manifold  # optional: only connector meshes need manifold3d
 
     dirs = np.asarray(directions, float).reshape(-1, 3)

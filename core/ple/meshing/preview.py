@@ -6,10 +6,14 @@ ball and per beam with numpy, so a 10⁵-beam preview builds in well under a sec
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import trimesh
 
 from ..algebra.vectors import perpendicular_frames
+
+if TYPE_CHECKING:  # imported where used: a run that writes no mesh object pays no trimesh import
+    import trimesh
 
 
 def balls_beams_mesh(center: np.ndarray, radius: np.ndarray, beam_nodes: np.ndarray,
@@ -17,6 +21,7 @@ def balls_beams_mesh(center: np.ndarray, radius: np.ndarray, beam_nodes: np.ndar
                      beam_scale: float = 1.0) -> trimesh.Trimesh:
     """Preview mesh: an icosphere per ball (centres (N, 3), radii (N,)) and a frustum per
     beam (beam_nodes (M, 2) rows into the ball arrays), radii scaled by ``beam_scale``."""
+    import trimesh
     sphere = trimesh.creation.icosphere(subdivisions=sphere_subdivisions)
     sv, sf = np.asarray(sphere.vertices), np.asarray(sphere.faces)
     verts = (sv[None] * radius[:, None, None] + center[:, None]).reshape(-1, 3)

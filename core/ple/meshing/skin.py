@@ -15,14 +15,17 @@ manifold3d intersection of the closed lattice mesh with each body.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
 from ..errors import PleError, echo
 from ..filters.body import Body, body_filters
 from .selfcheck import self_intersections
 from .weld import COLLAPSE_GRIDS, grid_spacing
+
+if TYPE_CHECKING:  # imported where used: a run that writes no mesh object pays no trimesh import
+    import trimesh
 
 MAX_SDF_SAMPLES = 8_000_000  # grid samples of the signed distance
 
@@ -54,6 +57,7 @@ def _solid(body: Body):
 def _trimesh(m) -> trimesh.Trimesh:
     """The Boolean's result with its slivers (features under a few float32 steps at its size,
     which a float32 file cannot keep apart) removed by manifold3d itself: it stays manifold."""
+    import trimesh
     if not m.is_empty():
         box = np.asarray(m.bounding_box(), float)
         m = m.simplify(COLLAPSE_GRIDS * grid_spacing(box[:3], box[3:]))
@@ -163,6 +167,7 @@ def clip_to_bodies(mesh: trimesh.Trimesh, bodies, contain=None) -> trimesh.Trime
     size 10 would make coarser than the lattice. ``contain`` runs the Booleans, given as a
     function that returns the cut mesh, and returns that mesh (in a child process that a signal
     stops: ``ple.program.meshes.mesh_contained``); None runs them here."""
+    import trimesh
     if not bodies or not len(mesh.faces):
         return mesh
     for body in bodies:

@@ -35,9 +35,9 @@ import weakref
 from collections import deque
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from functools import partial
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
 from ..algebra.vectors import perpendicular_frames, runs, unit_rows
 from ..errors import PleError, echo
@@ -66,6 +66,9 @@ from .unions import (
     unite_stoppable,
 )
 from .weld import COLLAPSE_GRIDS, grid_spacing, weld
+
+if TYPE_CHECKING:  # imported where used: a run that writes no mesh object pays no trimesh import
+    import trimesh
 
 KEY_QUANTUM = 1e-9  # neighbourhoods equal to this fraction of the ball radius share a hub mesh
 MAX_LEVELS = 6
@@ -957,6 +960,7 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
     ``cut`` is False (for a skin, which cuts and unites in one run of Booleans); ``contain`` runs
     that cut's Booleans (``clip_to_bodies``: in a child process that a signal stops). ``unclean``: the
     region's report when the caller has it already (``checked_stream``), so the check runs once."""
+    import trimesh
     levels, segments = resolve_style(style, levels, segments)
     bodies = clip_bodies(lat)
     lat, r = lat.per_hub(region)  # groups not similar (Möbius, TMI): every hub its own template

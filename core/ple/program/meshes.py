@@ -7,12 +7,15 @@ the runner's allowlist)."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
 from ..meshing.clg import check_outer_budget, mesh_arrays
 from .runner import Job
+
+if TYPE_CHECKING:  # imported where used: a run that writes no mesh object pays no trimesh import
+    import trimesh
 
 
 def mesh_clg_contained(comp, segments: int, max_bytes: float | None, name: str,
@@ -30,6 +33,7 @@ def mesh_contained(make: Callable[[], trimesh.Trimesh], name: str, what: str) ->
     """The mesh ``make()`` returns (``ple.meshing.skin.skin``, …), made in a child process with no
     time limit; ``name`` and ``what`` ("the skin") name it in errors. Its vertices (V, 3) and faces
     (F, 3) come back as they were made (``process=False``)."""
+    import trimesh
     def arrays():
         mesh = make()
         return np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
