@@ -16,6 +16,9 @@ except ImportError:  # running from the source tree: the core is installed in th
     import ple
 
 
+PleError = ple.PleError
+
+
 def core(name: str) -> ModuleType:
     """A core sub-module, e.g. ``core("model.cage")``."""
     return importlib.import_module(f"{ple.__name__}.{name}")
@@ -28,8 +31,14 @@ def needs(name: str) -> ModuleType:
     try:
         return core(name)
     except ModuleNotFoundError as exc:
-        raise ple.PleError(f"ple.{name} needs the Python package {exc.name!r}, which Blender's Python "
-                           "does not have (install it into Blender's Python to use this)") from None
+        raise missing(exc, f"ple.{name}") from None
+
+
+def missing(exc: ModuleNotFoundError, what: str = "this") -> PleError:
+    """The report of a package Blender's Python lacks, found where the core imports it (trimesh
+    is imported where a mesh object is made, so a module loads without it)."""
+    return ple.PleError(f"{what} needs the Python package {exc.name!r}, which Blender's Python does not have "
+                        "(install it into Blender's Python to use this)")
 
 
 body = core("filters.body")  # bodies and the body filter (the Body panel)
@@ -46,7 +55,6 @@ snippets = core("program.snippets")
 styles = core("meshing.styles")  # also the triangle estimate of a style
 weld = core("meshing.weld")  # meshes that survive float32 (files, Blender meshes)
 work = core("model.budget")  # the work budget: estimates of a region (balls, beams, triangles, memory), limits
-PleError = ple.PleError
 Lattice = ple.Lattice
 Similarity = ple.Similarity
 

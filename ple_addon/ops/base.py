@@ -13,7 +13,7 @@ import numpy as np
 from bpy.props import BoolProperty, IntVectorProperty, StringProperty
 
 from .. import jobs, prefs
-from ..corelink import PleError, needs, presets, styles, work
+from ..corelink import PleError, missing, needs, presets, styles, work
 from ..rig import events, model, sync
 
 SNIPPET_TEXT = "PLE snippet"  # the text block snippets go to (and the clipboard)
@@ -47,12 +47,14 @@ class RigOperator:
     def execute(self, context):
         try:
             rig = self.get_rig(context)
-        except PleError as exc:
+        except (PleError, ModuleNotFoundError) as exc:
+            exc = _reported(exc)
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         try:
             return self.run(context, rig)
-        except PleError as exc:
+        except (PleError, ModuleNotFoundError) as exc:
+            exc = _reported(exc)
             rig.ple.status = str(exc)  # the panel's status line as well as the Info report
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
@@ -218,7 +220,8 @@ class SteppedOperator(RigOperator):
                     wm.progress_update(int(100 * frac))
             finally:
                 wm.progress_end()
-        except PleError as exc:
+        except (PleError, ModuleNotFoundError) as exc:
+            exc = _reported(exc)
             self.fail(context, str(exc))
             return {"CANCELLED"}
         self.done(context)
@@ -247,7 +250,8 @@ class SteppedOperator(RigOperator):
         except StopIteration:
             self.done(context)
             return {"FINISHED"}
-        except PleError as exc:
+        except (PleError, ModuleNotFoundError) as exc:
+            exc = _reported(exc)
             if "refused" in str(exc) and not self.beyond_limit:  # ask: beyond the limit?
                 self.beyond_limit = self._confirmed = True
                 return context.window_manager.invoke_confirm(self, event, title="Beyond the work limit",
@@ -288,7 +292,8 @@ class SteppedOperator(RigOperator):
             self.finish(context)
             self.done(context)
             return {"FINISHED"}
-        except PleError as exc:
+        except (PleError, ModuleNotFoundError) as exc:
+            exc = _reported(exc)
             self.finish(context)
             self.fail(context, str(exc))
             return {"CANCELLED"}
@@ -363,3 +368,8 @@ def register() -> None:
 
 def unregister() -> None:
     pass
+
+
+def _reported(exc: Exception) -> PleError:
+    """The error an operator reports: a package Blender's Python lacks is named, not a traceback."""
+    return missing(exc) if isinstance(exc, ModuleNotFoundError) else exc

@@ -354,7 +354,8 @@ def case_errors():
     assert not Path("/tmp/x.docx").exists()
     fails(bpy.ops.ple.lil_filter, "coarse")
     fails(bpy.ops.ple.lattice_add, "no text block", source="TEXT", text="nope")
-    # a Blender without trimesh: the tessellation reports the missing package, no traceback
+    # a Blender without trimesh: Tessellate streams its boxes without it, an Export to GLB (trimesh
+    # encodes it) reports the missing package, no traceback
     new_rig("cubic", region=(2, 2, 2))
     vendored = "bl_ext.user_default.ple.vendor.ple"
     saved = {k: sys.modules.pop(k) for k in list(sys.modules)
@@ -363,7 +364,10 @@ def case_errors():
                                                                    f"{vendored}.app.pipeline")}
     sys.modules["trimesh"] = None
     try:
-        fails(bpy.ops.ple.tessellate, "'trimesh'", style="CNT")
+        assert bpy.ops.ple.tessellate(style="CNT") == {"FINISHED"}
+        glb = Path(tempfile.mkdtemp()) / "x.glb"
+        fails(bpy.ops.ple.export, "'trimesh'", filepath=str(glb))
+        assert not glb.exists()
     finally:
         del sys.modules["trimesh"]
         sys.modules.update(saved)
