@@ -11,12 +11,12 @@ import sys
 import pytest
 
 HEAVY = ("trimesh", "dask", "distributed", "scipy.spatial", "manifold3d", "rtree")
-PROBE = """
+PROBE = f"""
 import json, sys
 from ple.cli.main import main
 code = main(sys.argv[1:])
-print(json.dumps({"code": code, "heavy": sorted(m for m in %r if m in sys.modules)}), file=sys.stderr)
-""" % (HEAVY,)
+print(json.dumps({{"code": code, "heavy": sorted(m for m in {HEAVY!r} if m in sys.modules)}}), file=sys.stderr)
+"""
 
 
 def run(*argv):

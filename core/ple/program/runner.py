@@ -104,7 +104,8 @@ def _describe(exc: BaseException, program: str, memory: int | None, hints: Hints
     if isinstance(exc, RecursionError):
         return f"{where}: {what} recursed too deeply"
     if isinstance(exc, ModuleNotFoundError) and exc.name:  # a package this Python lacks (trimesh, imported where used)
-        return f"{where}: {what.removeprefix('the ')} needs the Python package {exc.name!r}, which this Python does not have"
+        return (f"{where}: {what.removeprefix('the ')} needs the Python package {exc.name!r}, "
+                "which this Python does not have")
     return f"{where}: {what.removeprefix('the ')} raised {type(exc).__name__}: {exc}"
 
 
