@@ -1,7 +1,8 @@
 """The layers of the core (docs/architecture.md), enforced: imports run downward only, no cycles,
 no library module reaches the doors (cli, bench, tools, the add-on), query backends never import
 their dispatcher, meshing writes no files, and function-local imports are only for optional
-third-party packages (and trimesh, a cost small jobs do not pay). Imports are read with ``ast``, function-local ones included."""
+third-party packages (and trimesh, a cost small jobs do not pay). Imports are read with ``ast``,
+function-local ones included."""
 
 from __future__ import annotations
 
