@@ -44,12 +44,14 @@ from ..errors import PleError, echo
 from ..model.budget import hub_triangles, mean_degree, region_beams, region_nodes
 from ..model.lattice import Lattice, Region
 from ..queries.overlaps import grid_pairs
+from . import slabs
 from .achocc import JunctionError
 from .assembly import Packed, Pieces, TemplateTable, fill, hub_faces, place
 from .hubs import hub_templates
 from .preview import balls_beams_mesh
 from .selfcheck import self_intersections
 from .skin import clip_bodies, clip_to_bodies
+from .slabs import unite_in_slabs_stoppable
 from .styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS
 from .styles import style as style_named
 from .unclean import SEPARATION_GRIDS, find_unclean
@@ -1175,20 +1177,34 @@ class _UnionQueue:
                     own, beams = set(part.hubs.tolist()), set(part.beams.tolist())
                     prg = {k: r for k, r in rg.items() if k[0] in beams and int(bn[k]) not in own}
                     prg.update({(j, CUT): cut_rings[(j, CUT)] for j, _ in part.halves.tolist()})
-                piece = self._piece(part, prg)
-                if isinstance(piece, RingTouchedError):
-                    if any(e == CUT for _, e in piece.ring):
+                got = self._pieces(part, prg)
+                if isinstance(got, RingTouchedError):
+                    if any(e == CUT for _, e in got.ring):
                         self._settle(c, rg)
                         return
-                    touched += piece.ring
+                    touched += got.ring
                 else:
-                    pieces.append(piece)
+                    pieces += got
             if not touched:
                 self.done[id(c)] = (c, pieces)
                 return
             c, rg = self._grow(c, touched)
         raise PleError(f"an unclean cluster of {len(c.hubs):,} hubs and {len(c.beams):,} beams keeps "
                        "touching the clean junctions around it")
+
+    def _pieces(self, c, rg):
+        """A cluster's pieces: from the cache, or its union (put in the cache), or, when its union
+        would pass ``slabs.SLAB_TRIANGLES``, its slabs' (``slabs.unite_in_slabs``); the
+        RingTouchedError when a union touches one of its rings."""
+        if piece_estimate(c)[0] > slabs.SLAB_TRIANGLES:
+            try:
+                got = unite_in_slabs_stoppable(c, self.ev.center, self.ev.radius, self.bn, rg, self.tess.grid)
+            except RingTouchedError as exc:
+                return exc
+            self.united += len(got)
+            return got
+        piece = self._piece(c, rg)
+        return piece if isinstance(piece, RingTouchedError) else [piece]
 
     def _piece(self, c, rg):
         """A cluster's piece from the cache, or its union (put in the cache); the RingTouchedError

@@ -307,18 +307,30 @@ def unite_stoppable(cluster: Cluster, center, radius, beam_nodes, rings: dict, g
     """``unite_cluster``, in a forked child process when the cluster is large
     (``STOPPABLE_TRIANGLES``): a signal then stops the command at once (the child is killed)
     instead of after a long call into manifold3d that holds the interpreter."""
-    if piece_estimate(cluster)[0] < STOPPABLE_TRIANGLES or not hasattr(os, "fork"):
+    if piece_estimate(cluster)[0] < STOPPABLE_TRIANGLES:
         return unite_cluster(cluster, center, radius, beam_nodes, rings, grid)
+    return stoppable(unite_cluster, cluster, center, radius, beam_nodes, rings, grid)
+
+
+def stoppable(fn, *args):
+    """``fn(*args)`` in a forked child process (where there is fork): a signal stops the command
+    at once (the child is killed) instead of after a long call into manifold3d that holds the
+    interpreter. A PleError in the child is raised here."""
+    if not hasattr(os, "fork"):
+        return fn(*args)
     ctx = multiprocessing.get_context("fork")
     recv, send = ctx.Pipe(duplex=False)
-    child = ctx.Process(target=_child, args=(send, cluster, center, radius, beam_nodes, rings, grid), daemon=True)
+    child = ctx.Process(target=_child, args=(send, fn, *args), daemon=True)
     child.start()
     send.close()
     try:
         while not recv.poll(0.05):
             if not child.is_alive():
-                raise PleError("the union of an unclean cluster ended without a result (out of memory?)")
-        ok, value = recv.recv()
+                break
+        try:
+            ok, value = recv.recv()
+        except EOFError:  # it died without a word (killed, out of memory)
+            raise PleError("the union of an unclean cluster ended without a result (out of memory?)") from None
     finally:
         if child.is_alive():
             child.kill()
@@ -329,16 +341,16 @@ def unite_stoppable(cluster: Cluster, center, radius, beam_nodes, rings: dict, g
     return value
 
 
-def _child(send, *args) -> None:
+def _child(send, fn, *args) -> None:
     try:
-        send.send((True, unite_cluster(*args)))
-    except PleError as exc:
+        send.send((True, fn(*args)))
+    except Exception as exc:  # a PleError, or a bug: raised in the parent as it is
         send.send((False, exc))
     finally:
         send.close()
 
 
-def _manifold3d():
+def manifold3d_module():
     try:
         import manifold3d
     except ImportError as exc:  # pragma: no cover - a runtime dependency of unclean meshing
@@ -353,7 +365,7 @@ def unite_cluster(cluster: Cluster, center, radius, beam_nodes, rings: dict, gri
     cluster's beams that is not one of its hubs. Tries the balls as they are, then each turned
     its own way (identical balls give symmetric lattices coplanar faces that a Boolean may leave
     overlapping)."""
-    manifold3d = _manifold3d()
+    manifold3d = manifold3d_module()
     last = None
     for turns in (None, BALL_TURNS):
         try:
@@ -362,7 +374,7 @@ def unite_cluster(cluster: Cluster, center, radius, beam_nodes, rings: dict, gri
             reach = float(np.linalg.norm(v - centre, axis=1).max()) if len(v) else 0.0
             pinned = [rings[k] for k in keys]
             v, f = on_grid(v, f, grid, centre[None], reach, rings=pinned)
-            return _open_rings(v, f, pinned, keys)
+            return open_rings(v, f, pinned, keys)
         except PleError as exc:
             last = exc
     raise last
@@ -374,10 +386,10 @@ BATCH_TRIANGLES = 100_000  # input triangles of the small clusters put on the gr
 def unite_batch(batch: list, center, radius, beam_nodes, rings: list, grid: float) -> list:
     """``unite_cluster`` for many small clusters at once (``batch``, each with its ``rings``, at
     least one): each is united on its own, then all are put on the grid, checked and opened in one
-    ``on_grid`` and one ``_open_rings`` (their cost is mostly per call), and split again by the
+    ``on_grid`` and one ``open_rings`` (their cost is mostly per call), and split again by the
     connected pieces of the result, each found by its ring vertices. Returns a piece per cluster,
     or None for every cluster when anything fails (then each is united alone)."""
-    manifold3d = _manifold3d()
+    manifold3d = manifold3d_module()
     vs, fs, keys, centres, at = [], [], [], [], 0
     try:
         for k, (c, rg) in enumerate(zip(batch, rings)):
@@ -394,7 +406,7 @@ def unite_batch(batch: list, center, radius, beam_nodes, rings: list, grid: floa
         reach = max(float(np.linalg.norm(x - y, axis=1).max()) for x, y in zip(vs, centres))
         pinned = [rings[k][key] for k, key in keys]
         v, f = on_grid(v, f, grid, centres, reach, rings=pinned)
-        v, f = _open_rings(v, f, pinned, keys)
+        v, f = open_rings(v, f, pinned, keys)
     except PleError:
         return [None] * len(batch)
     label = component_labels(len(v), np.concatenate([f[:, [0, 1]], f[:, [1, 2]]]))
@@ -420,6 +432,14 @@ def unite_batch(batch: list, center, radius, beam_nodes, rings: list, grid: floa
 def _united(manifold3d, cluster, center, radius, beam_nodes, rings, turns):
     """The Boolean union of a cluster's balls and beams (manifold3d): (vertices, faces, the keys
     of its rings: those shared with the fast path, and its cut rings)."""
+    parts, keys = element_hulls(manifold3d, cluster, center, radius, beam_nodes, rings, turns)
+    out = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add).to_mesh64()
+    return np.asarray(out.vert_properties[:, :3], float), np.asarray(out.tri_verts, np.int64), keys
+
+
+def element_hulls(manifold3d, cluster, center, radius, beam_nodes, rings, turns):
+    """A cluster's balls and beams as convex manifold3d solids (hubs first, then beams, then
+    halves), and the keys of its rings: those shared with the fast path, and its cut rings."""
     unit = _unit_vertices(manifold3d)
     c = np.asarray(center, float)
     rad = np.asarray(radius, float)
@@ -444,14 +464,14 @@ def _united(manifold3d, cluster, center, radius, beam_nodes, rings, turns):
     for p in parts:
         if p.status() != manifold3d.Error.NoError or p.is_empty():
             raise PleError("a beam of an unclean cluster has no volume (its two ends are flat)")
-    out = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add).to_mesh64()
-    return np.asarray(out.vert_properties[:, :3], float), np.asarray(out.tri_verts, np.int64), keys
+    return parts, keys
 
 
-def _open_rings(v, f, rings: list, keys: list):
+def open_rings(v, f, rings: list, keys: list, seams: np.ndarray | None = None):
     """Remove the faces lying on the rings (every corner a vertex of one ring: the ring's
     polygon), and check that what is left is open exactly along each ring's edges
-    (``RingTouchedError`` naming the first ring that is not, by its key of ``keys``)."""
+    (``RingTouchedError`` naming the first ring that is not, by its key of ``keys``) and along
+    ``seams`` (E, 2: vertex pairs of edges that are open already, a slab's cut planes)."""
     if not rings:
         return v, f
     rings = [np.asarray(r, float).reshape(-1, 3) for r in rings]
@@ -474,6 +494,8 @@ def _open_rings(v, f, rings: list, keys: list):
             want.append(edges)
     if touched:
         raise RingTouchedError("a ring of an unclean cluster was changed by its union", touched)
+    if seams is not None and len(seams):
+        want.append(np.minimum(seams[:, 0], seams[:, 1]) * n + np.maximum(seams[:, 0], seams[:, 1]))
     extra = np.setdiff1d(open_edges, np.concatenate(want)) if want else open_edges
     if len(extra):
         ends = np.concatenate([extra // n, extra % n])
