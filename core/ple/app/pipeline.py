@@ -261,9 +261,11 @@ def _union_limit(p: MeshPlan, report) -> None:
     evaluation, passes ``max_memory``."""
     q = p.request
     if report is not None and report.clusters and q.max_memory is not None:  # one local union at a time
+        slabs = f", cut into {report.union_slabs} slabs" if report.union_slabs > 1 else ""
         require(report.union_bytes + evaluation_bytes(p.lattice, p.region),
-                f"the largest of {report.clusters:,} local unions of unclean hubs, with the region's "
-                f"evaluation, of region {p.region}", q.max_memory, "choose a smaller --region")
+                f"the largest of {report.clusters:,} local unions of unclean hubs ({report.union_hubs:,} hubs, "
+                f"{report.union_beams:,} beams, {report.union_pairs:,} overlapping pairs{slabs}), with the "
+                f"region's evaluation, of region {p.region}", q.max_memory, "choose a smaller --region")
 
 
 def _in_memory(p: MeshPlan, report=None) -> trimesh.Trimesh:

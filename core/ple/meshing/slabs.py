@@ -30,7 +30,7 @@ import numpy as np
 
 from ..errors import PleError
 from .unclean import BALL_TURNS, SPHERE_SEGMENTS, match_rows, on_grid
-from .unions import UNION_TRIANGLE_BYTES, element_hulls, manifold3d_module, open_rings, stoppable
+from .unions import UNION_TRIANGLE_BYTES, Elements, manifold3d_module, open_rings, stoppable
 from .weld import sorted_edges
 
 SLAB_TRIANGLES = 1_500_000  # input triangles of one slab's union (about 0.9 GB at UNION_TRIANGLE_BYTES)
@@ -81,12 +81,13 @@ def plan_slabs(weights: np.ndarray, extents: np.ndarray, limit: int = SLAB_TRIAN
     return axis, np.asarray(cuts, float)
 
 
-def slab_bytes(cluster, center, radius, beam_nodes, limit: int = SLAB_TRIANGLES) -> int:
-    """Peak bytes of a cluster's largest slab union (the whole cluster's when it fits one)."""
+def slab_plan_bytes(cluster, center, radius, beam_nodes, limit: int | None = None) -> tuple[int, int]:
+    """(peak bytes of a cluster's largest slab union, number of cut planes): the whole
+    cluster's, and 0, when it fits one union."""
     w = element_triangles(cluster)
     ext = element_extents(cluster, center, radius, beam_nodes)
-    axis, cuts = plan_slabs(w, ext, limit)
-    return int(max(slab_loads(w, ext[:, 0, axis], ext[:, 1, axis], cuts))) * UNION_TRIANGLE_BYTES
+    axis, cuts = plan_slabs(w, ext, SLAB_TRIANGLES if limit is None else limit)
+    return int(max(slab_loads(w, ext[:, 0, axis], ext[:, 1, axis], cuts))) * UNION_TRIANGLE_BYTES, len(cuts)
 
 
 def slab_loads(weights, lo, hi, cuts) -> list:
@@ -99,26 +100,20 @@ def unite_in_slabs(cluster, center, radius, beam_nodes, rings: dict, grid: float
     """The pieces (vertices, faces) of a cluster cut into slabs (module docstring), each open along
     its seams and along the rings it shares with clean junctions (``unions.unite_cluster``'s
     ``rings``). Tries the balls as they are, then turned (as ``unite_cluster``), each at up to
-    ``SEAM_TRIES`` positions of the planes."""
+    ``SEAM_TRIES`` positions of each plane. Only the elements of one slab are held at a time."""
     manifold3d = manifold3d_module()
     weights = element_triangles(cluster)
     ext = element_extents(cluster, center, radius, beam_nodes)
     axis, cuts = plan_slabs(weights, ext, limit)
     if not len(cuts):
         raise PleError("a cluster that fits one union is not cut into slabs")
-    lo, hi = ext[:, 0, axis], ext[:, 1, axis]
-    gaps = np.diff([lo.min(), *cuts.tolist(), hi.max()])
     last = None
     for turns in (None, BALL_TURNS):
-        parts, keys = element_hulls(manifold3d, cluster, center, radius, beam_nodes, rings, turns)
-        meshes = [_mesh(p) for p in parts]
-        for attempt in range(SEAM_TRIES):
-            shift = attempt * 0.13 * np.minimum(gaps[:-1], gaps[1:])  # a fraction of the thinner slab
-            at = _clear_planes(cuts + shift, meshes, rings, keys, axis, len(cluster.hubs))
-            try:
-                return _slabs(manifold3d, parts, meshes, at, axis, rings, keys, grid)
-            except PleError as exc:  # a seam that does not match, or a slab the grid folds: move the planes
-                last = exc
+        try:
+            return _slabs(Elements(manifold3d, cluster, center, radius, beam_nodes, rings, turns), cuts, ext, axis,
+                          grid)
+        except PleError as exc:  # a plane that no try could place: the balls turned, as unite_cluster does
+            last = exc
     raise PleError(f"an unclean cluster of {len(cluster.hubs):,} hubs and {len(cluster.beams):,} beams cut "
                    f"into {len(cuts) + 1} slabs does not join ({last})")
 
@@ -128,37 +123,147 @@ def unite_in_slabs_stoppable(cluster, center, radius, beam_nodes, rings: dict, g
     return stoppable(unite_in_slabs, cluster, center, radius, beam_nodes, rings, grid, SLAB_TRIANGLES)
 
 
-def _mesh(part) -> tuple[np.ndarray, np.ndarray]:
-    m = part.to_mesh64()
-    return np.asarray(m.vert_properties[:, :3], float), np.asarray(m.tri_verts, np.int64)
+def _made(make, i: int, axis: int):
+    """Element i as (hull, vertices, faces, its low and high end along ``axis``)."""
+    h = make.hull(i)
+    m = h.to_mesh64()
+    v, f = np.asarray(m.vert_properties[:, :3], float), np.asarray(m.tri_verts, np.int64)
+    return h, v, f, float(v[:, axis].min()), float(v[:, axis].max())
 
 
-def _clear_planes(cuts, meshes, rings, keys, axis, balls: int = 0) -> np.ndarray:
-    """The cut positions moved off the balls (the first ``balls`` meshes: where a beam's hull
-    takes a ball's own vertices, two caps would share edges), off every ring (a ring lies within
-    one slab) and off every element vertex, by at least ``CLEARANCE`` of the size: each to the
-    nearest such position, or off the rings and vertices only where the balls leave none."""
-    pts = np.concatenate([v[:, axis] for v, _ in meshes])
-    size = float(pts.max() - pts.min()) or 1.0
-    clear = CLEARANCE * size
-    rings_at = [(float(rings[k][:, axis].min()), float(rings[k][:, axis].max())) for k in keys]
-    balls_at = [(float(v[:, axis].min()), float(v[:, axis].max())) for v, _ in meshes[:balls]]
-    xs = np.sort(pts)
-    out = []
-    for c in np.asarray(cuts, float):
-        lo, hi = float(xs[0]) + clear, float(xs[-1]) - clear
-        free = _nearest_free(c, rings_at + balls_at, clear, lo, hi)
-        if free is None:
-            free = _nearest_free(c, rings_at, clear, lo, hi)
-        c = c if free is None else free
-        for _ in range(64):  # step past vertices closer than `clear`
-            i = np.searchsorted(xs, c)
-            near = xs[max(i - 1, 0):i + 1]
-            if not len(near) or np.abs(near - c).min() > clear:
+class SeamMismatchError(PleError):
+    """The two sides of a seam do not match: the plane between them is moved."""
+
+
+def _slabs(make, cuts, ext, axis, grid):
+    """Every slab's piece (module docstring). Each plane is placed off the balls and rings where
+    it can be, and off the vertices of the elements that reach it; the elements reaching past it
+    are kept for the next slab, the others let go. A slab that fails is made again with its high
+    plane moved (a fold on the grid), or with its low one moved and the last slab made again (a
+    seam that does not match), up to ``SEAM_TRIES`` times each."""
+    lo, hi = ext[:, 0, axis], ext[:, 1, axis]
+    size = float((ext[:, 1].max(axis=0) - ext[:, 0].min(axis=0)).max()) or 1.0
+    ctx = _SlabContext(make, lo, hi, axis, grid, size)
+    span = (float(lo.min()), float(hi.max()))
+    gaps = np.diff([span[0], *np.asarray(cuts, float).tolist(), span[1]])
+    pieces: list = []
+    last = None  # the last slab: (its low plane, the seam it took, its high plane)
+    a, prev, k, tries = -math.inf, None, 0, 0
+    while k <= len(cuts):
+        b = math.inf
+        if k < len(cuts):
+            b = ctx.plane(float(cuts[k]) + _nudge(tries) * min(gaps[k], gaps[k + 1]), a)
+            if b is None:
+                k += 1
+                continue
+        try:
+            piece, seam, b = ctx.slab(a, b, prev)
+        except SeamMismatchError:
+            if last is None or tries >= 2 * SEAM_TRIES:
+                raise
+            tries += 1  # the low plane moves: the last slab is made again up to it
+            a0, prev0, _ = last
+            moved = ctx.plane(a + _nudge(tries) * (a - a0 if math.isfinite(a0) else gaps[0]), a0)
+            if moved is None:
+                raise
+            pieces[-1], prev, a = *ctx.slab(a0, moved, prev0)[:2], moved
+            last = (a0, prev0, a)
+            continue
+        except PleError:
+            if not math.isfinite(b) or tries >= 2 * SEAM_TRIES:
+                raise
+            tries += 1  # the high plane moves
+            continue
+        pieces.append(piece)
+        last, prev, a, k, tries = (a, prev, b), seam, b, k + 1, 0
+        ctx.let_go(b)
+    return pieces
+
+
+def _nudge(t: int) -> float:
+    """The fraction of a slab by which try t moves a plane: 0, then ±0.06, ±0.12, …"""
+    return 0.0 if t == 0 else (0.06 * ((t + 1) // 2)) * (1 if t % 2 else -1)
+
+
+class _SlabContext:
+    """What the slabs of one cluster share: its elements (made when a slab needs them, let go when
+    no later slab does), the balls and rings a plane keeps off, the tolerances."""
+
+    def __init__(self, make, lo, hi, axis, grid, size):
+        self.make, self.lo, self.hi, self.axis, self.grid = make, lo, hi, axis, grid
+        self.tol, self.clear = SEAM_TOLERANCE * size, CLEARANCE * size
+        self.ring_pts = {k: np.asarray(make.rings[k], float) for k in make.keys}
+        self.rings_at = [(float(r[:, axis].min()), float(r[:, axis].max())) for r in self.ring_pts.values()]
+        self.balls_at = list(zip(lo[:make.hubs].tolist(), hi[:make.hubs].tolist()))
+        self.span = (float(lo.min()), float(hi.max()))
+        self.built: dict = {}  # element -> _made's
+
+    def plane(self, c: float, a: float) -> float | None:
+        """A plane near ``c`` above ``a``, off the balls and rings where it can be (None: none)."""
+        within = (max(a, self.span[0]) + self.clear, self.span[1] - self.clear)
+        b = _nearest_free(c, self.rings_at + self.balls_at, self.clear, *within)
+        b = _nearest_free(c, self.rings_at, self.clear, *within) if b is None else b
+        return None if b is None or b <= a else b
+
+    def slab(self, a: float, b: float, prev):
+        """(piece, high seam, the high plane as placed) of the slab between a and b."""
+        axis, clear = self.axis, self.clear
+        for _ in range(64):  # the elements reaching in; the plane stepped past their vertices
+            want = np.flatnonzero((self.hi > a) & (self.lo < b))
+            for i in want.tolist():
+                if i not in self.built:
+                    self.built[i] = _made(self.make, i, axis)
+            near = [e[1][:, axis] for i, e in self.built.items() if e[3] - clear <= b <= e[4] + clear]
+            if not near or np.abs(np.concatenate(near) - b).min() > clear:
                 break
-            c += clear
-        out.append(c)
-    return np.unique(np.asarray(out, float))
+            b += clear
+        solids = []
+        clip = self.make.manifold3d.Manifold.hull_points
+        for i in want.tolist():
+            h, v, f, elo, ehi = self.built[i]
+            if ehi > a and elo < b:
+                solids.append(h if elo >= a and ehi <= b else clip(_clip(v, f, a, b, axis)))
+        if not solids:
+            raise PleError("a slab of an unclean cluster holds nothing")
+        piece, seam = _slab_piece(self.make.manifold3d, solids, a, b, axis, prev, self.ring_pts, self.grid, self.tol)
+        return piece, seam, b
+
+    def let_go(self, a: float) -> None:
+        """Forget the elements that end below the plane ``a`` (no later slab reaches them)."""
+        self.built = {i: e for i, e in self.built.items() if e[4] > a}
+
+
+def _slab_piece(manifold3d, solids, a, b, axis, prev, ring_pts, grid, tol):
+    """One slab's union, open along its seams (its low one given the last slab's floats) and its
+    rings; returns (piece, its high seam for the next slab)."""
+    out = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add).to_mesh64()
+    v, f = np.array(out.vert_properties[:, :3], float), np.asarray(out.tri_verts, np.int64)
+    low, high = _on_plane(v, a, axis, tol), _on_plane(v, b, axis, tol)
+    if prev is not None:  # the seam (the cap's boundary; inner cap vertices go with the cap) takes prev's floats
+        v = _matched(v, _boundary(f[low[f].all(axis=1)], len(v)), prev[0], tol)
+    elif low.any():
+        raise SeamMismatchError("a slab of an unclean cluster has a seam where the last slab had none")
+    seams = [v[low], v[high]]
+    own_keys = [k for k, r in ring_pts.items() if a < r[0, axis] < b]
+    pinned = [ring_pts[k] for k in own_keys]
+    centre = v.mean(axis=0)
+    reach = float(np.linalg.norm(v - centre, axis=1).max())
+    v, f = on_grid(v, f, grid, centre[None], reach, rings=pinned + [s for s in seams if len(s)])
+    low, high = _rows(v, seams[0]), _rows(v, seams[1])
+    caps = (low[f].all(axis=1) & _flat(v, f, a, axis)) | (high[f].all(axis=1) & _flat(v, f, b, axis))
+    f = f[~caps]
+    open_edges = _open(f, len(v))
+    on_low, on_high = low[open_edges].all(axis=1), high[open_edges].all(axis=1)
+    if prev is not None and not np.array_equal(_edge_rows(v, open_edges[on_low]), prev[1]):
+        raise SeamMismatchError("a seam between two slabs does not match (its edges differ on the two sides)")
+    if pinned:
+        v, f = open_rings(v, f, pinned, own_keys, seams=open_edges[on_low | on_high])
+    elif not (on_low | on_high).all():
+        raise PleError("a slab of an unclean cluster is open off its seams")
+    used = np.unique(f)  # the caps' inner vertices go
+    remap = np.full(len(v), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return (v[used], remap[f]), (v[np.unique(open_edges[on_high])], _edge_rows(v, open_edges[on_high]))
 
 
 def _nearest_free(c: float, blocked: list, clear: float, lo: float, hi: float) -> float | None:
@@ -229,45 +334,6 @@ def _strict_hull(p: np.ndarray) -> np.ndarray:
     return np.asarray(lower[:-1] + upper[:-1], np.int64)
 
 
-def _slabs(manifold3d, parts, meshes, cuts, axis, rings, keys, grid):
-    """Every slab's piece (module docstring), or PleError when a seam does not match."""
-    bounds = np.array([[m[0][:, axis].min(), m[0][:, axis].max()] for m in meshes])
-    size = float(np.ptp(np.concatenate([m[0] for m in meshes]), axis=0).max()) or 1.0
-    tol = SEAM_TOLERANCE * size
-    edges = [-math.inf, *cuts.tolist(), math.inf]
-    ring_pts = {k: np.asarray(rings[k], float) for k in keys}
-    pieces, prev = [], None  # prev: the last slab's high seam, (points (S, 3), edge rows (E, 6))
-    for a, b in zip(edges[:-1], edges[1:]):
-        inside = np.flatnonzero((bounds[:, 1] > a) & (bounds[:, 0] < b))
-        solids = [parts[i] if bounds[i, 0] >= a and bounds[i, 1] <= b
-                  else manifold3d.Manifold.hull_points(_clip(*meshes[i], a, b, axis)) for i in inside]
-        out = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add).to_mesh64()
-        v, f = np.array(out.vert_properties[:, :3], float), np.asarray(out.tri_verts, np.int64)
-        low, high = _on_plane(v, a, axis, tol), _on_plane(v, b, axis, tol)
-        if prev is not None:  # the seam (the cap's boundary; inner cap vertices go with the cap) takes prev's floats
-            v = _matched(v, _boundary(f[low[f].all(axis=1)], len(v)), prev[0], tol)
-        seams = [v[low], v[high]]
-        own_keys = [k for k in keys if a < ring_pts[k][0, axis] < b]
-        pinned = [ring_pts[k] for k in own_keys]
-        centre = v.mean(axis=0)
-        reach = float(np.linalg.norm(v - centre, axis=1).max())
-        v, f = on_grid(v, f, grid, centre[None], reach, rings=pinned + [s for s in seams if len(s)])
-        low, high = _rows(v, seams[0]), _rows(v, seams[1])
-        caps = (low[f].all(axis=1) & _flat(v, f, a, axis)) | (high[f].all(axis=1) & _flat(v, f, b, axis))
-        f = f[~caps]
-        open_edges = _open(f, len(v))
-        on_low, on_high = low[open_edges].all(axis=1), high[open_edges].all(axis=1)
-        if prev is not None and not np.array_equal(_edge_rows(v, open_edges[on_low]), prev[1]):
-            raise PleError("a seam between two slabs does not match (its edges differ on the two sides)")
-        if pinned:
-            v, f = open_rings(v, f, pinned, own_keys, seams=open_edges[on_low | on_high])
-        elif not (on_low | on_high).all():
-            raise PleError("a slab of an unclean cluster is open off its seams")
-        pieces.append((v, f))
-        prev = (v[np.unique(open_edges[on_high])], _edge_rows(v, open_edges[on_high]))
-    return pieces
-
-
 def _on_plane(v, c, axis, tol) -> np.ndarray:
     """Vertices on the plane at ``c`` (within ``tol``), put exactly on it."""
     if not math.isfinite(c):
@@ -326,12 +392,13 @@ def _matched(v, low, ref, tol) -> np.ndarray:
 
     mine = np.flatnonzero(low)
     if len(mine) != len(ref):
-        raise PleError(f"a seam between two slabs has {len(ref)} vertices on one side and {len(mine)} on the other")
+        raise SeamMismatchError(f"a seam between two slabs has {len(ref)} vertices on one side and {len(mine)} "
+                                "on the other")
     if not len(mine):
         return v
     d, j = cKDTree(ref).query(v[mine])
     if d.max() > tol or len(np.unique(j)) != len(j):
-        raise PleError("a seam between two slabs does not match (a crossing moved more than the tolerance)")
+        raise SeamMismatchError("a seam between two slabs does not match (a crossing moved more than the tolerance)")
     out = v.copy()
     out[mine] = ref[j]
     return out

@@ -997,8 +997,25 @@ def leave_to_unions(tess: Tessellator, ev, report) -> list:
     pattern = np.asarray(ev.beam_index, np.int64)[:, 3]
     tess.exclude(idx[hubs], np.concatenate([idx[bn[beams, 0], :3], pattern[beams, None]], axis=1))
     report.clusters = len(cl)
-    report.union_bytes = max([piece_estimate(c)[1] for c in cl], default=0)
+    estimate_unions(report, cl, ev)
     return cl
+
+
+def estimate_unions(report, cl: list, ev) -> None:
+    """The largest local union's peak bytes (``unions.piece_estimate``; a cluster past
+    ``slabs.SLAB_TRIANGLES``: its largest slab's, ``slabs.slab_bytes``), counted from the hub
+    neighbourhoods before any union runs, with its hubs, beams, overlapping pairs and slabs."""
+    report.union_bytes = 0
+    n = len(ev.center)
+    for c in cl:
+        tris, peak = piece_estimate(c)
+        cuts = 0
+        if tris > slabs.SLAB_TRIANGLES:
+            peak, cuts = slabs.slab_plan_bytes(c, ev.center, ev.radius, ev.beam_nodes)
+        if peak > report.union_bytes:
+            ids = np.concatenate([np.asarray(c.hubs, np.int64), n + np.asarray(c.beams, np.int64)])
+            report.union_bytes, report.union_hubs, report.union_beams = peak, len(c.hubs), len(c.beams)
+            report.union_pairs, report.union_slabs = len(report.pairs_within(np.sort(ids))), cuts + 1
 
 
 def build_with_unions(tess: Tessellator, ev, report) -> tuple[np.ndarray, np.ndarray]:

@@ -55,7 +55,11 @@ class UncleanReport:
     shrunk: np.ndarray | None = None  # (N,) hubs whose ACHoCC shrank its caps
     clusters: int = 0  # local unions (``ple.meshing.unions``), once the stream has split them
     united: int = 0  # unions made by manifold3d once the stream has settled them (the rest: kept shapes' copies)
-    union_bytes: int = 0  # the largest cluster's union, estimated from above (peak bytes)
+    union_bytes: int = 0  # the largest cluster's union (its largest slab's), estimated from above (peak bytes)
+    union_hubs: int = 0  # that cluster's hubs, beams and overlapping element pairs, and the slabs it is cut into
+    union_beams: int = 0
+    union_pairs: int = 0
+    union_slabs: int = 1
     r_plus: np.ndarray | None = None  # (N,) each hub's S⁺ radius (world units), which holds its junction
     _index: tuple | None = field(default=None, repr=False, compare=False)  # ``pairs_within``'s, made once
 

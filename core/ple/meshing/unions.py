@@ -440,31 +440,48 @@ def _united(manifold3d, cluster, center, radius, beam_nodes, rings, turns):
 def element_hulls(manifold3d, cluster, center, radius, beam_nodes, rings, turns):
     """A cluster's balls and beams as convex manifold3d solids (hubs first, then beams, then
     halves), and the keys of its rings: those shared with the fast path, and its cut rings."""
-    unit = _unit_vertices(manifold3d)
-    c = np.asarray(center, float)
-    rad = np.asarray(radius, float)
-    bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
-    own = set(cluster.hubs.tolist())
+    make = Elements(manifold3d, cluster, center, radius, beam_nodes, rings, turns)
+    return [make.hull(i) for i in range(make.count)], make.keys
 
-    def ball(x):
-        u = unit if turns is None else _turned(unit, np.modf(x * turns)[0])
-        return u * rad[x] + c[x]
 
-    parts = [manifold3d.Manifold.hull_points(ball(int(x))) for x in cluster.hubs]
-    # the rings shared with the fast path, and the cut rings shared with the other halves' unions
-    keys = sorted(k for k in rings if k[1] == CUT or int(bn[k[0], k[1]]) not in own)
-    for j in cluster.beams.tolist():
-        x = [int(bn[j, e]) for e in (0, 1)]
-        parts.append(manifold3d.Manifold.hull_points(beam_points(
-            [ball(x[e]) if x[e] in own else rings[(j, e)] for e in (0, 1)],
-            [c[x[e]] if x[e] in own else None for e in (0, 1)])))
-    for j, e in cluster.halves.tolist():
+class Elements:
+    """A cluster's balls and beams (``element_hulls``' order), each made when asked for: a slab
+    (``ple.meshing.slabs``) holds only its own."""
+
+    def __init__(self, manifold3d, cluster, center, radius, beam_nodes, rings, turns):
+        self.manifold3d, self.cluster, self.rings, self.turns = manifold3d, cluster, rings, turns
+        self.unit = _unit_vertices(manifold3d)
+        self.c, self.rad = np.asarray(center, float), np.asarray(radius, float)
+        self.bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
+        self.own = set(cluster.hubs.tolist())
+        self.hubs, self.beams = len(cluster.hubs), len(cluster.beams)
+        self.count = self.hubs + self.beams + len(cluster.halves)
+        # the rings shared with the fast path, and the cut rings shared with the other halves' unions
+        self.keys = sorted(k for k in rings if k[1] == CUT or int(self.bn[k[0], k[1]]) not in self.own)
+
+    def ball(self, x: int) -> np.ndarray:
+        u = self.unit if self.turns is None else _turned(self.unit, np.modf(x * self.turns)[0])
+        return u * self.rad[x] + self.c[x]
+
+    def points(self, i: int) -> np.ndarray:
+        """The points whose hull is element i."""
+        bn, c, own, rings = self.bn, self.c, self.own, self.rings
+        if i < self.hubs:
+            return self.ball(int(self.cluster.hubs[i]))
+        if i < self.hubs + self.beams:
+            j = int(self.cluster.beams[i - self.hubs])
+            x = [int(bn[j, e]) for e in (0, 1)]
+            return beam_points([self.ball(x[e]) if x[e] in own else rings[(j, e)] for e in (0, 1)],
+                               [c[x[e]] if x[e] in own else None for e in (0, 1)])
+        j, e = (int(t) for t in self.cluster.halves[i - self.hubs - self.beams])
         x = int(bn[j, e])
-        parts.append(manifold3d.Manifold.hull_points(beam_points([ball(x), rings[(j, CUT)]], [c[x], None])))
-    for p in parts:
-        if p.status() != manifold3d.Error.NoError or p.is_empty():
+        return beam_points([self.ball(x), rings[(j, CUT)]], [c[x], None])
+
+    def hull(self, i: int):
+        p = self.manifold3d.Manifold.hull_points(self.points(i))
+        if p.status() != self.manifold3d.Error.NoError or p.is_empty():
             raise PleError("a beam of an unclean cluster has no volume (its two ends are flat)")
-    return parts, keys
+        return p
 
 
 def open_rings(v, f, rings: list, keys: list, seams: np.ndarray | None = None):
