@@ -70,13 +70,15 @@ def plan_slabs(weights: np.ndarray, extents: np.ndarray, limit: int = SLAB_TRIAN
         return axis, np.zeros(0)
     lo, hi = extents[:, 0, axis], extents[:, 1, axis]
     order = np.argsort(lo, kind="stable")
-    cuts, load, start = [], 0, -math.inf
+    cuts, load, first = [], 0, None  # first: the low end of the slab's first element
     for i in order:
-        if load + weights[i] > limit and lo[i] > start:
+        if load + weights[i] > limit and first is not None and lo[i] > first:
             cut = float(lo[i])  # the plane at this element's low end: it and those after go to the next slab
             cuts.append(cut)
-            start = cut
+            first = cut
             load = int(weights[(hi > cut) & (lo < cut)].sum())  # elements crossing the plane are in both
+        if first is None:
+            first = float(lo[i])
         load += int(weights[i])
     return axis, np.asarray(cuts, float)
 

@@ -1,0 +1,155 @@
+"""Clusters with no free beam, cut into slabs (``ple.meshing.slabs``): a thick lattice whose every
+hub is unclean meshes slab by slab into one closed, oriented, self-intersection-free surface with
+the volume of the exact union, the streamed file holds the same triangles, and the estimate that
+refuses or admits it is the largest slab's."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from ple.algebra.similarity import Rotation, Scaling, Translation
+from ple.algebra.vectors import Pt, Vec
+from ple.app.pipeline import MeshRequest, write_mesh
+from ple.cli.main import main
+from ple.cli.mesh import monte_carlo_volume
+from ple.io.export import read_back
+from ple.meshing import slabs
+from ple.meshing.selfcheck import self_intersections
+from ple.meshing.tessellate import Tessellator, tessellate
+from ple.meshing.unions import clusters, piece_estimate
+from ple.model.lattice import Lattice
+
+manifold3d = pytest.importorskip("manifold3d")
+trimesh = pytest.importorskip("trimesh")
+
+OCTET = [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (-1, 1, 0), (1, 0, 1), (-1, 0, 1), (0, 1, 1), (0, -1, 1)]
+
+
+def thick_octet(n: int = 5, radius: float = 0.2) -> Lattice:
+    """An octet (the axes and the six face diagonals) on curved rows: V turns about a far z axis.
+    At radius 0.2 every hub is shrunk: the lattice is one cluster with no free beam."""
+    lat = Lattice()
+    a = lat.add_node(Pt(0, 0, 0), radius)
+    for off in OCTET:
+        lat.add_beam(a, a, *off)
+    lat.set_u(n, Translation(Vec(1, 0, 0)))
+    lat.set_v(n, Rotation(0.06, Vec(0, 0, 1), Pt(-16, 0, 0)))
+    lat.set_w(2, Translation(Vec(0, 0, 1)))
+    return lat
+
+
+def shrunk_graded(n: int = 4) -> Lattice:
+    """Two balls 0.2 apart on each cell, beams shorter than their junctions, graded by a scaling U
+    (a step of about 0.5 at the cells): every hub is shrunk."""
+    lat = Lattice()
+    a = lat.add_node(Pt(0, 0, 0), 0.13)
+    b = lat.add_node(Pt(0.1, 0.17, 0.03), 0.13)
+    lat.add_beam(a, b, 0, 0, 0)
+    lat.add_beam(b, a, 1, 0, 0)
+    lat.add_beam(b, a, 0, 1, 0)
+    lat.add_beam(a, a, 0, 0, 1)
+    lat.add_beam(b, b, 0, 0, 1)
+    lat.set_u(n, Scaling(1.025, Pt(-20, 0, 0)))
+    lat.set_v(n, Translation(Vec(0, 0.5, 0)))
+    lat.set_w(2, Translation(Vec(0, 0, 0.5)))
+    return lat
+
+
+def _cluster(lat):
+    tess = Tessellator(lat, lat.region(), "cnt", 0, 16)
+    report, ev = tess.find_unclean()
+    return clusters(report, ev.beam_nodes, ev.center, ev.radius), ev
+
+
+@pytest.mark.parametrize("make", [thick_octet, shrunk_graded], ids=["thick_octet", "shrunk_graded"])
+def test_a_cluster_without_free_beams_meshes_slab_by_slab(make, monkeypatch, tmp_path):
+    lat = make()
+    cl, _ = _cluster(lat)
+    assert len(cl) == 1  # one cluster holds every hub
+    whole = piece_estimate(cl[0])[0]
+    limit = whole // 4
+    monkeypatch.setattr(slabs, "SLAB_TRIANGLES", limit)
+    mesh = tessellate(lat, None, "cnt", segments=16)
+    report = mesh.metadata["ple_unclean"]
+    assert report.union_slabs >= 3 and report.united >= 3  # planned slabs, and the unions made (planes may merge)
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    check = trimesh.Trimesh(v, f, process=True)  # merged by trimesh itself: closed by coordinates
+    assert check.is_watertight and check.is_winding_consistent and check.volume > 0
+    assert len(self_intersections(v, f)) == 0
+    est, err = monte_carlo_volume(lat, lat.region(), samples=400_000, seed=3)
+    assert abs(mesh.volume - est) < 0.01 * est + 4 * err
+    monkeypatch.setattr(slabs, "SLAB_TRIANGLES", 10 * whole)  # one union: the same solid
+    one = tessellate(lat, None, "cnt", segments=16)
+    assert one.metadata["ple_unclean"].union_slabs == 1
+    assert abs(mesh.volume / one.volume - 1) < 2e-3
+    monkeypatch.setattr(slabs, "SLAB_TRIANGLES", limit)
+    out = tmp_path / "slabs.stl"
+    info: dict = {}
+    write_mesh(MeshRequest(lat, style="cnt", segments=16, max_groups=8), out, info=info)
+    back = read_back(out)
+    assert info["unclean"].union_slabs == report.union_slabs
+    assert back.is_watertight and back.is_winding_consistent
+    assert abs(back.volume / mesh.volume - 1) < 1e-5
+
+
+def test_the_estimate_is_the_largest_slab():
+    """With a limit of twice the heaviest cross-section (recounted at every element's end), every
+    slab of the plan holds about the limit at most and none is empty; the estimate is the largest
+    slab's, below the whole cluster's."""
+    lat = thick_octet(12)
+    cl, ev = _cluster(lat)
+    c = cl[0]
+    w = slabs.element_triangles(c)
+    ext = slabs.element_extents(c, ev.center, ev.radius, ev.beam_nodes)
+    axis = int(np.argmax(ext[:, 1].max(axis=0) - ext[:, 0].min(axis=0)))
+    lo, hi = ext[:, 0, axis], ext[:, 1, axis]
+    heaviest = max(int(w[(lo < x) & (hi > x)].sum()) for x in np.concatenate([lo, hi]))
+    limit = 2 * heaviest
+    got, cuts = slabs.plan_slabs(w, ext, limit)
+    assert got == axis and len(cuts) >= 2 and np.all(np.diff(cuts) > 0)
+    edges = [-math.inf, *cuts.tolist(), math.inf]
+    loads = [int(w[(hi > a) & (lo < b)].sum()) for a, b in zip(edges[:-1], edges[1:])]
+    # elements that start at one plane go to one slab: a slab passes the limit by one such group at most
+    group = max(int(w[lo == x].sum()) for x in np.unique(lo))
+    assert all(0 < x <= limit + group for x in loads)
+    peak, n = slabs.slab_plan_bytes(c, ev.center, ev.radius, ev.beam_nodes, limit)
+    assert n == len(cuts) and peak == max(loads) * slabs.UNION_TRIANGLE_BYTES < piece_estimate(c)[1]
+
+
+def test_strict_hull_drops_collinear_crossings():
+    """The 2-D hull's corners are scipy's hull vertices; points on an edge (a cut quad's diagonal
+    crossing) are dropped."""
+    from scipy.spatial import ConvexHull
+
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        p = rng.normal(size=(30, 2))
+        hull = ConvexHull(p)
+        ring = p[hull.vertices]
+        mids = 0.5 * (ring + np.roll(ring, -1, axis=0))  # exactly between two corners (up to rounding)
+        pts = np.concatenate([p, mids])
+        got = slabs._strict_hull(pts)
+        assert sorted(got.tolist()) == sorted(hull.vertices.tolist())
+
+
+def test_a_union_past_the_limit_names_its_hubs_and_pairs(tmp_path, capsys):
+    """Refused before it starts, with the largest union's hubs, beams and overlapping pairs."""
+    prog = tmp_path / "thick.py"
+    prog.write_text(
+        "from ple import Lattice, Pt, Vec, Translation, Rotation\n"
+        "def lattice():\n"
+        "    lat = Lattice()\n"
+        "    a = lat.add_node(Pt(0, 0, 0), 0.2)\n"
+        f"    for off in {OCTET!r}:\n"
+        "        lat.add_beam(a, a, *off)\n"
+        "    lat.set_u(5, Translation(Vec(1, 0, 0)))\n"
+        "    lat.set_v(5, Rotation(0.06, Vec(0, 0, 1), Pt(-16, 0, 0)))\n"
+        "    lat.set_w(2, Translation(Vec(0, 0, 1)))\n"
+        "    return lat\n")
+    out = tmp_path / "t.stl"
+    assert main(["mesh", str(prog), "--style", "cnt", "--max-memory", "60M", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "50 hubs" in err and "overlapping pairs" in err and "local unions" in err
+    assert not out.exists()
