@@ -29,12 +29,14 @@ import math
 import numpy as np
 
 from ..errors import PleError
+from .selfcheck import self_intersections
 from .unclean import BALL_TURNS, SPHERE_SEGMENTS, match_rows, on_grid
 from .unions import UNION_TRIANGLE_BYTES, Elements, manifold3d_module, open_rings, stoppable
 from .weld import sorted_edges
 
 SLAB_TRIANGLES = 1_500_000  # input triangles of one slab's union (about 0.9 GB at UNION_TRIANGLE_BYTES)
-SEAM_TOLERANCE = 2.0**-32  # of the cluster's size: how far the two slabs' crossings on a seam may lie apart
+SEAM_TOLERANCE = 2.0**-32  # of the cluster's size: how far the two slabs' crossings on a seam lie apart at most
+LOOSE = 2.0**14  # tolerances (2^-18 of the size): how far apart two sides put a crossing of nearly tangent edges
 SEAM_TRIES = 4  # plane positions tried before a cluster is refused
 CLEARANCE = 2.0**-20  # of the cluster's size: how far a cut plane stays from every element's vertex
 
@@ -236,15 +238,21 @@ class _SlabContext:
 
 
 def _slab_piece(manifold3d, solids, a, b, axis, prev, ring_pts, grid, tol):
-    """One slab's union, open along its seams (its low one given the last slab's floats) and its
-    rings; returns (piece, its high seam for the next slab)."""
+    """One slab's union, on the grid with its seams pinned, opened along them (its low seam given
+    the last slab's floats, ``_matched``) and along its rings; returns (piece, its high seam for
+    the next slab: (points, directed edges into them))."""
     out = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add).to_mesh64()
     v, f = np.array(out.vert_properties[:, :3], float), np.asarray(out.tri_verts, np.int64)
     low, high = _on_plane(v, a, axis, tol), _on_plane(v, b, axis, tol)
-    if prev is not None:  # the seam (the cap's boundary; inner cap vertices go with the cap) takes prev's floats
-        v = _matched(v, _boundary(f[low[f].all(axis=1)], len(v)), prev[0], tol)
-    elif low.any():
-        raise SeamMismatchError("a slab of an unclean cluster has a seam where the last slab had none")
+    if (prev is None) != (not low.any()):
+        raise SeamMismatchError("a slab of an unclean cluster has a seam where the last slab had none, or none where "
+                                "it had one")
+    for on, c in ((low, a), (high, b)):  # each cap made of its boundary alone: its inner vertices go
+        if on.any():
+            f = _recapped(manifold3d, v, f, on, c, axis)
+    used = np.zeros(len(v), bool)
+    used[f.reshape(-1)] = True
+    low, high = low & used, high & used
     seams = [v[low], v[high]]
     own_keys = [k for k, r in ring_pts.items() if a < r[0, axis] < b]
     pinned = [ring_pts[k] for k in own_keys]
@@ -256,8 +264,8 @@ def _slab_piece(manifold3d, solids, a, b, axis, prev, ring_pts, grid, tol):
     f = f[~caps]
     open_edges = _open(f, len(v))
     on_low, on_high = low[open_edges].all(axis=1), high[open_edges].all(axis=1)
-    if prev is not None and not np.array_equal(_edge_rows(v, open_edges[on_low]), prev[1]):
-        raise SeamMismatchError("a seam between two slabs does not match (its edges differ on the two sides)")
+    if prev is not None:  # this side runs its seam the other way round
+        v = _matched(v, f, open_edges[on_low][:, ::-1], prev, tol)
     if pinned:
         v, f = open_rings(v, f, pinned, own_keys, seams=open_edges[on_low | on_high])
     elif not (on_low | on_high).all():
@@ -265,7 +273,41 @@ def _slab_piece(manifold3d, solids, a, b, axis, prev, ring_pts, grid, tol):
     used = np.unique(f)  # the caps' inner vertices go
     remap = np.full(len(v), -1, np.int64)
     remap[used] = np.arange(len(used))
-    return (v[used], remap[f]), (v[np.unique(open_edges[on_high])], _edge_rows(v, open_edges[on_high]))
+    seam = open_edges[on_high]  # directed as this slab's faces leave them
+    ids, at = np.unique(seam, return_inverse=True)
+    return (v[used], remap[f]), (v[ids], at.reshape(-1, 2))
+
+
+def _recapped(manifold3d, v, f, on, c, axis) -> np.ndarray:
+    """``f`` with its cap on the plane at ``c`` (faces with every corner on it) triangulated anew
+    from the cap's boundary loops alone (``manifold3d.triangulate``, which keeps their edges):
+    a Boolean leaves inner vertices in a cap (corners of one element's polygon inside another's),
+    which the grid could tie to the seam."""
+    cap = on[f].all(axis=1) & _flat(v, f, c, axis)
+    if not cap.any():
+        return f
+    cf = f[cap]
+    nxt = _successors(_open(cf, len(v)))
+    if nxt is None:
+        raise SeamMismatchError("a seam of a slab is pinched (a vertex on two of its loops)")
+    loops, seen = [], set()
+    for start in nxt:
+        if start in seen:
+            continue
+        loop, x = [], start
+        while x not in seen:
+            seen.add(x)
+            loop.append(x)
+            x = nxt[x]
+        loops.append(np.asarray(loop, np.int64))
+    t = v[cf]
+    up = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])[:, axis].sum() > 0  # the cap faces +axis
+    other = [(axis + 1) % 3, (axis + 2) % 3]
+    if not up:
+        loops = [lp[::-1] for lp in loops]
+    tri = np.asarray(manifold3d.triangulate([v[lp][:, other] for lp in loops]), np.int64)
+    new = np.concatenate(loops)[tri.reshape(-1)].reshape(-1, 3)
+    return np.concatenate([f[~cap], new if up else new[:, ::-1]])
 
 
 def _nearest_free(c: float, blocked: list, clear: float, lo: float, hi: float) -> float | None:
@@ -361,46 +403,70 @@ def _open(f, n) -> np.ndarray:
     return d[~np.isin(d[:, 0] * m + d[:, 1], d[:, 1] * m + d[:, 0])]
 
 
-def _edge_rows(v, e) -> np.ndarray:
-    """Undirected edges as sorted rows of their two corners' coordinates (E, 6), in order."""
-    p, q = v[e[:, 0]], v[e[:, 1]]
-    first = _less(p, q)
-    rows = np.where(first[:, None], np.concatenate([p, q], axis=1), np.concatenate([q, p], axis=1))
-    return rows[np.lexsort(rows.T[::-1])] if len(rows) else rows.reshape(0, 6)
-
-
-def _less(p, q) -> np.ndarray:
-    """Row-wise lexicographic p < q."""
-    out = np.zeros(len(p), bool)
-    decided = np.zeros(len(p), bool)
-    for k in range(3):
-        lt, gt = p[:, k] < q[:, k], p[:, k] > q[:, k]
-        out |= ~decided & lt
-        decided |= lt | gt
-    return out
-
-
-def _boundary(cap: np.ndarray, n: int) -> np.ndarray:
-    """(n,) bool: the vertices of a cap's boundary (edges of one cap face only)."""
-    out = np.zeros(n, bool)
-    out[_open(cap, n).reshape(-1)] = True
-    return out
-
-
-def _matched(v, low, ref, tol) -> np.ndarray:
-    """``v`` with the vertices of this slab's low seam replaced by the previous slab's seam
-    points ``ref`` (its high plane): one to one within ``tol``; else PleError."""
+def _matched(v, f, edges, ref, tol) -> np.ndarray:
+    """``v`` with the vertices of this slab's low seam (``edges``: (E, 2), directed as the last
+    slab's run) at the last slab's seam points (``ref``: (points (S, 3), directed edges (S, 2)
+    into them)). The two are walked loop by loop from a vertex within ``tol`` of exactly one
+    reference point; each vertex on the way must lie within ``LOOSE`` tolerances of its partner
+    (a crossing of two nearly tangent cap edges, which the two Booleans place apart), and the
+    faces near a vertex that moved must not meet after the move (exact). Else SeamMismatchError."""
     from scipy.spatial import cKDTree  # noqa: PLC0415 - optional package
 
-    mine = np.flatnonzero(low)
-    if len(mine) != len(ref):
-        raise SeamMismatchError(f"a seam between two slabs has {len(ref)} vertices on one side and {len(mine)} "
+    points, ref_edges = ref
+    mine = np.unique(edges)
+    if len(mine) != len(points) or len(edges) != len(ref_edges):
+        raise SeamMismatchError(f"a seam between two slabs has {len(points)} vertices on one side and {len(mine)} "
                                 "on the other")
-    if not len(mine):
-        return v
-    d, j = cKDTree(ref).query(v[mine])
-    if d.max() > tol or len(np.unique(j)) != len(j):
-        raise SeamMismatchError("a seam between two slabs does not match (a crossing moved more than the tolerance)")
+    nxt_mine, nxt_ref = _successors(edges), _successors(ref_edges)
+    if nxt_mine is None or nxt_ref is None:
+        raise SeamMismatchError("a seam between two slabs is pinched (a vertex on two of its loops)")
+    loose = LOOSE * tol
+    d, j = cKDTree(points).query(v[mine], k=min(2, len(points)))
+    d, j = d.reshape(len(mine), -1), j.reshape(len(mine), -1)
+    sure = (d[:, 0] <= tol) & ((d[:, 1] > loose) if d.shape[1] > 1 else True)
+    partner = dict(zip(mine.tolist(), j[:, 0].tolist()))
     out = v.copy()
-    out[mine] = ref[j]
+    done: set = set()
+    for x0 in mine[sure].tolist():
+        if x0 in done:
+            continue
+        x, a = x0, partner[x0]
+        while True:
+            if x in done or np.linalg.norm(v[x] - points[a]) > loose:
+                raise SeamMismatchError("a seam between two slabs does not match (its loops run apart)")
+            out[x] = points[a]
+            done.add(x)
+            x, a = nxt_mine[x], nxt_ref[a]
+            if x == x0:
+                if a != partner[x0]:
+                    raise SeamMismatchError("a seam between two slabs does not match (its loops differ)")
+                break
+    if len(done) != len(mine):
+        raise SeamMismatchError("a seam between two slabs does not match (a loop without a sure vertex)")
+    moved = np.flatnonzero((out != v).any(axis=1))
+    if len(moved):
+        _check_moved(out, f, moved)
     return out
+
+
+def _check_moved(v, f, moved) -> None:
+    """No faces near the ``moved`` vertices meet (exact check of the faces within two of their
+    longest incident edges)."""
+    from scipy.spatial import cKDTree  # noqa: PLC0415 - optional package
+
+    touch = np.isin(f, moved).any(axis=1)
+    reach = 2 * float(np.linalg.norm(v[f[touch]] - v[f[touch]][:, [1, 2, 0]], axis=2).max())
+    near = np.isfinite(cKDTree(v[moved]).query(v[f].mean(axis=1), distance_upper_bound=reach)[0])
+    faces = np.flatnonzero(near | touch)
+    if len(self_intersections(v, f[faces])):
+        raise SeamMismatchError("a seam between two slabs does not match (a vertex moved onto it folds a face)")
+
+
+def _successors(edges: np.ndarray) -> dict | None:
+    """{a: b} for directed edges a -> b forming simple loops (None if a vertex leads twice)."""
+    nxt = {}
+    for a, b in edges.tolist():
+        if a in nxt:
+            return None
+        nxt[a] = b
+    return nxt
