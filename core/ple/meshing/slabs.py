@@ -142,9 +142,10 @@ class SeamMismatchError(PleError):
 def _slabs(make, cuts, ext, axis, grid):
     """Every slab's piece (module docstring). Each plane is placed off the balls and rings where
     it can be, and off the vertices of the elements that reach it; the elements reaching past it
-    are kept for the next slab, the others let go. A slab that fails is made again with its high
-    plane moved (a fold on the grid), or with its low one moved and the last slab made again (a
-    seam that does not match), up to ``SEAM_TRIES`` times each."""
+    are kept for the next slab, the others let go. A seam that does not match moves its plane
+    and makes the last slab again (up to 2 ``SEAM_TRIES`` times); a slab the grid folds is made
+    once more with its high plane moved, then given up (the caller turns the balls: a fold inside
+    a slab is a symmetric lattice's, which no plane moves)."""
     lo, hi = ext[:, 0, axis], ext[:, 1, axis]
     size = float((ext[:, 1].max(axis=0) - ext[:, 0].min(axis=0)).max()) or 1.0
     ctx = _SlabContext(make, lo, hi, axis, grid, size)
@@ -173,10 +174,10 @@ def _slabs(make, cuts, ext, axis, grid):
             pieces[-1], prev, a = *ctx.slab(a0, moved, prev0)[:2], moved
             last = (a0, prev0, a)
             continue
-        except PleError:
-            if not math.isfinite(b) or tries >= 2 * SEAM_TRIES:
+        except PleError:  # a fold on the grid inside the slab: once more with the high plane moved,
+            if not math.isfinite(b) or tries:  # then the balls are turned (the caller)
                 raise
-            tries += 1  # the high plane moves
+            tries += 1
             continue
         pieces.append(piece)
         last, prev, a, k, tries = (a, prev, b), seam, b, k + 1, 0
