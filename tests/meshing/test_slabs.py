@@ -57,18 +57,30 @@ def shrunk_graded(n: int = 4) -> Lattice:
     return lat
 
 
+def graded_octet(n: int = 6) -> Lattice:
+    """The thick octet graded to thin along U (factor 1 at x = 0, 0.4 at x = 5): its thick end is
+    one cluster, which meets the clean thin end along contact rings."""
+    from ple.model.grading import LinearGradient
+
+    lat = thick_octet(n)
+    lat.radius_field = LinearGradient((0, 0, 0), (5, 0, 0), 1.0, 0.4)
+    return lat
+
+
 def _cluster(lat):
     tess = Tessellator(lat, lat.region(), "cnt", 0, 16)
     report, ev = tess.find_unclean()
     return clusters(report, ev.beam_nodes, ev.center, ev.radius), ev
 
 
-@pytest.mark.parametrize("make", [thick_octet, shrunk_graded], ids=["thick_octet", "shrunk_graded"])
-def test_a_cluster_without_free_beams_meshes_slab_by_slab(make, monkeypatch, tmp_path):
+# the Monte Carlo volume's tolerance: the united balls keep the exact volume, the fast path's
+# 16-gon beams (the graded octet's thin clean end) 2.6 % less than their circles' area
+@pytest.mark.parametrize("make, within", [(thick_octet, 0.01), (shrunk_graded, 0.01), (graded_octet, 0.04)],
+                         ids=["thick_octet", "shrunk_graded", "graded_octet_with_rings"])
+def test_a_cluster_without_free_beams_meshes_slab_by_slab(make, within, monkeypatch, tmp_path):
     lat = make()
     cl, _ = _cluster(lat)
-    assert len(cl) == 1  # one cluster holds every hub
-    whole = piece_estimate(cl[0])[0]
+    whole = max(piece_estimate(c)[0] for c in cl)  # one cluster holds every hub, or the thick end's
     limit = whole // 4
     monkeypatch.setattr(slabs, "SLAB_TRIANGLES", limit)
     mesh = tessellate(lat, None, "cnt", segments=16)
@@ -79,7 +91,7 @@ def test_a_cluster_without_free_beams_meshes_slab_by_slab(make, monkeypatch, tmp
     assert check.is_watertight and check.is_winding_consistent and check.volume > 0
     assert len(self_intersections(v, f)) == 0
     est, err = monte_carlo_volume(lat, lat.region(), samples=400_000, seed=3)
-    assert abs(mesh.volume - est) < 0.01 * est + 4 * err
+    assert abs(mesh.volume - est) < within * est + 4 * err
     monkeypatch.setattr(slabs, "SLAB_TRIANGLES", 10 * whole)  # one union: the same solid
     one = tessellate(lat, None, "cnt", segments=16)
     assert one.metadata["ple_unclean"].union_slabs == 1

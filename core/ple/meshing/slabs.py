@@ -179,8 +179,10 @@ def _slabs(make, cuts, ext, axis, grid):
                 raise
             tries += 1
             continue
-        pieces.append(piece)
-        last, prev, a, k, tries = (a, prev, b), seam, b, k + 1, 0
+        if piece is not None:
+            pieces.append(piece)
+            last = (a, prev, b)
+        prev, a, k, tries = seam, b, k + 1, 0
         ctx.let_go(b)
     return pieces
 
@@ -228,8 +230,10 @@ class _SlabContext:
             h, v, f, elo, ehi = self.built[i]
             if ehi > a and elo < b:
                 solids.append(h if elo >= a and ehi <= b else clip(_clip(v, f, a, b, axis)))
-        if not solids:
-            raise PleError("a slab of an unclean cluster holds nothing")
+        if not solids:  # a gap between elements (nothing crosses its planes): no piece
+            if prev is not None and len(prev[0]):
+                raise SeamMismatchError("a slab of an unclean cluster holds nothing past a seam")
+            return None, None, b
         piece, seam = _slab_piece(self.make.manifold3d, solids, a, b, axis, prev, self.ring_pts, self.grid, self.tol)
         return piece, seam, b
 
