@@ -165,3 +165,52 @@ def test_a_union_past_the_limit_names_its_hubs_and_pairs(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "50 hubs" in err and "overlapping pairs" in err and "local unions" in err
     assert not out.exists()
+
+
+BALLS_50 = (
+    "from ple import Lattice, Pt, Vec, Translation\n"
+    "def lattice():\n"
+    "    lat = Lattice()\n"
+    "    a = lat.add_node(Pt(0, 0, 0), 50)\n"
+    "    for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1)]:\n"
+    "        lat.add_beam(a, a, *off)\n"
+    "    for s, v in (('u', Vec(1, 0, 0)), ('v', Vec(0, 1, 0)), ('w', Vec(0, 0, 1))):\n"
+    "        getattr(lat, f'set_{s}')(10, Translation(v))\n"
+    "    return lat\n")
+
+
+def test_a_union_the_balls_foresee_is_refused_before_the_check(tmp_path, capsys, monkeypatch):
+    """Cubic 10³ whose balls (radius 50, cell 1) all overlap: refused before the unclean check,
+    naming its 1,000 hubs, 2,700 beams and C(1000, 2) = 499,500 overlapping balls; the check
+    (which would enumerate millions of element pairs) never runs."""
+    import ple.app.pipeline as pipeline
+
+    prog = tmp_path / "r50.py"
+    prog.write_text(BALLS_50)
+    monkeypatch.setattr(pipeline, "checked_stream", lambda *a, **k: pytest.fail("the check ran"))
+    out = tmp_path / "r50.stl"
+    assert main(["mesh", str(prog), "--style", "cnt", "--max-memory", "1500M", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "foreseen" in err and "1,000 hubs" in err and "2,700 beams" in err and "499,500 overlapping balls" in err
+    assert not out.exists()
+
+
+def test_the_foreseen_union_is_within_the_checks():
+    """The balls' foresight is a lower bound: its union's hubs and bytes are at most those of the
+    check's largest union (two balls 0.2 apart overlap; the thick octet's balls do not, its hubs
+    are unclean by their beams: nothing foreseen); a clean lattice foresees nothing."""
+    from ple.meshing.tessellate import foreseen_union, leave_to_unions
+    from ple.program.sources import load_lattice
+
+    for lat, overlapping in ((shrunk_graded(), True), (thick_octet(), False)):
+        f = foreseen_union(lat)
+        assert (f is not None) == overlapping
+        if f is not None:
+            tess = Tessellator(lat, lat.region(), "cnt", 0, 16)
+            report, ev = tess.find_unclean()
+            leave_to_unions(tess, ev, report)
+            assert 0 < f.hubs <= report.union_hubs and f.bytes <= report.union_bytes
+            c, rad = np.asarray(ev.center), np.asarray(ev.radius)  # every pair of balls, brute force
+            near = np.linalg.norm(c[:, None] - c[None], axis=2) < rad[:, None] + rad[None]
+            assert f.ball_pairs == (near.sum() - len(c)) // 2
+    assert foreseen_union(load_lattice("cubic", {"n": 20})) is None

@@ -52,6 +52,7 @@ from ..meshing.tessellate import (
     check_bytes,
     check_fillet,
     checked_stream,
+    foreseen_union,
     iter_triangles,
     resolve_style,
     smallest_radius,
@@ -256,6 +257,21 @@ def _checked(p: MeshPlan, encode=None):
                           encode=encode, grid=p.grid)
 
 
+def _foreseen_limit(p: MeshPlan) -> None:
+    """Refuse before the unclean check a local union that the balls alone show will pass
+    ``max_memory`` (``tessellate.foreseen_union``: overlapping balls, a lower bound)."""
+    q = p.request
+    if not p.checked or p.cut or q.max_memory is None:
+        return
+    f = foreseen_union(p.lattice, p.region)
+    if f is not None:
+        slabs = f", cut into {f.slabs} slabs" if f.slabs > 1 else ""
+        require(f.bytes + evaluation_bytes(p.lattice, p.region),
+                f"a local union of unclean hubs, foreseen from the balls that overlap ({f.hubs:,} hubs, {f.beams:,} "
+                f"beams, {f.ball_pairs:,} overlapping balls{slabs}), with the region's evaluation, of region "
+                f"{p.region}", q.max_memory, "choose a smaller --region")
+
+
 def _union_limit(p: MeshPlan, report) -> None:
     """Refuse before they run the local unions whose largest estimate, with the region's
     evaluation, passes ``max_memory``."""
@@ -280,6 +296,7 @@ def _run(p: MeshPlan, encode, info: dict, fmt: str = "float32"):
     limit; returns the checked stream's boxes, each passed through ``encode`` by the thread that
     assembled it (None: the region is one mesh in memory, cut at a body)."""
     check_float32_range(p.bounds, smallest_radius(p.lattice, p.region), fmt)
+    _foreseen_limit(p)
     report, chunks = _checked(p, encode) if not p.cut else (None, None)
     info["unclean"] = report
     _union_limit(p, report)

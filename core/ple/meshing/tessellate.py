@@ -34,6 +34,7 @@ import threading
 import weakref
 from collections import deque
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from dataclasses import dataclass
 from functools import partial
 from typing import TYPE_CHECKING
 
@@ -54,7 +55,7 @@ from .skin import clip_bodies, clip_to_bodies
 from .slabs import unite_in_slabs_stoppable
 from .styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS
 from .styles import style as style_named
-from .unclean import SEPARATION_GRIDS, find_unclean
+from .unclean import SEPARATION_GRIDS, component_labels, find_unclean
 from .unions import (
     BATCH_TRIANGLES,
     CUT,
@@ -999,6 +1000,81 @@ def leave_to_unions(tess: Tessellator, ev, report) -> list:
     report.clusters = len(cl)
     estimate_unions(report, cl, ev)
     return cl
+
+
+FORESIGHT_PAIRS = 20_000_000  # candidate ball pairs up to which ``foreseen_union`` looks (more: the check decides)
+
+
+@dataclass
+class ForeseenUnion:
+    """The largest local union ``foreseen_union`` finds from the balls alone."""
+
+    hubs: int
+    beams: int
+    ball_pairs: int  # overlapping balls in the whole region
+    slabs: int
+    bytes: int
+
+
+def foreseen_union(lat: Lattice, region=None) -> ForeseenUnion | None:
+    """The largest local union foreseen before the unclean check, cheaply, from the balls alone:
+    two balls that overlap (centres nearer than their radii's sum) are unclean hubs of one local
+    union (their meshes would meet, and no free beam joins them), so the connected groups of the
+    overlap graph, with the beams at their hubs, are within the check's clusters. Their largest
+    one's estimate (``unions.piece_estimate``, or its largest slab's) is a lower bound of what the
+    check will find. None when no ball overlaps another, or when more than ``FORESIGHT_PAIRS``
+    candidate pairs would have to be looked at (the check then decides). A region of more than
+    ``SAMPLED_GROUPS`` groups is looked at whole only where its corners or middle overlap."""
+    lat, r = lat.per_hub(region)
+    if r.groups > SAMPLED_GROUPS and not any(len(_overlapping_balls(lat.evaluate(b))) for b in _sample_blocks(r)):
+        return None
+    ev = lat.evaluate(r)
+    pairs = _overlapping_balls(ev, FORESIGHT_PAIRS)
+    if pairs is None or not len(pairs):
+        return None
+    label = component_labels(len(ev.center), pairs)
+    sizes = np.bincount(label[np.unique(pairs)], minlength=int(label.max()) + 1)
+    hubs = np.flatnonzero(label == int(np.argmax(sizes)))
+    bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
+    beams = np.flatnonzero(np.isin(bn, hubs).any(axis=1))
+    cluster = Cluster(hubs, beams)
+    tris, peak = piece_estimate(cluster)
+    cuts = 0
+    if tris > slabs.SLAB_TRIANGLES:
+        peak, cuts = slabs.slab_plan_bytes(cluster, ev.center, ev.radius, bn)
+    return ForeseenUnion(len(hubs), len(beams), len(pairs), cuts + 1, int(peak))
+
+
+def _overlapping_balls(ev, limit: int | None = None) -> np.ndarray | None:
+    """(P, 2) the pairs of an evaluation's balls that overlap (their boxes' pairs from
+    ``queries.overlaps.grid_pairs``, then the centres' distance); None past ``limit`` candidates."""
+    c, rad = np.asarray(ev.center, float), np.asarray(ev.radius, float)
+    out, seen = [], 0
+    for i, j in grid_pairs(c - rad[:, None], c + rad[:, None], 0.0):
+        block = np.stack([np.asarray(i, np.int64), np.asarray(j, np.int64)], axis=1)
+        seen += len(block)
+        if limit is not None and seen > limit:
+            return None
+        d = np.linalg.norm(c[block[:, 0]] - c[block[:, 1]], axis=1)
+        out.append(block[d < rad[block[:, 0]] + rad[block[:, 1]]])
+    return np.concatenate(out) if out else np.zeros((0, 2), np.int64)
+
+
+SAMPLED_GROUPS = 4096  # regions beyond this many groups are looked at in ``_sample_blocks`` first
+
+
+def _sample_blocks(r: Region) -> list:
+    """Blocks of up to 4 groups a side at the region's eight corners and its middle."""
+    out = []
+    for corner in itertools.product((0, 1, 2), repeat=3):
+        if 1 in corner and corner != (1, 1, 1):
+            continue
+        lo = []
+        for (a, b), k in zip(((r.i0, r.i1), (r.j0, r.j1), (r.k0, r.k1)), corner):
+            n = min(4, b - a)
+            lo.append((a, a + n) if k == 0 else (b - n, b) if k == 2 else ((a + b - n) // 2, (a + b - n) // 2 + n))
+        out.append(Region(lo[0][0], lo[0][1], lo[1][0], lo[1][1], lo[2][0], lo[2][1]))
+    return out
 
 
 def estimate_unions(report, cl: list, ev) -> None:
