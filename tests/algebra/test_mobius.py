@@ -41,6 +41,18 @@ def test_integer_powers_are_repeated_compositions(a, b, c, d, n):
     assert np.allclose(got[ok], want[ok], rtol=1e-7, atol=1e-7)
 
 
+def test_a_near_parabolic_power_keeps_its_digits():
+    """U = (i z + 8e-27) / (-1.866 z + i) is parabolic to 1e-26: its fixed points' conjugation
+    lost four digits (hypothesis found it); integer powers are U's own products."""
+    u = _mobius(1j, 8.050016044641517e-27, -1.866042081612517, 1j)
+    assert u.near_parabolic()
+    raw = np.array([[u.m[0, 0], u.m[0, 1]], [u.m[1, 0], u.m[1, 1]]])
+    z = np.array([0.3 + 0.1j, -1.2 + 0.7j, 2.0 - 0.5j])
+    for n in (-3, 1, 2, 5):
+        rep = np.linalg.matrix_power(raw if n >= 0 else np.linalg.inv(raw), abs(n))
+        assert np.allclose((u ** n)(z), _apply(rep, z), rtol=1e-12, atol=1e-12)
+
+
 def _eigen_power(u: Mobius, t: float) -> np.ndarray:
     """U**t from the matrix form: P diag(λ1^t, λ2^t) P⁻¹ with principal branches."""
     w, p = np.linalg.eig(u.m)

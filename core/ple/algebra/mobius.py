@@ -212,10 +212,15 @@ class Mobius:
         return Mobius(np.array([[s[0, 0], s[0, 1]], [0, s[1, 1]]], dtype=complex)).to_similarity(), mr
 
     def power_matrices(self, ts) -> np.ndarray:
-        """Normalized matrices of ``U**t`` for every real t in ``ts``, shape (n, 2, 2) (§11.2.3)."""
+        """Normalized matrices of ``U**t`` for every real t in ``ts``, shape (n, 2, 2) (§11.2.3).
+        Near a parabolic U (its two fixed points merging: the conjugation to a similarity loses
+        about half the digits), integer powers are products of U's own matrix instead (by
+        squaring), which keep them."""
         ts = np.asarray(ts, dtype=float).reshape(-1)
         if not np.all(np.isfinite(ts)):
             raise PleError("Möbius power must be finite")
+        if self.near_parabolic() and np.all(ts == np.round(ts)) and np.all(np.abs(ts) <= 1 << 30):
+            return _normalized(np.stack([_integer_power(self.m, int(t)) for t in ts]))
         s, mr = self.similarity_part()
         sm = s.power_matrices(ts)
         st = np.zeros((len(ts), 2, 2), dtype=complex)
@@ -225,6 +230,12 @@ class Mobius:
         if mr is not None:
             st = mr[None] @ st.conj() @ mr.conj()[None]  # U^t = R ∘ S^t ∘ R
         return _normalized(st)
+
+    def near_parabolic(self) -> bool:
+        """Whether U's fixed points nearly merge, (a + d)² within ``PARABOLIC`` of 4 (ad - bc = 1),
+        while U is no similarity (those power exactly)."""
+        a, _, _, d = self.coefficients
+        return not self.is_similarity and abs((a + d) ** 2 - 4) <= PARABOLIC
 
     def __pow__(self, t: float) -> Mobius:
         split = None if self.split is None else (self.split[0] ** float(t), self.split[1])
@@ -245,6 +256,22 @@ class Mobius:
     def __repr__(self) -> str:
         a, b, c, d = (complex(round(x.real, 9), round(x.imag, 9)) for x in self.coefficients)
         return f"Mobius(a={a}, b={b}, c={c}, d={d})"
+
+
+PARABOLIC = 1e-6  # |(a + d)² - 4| below which the fixed points' conjugation loses too many digits
+
+
+def _integer_power(m: np.ndarray, n: int) -> np.ndarray:
+    """m**n for a 2×2 matrix of determinant 1, by squaring (n < 0: of its inverse)."""
+    if n < 0:
+        m, n = np.array([[m[1, 1], -m[0, 1]], [-m[1, 0], m[0, 0]]], dtype=complex), -n
+    out = np.eye(2, dtype=complex)
+    while n:
+        if n & 1:
+            out = out @ m
+        m = m @ m
+        n >>= 1
+    return out
 
 
 def apply_matrices(m: np.ndarray, pts) -> np.ndarray:
