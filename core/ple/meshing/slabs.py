@@ -1,25 +1,26 @@
 """A cluster too large for one union, cut into slabs: memory bounded by the slab, not the cluster.
 
 A cluster with no free beam (``unions.split`` finds none: thick octets, all-shrunk junctions)
-can hold most of a lattice. It is cut by planes normal to its longest axis into slabs of at most
-``SLAB_TRIANGLES`` input triangles, and each slab is one manifold3d union:
+can hold most of a lattice. It is cut by planes normal to its longest axis into slabs of about
+``SLAB_TRIANGLES`` input triangles (``plan_slabs``), and each slab is one manifold3d union:
 
-1. Each ball and beam is a convex solid (``unions.element_hulls``). One that crosses a cut plane
-   is clipped there *before* the union: its cap on the plane is the polygon of its own edges cut
-   by the plane, computed once per element from its one hull (the same floats on both sides).
+1. Each ball and beam is a convex solid (``unions.Elements``, made when a slab needs it). One
+   that crosses a cut plane is clipped there *before* the union: its cap on the plane is the
+   polygon of its own edges cut by the plane, from its one hull, without crossings on the chord
+   of their neighbours (``_strict_hull``): the same floats on both sides.
 2. The slab's clipped elements are united. Its cap on each cut plane is the union of those
-   polygons (§3 of the unions' locality: what meets on the plane is what crosses it, on both
-   sides the same elements). The cap's vertices are the polygons' corners (the same floats on
-   both sides) and their edges' crossings, which the two Booleans compute from different faces:
-   the second slab's crossings are matched to the first's (within ``SEAM_TOLERANCE`` of the
-   cluster's size, one to one, with the same edges) and take its floats.
-3. The caps are removed: the slabs meet along the seam with identical vertices, as the pieces of
-   ``unions`` meet the fast path along its rings, and the seams are pinned on the output grid
-   (``unclean.on_grid``) as the rings are.
+   polygons (what meets on the plane is what crosses it: the same elements on both sides), and
+   it is triangulated anew from its boundary alone (``_recapped``). Its corners are the shared
+   floats; its edges' crossings are computed by each Boolean from different faces.
+3. The slab goes on the output grid with its seams pinned (``unclean.on_grid``), its caps are
+   removed, and its low seam is walked loop by loop onto the last slab's high seam
+   (``_matched``: every vertex within ``LOOSE`` tolerances of its partner, the faces near a moved
+   one checked exactly): the slabs meet on identical vertices, as the pieces of ``unions`` meet
+   the fast path along its rings.
 
-A plane that does not give matching seams (a crossing too close to a corner, a coincidence of a
-symmetric lattice) is moved by a fraction of the slab and the slabs are united again, up to
-``SEAM_TRIES`` times.
+A seam that does not match moves its plane and makes the last slab again (up to 2
+``SEAM_TRIES`` times); a slab the grid folds inside is made once more, then the balls are turned
+(as ``unions.unite_cluster`` does).
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ from .unions import UNION_TRIANGLE_BYTES, Elements, manifold3d_module, open_ring
 from .weld import sorted_edges
 
 SLAB_TRIANGLES = 1_500_000  # input triangles of one slab's union (about 0.9 GB at UNION_TRIANGLE_BYTES)
-SEAM_TOLERANCE = 2.0**-32  # of the cluster's size: how far the two slabs' crossings on a seam lie apart at most
+SEAM_TOLERANCE = 2.0**-32  # of the cluster's size: a vertex this near a plane is on it; a seam's sure vertex
 LOOSE = 2.0**14  # tolerances (2^-18 of the size): how far apart two sides put a crossing of nearly tangent edges
 SEAM_TRIES = 4  # plane positions tried before a cluster is refused
 CLEARANCE = 2.0**-20  # of the cluster's size: how far a cut plane stays from every element's vertex
