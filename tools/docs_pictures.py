@@ -103,8 +103,38 @@ def demo():
     return [tessellate(load_lattice(DEFAULT_PRESET, DEFAULT_PARAMS), style="refined", levels=2)], None
 
 
+def slabs():
+    """A thick octet on curved rows (every hub shrunk: one cluster with no free beam) meshed in
+    slabs (``ple.meshing.slabs``), each slab its own colour, drawn apart along the cut axis."""
+    import trimesh
+    from ple.meshing import slabs as slab_mod
+    from ple.meshing.tessellate import Tessellator
+    from ple.meshing.unions import clusters, piece_estimate
+
+    lat = Lattice()
+    a = lat.add_node((0, 0, 0), 0.2)
+    for off in [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (-1, 1, 0), (1, 0, 1), (-1, 0, 1), (0, 1, 1),
+                (0, -1, 1)]:
+        lat.add_beam(a, a, *off)
+    lat.set_u(5, Translation((1, 0, 0)))
+    lat.set_v(5, Rotation(0.06, (0, 0, 1), (-16, 0, 0)))
+    lat.set_w(2, Translation((0, 0, 1)))
+    tess = Tessellator(lat, lat.region(), "cnt", 0, 16)
+    report, ev = tess.find_unclean()
+    c = clusters(report, ev.beam_nodes, ev.center, ev.radius)[0]
+    pieces = slab_mod.unite_in_slabs(c, ev.center, ev.radius, ev.beam_nodes, {}, tess.grid,
+                                     piece_estimate(c)[0] * 2 // 3)
+    axis = int(np.argmax(np.ptp(ev.center, axis=0)))
+    out = []
+    for n, (v, f) in enumerate(pieces):
+        shift = np.zeros(3)
+        shift[axis] = 0.6 * n
+        out.append(trimesh.Trimesh(v + shift, f, process=False))
+    return out, None
+
+
 PICTURES = {"steady_rows": steady_rows, "cage": cage, "frames": frames, "becots_corners": becots_corners,
-            "lil": lil, "chocc": chocc, "demo": demo}
+            "lil": lil, "chocc": chocc, "demo": demo, "slabs": slabs}
 
 
 def build_pictures(force: bool = False) -> list[str]:
