@@ -91,8 +91,9 @@ lat = case_lattice(sys.argv[1], int(sys.argv[2]))
 t0, c0 = time.perf_counter(), time.process_time()
 from ple.model.lattice import Region
 m = int(sys.argv[3]) if len(sys.argv) > 3 else 0  # a corner block of m³ groups only (0: the whole lattice)
+segments = int(sys.argv[4]) if len(sys.argv) > 4 else SPHERE_SEGMENTS  # of every ball (and so of every hull)
 ev = lat.evaluate(Region(0, m, 0, m, 0, m) if m else lat.region())
-unit = manifold3d.Manifold.sphere(1.0, SPHERE_SEGMENTS)
+unit = manifold3d.Manifold.sphere(1.0, segments)
 balls = [unit.scale([r] * 3).translate(list(c)) for c, r in zip(ev.center, ev.radius)]
 parts = balls + [manifold3d.Manifold.batch_hull([balls[a], balls[b]]) for a, b in ev.beam_nodes]
 u = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add)
@@ -120,6 +121,9 @@ def add_arguments(p) -> None:
     p.add_argument("--union-memory", type=float, default=12.0,
                    help="GB of address space the manifold3d baseline may take before it is stopped (default 12: "
                         "half this machine; the speed-up is then a lower bound)")
+    p.add_argument("--union-segments", default="",
+                   help="comma-separated segment counts (e.g. 16) of further manifold3d baselines, beside the one "
+                        "at SPHERE_SEGMENTS (32, our unions' balls); rows get manifold3d_union_<s>, wall_speedup_<s>")
     p.add_argument("--scale", type=float, default=100.0,
                    help="every case's n in percent of its size (default 100: the issue's sizes)")
 
@@ -285,6 +289,11 @@ def run(args) -> dict:
                 row["speedup_is_lower_bound"] = "cpu_seconds" not in base
                 if "process_wall_seconds" in base:  # both processes' wall time, start-up included
                     row["wall_speedup"] = base["process_wall_seconds"] / max(ours["process_wall_seconds"], 1e-9)
+            for seg in [int(x) for x in args.union_segments.split(",") if x.strip()]:
+                other = _run(UNION, [name, n, 0, seg], args.union_timeout, args.union_memory * 1e9)
+                row[f"manifold3d_union_{seg}"] = other
+                if "process_wall_seconds" in other and "process_wall_seconds" in ours:
+                    row[f"wall_speedup_{seg}"] = other["process_wall_seconds"] / max(ours["process_wall_seconds"], 1e-9)
             rows.append(row)
             print(json.dumps(row), file=sys.stderr, flush=True)
     return {"benchmark": "unclean", "machine": f"{os.cpu_count()} cores", "union_timeout_s": args.union_timeout,
