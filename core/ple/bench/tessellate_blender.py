@@ -4,7 +4,8 @@ triangles, the peak memory of the process (the add-on's: Blender's own process; 
 is apart) and, in the same Blender, today's path's baseline, the boxes sent to Blender and welded
 there (the add-on's Tessellate until issue 37), which held every box twice.
 
-Needs the ``bpy`` module (the project's venv) and the repository's ``ple_addon/`` beside the core."""
+Needs the ``bpy`` module (the project's venv) and the repository's ``ple_addon/`` and
+``benchmarks/tessellate_blender_child.py`` (the Blender side) beside the core."""
 
 from __future__ import annotations
 
@@ -22,50 +23,7 @@ ROOT = Path(__file__).resolve().parents[3]
 CASES = [("thesis_regular", "0:16,0:16,0:16", "cnt"), ("fig6_3", "0:7,0:12,0:15", "cnt"),
          ("cylindrical", "0:8,0:32,0:8", "chocc")]
 
-BLENDER = r'''
-import json, os, resource, sys, tempfile, time
-os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp()
-sys.path.insert(0, sys.argv[1])
-import bpy
-import numpy as np
-import ple_addon
-bpy.ops.wm.read_factory_settings(use_empty=True)
-ple_addon.register()
-preset, region, style, how = sys.argv[2:6]
-lo, hi = zip(*(map(int, part.split(":")) for part in region.split(",")))
-assert bpy.ops.ple.lattice_add(source="PRESET", preset=preset, region=(1, 1, 1)) == {"FINISHED"}
-rig = bpy.context.active_object
-from ple_addon import prefs
-prefs.DEFAULTS.update(memory_gb=20.0, max_triangles=10**9)  # registered, not enabled: the defaults are the limits
-rig.ple.region_min, rig.ple.region_max = lo, hi
-bpy.context.view_layer.update()
-before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-t0 = time.perf_counter()
-if how == "addon":
-    assert bpy.ops.ple.tessellate(style=style.upper()) == {"FINISHED"}
-    me = bpy.data.objects[f"{rig.name}.{style}"].data
-else:  # today's baseline: every box sent to Blender, welded there
-    from ple_addon import jobs
-    from ple_addon.corelink import core
-    from ple_addon.draw import mesh_from_arrays
-    from ple_addon.rig import model
-    pipeline = core("app.pipeline")
-    lat = model.shown_lattice(rig)
-    p = pipeline.plan(pipeline.MeshRequest(lat, model.region_of(rig, lat), style))
-    job = jobs.start(lambda: pipeline.stream(p, {}), rig.name, "baseline", True)
-    gen = jobs.follow(job, lambda items: 0.0)
-    try:
-        while True:
-            next(gen)
-    except StopIteration as stop:
-        chunks, _ = stop.value
-    verts, faces = pipeline.weld_chunks(chunks)
-    me = mesh_from_arrays("baseline", verts, faces)
-seconds = time.perf_counter() - t0
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-print("@@" + json.dumps({"seconds": seconds, "triangles": len(me.polygons), "peak_bytes": peak * 1024,
-                         "before_bytes": before * 1024}))
-'''
+CHILD = ROOT / "benchmarks" / "tessellate_blender_child.py"  # the Blender side, outside the core (no bpy here)
 
 
 def add_arguments(p) -> None:
@@ -86,7 +44,7 @@ def _parse(text: str) -> list[tuple[str, str, str]]:
 
 
 def _blender(preset: str, region: str, style: str, how: str) -> dict:
-    res = subprocess.run([sys.executable, "-c", BLENDER, str(ROOT), preset, region, style, how],
+    res = subprocess.run([sys.executable, str(CHILD), str(ROOT), preset, region, style, how],
                          capture_output=True, text=True, cwd=tempfile.gettempdir())
     lines = [ln for ln in res.stdout.splitlines() if ln.startswith("@@")]
     if res.returncode != 0 or not lines:
