@@ -9,9 +9,8 @@ import math
 
 import numpy as np
 import pytest
-from ple.algebra.similarity import Rotation, Scaling, Translation
-from ple.algebra.vectors import Pt, Vec
 from ple.app.pipeline import MeshRequest, write_mesh
+from ple.bench.unclean import case_lattice
 from ple.cli.main import main
 from ple.cli.mesh import monte_carlo_volume
 from ple.io.export import read_back
@@ -27,34 +26,17 @@ trimesh = pytest.importorskip("trimesh")
 OCTET = [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (-1, 1, 0), (1, 0, 1), (-1, 0, 1), (0, 1, 1), (0, -1, 1)]
 
 
-def thick_octet(n: int = 5, radius: float = 0.2) -> Lattice:
-    """An octet (the axes and the six face diagonals) on curved rows: V turns about a far z axis.
-    At radius 0.2 every hub is shrunk: the lattice is one cluster with no free beam."""
-    lat = Lattice()
-    a = lat.add_node(Pt(0, 0, 0), radius)
-    for off in OCTET:
-        lat.add_beam(a, a, *off)
-    lat.set_u(n, Translation(Vec(1, 0, 0)))
-    lat.set_v(n, Rotation(0.06, Vec(0, 0, 1), Pt(-16, 0, 0)))
-    lat.set_w(2, Translation(Vec(0, 0, 1)))
-    return lat
+def thick_octet(n: int = 5) -> Lattice:
+    """The bench's thick octet (``ple bench unclean``): the axes and the six face diagonals, r 0.2,
+    on rows curved about a far z axis, n × n × max(2, n // 2); every hub is shrunk: one cluster
+    with no free beam."""
+    return case_lattice("thick_octet", n)
 
 
 def shrunk_graded(n: int = 4) -> Lattice:
-    """Two balls 0.2 apart on each cell, beams shorter than their junctions, graded by a scaling U
-    (a step of about 0.5 at the cells): every hub is shrunk."""
-    lat = Lattice()
-    a = lat.add_node(Pt(0, 0, 0), 0.13)
-    b = lat.add_node(Pt(0.1, 0.17, 0.03), 0.13)
-    lat.add_beam(a, b, 0, 0, 0)
-    lat.add_beam(b, a, 1, 0, 0)
-    lat.add_beam(b, a, 0, 1, 0)
-    lat.add_beam(a, a, 0, 0, 1)
-    lat.add_beam(b, b, 0, 0, 1)
-    lat.set_u(n, Scaling(1.025, Pt(-20, 0, 0)))
-    lat.set_v(n, Translation(Vec(0, 0.5, 0)))
-    lat.set_w(2, Translation(Vec(0, 0, 0.5)))
-    return lat
+    """The bench's two balls 0.2 apart on each cell, beams shorter than their junctions, graded by
+    a scaling U (a step of about 0.5 at the cells): every hub is shrunk."""
+    return case_lattice("shrunk_graded", n)
 
 
 def graded_octet(n: int = 6) -> Lattice:
@@ -62,7 +44,7 @@ def graded_octet(n: int = 6) -> Lattice:
     one cluster, which meets the clean thin end along contact rings."""
     from ple.model.grading import LinearGradient
 
-    lat = thick_octet(n)
+    lat = thick_octet(n).with_counts(n, n, 2)
     lat.radius_field = LinearGradient((0, 0, 0), (5, 0, 0), 1.0, 0.4)
     return lat
 
