@@ -260,28 +260,29 @@ def _checked(p: MeshPlan, encode=None):
 def _foreseen_limit(p: MeshPlan) -> None:
     """Refuse before the unclean check a local union that the balls alone show will pass
     ``max_memory`` (``tessellate.foreseen_union``: overlapping balls, a lower bound)."""
-    q = p.request
-    if not p.checked or p.cut or q.max_memory is None:
+    if not p.checked or p.cut or p.request.max_memory is None:
         return
     f = foreseen_union(p.lattice, p.region)
     if f is not None:
-        slabs = f", cut into {f.slabs} slabs" if f.slabs > 1 else ""
-        require(f.bytes + evaluation_bytes(p.lattice, p.region),
-                f"a local union of unclean hubs, foreseen from the balls that overlap ({f.hubs:,} hubs, {f.beams:,} "
-                f"beams, {f.ball_pairs:,} overlapping balls{slabs}), with the region's evaluation, of region "
-                f"{p.region}", q.max_memory, "choose a smaller --region")
+        _union_within(p, f.bytes, "a local union of unclean hubs, foreseen from the balls that overlap", f.hubs,
+                      f.beams, f"{f.ball_pairs:,} overlapping balls", f.slabs)
 
 
 def _union_limit(p: MeshPlan, report) -> None:
     """Refuse before they run the local unions whose largest estimate, with the region's
     evaluation, passes ``max_memory``."""
-    q = p.request
-    if report is not None and report.clusters and q.max_memory is not None:  # one local union at a time
-        slabs = f", cut into {report.union_slabs} slabs" if report.union_slabs > 1 else ""
-        require(report.union_bytes + evaluation_bytes(p.lattice, p.region),
-                f"the largest of {report.clusters:,} local unions of unclean hubs ({report.union_hubs:,} hubs, "
-                f"{report.union_beams:,} beams, {report.union_pairs:,} overlapping pairs{slabs}), with the "
-                f"region's evaluation, of region {p.region}", q.max_memory, "choose a smaller --region")
+    if report is not None and report.clusters and p.request.max_memory is not None:  # one local union at a time
+        _union_within(p, report.union_bytes, f"the largest of {report.clusters:,} local unions of unclean hubs",
+                      report.union_hubs, report.union_beams, f"{report.union_pairs:,} overlapping pairs",
+                      report.union_slabs)
+
+
+def _union_within(p: MeshPlan, peak: int, whose: str, hubs: int, beams: int, pairs: str, slabs: int) -> None:
+    """``require`` a union's peak with the region's evaluation within ``max_memory``, naming it."""
+    cut = f", cut into {slabs} slabs" if slabs > 1 else ""
+    require(peak + evaluation_bytes(p.lattice, p.region),
+            f"{whose} ({hubs:,} hubs, {beams:,} beams, {pairs}{cut}), with the region's evaluation, of region "
+            f"{p.region}", p.request.max_memory, "choose a smaller --region")
 
 
 def _in_memory(p: MeshPlan, report=None) -> trimesh.Trimesh:

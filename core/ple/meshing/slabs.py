@@ -32,7 +32,7 @@ import numpy as np
 from ..errors import PleError
 from .selfcheck import self_intersections
 from .unclean import BALL_TURNS, SPHERE_SEGMENTS, match_rows, on_grid
-from .unions import UNION_TRIANGLE_BYTES, Elements, manifold3d_module, open_rings, stoppable
+from .unions import UNION_TRIANGLE_BYTES, Elements, manifold3d_module, open_rings, piece_estimate, stoppable
 from .weld import sorted_edges
 
 SLAB_TRIANGLES = 1_500_000  # input triangles of one slab's union (about 0.9 GB at UNION_TRIANGLE_BYTES)
@@ -93,6 +93,17 @@ def slab_plan_bytes(cluster, center, radius, beam_nodes, limit: int | None = Non
     ext = element_extents(cluster, center, radius, beam_nodes)
     axis, cuts = plan_slabs(w, ext, SLAB_TRIANGLES if limit is None else limit)
     return int(max(slab_loads(w, ext[:, 0, axis], ext[:, 1, axis], cuts))) * UNION_TRIANGLE_BYTES, len(cuts)
+
+
+def union_peak(cluster, center, radius, beam_nodes) -> tuple[int, int]:
+    """(peak bytes, slabs) of a cluster's union as ``tessellate`` runs it: one union
+    (``unions.piece_estimate``), or, past ``SLAB_TRIANGLES`` input triangles and where the plan
+    cuts it, its slabs (the largest one's bytes)."""
+    tris, peak = piece_estimate(cluster)
+    if tris <= SLAB_TRIANGLES:
+        return peak, 1
+    slab_peak, cuts = slab_plan_bytes(cluster, center, radius, beam_nodes)
+    return (slab_peak, cuts + 1) if cuts else (peak, 1)
 
 
 def slab_loads(weights, lo, hi, cuts) -> list:

@@ -1037,12 +1037,8 @@ def foreseen_union(lat: Lattice, region=None) -> ForeseenUnion | None:
     hubs = np.flatnonzero(label == int(np.argmax(sizes)))
     bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
     beams = np.flatnonzero(np.isin(bn, hubs).any(axis=1))
-    cluster = Cluster(hubs, beams)
-    tris, peak = piece_estimate(cluster)
-    cuts = 0
-    if tris > slabs.SLAB_TRIANGLES:
-        peak, cuts = slabs.slab_plan_bytes(cluster, ev.center, ev.radius, bn)
-    return ForeseenUnion(len(hubs), len(beams), len(pairs), cuts + 1, int(peak))
+    peak, count = slabs.union_peak(Cluster(hubs, beams), ev.center, ev.radius, bn)
+    return ForeseenUnion(len(hubs), len(beams), len(pairs), count, int(peak))
 
 
 def _overlapping_balls(ev, limit: int | None = None) -> np.ndarray | None:
@@ -1078,20 +1074,17 @@ def _sample_blocks(r: Region) -> list:
 
 
 def estimate_unions(report, cl: list, ev) -> None:
-    """The largest local union's peak bytes (``unions.piece_estimate``; a cluster past
-    ``slabs.SLAB_TRIANGLES``: its largest slab's, ``slabs.slab_bytes``), counted from the hub
-    neighbourhoods before any union runs, with its hubs, beams, overlapping pairs and slabs."""
+    """The largest local union's peak bytes (``slabs.union_peak``: one union's, or its largest
+    slab's), counted from the hub neighbourhoods before any union runs, with its hubs, beams,
+    overlapping pairs and slabs."""
     report.union_bytes = 0
     n = len(ev.center)
     for c in cl:
-        tris, peak = piece_estimate(c)
-        cuts = 0
-        if tris > slabs.SLAB_TRIANGLES:
-            peak, cuts = slabs.slab_plan_bytes(c, ev.center, ev.radius, ev.beam_nodes)
+        peak, count = slabs.union_peak(c, ev.center, ev.radius, ev.beam_nodes)
         if peak > report.union_bytes:
             ids = np.concatenate([np.asarray(c.hubs, np.int64), n + np.asarray(c.beams, np.int64)])
             report.union_bytes, report.union_hubs, report.union_beams = peak, len(c.hubs), len(c.beams)
-            report.union_pairs, report.union_slabs = len(report.pairs_within(np.sort(ids))), cuts + 1
+            report.union_pairs, report.union_slabs = len(report.pairs_within(np.sort(ids))), count
 
 
 def build_with_unions(tess: Tessellator, ev, report) -> tuple[np.ndarray, np.ndarray]:
@@ -1287,9 +1280,9 @@ class _UnionQueue:
 
     def _pieces(self, c, rg):
         """A cluster's pieces: from the cache, or its union (put in the cache), or, when its union
-        would pass ``slabs.SLAB_TRIANGLES``, its slabs' (``slabs.unite_in_slabs``); the
+        is planned in slabs (``slabs.union_peak``), its slabs' (``slabs.unite_in_slabs``); the
         RingTouchedError when a union touches one of its rings."""
-        if piece_estimate(c)[0] > slabs.SLAB_TRIANGLES:
+        if slabs.union_peak(c, self.ev.center, self.ev.radius, self.bn)[1] > 1:  # as it was estimated
             try:
                 got = unite_in_slabs_stoppable(c, self.ev.center, self.ev.radius, self.bn, rg, self.tess.grid)
             except RingTouchedError as exc:
