@@ -44,6 +44,7 @@ def missing(exc: ModuleNotFoundError, what: str = "this") -> PleError:
 body = core("filters.body")  # bodies and the body filter (the Body panel)
 cage = core("model.cage")
 cleanup = core("filters.cleanup")
+files = core("io.files")  # outputs written atomically: complete or not at all
 grading = core("model.grading")  # radius fields: graded thickness
 ir = core("filters.ir")  # ple-lattice/1 data with filters
 irfile = core("io.irfile")  # ple-lattice/1 files: a body mesh resolved against its folder

@@ -13,7 +13,7 @@ import numpy as np
 from bpy.props import BoolProperty, IntVectorProperty, StringProperty
 
 from .. import jobs, prefs
-from ..corelink import PleError, missing, needs, presets, styles, work
+from ..corelink import PleError, files, missing, needs, presets, styles, work
 from ..rig import events, model, sync
 
 SNIPPET_TEXT = "PLE snippet"  # the text block snippets go to (and the clipboard)
@@ -328,16 +328,25 @@ class SteppedOperator(RigOperator):
 
     def file_job(self, request, path):
         """Steps writing ``request``'s mesh to ``path`` in a child process (``pipeline.write_mesh``,
-        as ``ple mesh``); returns (triangles written, the unclean-hubs line or None)."""
+        as ``ple mesh``); returns (triangles written, the unclean-hubs line or None). The child
+        writes a temporary beside ``path``, and this process renames it over ``path`` only once
+        the job is complete: a child that finishes while Esc stops it leaves nothing behind."""
         pipeline = needs("app.pipeline")
+        folder = None
+        try:
+            with files.atomic_path(path) as tmp:
+                folder = tmp.parent
 
-        def work():
-            info: dict = {}
-            n = pipeline.write_mesh(request, path, info)
-            return n, unclean_line(info)
+                def work():
+                    info: dict = {}
+                    n = pipeline.write_mesh(request, tmp, info)
+                    return n, unclean_line(info)
 
-        job = jobs.start(work, self._rig.name, f"the export of region {request.region}", self.beyond_limit)
-        _, (count, line) = yield from jobs.follow(job, lambda items: 0.5)
+                job = jobs.start(work, self._rig.name, f"the export of region {request.region}", self.beyond_limit)
+                _, (count, line) = yield from jobs.follow(job, lambda items: 0.5)
+        finally:  # a child killed mid-write leaves its own temporary: its tree is gone by now
+            if folder is not None:
+                files.remove_stale_temporaries(folder)
         return count, line
 
 

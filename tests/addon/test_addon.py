@@ -13,6 +13,7 @@ import json
 import os
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -507,6 +508,15 @@ def case_export():
     assert first == 0.0 and 0.0 <= second < 1.0  # progress of the first boxes
     steps.close()
     assert not (tmp / "cancelled.stl").exists() and not list(tmp.glob(".cancelled*"))
+    # Esc after the child wrote its whole file, before Blender took the result: still nothing
+    (tmp / "kept.stl").write_bytes(b"the user's file")
+    op.filepath = str(tmp / "kept.stl")
+    steps = bpy.types.PLE_OT_export.steps(op, bpy.context, rig)
+    next(steps), next(steps)
+    time.sleep(3.0)  # a 3x3x2 CHoCC export is done in well under a second
+    steps.close()
+    assert (tmp / "kept.stl").read_bytes() == b"the user's file"
+    assert sorted(p.name for p in tmp.iterdir()) == ["c.ply", "c.stl", "kept.stl", "r.stl"], list(tmp.iterdir())
 
 
 def case_ui():

@@ -171,9 +171,14 @@ def test_stale_temporaries_of_dead_processes_are_removed(tmp_path):
     live.write_text("busy")
     user = tmp_path / ".hidden-user-file"
     user.write_text("mine")
+    # a temp of a temp (a child writing the temporary its live parent renames): the writer is the last tag
+    nested_dead = tmp_path / f"..n.stl{TMP_TAG}{os.getpid()}-abc.stl{TMP_TAG}{dead}-def.stl"
+    nested_live = tmp_path / f"..m.stl{TMP_TAG}{dead}-abc.stl{TMP_TAG}1-def.stl"
+    nested_dead.write_text("x")
+    nested_live.write_text("x")
     assert run("ir", "cubic", "--out", tmp_path / "x.json") == 0
-    assert not stale_file.exists() and not stale_dir.exists()
-    assert live.exists() and user.exists()
+    assert not stale_file.exists() and not stale_dir.exists() and not nested_dead.exists()
+    assert live.exists() and user.exists() and nested_live.exists()
     assert remove_stale_temporaries(tmp_path) == []
 
 

@@ -350,7 +350,7 @@ def remove_stale_temporaries(folder) -> list[Path]:
         name = entry.name
         if not name.startswith(".") or TMP_TAG not in name:
             continue
-        pid_text = name.split(TMP_TAG, 1)[1].split("-", 1)[0]
+        pid_text = name.rsplit(TMP_TAG, 1)[1].split("-", 1)[0]  # the last tag: the writer (a temp of a temp)
         if not pid_text.isdigit() or int(pid_text) == os.getpid() or _alive(int(pid_text)):
             continue
         with contextlib.suppress(OSError):
