@@ -10,6 +10,8 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import psutil
+
 CORE = str(Path(__file__).resolve().parents[1] / "core")
 WATCHDOG_BYTES = 3 << 30  # address-space cap of the child: a runaway fails instead of filling RAM
 PEAK_LIMIT_BYTES = 2 << 30  # the promise (docs/reliability.md): every listed input stays under 2 GB
@@ -52,3 +54,11 @@ def assert_clean_failure(run: Run, *needles: str) -> None:
     assert len(lines) == 1, run.stderr
     for n in needles:
         assert n in run.stderr, (n, run.stderr)
+
+
+def gone(pid: int) -> bool:
+    """Whether process ``pid`` has ended: it no longer exists, or is a zombie waiting for init."""
+    try:
+        return psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return True

@@ -18,7 +18,7 @@ import pytest
 from ple.errors import PleError
 from ple.program import proctree
 from ple.program.runner import Job
-from reliability_helpers import CORE
+from reliability_helpers import CORE, gone
 
 SLEEP = 120  # seconds a grandchild sleeps: far beyond every guard below
 GUARD = 60  # the longest a run may take before the test fails (the runs end within a second or the --timeout)
@@ -59,13 +59,6 @@ def lattice():
     return str(prog), str(pids)
 
 
-def _gone(pid: int) -> bool:
-    try:
-        return psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
-    except psutil.NoSuchProcess:
-        return True
-
-
 def _sleepers(pids: str) -> list[int]:
     with open(pids) as fh:
         return [int(x) for x in fh.read().split()]
@@ -85,7 +78,7 @@ def test_no_process_of_a_program_outlives_ple(tmp_path, start, end):
         assert len(run.stderr.strip().splitlines()) == 1, run.stderr
         assert ("after starting a sleeper" if end == "raises" else "ran longer than 2 s") in run.stderr
     sleepers = _sleepers(pids)
-    assert sleepers and all(_gone(p) for p in sleepers), sleepers
+    assert sleepers and all(gone(p) for p in sleepers), sleepers
 
 
 def _forking_work(pids: str, daemon: bool):
@@ -110,7 +103,7 @@ def _forking_work(pids: str, daemon: bool):
 def test_a_job_ends_the_processes_its_work_started(tmp_path, daemon):
     pids = str(tmp_path / "pids.txt")
     assert Job(_forking_work(pids, daemon), "w", timeout=GUARD).result() == 42
-    assert all(_gone(p) for p in _sleepers(pids))
+    assert all(gone(p) for p in _sleepers(pids))
 
 
 @pytest.mark.parametrize("daemon", [False, True])
@@ -128,7 +121,7 @@ def test_cancel_ends_the_whole_tree(tmp_path, daemon):
         taken = job.take()
     child = taken[0]
     job.cancel()
-    assert _gone(child) and all(_gone(p) for p in _sleepers(pids))
+    assert gone(child) and all(gone(p) for p in _sleepers(pids))
 
 
 def test_a_child_that_dies_does_not_wait_for_its_grandchild(tmp_path):
@@ -148,7 +141,7 @@ def test_a_child_that_dies_does_not_wait_for_its_grandchild(tmp_path):
         os.kill(os.getpid(), signal.SIGKILL)
     with pytest.raises(PleError, match="crashed with SIGKILL"):
         Job(work, "w", timeout=GUARD).result()
-    assert all(_gone(p) for p in _sleepers(pids))
+    assert all(gone(p) for p in _sleepers(pids))
 
 
 def test_members_finds_descendants_and_the_session(tmp_path):
@@ -178,7 +171,7 @@ def test_members_finds_descendants_and_the_session(tmp_path):
         assert os.getsid(pid) == pid and os.getpgid(pid) == pid
     finally:
         proctree.end_tree(pid)
-    assert all(_gone(p) for p in expected | {pid})
+    assert all(gone(p) for p in expected | {pid})
 
 
 def test_without_proc_the_process_group_is_ended(tmp_path, monkeypatch):
@@ -187,7 +180,7 @@ def test_without_proc_the_process_group_is_ended(tmp_path, monkeypatch):
     monkeypatch.setattr(proctree, "members", lambda pid: None)
     pids = str(tmp_path / "pids.txt")
     assert Job(_forking_work(pids, daemon=False), "w", timeout=GUARD).result() == 42
-    assert all(_gone(p) for p in _sleepers(pids))
+    assert all(gone(p) for p in _sleepers(pids))
 
 
 def test_end_tree_leaves_a_process_that_is_not_its_child_alone():
@@ -197,7 +190,7 @@ def test_end_tree_leaves_a_process_that_is_not_its_child_alone():
     try:
         grandchild = int(shell.stdout.readline())
         assert proctree.end_tree(grandchild) is None
-        assert psutil.Process(grandchild).status() != psutil.STATUS_STOPPED and not _gone(grandchild)
+        assert psutil.Process(grandchild).status() != psutil.STATUS_STOPPED and not gone(grandchild)
     finally:
         for p in psutil.Process(shell.pid).children():
             p.kill()

@@ -14,14 +14,20 @@ pid, and the group and session named by it, are not reused meanwhile. A pid that
 this process's child (reaped elsewhere, SIGCHLD ignored) is left alone: it may name another
 process by then.
 
+While the run goes on, the parent watches the memory of the whole tree (``TreeMemory``): the
+per-process address-space limit (``RLIMIT_AS``, inherited by what the child forks) alone lets a
+program fork children that each stay under it.
+
 Elsewhere: macOS (no ``/proc``, no subreaper) ends the child's process group; a descendant
-that calls ``setsid`` or ``setpgid`` there escapes. Windows has no ``fork``: the runner works
-in-process and there is no tree to end.
+that calls ``setsid`` or ``setpgid`` there escapes, and the tree's memory is not watched (each
+process keeps its ``RLIMIT_AS``). Windows has no ``fork``: the runner works in-process and there
+is no tree to end.
 """
 
 from __future__ import annotations
 
 import ctypes
+import math
 import os
 import signal
 import sys
@@ -31,6 +37,11 @@ PR_SET_CHILD_SUBREAPER = 36
 KILL_WAIT = 2.0  # seconds end_tree waits at most for killed processes to exit
 ORPHAN_CHECK = 0.5  # seconds between a waiting child's looks at whether its parent is alive
 ROUNDS = 20  # scans of a tree that keeps forking while it is being stopped
+WATCH_EVERY = 0.05  # seconds between looks at a tree's memory
+WATCH_SHARE = 20  # a count by PSS not forced by the limit waits 20 times its own cost: 5 % of a core
+PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
+TREE_MEMORY = os.path.exists("/proc/self/statm")  # Linux: a tree's memory can be watched
+HAS_PSS = os.path.exists("/proc/self/smaps_rollup")  # Linux 4.14 and later
 
 
 def detach() -> None:
@@ -206,3 +217,78 @@ def _wait_gone(pids, limit: float = KILL_WAIT) -> None:
         left = {p for p in left if _running(p)}
         if left:
             time.sleep(0.002)
+
+
+def resident(pids) -> dict[int, int]:
+    """Bytes resident in each live process of ``pids`` (zombies and ended ones left out), from
+    ``/proc/P/statm``: kernel counters, microseconds a process. A page that k of them share
+    (copy-on-write after a fork) counts in each of the k."""
+    out = {}
+    for p in pids:
+        try:
+            with open(f"/proc/{p}/statm", "rb") as fh:
+                pages = int(fh.read().split()[1])
+        except (OSError, IndexError, ValueError):  # ended meanwhile
+            continue
+        if pages:
+            out[p] = pages * PAGE
+    return out
+
+
+def proportional(pids) -> dict[int, int]:
+    """The proportional set size (PSS) in bytes of each live process of ``pids``, from
+    ``/proc/P/smaps_rollup``: a page shared by k processes counts 1/k in each, so summed over a
+    tree a page its members share counts once. The kernel walks their page tables for it: the
+    cost grows with the resident pages, unlike ``resident``'s."""
+    out = {}
+    for p in pids:
+        try:
+            with open(f"/proc/{p}/smaps_rollup", "rb") as fh:
+                for line in fh:
+                    if line.startswith(b"Pss:"):
+                        out[p] = int(line.split()[1]) * 1024
+                        break
+        except (OSError, ValueError):  # ended meanwhile, or a zombie
+            continue
+    return out
+
+
+class TreeMemory:
+    """The memory the tree of the ``detach``ed child ``pid`` holds beyond what the child held at
+    its fork, against ``limit`` bytes; ``runner.Job.poll`` calls ``over`` when it is ``due``
+    (every ``WATCH_EVERY`` s).
+
+    Resident sets are cheap to read but count a page shared after a fork once per process
+    (workers forked by a program that built its data; any child of Blender), so a stop is decided
+    by PSS (``proportional``). The tree is counted so when its resident sets, less ``shared``
+    (what the last such count found them counting more than once), pass the limit; and, while
+    ``shared`` is not zero, when a process starts or ends and every ``WATCH_SHARE`` times the
+    count's cost (a shared page that a process writes becomes its own). At the fork the child
+    shared all of ``base`` with this process: half of it was in the child's PSS."""
+
+    def __init__(self, pid: int, limit: int):
+        self.pid, self.limit = pid, limit
+        self.base = resident([pid]).get(pid, 0)
+        self.shared = 0
+        self.counted: set[int] = set()  # the processes of the last count by PSS
+        self.due = time.monotonic() + WATCH_EVERY
+        self.recount = math.inf  # when PSS is counted again although the sum is within the limit
+
+    def over(self) -> tuple[int, int] | None:
+        """(bytes held, processes) once the tree holds more than the limit, else None."""
+        pids = [self.pid, *(members(self.pid) or ())]
+        held = resident(pids)
+        total = sum(held.values()) - self.base
+        start = time.monotonic()
+        stale = self.shared > 0 and (start >= self.recount or held.keys() != self.counted)
+        if HAS_PSS and (total - self.shared > self.limit or stale):
+            summed, self.counted = total, set(held)
+            held = proportional(pids)
+            total = sum(held.values()) - self.base // 2
+            self.shared = max(0, summed - total)
+            cost = time.monotonic() - start
+            self.recount = start + WATCH_SHARE * cost if self.shared else math.inf
+        else:
+            total -= self.shared
+        self.due = time.monotonic() + WATCH_EVERY
+        return (total, len(held)) if total > self.limit else None

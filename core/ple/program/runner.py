@@ -1,8 +1,10 @@
 """Contained work: lattice programs and long core calls in a child process (docs/reliability.md).
 
 A ``Job`` runs a function in a child (``os.fork``: the core is already imported, so a start
-costs milliseconds) under a memory limit (``RLIMIT_AS``); the parent waits at most ``timeout``
-seconds and may cancel it at any moment (Blender's Esc). What the function yields on the way
+costs milliseconds) under a memory limit: each process's address space (``RLIMIT_AS``, which
+stops one fast allocation) and, on Linux, the whole tree's memory, which the parent looks at
+every few tens of ms (``proctree.TreeMemory``). The parent waits at most ``timeout`` seconds
+and may cancel it at any moment (Blender's Esc). What the function yields on the way
 (progress fractions, mesh chunks) comes back as messages; what it returns is the result.
 ``sys.exit``, ``os._exit``, any ``BaseException``, running out of memory and crashes of the
 child become one PleError naming the program file and, where known, the line. A hang or a
@@ -201,9 +203,10 @@ def check_timeout(timeout: float | None) -> float | None:
 
 class Job:
     """``work()`` running contained in a child process: at most ``timeout`` seconds (None: no
-    limit) and ``memory`` bytes beyond what this process already maps. ``name`` names it in
-    errors ("<file>: the program ran longer than …"); ``what`` says what ran ("the program",
-    "the tessellation"). Where there is no ``os.fork`` the work runs in-process at ``start``."""
+    limit) and ``memory`` bytes beyond what this process already maps, in each process and (on
+    Linux) in the child's whole tree together. ``name`` names it in errors ("<file>: the program
+    ran longer than …"); ``what`` says what ran ("the program", "the tessellation"). Where there
+    is no ``os.fork`` the work runs in-process at ``start``."""
 
     def __init__(self, work: Callable[[], Any], name: str, timeout: float | None = DEFAULT_TIMEOUT,
                  memory: int | None = None, what: str = "the program", hints: Hints = CLI_HINTS):
@@ -219,6 +222,7 @@ class Job:
         self._fd = None
         self._exit_fd = None  # readable once the child has exited (a pidfd; None: looked at by waitid)
         self._deadline = None
+        self._memory: proctree.TreeMemory | None = None  # the tree's, looked at while polling
         self._start(work)
 
     def _start(self, work) -> None:
@@ -239,15 +243,23 @@ class Job:
         except (AttributeError, OSError):  # macOS, Linux before 5.3
             self._exit_fd = None
         self._deadline = None if self.timeout is None else time.monotonic() + self.timeout
+        if self.memory and proctree.TREE_MEMORY:
+            self._memory = proctree.TreeMemory(pid, int(self.memory))
 
     def poll(self, wait: float = 0.0) -> bool:
         """Read what the child sent (waiting at most ``wait`` seconds for something); True once
-        the work has finished. PleError when it failed, ran out of time or was killed."""
+        the work has finished. PleError when it failed, ran out of time or memory, or was killed."""
         end = time.monotonic() + wait
         while not self.done:
+            if self._memory is not None and time.monotonic() >= self._memory.due:
+                self._look_at_memory()
+                if self.done:
+                    break
             left = max(0.0, end - time.monotonic())
             if self._deadline is not None:
                 left = min(left, max(0.0, self._deadline - time.monotonic()))
+            if self._memory is not None:
+                left = min(left, max(0.0, self._memory.due - time.monotonic()))
             watch = [self._fd] if self._exit_fd is None else [self._fd, self._exit_fd]
             ready, _, _ = select.select(watch, [], [], left if self._exit_fd is not None else min(left, EXIT_CHECK))
             if self._fd not in ready:
@@ -255,9 +267,8 @@ class Job:
                     self._ended()
                     break
                 if self._deadline is not None and time.monotonic() >= self._deadline:
-                    self.cancel()
-                    raise PleError(f"{self.name}: {self.what} ran longer than {self.timeout:g} s; "
-                                   f"{self.hints.timeout}")
+                    self._stop(f"{self.name}: {self.what} ran longer than {self.timeout:g} s; {self.hints.timeout}")
+                    break
                 if time.monotonic() >= end:
                     return False
                 continue
@@ -272,6 +283,20 @@ class Job:
         if self._error is not None:
             raise PleError(self._error)
         return True
+
+    def _look_at_memory(self) -> None:
+        """Stop the run if its process tree holds more than ``memory`` together."""
+        over = self._memory.over()
+        if over is not None:
+            held, count = over
+            who = "its process held" if count == 1 else f"its {count} processes together held"
+            self._stop(f"{self.name}: {self.what} ran out of memory: {who} {human(held)} "
+                       f"(limit {human(self.memory)}); {self.hints.memory}")
+
+    def _stop(self, why: str) -> None:
+        """End the run over a limit: the child and its tree now; ``why`` is its error."""
+        self.cancel()
+        self._error = why
 
     def _messages(self) -> None:
         while len(self._buffer) >= _FRAME.size:
