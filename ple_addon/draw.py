@@ -105,9 +105,14 @@ def cage_curve(cu, curves) -> None:
     cu.update_tag()
 
 
+TAPERS = 9  # beam instances: cones whose far radius is 0, 1/8, …, 1 of the near one (the taper rounded)
+
+
 def balls_beams_group():
-    """The shared geometry-nodes group: an icosphere instance per vertex scaled by its radius,
-    a circle swept along every edge scaled by the radii of its ends (a cone-beam preview)."""
+    """The shared geometry-nodes group drawing a region as GPU instances: one icosphere per
+    vertex scaled by its radius, one unit cone per edge (at its midpoint, turned along it,
+    scaled by the larger end radius and the length; its taper picked among ``TAPERS`` cones).
+    Nothing is swept or realized: an edit of the centres costs fields on the points and edges."""
     ng = bpy.data.node_groups.get(NODE_GROUP)
     if ng is not None:
         return ng
@@ -120,35 +125,78 @@ def balls_beams_group():
     ng.interface.new_socket("Material", in_out="INPUT", socket_type="NodeSocketMaterial")
     ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
     nodes, links = ng.nodes, ng.links
+
+    def node(kind, *inputs, **props):
+        n = nodes.new(kind)
+        for key, value in props.items():
+            setattr(n, key, value)
+        for socket, value in zip(n.inputs, inputs):
+            if value is None:
+                continue
+            if hasattr(value, "is_output"):
+                links.new(value, socket)
+            else:
+                socket.default_value = value
+        return n
+
+    def math(op, a, b=None):
+        return node("ShaderNodeMath", a, b, operation=op).outputs[0]
+
     gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
-    radius = nodes.new("GeometryNodeInputNamedAttribute")
-    radius.data_type = "FLOAT"
+    mesh = gin.outputs[0]
+    radius = node("GeometryNodeInputNamedAttribute", data_type="FLOAT")
     radius.inputs["Name"].default_value = RADIUS_ATTR
-    points = nodes.new("GeometryNodeMeshToPoints")
-    sphere = nodes.new("GeometryNodeMeshIcoSphere")
-    sphere.inputs["Radius"].default_value = 1.0
+    radius = radius.outputs["Attribute"]
+    # balls: an icosphere on every vertex
+    sphere = node("GeometryNodeMeshIcoSphere", 1.0, gin.outputs["Ball detail"])
+    sphere = node("GeometryNodeSetMaterial", sphere.outputs["Mesh"], None, gin.outputs["Material"])
+    points = node("GeometryNodeMeshToPoints", mesh)
     balls = nodes.new("GeometryNodeInstanceOnPoints")
-    curve = nodes.new("GeometryNodeMeshToCurve")
-    circle = nodes.new("GeometryNodeCurvePrimitiveCircle")
-    circle.inputs["Radius"].default_value = 1.0
-    beams = nodes.new("GeometryNodeCurveToMesh")
+    links.new(points.outputs[0], balls.inputs["Points"])
+    links.new(sphere.outputs[0], balls.inputs["Instance"])
+    links.new(radius, balls.inputs["Scale"])
+    # beams: per edge its ends, the larger radius first (the cone's base)
+    ends = nodes.new("GeometryNodeInputMeshEdgeVertices")
+    r1 = node("GeometryNodeSampleIndex", mesh, radius, ends.outputs["Vertex Index 1"], data_type="FLOAT",
+              domain="POINT").outputs[0]
+    r2 = node("GeometryNodeSampleIndex", mesh, radius, ends.outputs["Vertex Index 2"], data_type="FLOAT",
+              domain="POINT").outputs[0]
+    first = node("FunctionNodeCompare", r1, r2, operation="GREATER_EQUAL", data_type="FLOAT").outputs[0]
+    along = node("ShaderNodeVectorMath", ends.outputs["Position 2"], ends.outputs["Position 1"],
+                 operation="SUBTRACT").outputs[0]
+    back = node("ShaderNodeVectorMath", along, None, None, -1.0, operation="SCALE").outputs[0]
+    way = node("GeometryNodeSwitch", first, back, along, input_type="VECTOR").outputs[0]
+    big, small = math("MAXIMUM", r1, r2), math("MINIMUM", r1, r2)
+    length = node("ShaderNodeVectorMath", along, operation="LENGTH").outputs["Value"]
+    taper = math("ROUND", math("MULTIPLY", math("DIVIDE", small, big), TAPERS - 1))
+    turn = node("FunctionNodeAlignRotationToVector", None, 1.0, way, axis="Z").outputs[0]
+    scale = node("ShaderNodeCombineXYZ", big, big, length).outputs[0]
+    cap = node("GeometryNodeCaptureAttribute", mesh, domain="EDGE")
+    captured = []
+    for kind, name, value in (("ROTATION", "turn", turn), ("VECTOR", "scale", scale), ("FLOAT", "taper", taper)):
+        cap.capture_items.new(kind, name)
+        links.new(value, cap.inputs[name])
+        captured.append(cap.outputs[name])
+    mids = node("GeometryNodeMeshToPoints", cap.outputs["Geometry"], mode="EDGES")
+    cones = nodes.new("GeometryNodeGeometryToInstance")
+    for k in reversed(range(TAPERS)):  # a multi-input socket lists its last link first
+        cone = node("GeometryNodeMeshCone", gin.outputs["Beam sides"], 1, 1, k / (TAPERS - 1), 1.0, 1.0,
+                    fill_type="NONE")
+        cone = node("GeometryNodeTransform", cone.outputs["Mesh"])  # the primitive stands on z = 0
+        cone.inputs["Translation"].default_value = (0.0, 0.0, -0.5)
+        cone = node("GeometryNodeSetMaterial", cone.outputs[0], None, gin.outputs["Material"])
+        links.new(cone.outputs[0], cones.inputs[0])
+    beams = nodes.new("GeometryNodeInstanceOnPoints")
+    links.new(mids.outputs[0], beams.inputs["Points"])
+    links.new(cones.outputs[0], beams.inputs["Instance"])
+    beams.inputs["Pick Instance"].default_value = True
+    links.new(captured[2], beams.inputs["Instance Index"])
+    links.new(captured[0], beams.inputs["Rotation"])
+    links.new(captured[1], beams.inputs["Scale"])
     join = nodes.new("GeometryNodeJoinGeometry")
-    links.new(gin.outputs["Ball detail"], sphere.inputs["Subdivisions"])
-    links.new(gin.outputs["Beam sides"], circle.inputs["Resolution"])
-    links.new(gin.outputs[0], points.inputs["Mesh"])
-    links.new(points.outputs["Points"], balls.inputs["Points"])
-    links.new(sphere.outputs["Mesh"], balls.inputs["Instance"])
-    links.new(radius.outputs["Attribute"], balls.inputs["Scale"])
-    links.new(gin.outputs[0], curve.inputs["Mesh"])
-    links.new(curve.outputs["Curve"], beams.inputs["Curve"])
-    links.new(circle.outputs["Curve"], beams.inputs["Profile Curve"])
-    links.new(radius.outputs["Attribute"], beams.inputs["Scale"])
+    links.new(beams.outputs["Instances"], join.inputs["Geometry"])
     links.new(balls.outputs["Instances"], join.inputs["Geometry"])
-    links.new(beams.outputs["Mesh"], join.inputs["Geometry"])
-    set_mat = nodes.new("GeometryNodeSetMaterial")
-    links.new(join.outputs["Geometry"], set_mat.inputs["Geometry"])
-    links.new(gin.outputs["Material"], set_mat.inputs["Material"])
-    links.new(set_mat.outputs["Geometry"], gout.inputs[0])
+    links.new(join.outputs[0], gout.inputs[0])
     return ng
 
 

@@ -26,6 +26,9 @@ class RigState:
     expected: dict = field(default_factory=dict)
     signature: tuple = ()
     topology: tuple = ()  # (key, Evaluation) of the last unfiltered region drawn
+    rigid: bool = False  # the region was drawn before G, its object placed by G (a move of G moves it)
+    hull: tuple | None = None  # (node_index and limit it was chosen for, balls, beams, their ends): ``live_view``
+    hull_drawn: bool = False  # a live move drew the hull only: ``settle`` draws the region in full
     cumulative: tuple = (False, False, False)  # the Cumulative toggles when last drawn
     region: tuple = ()  # (region_min, region_max) last drawn without error
     refused: bool = False  # the status is a refused setting: it stays until the user's next edit

@@ -182,7 +182,7 @@ def on_depsgraph_update(scene, depsgraph):
     for name in dict.fromkeys(names):
         r = bpy.data.objects.get(name)
         if is_rig(r):
-            sync.refresh(r)
+            sync.refresh(r, live=True)
     for fn in hooks.each("updates"):  # e.g. Möbius rigs whose control frames moved
         fn(scene)
 

@@ -17,7 +17,7 @@ import bpy
 import numpy as np
 
 from .. import jobs, prefs
-from ..corelink import PleError, cage, core, ir, irfile, snippets, work
+from ..corelink import PleError, Similarity, cage, core, ir, irfile, snippets, work
 from ..session import SESSION, RigState
 from . import hooks
 
@@ -251,28 +251,46 @@ def shown_lattice(rig, lat=None, panel=None):
     return shown
 
 
+def moves_rigidly(rig, lat) -> bool:
+    """Does a move of G move the drawing as a whole? Yes unless something that decides what is
+    kept or how thick it is reads placed coordinates: a filter (the program's, the panel's, a
+    feature's), a radius field, a group map."""
+    return (lat.filter is None and rig.ple.filter_kind == "NONE" and lat.radius_field is None
+            and lat.group_map is None and not any(fn(rig) for fn in hooks.each("filtering")))
+
+
+def unplaced(lat):
+    """``lat`` without its placement G: what a rigidly moved drawing holds (its object is placed by G)."""
+    out = lat.copy()
+    out.set_placement(Similarity())
+    return out
+
+
 def evaluate_region(rig, lat, st: RigState | None = None):
     """Evaluation of the drawn region, through the program's and the panel's filters (None if
-    the region is empty). Unfiltered, a move of a frame changes only ball centres and radii:
-    the node and beam indices of the last evaluation are reused (``Lattice.region_balls``)."""
+    the region is empty), and the matrix of the region object that places it: G when the
+    drawing moves rigidly (``moves_rigidly``; the evaluation is then in lattice coordinates,
+    before G, so that a move of G only moves the object), otherwise the identity. Unfiltered, a
+    move of a frame changes only ball centres and radii: the node and beam indices of the last
+    evaluation are reused (``Lattice.region_balls``)."""
     r = region_of(rig, lat)
     if r is None:
-        return None
+        return None, np.eye(4)
     check_budget(lat, r)
-    panel = filtered(rig, lat)
-    if lat.filter is None and panel is None and not any(fn(rig) for fn in hooks.each("filtering")):
+    if moves_rigidly(rig, lat):
+        local = unplaced(lat)
         key = (str(r), len(lat.nodes), tuple((b.n1, b.n2, b.di, b.dj, b.dk) for b in lat.beams))
         if st is not None and st.topology and st.topology[0] == key:
             last = st.topology[1]
-            centers, radii = lat.region_balls(r)
+            centers, radii = local.region_balls(r)
             return type(last)(last.node_index, centers.reshape(-1, 3), radii.reshape(-1), last.beam_index,
-                              last.beam_nodes)
-        ev = lat.evaluate(r)
+                              last.beam_nodes), lat.placement.matrix
+        ev = local.evaluate(r)
         if st is not None:
             st.topology = (key, ev)
-        return ev
-    shown = shown_lattice(rig, lat, panel)  # the program's own filter, then the panels'
-    return jobs.call(lambda: shown.evaluate(r), rig.name, f"the filtered evaluation of region {r}")
+        return ev, lat.placement.matrix
+    shown = shown_lattice(rig, lat)  # the program's own filter, then the panels'
+    return jobs.call(lambda: shown.evaluate(r), rig.name, f"the filtered evaluation of region {r}"), np.eye(4)
 
 
 # ----- what a drawing depends on --------------------------------------------------------------------

@@ -12,12 +12,13 @@ import uuid
 
 import bpy
 import numpy as np
-from mathutils import Matrix, Vector
+from mathutils import Vector
 
 from .. import draw
-from ..corelink import PleError, cage
+from ..corelink import PleError, snippets
 from ..session import SESSION, RigState, notify
 from . import hooks
+from .drawing import KEPT, draw_rig, handle_size, new_part
 from .edits import baseline, user_edits
 from .model import (
     PARAM_PREFIX,
@@ -25,10 +26,10 @@ from .model import (
     add_edits,
     all_rigs,
     base_lattice,
-    becots_corners,
     check_budget,
     evaluate_region,
     lattice_of,
+    moves_rigidly,
     parts,
     rig_of,
     signature,
@@ -38,10 +39,13 @@ from .model import (
 )
 
 
-def refresh(rig, force: bool = False, prepared=None) -> str | None:
+def refresh(rig, force: bool = False, prepared=None, live: bool = False) -> str | None:
     """Read user moves, re-evaluate and redraw if anything changed; returns an error or None.
     ``prepared``: (lattice, evaluation) a job computed for the rig as it is now, drawn instead
-    of evaluating again unless the user moved something since.
+    of evaluating again unless the user moved something since. ``live``: a move in progress
+    (the depsgraph handler): a region of more than ``LIVE_ELEMENTS`` is drawn as its hull until
+    the moves pause (``settle``). A move of G alone, where the drawing moves rigidly, moves the
+    region's object and rewrites nothing.
 
     Errors (bad program, degenerate frame) leave the program text, the edits and the last
     good drawing untouched and are shown as the rig's status; a refused setting (``refuse``)
@@ -59,11 +63,16 @@ def refresh(rig, force: bool = False, prepared=None) -> str | None:
                 if rig.ple.status and not st.refused:  # e.g. a degenerate frame was put back
                     rig.ple.status = ""
                 return None
+            placed_only = (st.rigid and new and not force and prepared is None and signature(rig) == st.signature
+                           and all(isinstance(e, snippets.SetPlacement) for e in new))
             if prepared is not None and not new:
-                lat, ev = prepared
+                (lat, ev), at = prepared, np.eye(4)
             else:
                 lat = lattice_of(rig, st, new)  # new edits are kept only if the lattice they give is valid
-                ev = evaluate_region(rig, lat, st)
+                if placed_only and moves_rigidly(rig, lat):
+                    ev, at = KEPT, lat.placement.matrix
+                else:
+                    ev, at = evaluate_region(rig, lat, st)
         except PleError as exc:
             if rig.ple.status != str(exc):
                 notify(rig, str(exc))
@@ -73,7 +82,8 @@ def refresh(rig, force: bool = False, prepared=None) -> str | None:
         st.lattice = lat
         if not {"G", "u", "v", "w", "cage", "region"} <= set(parts(rig)):
             build_parts(rig, lat)  # a copy (Shift+D) or a rig whose parts were deleted
-        draw_rig(rig, lat, ev, st)
+        if draw_rig(rig, lat, ev, st, at, live):
+            _settle_later()
         for hook in hooks.each("after_draw"):  # e.g. a CLG rig's preview
             hook(rig, lat)
         st.signature = signature(rig)
@@ -87,6 +97,25 @@ def refresh(rig, force: bool = False, prepared=None) -> str | None:
         if rig.ple.status:
             rig.ple.status = ""
         return None
+
+
+SETTLE_SECONDS = 0.3  # moves paused this long (the mouse released): the region drawn in full
+
+
+def settle() -> None:
+    """The moves paused: every rig drawn as its hull is drawn in full (a timer, ``SETTLE_SECONDS``
+    after the last live move; a background session, where timers never fire, calls it)."""
+    for r in all_rigs():
+        st = SESSION.states.get(uid(r))
+        if st is not None and st.hull_drawn:
+            st.hull_drawn = False
+            refresh(r, force=True)
+
+
+def _settle_later() -> None:
+    if bpy.app.timers.is_registered(settle):
+        bpy.app.timers.unregister(settle)  # the last move counts: the pause starts now
+    bpy.app.timers.register(settle, first_interval=SETTLE_SECONDS)
 
 
 def note(rig, message: str) -> None:
@@ -105,82 +134,7 @@ def refuse(rig, message: str, report: bool = True) -> None:
         notify(rig, message)
 
 
-def draw_rig(rig, lat, ev, st: RigState) -> None:
-    p = parts(rig)
-    if tuple(rig.ple.counts) != lat.counts:
-        rig.ple.counts = lat.counts
-    if "region" in p:
-        draw.region_mesh(p["region"].data, ev)
-        draw.set_detail(p["region"], 0 if ev is None else len(ev.center) + len(ev.beam_nodes))
-    if "cage" in p:
-        draw.cage_curve(p["cage"].data, cage.cage_curves(lat, interior=rig.ple.cage_interior))
-    frames = {"G": lat.placement.matrix}
-    for n, axis in enumerate("uvw"):
-        frames[axis] = cage.direction_frame(lat, axis, rig.ple.cumulative[n])
-    for key, m in frames.items():
-        if key in p:
-            st.expected[key] = draw.set_matrix(p[key], m)
-    sync_nodes(rig, lat, p, st)
-    sync_corners(rig, lat, p, st)
-
-
-def sync_nodes(rig, lat, p: dict, st: RigState) -> None:
-    """One sphere empty per template node (child of G): location = centre, scale = radius."""
-    want = len(lat.nodes) if rig.ple.show_template else 0
-    stale = [obj for key, obj in p.items() if isinstance(key, tuple) and key[0] == "node" and key[1] >= want]
-    if stale:
-        layer = bpy.context.view_layer
-        if layer is not None and layer.objects.active in stale:
-            layer.objects.active = rig  # the active node goes: the rig becomes active, not nothing
-        bpy.data.batch_remove(stale)
-    for key in [k for k in st.expected if isinstance(k, tuple) and k[0] == "node" and k[1] >= want]:
-        del st.expected[key]
-    for n in range(want):
-        obj = p.get(("node", n))
-        if obj is None:
-            obj = new_part(rig, f"{rig.name}.N{n}", None, "NODE", parent=p.get("G"))
-            obj.empty_display_type = "SPHERE"
-            obj.empty_display_size = 1.0
-            obj.ple.node_index = n
-        node = lat.nodes[n]
-        m = np.diag([node.radius, node.radius, node.radius, 1.0])
-        m[:3, 3] = node.center
-        st.expected[("node", n)] = draw.set_matrix(obj, m)
-
-
-def sync_corners(rig, lat, p: dict, st: RigState) -> None:
-    """Corner empties A, B, C, D of a BeCOTS slab (children of G); moving one re-makes the
-    slab from the four corners (``set_becots``, thesis §4.2)."""
-    corners = becots_corners(lat)
-    stale = [obj for key, obj in p.items() if isinstance(key, tuple) and key[0] == "corner" and not corners]
-    if stale:
-        bpy.data.batch_remove(stale)
-        for label in "ABCD":
-            st.expected.pop(("corner", label), None)
-    for label, c in zip("ABCD", corners):
-        obj = p.get(("corner", label))
-        if obj is None:
-            obj = new_part(rig, f"{rig.name}.{label}", None, "CORNER", parent=p.get("G"))
-            obj.empty_display_type = "CUBE"
-            obj.empty_display_size = 0.5 * handle_size(lat)
-            obj.ple.frame = label
-        m = np.eye(4)
-        m[:3, 3] = c
-        st.expected[("corner", label)] = draw.set_matrix(obj, m)
-
-
 # ----- building a rig -------------------------------------------------------------------------
-def new_part(rig, name: str, data, role: str, parent=None):
-    obj = bpy.data.objects.new(name, data)
-    for coll in rig.users_collection:
-        coll.objects.link(obj)
-    obj.parent = parent if parent is not None else rig
-    obj.matrix_parent_inverse = Matrix.Identity(4)
-    obj.ple.role = role
-    obj.ple.rig = rig
-    return obj
-
-
 def mesh_part(rig, role: str, material):
     """The rig's mesh part of ``role`` (e.g. "CLG": a preview), made once (``NAME.role``, not
     selectable, with ``material``)."""
@@ -209,18 +163,6 @@ def set_params(rig, inputs) -> None:
                 lo, hi = kind(prm.range.lo), kind(prm.range.hi)
                 opts.update(min=lo, max=hi, soft_min=lo, soft_max=hi)
             ui.update(**opts)
-
-
-def handle_size(lat) -> float:
-    """Display size of frame handles, readable on the whole lattice: half the mean U, V, W step
-    (their translation at the cage point), at least 3 % of the cage's extent, at most two steps,
-    and at least twice the mean ball radius."""
-    steps = [np.linalg.norm(cage.direction_frame(lat, a)[:3, 3] - cage.base_frame(lat)[:3, 3]) for a in "uvw"]
-    step = float(np.mean([x for x in steps if x > 0])) if any(x > 0 for x in steps) else 1.0
-    pts = np.concatenate(cage.cage_curves(lat, interior=0))
-    extent = float(np.ptp(pts, axis=0).max()) if len(pts) else step
-    size = min(max(0.5 * step, 0.03 * extent), 2.0 * step)
-    return max(size, 2.0 * float(lat.template_radii.mean()), 1e-3)
 
 
 def build_parts(rig, lat) -> None:

@@ -66,7 +66,10 @@ def part(rig, key):
 
 
 def region_arrays(rig):
-    me = part(rig, "region").data
+    """Ball centres and radii of the drawn region in the rig's coordinates (its object's matrix,
+    G for a rigidly placed drawing, applied), and its beams."""
+    obj = part(rig, "region")
+    me = obj.data
     co = np.zeros(len(me.vertices) * 3, np.float32)
     me.attributes["position"].data.foreach_get("vector", co)
     rad = np.zeros(len(me.vertices), np.float32)
@@ -74,7 +77,10 @@ def region_arrays(rig):
         me.attributes["ple_radius"].data.foreach_get("value", rad)
     ed = np.zeros(len(me.edges) * 2, np.int32)
     me.edges.foreach_get("vertices", ed)
-    return co.reshape(-1, 3), rad, ed.reshape(-1, 2)
+    m = np.array(obj.matrix_basis)
+    factor = np.cbrt(np.linalg.det(m[:3, :3]))  # a similarity's dilation
+    return (co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]).astype(np.float32), (rad * factor).astype(np.float32), \
+        ed.reshape(-1, 2)
 
 
 def assert_region_is(rig, lat, region):

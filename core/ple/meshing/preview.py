@@ -49,3 +49,22 @@ def balls_beams_mesh(center: np.ndarray, radius: np.ndarray, beam_nodes: np.ndar
         parts_v.append(bv)
         parts_f.append(bf.reshape(-1, 3))
     return trimesh.Trimesh(np.concatenate(parts_v), np.concatenate(parts_f), process=False)
+
+
+def hull_rows(node_index: np.ndarray, beam_nodes: np.ndarray, limit: int):
+    """A level of detail of a drawn region for at most ``limit`` balls and beams: the nodes of the
+    node-groups on the six faces of its index box (what is seen from outside) and the beams
+    between them, or every k-th of those nodes alone when even that is more. Returns (node rows,
+    beam rows, the kept beams' ends renumbered to the kept nodes)."""
+    g = np.asarray(node_index)[:, :3]
+    if not len(g):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2), np.int64)
+    keep = np.flatnonzero(((g == g.min(axis=0)) | (g == g.max(axis=0))).any(axis=1))
+    row = np.full(len(g), -1, np.int64)
+    row[keep] = np.arange(len(keep))
+    beams = np.flatnonzero((row[beam_nodes] >= 0).all(axis=1)) if len(beam_nodes) else np.zeros(0, np.int64)
+    if len(keep) + len(beams) > limit:  # balls alone, thinned
+        keep, beams = keep[::-(-len(keep) // max(limit, 1))], beams[:0]
+        row[:] = -1
+        row[keep] = np.arange(len(keep))
+    return keep, beams, row[beam_nodes[beams]].reshape(-1, 2)

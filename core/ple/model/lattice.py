@@ -506,13 +506,21 @@ class Lattice:
             shape = [1, 1, 1, len(self.beams)]
             shape[d] = size
             valid &= ((x >= 0) & (x < size)).reshape(shape)
-        gi, gj, gk, p = (x.astype(np.int64) for x in np.nonzero(valid))
-        row = ((gi * nj + gj) * nk + gk) * nn
         n1 = np.array([b.n1 for b in self.beams], np.int64)
         n2 = np.array([b.n2 for b in self.beams], np.int64)
         step = ((off[:, 0] * nj + off[:, 1]) * nk + off[:, 2]) * nn + n2  # row offset of each pattern's far end
-        idx = np.stack([gi + r.i0, gj + r.j0, gk + r.k0, p], axis=1)
-        return idx, np.stack([row + n1[p], row + step[p]], axis=1)
+        flat = np.flatnonzero(valid)  # (group, pattern) in (i, j, k, p) order; written into the outputs in place
+        npat = len(self.beams)
+        idx = np.empty((len(flat), 4), np.int64)
+        group, idx[:, 3] = np.divmod(flat, npat)
+        rest, idx[:, 2] = np.divmod(group, nk)
+        idx[:, 0], idx[:, 1] = np.divmod(rest, nj)
+        idx[:, :3] += (r.i0, r.j0, r.k0)
+        ends = np.empty((len(flat), 2), np.int64)
+        group *= nn  # the row of the group's first node
+        np.add(group, n1[idx[:, 3]], out=ends[:, 0])
+        np.add(group, step[idx[:, 3]], out=ends[:, 1])
+        return idx, ends
 
     def evaluate(self, region=None) -> Evaluation:
         """The nodes and beams of a region (default: the whole lattice) that the lattice's filter
