@@ -244,7 +244,8 @@ ADDON = CORE.parent.parent / "ple_addon"
 TOOLS = CORE.parent.parent / "tools"
 # rank of each add-on module (docs/architecture.md): a module imports only modules of lower rank
 ADDON_RANK = {"corelink": 0, "prefs": 0, "session": 1, "draw": 1, "jobs": 1,
-              "rig.hooks": 2, "rig.model": 3, "rig.edits": 4, "rig.drawing": 4, "rig.sync": 5, "rig.events": 6, "rig": 7,
+              "rig.hooks": 2, "rig.model": 3, "rig.edits": 4, "rig.drawing": 4, "rig.sync": 5, "rig.events": 6,
+              "rig": 7,
               "props": 7, "ops.base": 7, "ops.program": 8, "ops.template": 8, "ops.output": 8, "ops": 9, "ui": 9,
               "features": 10, "features.body": 10, "features.clg": 10, "features.mobius": 10, "features.check": 10,
               "": 11, "batch": 11, "build": 11}
