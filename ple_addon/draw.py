@@ -42,7 +42,7 @@ def region_mesh(me, ev) -> None:
         attr = me.attributes.get(RADIUS_ATTR) or me.attributes.new(RADIUS_ATTR, "FLOAT", "POINT")
         attr.data.foreach_set("value", ev.radius.astype(np.float32))
     if m:
-        me.attributes[".edge_verts"].data.foreach_set("value", ev.beam_nodes.astype(np.int32).ravel())
+        me.attributes[".edge_verts"].data.foreach_set("value", ev.beam_nodes.astype(np.int32, copy=False).ravel())
     me.update()
 
 
@@ -177,7 +177,9 @@ def balls_beams_group():
         cap.capture_items.new(kind, name)
         links.new(value, cap.inputs[name])
         captured.append(cap.outputs[name])
-    mids = node("GeometryNodeMeshToPoints", cap.outputs["Geometry"], mode="EDGES")
+    bare = node("GeometryNodeRemoveAttribute", cap.outputs["Geometry"])  # not carried into 3 instances a ball
+    bare.inputs["Name"].default_value = RADIUS_ATTR
+    mids = node("GeometryNodeMeshToPoints", bare.outputs[0], mode="EDGES")
     cones = nodes.new("GeometryNodeGeometryToInstance")
     for k in reversed(range(TAPERS)):  # a multi-input socket lists its last link first
         cone = node("GeometryNodeMeshCone", gin.outputs["Beam sides"], 1, 1, k / (TAPERS - 1), 1.0, 1.0,
@@ -193,10 +195,10 @@ def balls_beams_group():
     links.new(captured[2], beams.inputs["Instance Index"])
     links.new(captured[0], beams.inputs["Rotation"])
     links.new(captured[1], beams.inputs["Scale"])
-    join = nodes.new("GeometryNodeJoinGeometry")
-    links.new(beams.outputs["Instances"], join.inputs["Geometry"])
-    links.new(balls.outputs["Instances"], join.inputs["Geometry"])
-    links.new(join.outputs[0], gout.inputs[0])
+    both = nodes.new("GeometryNodeGeometryToInstance")  # nested, not joined: a join copies every instance
+    links.new(beams.outputs["Instances"], both.inputs[0])
+    links.new(balls.outputs["Instances"], both.inputs[0])
+    links.new(both.outputs[0], gout.inputs[0])
     return ng
 
 

@@ -25,9 +25,9 @@ class RigState:
     lattice: object = None
     expected: dict = field(default_factory=dict)
     signature: tuple = ()
-    topology: tuple = ()  # (key, Evaluation) of the last unfiltered region drawn
+    topology: tuple = ()  # (key, (node_index, beam ends)) of the last unfiltered region drawn
     rigid: bool = False  # the region was drawn before G, its object placed by G (a move of G moves it)
-    hull: tuple | None = None  # (node_index and limit it was chosen for, balls, beams, their ends): ``live_view``
+    hull: tuple | None = None  # (node_index and limit it was chosen for, balls, beam ends): ``live_view``
     hull_drawn: bool = False  # a live move drew the hull only: ``settle`` draws the region in full
     cumulative: tuple = (False, False, False)  # the Cumulative toggles when last drawn
     region: tuple = ()  # (region_min, region_max) last drawn without error

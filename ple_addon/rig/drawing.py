@@ -11,24 +11,26 @@ from mathutils import Matrix
 from .. import draw
 from ..corelink import cage, core
 from ..session import RigState
-from .model import becots_corners, moves_rigidly, parts, unplaced
+from .model import Drawn, becots_corners, moves_rigidly, parts, unplaced
 
 preview = core("meshing.preview")
 
-# balls + beams a live move redraws in full: geometry nodes instance about 3e6 elements a second
-# on two cores (``ple bench addon``), so that a move of a bigger region costs at most ~0.1 s
+# balls + beams a live move redraws in full: geometry nodes instance about 10⁷ elements a second on
+# two cores (``ple bench addon``), so a move redraws these in ~30 ms and the handler and cage fit
+# beside them in 100 ms; a bigger region shows its hull while it moves
 LIVE_ELEMENTS = 300_000
 KEPT = object()  # an evaluation not redone: the drawing is kept, only its placement moves
 
 
-def live_view(ev, st: RigState):
+def live_view(ev, st: RigState) -> Drawn:
     """What a live move draws of a region of more than ``LIVE_ELEMENTS``: its hull
     (``preview.hull_rows``), chosen once per topology."""
     nodes = ev.node_index
     if st.hull is None or st.hull[0] is not nodes or st.hull[1] != LIVE_ELEMENTS:
-        st.hull = (nodes, LIVE_ELEMENTS, *preview.hull_rows(nodes, ev.beam_nodes, LIVE_ELEMENTS))
-    _, _, keep, beams, ends = st.hull
-    return type(ev)(nodes[keep], ev.center[keep], ev.radius[keep], ev.beam_index[beams], ends)
+        keep, _beams, ends = preview.hull_rows(nodes, ev.beam_nodes, LIVE_ELEMENTS)
+        st.hull = (nodes, LIVE_ELEMENTS, keep, ends.astype(np.int32))
+    _, _, keep, ends = st.hull
+    return Drawn(nodes[keep], ev.center[keep], ev.radius[keep], ends)
 
 
 def draw_rig(rig, lat, ev, st: RigState, at=None, live: bool = False) -> bool:
@@ -40,6 +42,8 @@ def draw_rig(rig, lat, ev, st: RigState, at=None, live: bool = False) -> bool:
     if tuple(rig.ple.counts) != lat.counts:
         rig.ple.counts = lat.counts
     st.rigid = moves_rigidly(rig, lat) and np.array_equal(at, lat.placement.matrix)  # drawn before G
+    if ev is not None and ev is not KEPT and not isinstance(ev, Drawn):
+        ev = Drawn.of(ev)  # a job's evaluation (a filter's)
     if "region" in p:
         if ev is not KEPT:
             full = ev is None or len(ev.center) + len(ev.beam_nodes) <= LIVE_ELEMENTS or not live

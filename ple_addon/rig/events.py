@@ -105,7 +105,7 @@ def on_counts_changed(rig) -> None:
         set_quietly(rig.ple, counts=old_counts)
         sync.refuse(rig, f"counts {asked} kept: {exc}")
         return
-    sync.refresh(rig)
+    sync.refresh(rig, live=True)  # a slider dragged: a big region shows its hull until the drag pauses
     refresh_dependents(rig)
 
 

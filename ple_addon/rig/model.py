@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import uuid
+from typing import NamedTuple
 
 import bpy
 import numpy as np
@@ -266,13 +267,26 @@ def unplaced(lat):
     return out
 
 
+class Drawn(NamedTuple):
+    """What a drawing holds of an evaluation: node indices (N, 4), centres, radii and the beams'
+    end rows as int32 (Blender's edge vertices); no beam indices (a drawing needs none)."""
+
+    node_index: np.ndarray
+    center: np.ndarray
+    radius: np.ndarray
+    beam_nodes: np.ndarray
+
+    @classmethod
+    def of(cls, ev) -> Drawn:
+        return cls(ev.node_index, ev.center, ev.radius, ev.beam_nodes.astype(np.int32))
+
+
 def evaluate_region(rig, lat, st: RigState | None = None):
-    """Evaluation of the drawn region, through the program's and the panel's filters (None if
-    the region is empty), and the matrix of the region object that places it: G when the
-    drawing moves rigidly (``moves_rigidly``; the evaluation is then in lattice coordinates,
-    before G, so that a move of G only moves the object), otherwise the identity. Unfiltered, a
-    move of a frame changes only ball centres and radii: the node and beam indices of the last
-    evaluation are reused (``Lattice.region_balls``)."""
+    """The drawn region (``Drawn``, None if empty) through the program's and the panel's filters,
+    and the matrix of the region object that places it: G when the drawing moves rigidly
+    (``moves_rigidly``; the region is then evaluated before G, so that a move of G only moves
+    the object), otherwise the identity. Unfiltered, a move of a frame changes only ball centres
+    and radii: the node and beam rows of the last drawing are reused (``Lattice.region_balls``)."""
     r = region_of(rig, lat)
     if r is None:
         return None, np.eye(4)
@@ -280,17 +294,17 @@ def evaluate_region(rig, lat, st: RigState | None = None):
     if moves_rigidly(rig, lat):
         local = unplaced(lat)
         key = (str(r), len(lat.nodes), tuple((b.n1, b.n2, b.di, b.dj, b.dk) for b in lat.beams))
+        centers, radii = local.region_balls(r)
         if st is not None and st.topology and st.topology[0] == key:
-            last = st.topology[1]
-            centers, radii = local.region_balls(r)
-            return type(last)(last.node_index, centers.reshape(-1, 3), radii.reshape(-1), last.beam_index,
-                              last.beam_nodes), lat.placement.matrix
-        ev = local.evaluate(r)
-        if st is not None:
-            st.topology = (key, ev)
-        return ev, lat.placement.matrix
+            nodes, beams = st.topology[1]
+        else:
+            nodes, beams = r.node_index(len(lat.nodes)), local.region_beam_nodes(r, np.int32)
+            if st is not None:
+                st.topology = (key, (nodes, beams))
+        return Drawn(nodes, centers.reshape(-1, 3), radii.reshape(-1), beams), lat.placement.matrix
     shown = shown_lattice(rig, lat)  # the program's own filter, then the panels'
-    return jobs.call(lambda: shown.evaluate(r), rig.name, f"the filtered evaluation of region {r}"), np.eye(4)
+    ev = jobs.call(lambda: shown.evaluate(r), rig.name, f"the filtered evaluation of region {r}")
+    return Drawn.of(ev), np.eye(4)
 
 
 # ----- what a drawing depends on --------------------------------------------------------------------

@@ -159,10 +159,12 @@ def case_live_hull_then_settle():
     drawing.LIVE_ELEMENTS = 500  # a 6 x 6 x 6 region has 216 balls and 540 beams, its hull 152 and 300
     try:
         rig = new_rig("cubic", region=(6, 6, 6))
-        rig.ple.counts = (6, 6, 6)
-        rig.ple.region_min, rig.ple.region_max = (0, 0, 0), (6, 6, 6)
+        base.assert_region_is(rig, cubic(10, 1.0), "0:6,0:6,0:6")  # drawn in full: not a live move
+        rig.ple.counts = (6, 6, 6)  # the counts slider is live too: the hull until the drag pauses
         update()
-        base.assert_region_is(rig, cubic(6, 1.0), "0:6,0:6,0:6")  # drawn in full: not a live move
+        assert st_of(rig).hull_drawn and len(region_arrays(rig)[0]) == 152
+        sync.settle()
+        base.assert_region_is(rig, cubic(6, 1.0), "0:6,0:6,0:6")
         u = part(rig, "u")
         u.location = (u.location[0] + 0.05, u.location[1], u.location[2])
         update()  # the depsgraph handler: a live move

@@ -494,33 +494,46 @@ class Lattice:
         """Beams with both ends in the region: beam_index (M, 4) and beam_nodes (M, 2) rows
         of the region's flattened node arrays (order i, j, k, n), sorted by (i, j, k, pattern)."""
         r = self.region(region)
+        flat, ends = self._beam_rows(r, np.int64)
+        idx = np.empty((len(flat), 4), np.int64)
+        group, idx[:, 3] = np.divmod(flat, max(len(self.beams), 1))
+        rest, idx[:, 2] = np.divmod(group, r.shape[2])
+        idx[:, 0], idx[:, 1] = np.divmod(rest, r.shape[1])
+        idx[:, :3] += (r.i0, r.j0, r.k0)
+        return idx, ends
+
+    def region_beam_nodes(self, region=None, dtype=np.int64) -> np.ndarray:
+        """The beam_nodes of ``region_beams`` alone, as ``dtype`` (int32: a drawing's edge
+        vertices, half the memory): a drawing needs no beam_index."""
+        r = self.region(region)
+        if np.dtype(dtype).itemsize < 8 and r.groups * len(self.nodes) > np.iinfo(dtype).max:
+            raise PleError(f"region {r}: {r.groups * len(self.nodes)} nodes do not fit {np.dtype(dtype).name} rows")
+        return self._beam_rows(r, dtype)[1]
+
+    def _beam_rows(self, r: Region, dtype) -> tuple[np.ndarray, np.ndarray]:
+        """(flat (group, pattern) numbers, beam_nodes as ``dtype``) of the beams with both ends in ``r``."""
         ni, nj, nk = r.shape
-        nn = len(self.nodes)
+        nn, npat = len(self.nodes), len(self.beams)
         if not self.beams or not r.groups:
-            return np.zeros((0, 4), np.int64), np.zeros((0, 2), np.int64)
+            return np.zeros(0, np.int64), np.zeros((0, 2), dtype)
         off = np.array([b.offset for b in self.beams], np.int64)
         # which (group, pattern) pairs have both ends in the region: nonzero lists them in (i, j, k, p) order
-        valid = np.ones((ni, nj, nk, len(self.beams)), bool)
+        valid = np.ones((ni, nj, nk, npat), bool)
         for d, size in enumerate((ni, nj, nk)):
             x = np.arange(size)[:, None] + off[:, d][None]
-            shape = [1, 1, 1, len(self.beams)]
+            shape = [1, 1, 1, npat]
             shape[d] = size
             valid &= ((x >= 0) & (x < size)).reshape(shape)
         n1 = np.array([b.n1 for b in self.beams], np.int64)
         n2 = np.array([b.n2 for b in self.beams], np.int64)
         step = ((off[:, 0] * nj + off[:, 1]) * nk + off[:, 2]) * nn + n2  # row offset of each pattern's far end
-        flat = np.flatnonzero(valid)  # (group, pattern) in (i, j, k, p) order; written into the outputs in place
-        npat = len(self.beams)
-        idx = np.empty((len(flat), 4), np.int64)
-        group, idx[:, 3] = np.divmod(flat, npat)
-        rest, idx[:, 2] = np.divmod(group, nk)
-        idx[:, 0], idx[:, 1] = np.divmod(rest, nj)
-        idx[:, :3] += (r.i0, r.j0, r.k0)
-        ends = np.empty((len(flat), 2), np.int64)
+        flat = np.flatnonzero(valid)
+        group, pattern = np.divmod(flat, npat)
         group *= nn  # the row of the group's first node
-        np.add(group, n1[idx[:, 3]], out=ends[:, 0])
-        np.add(group, step[idx[:, 3]], out=ends[:, 1])
-        return idx, ends
+        ends = np.empty((len(flat), 2), dtype)  # written in place: no stacked copies
+        np.add(group, n1[pattern], out=ends[:, 0], casting="unsafe")
+        np.add(group, step[pattern], out=ends[:, 1], casting="unsafe")
+        return flat, ends
 
     def evaluate(self, region=None) -> Evaluation:
         """The nodes and beams of a region (default: the whole lattice) that the lattice's filter
