@@ -323,6 +323,57 @@ def plot_unclean(d) -> Path | None:
     return out
 
 
+def plot_addon(d) -> Path | None:
+    """Drag time against the drawn balls and beams, today's redraw and ours (``ple bench addon``)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    rows = sorted((r for r in (d or {}).get("rows", []) if r["lattice_groups"] <= 10**6),
+                  key=lambda r: r["balls"] + r["beams"])
+    if not rows:
+        return None
+    x = [r["balls"] + r["beams"] for r in rows]
+    fig, ax = plt.subplots(figsize=(7.5, 3.8))
+    for side, colour, label in (("today", "#888", "before (swept beams, every move redrawn)"),
+                                ("ours", "#2a62b0", "after (instances, G a transform, hull while moving)")):
+        ax.plot(x, [r[side]["drag_u_ms"] for r in rows], "o-", color=colour, label=f"drag U, {label}")
+        ax.plot(x, [r[side]["drag_g_ms"] for r in rows], "s--", color=colour, label=f"drag G, {label}")
+    settle = [(xi, r["ours"]["settle_ms"]) for xi, r in zip(x, rows) if r["ours"].get("settle_ms", 0) > 1]
+    if settle:
+        ax.plot(*zip(*settle), "^:", color="#2a62b0", alpha=0.6, label="after: full drawing on release")
+    for ms, name in ((100, "100 ms"), (20, "20 ms")):
+        ax.axhline(ms, color="#c33", lw=0.8, ls=":")
+        ax.text(x[0], ms * 1.08, name, color="#c33", fontsize=7)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("balls + beams in the drawn region")
+    ax.set_ylabel("ms per move (median)")
+    ax.set_title("Blender: one move of a frame, handler and geometry nodes (2 cores)")
+    ax.legend(frameon=False, fontsize=7, loc="upper left")
+    fig.tight_layout()
+    out = DOCS / "img" / "addon_drag.png"
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def addon_section(d) -> list[str]:
+    out = ["## Live editing in Blender (`ple bench addon`)", "",
+           f"A cubic lattice, each case in a fresh bpy process; *today* is the add-on and core at "
+           f"`{d['baseline_rev']}` in the same run. Medians of the moves; peak: the whole process.", "",
+           "![Drag time against drawn elements, before and after](img/addon_drag.png)", "",
+           "| lattice | drawn groups | balls + beams | drag G | drag U | count change | first draw | full on release "
+           "| peak | drawn while moving |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in d["rows"]:
+        o, t = r["ours"], r["today"]
+        out.append(f"| cubic {round(r['lattice_groups'] ** (1 / 3))}³ | {r['drawn_groups']:,} | {r['balls'] + r['beams']:,} | "
+                   f"{_ms(o['drag_g_ms'])} ({_ms(t['drag_g_ms'])}) | {_ms(o['drag_u_ms'])} ({_ms(t['drag_u_ms'])}) | "
+                   f"{_ms(o['counts_ms'])} ({_ms(t['counts_ms'])}) | {o['first_draw_s']:.2f} s "
+                   f"({t['first_draw_s']:.2f} s) | {_ms(o['settle_ms'])} | {o['peak_gb']:.2f} GB "
+                   f"({t['peak_gb']:.2f} GB) | {o['drawn_while_dragging']:,} |")
+    return out + ["", "Ours first, today's in brackets. Raw JSON: `benchmarks/results/addon.json`.", ""]
+
+
 def presets_section(d) -> list[str]:
     """Every preset with its defaults in every closed style (``ple bench presets``)."""
     rows = d.get("rows", [])
@@ -430,6 +481,10 @@ def write_report() -> Path:
     if unclean:
         plot_unclean(unclean)
         lines += unclean_section(unclean)
+    addon = _load("addon")
+    if addon:
+        plot_addon(addon)
+        lines += addon_section(addon)
     presets = _load("presets")
     if presets:
         lines += presets_section(presets)
