@@ -366,7 +366,8 @@ def addon_section(d) -> list[str]:
            "| peak | drawn while moving |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in d["rows"]:
         o, t = r["ours"], r["today"]
-        out.append(f"| cubic {round(r['lattice_groups'] ** (1 / 3))}³ | {r['drawn_groups']:,} | {r['balls'] + r['beams']:,} | "
+        side = round(r["lattice_groups"] ** (1 / 3))
+        out.append(f"| cubic {side}³ | {r['drawn_groups']:,} | {r['balls'] + r['beams']:,} | "
                    f"{_ms(o['drag_g_ms'])} ({_ms(t['drag_g_ms'])}) | {_ms(o['drag_u_ms'])} ({_ms(t['drag_u_ms'])}) | "
                    f"{_ms(o['counts_ms'])} ({_ms(t['counts_ms'])}) | {o['first_draw_s']:.2f} s "
                    f"({t['first_draw_s']:.2f} s) | {_ms(o['settle_ms'])} | {o['peak_gb']:.2f} GB "
