@@ -157,9 +157,11 @@ def _spheres(tess):
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_steady_check_equals_the_search_of_every_element(seed):
+def test_steady_check_equals_the_search_of_every_element(seed, monkeypatch):
     """Anchored layers and their copies along W (``steady``) find exactly the unclean hubs and the
-    pairs of the search over every element; with the meshes' hulls, at least its hubs."""
+    pairs of the search over every element, looked up in one block or in many; with the meshes'
+    hulls, at least its hubs."""
+    from ple.meshing import unclean
     from ple.meshing.tessellate import Tessellator
 
     lat = steady_lattice(seed)
@@ -171,6 +173,10 @@ def test_steady_check_equals_the_search_of_every_element(seed):
     layered = find_unclean(ev.center, ev.radius, ev.beam_nodes, rp, steady=steady)
     assert whole.pairs > 100 and layered.pairs == whole.pairs
     assert np.array_equal(layered.nodes, whole.nodes)
+    monkeypatch.setattr(unclean, "QUERY_BLOCK", 37)  # the others looked up 37 at a time
+    blocks = find_unclean(ev.center, ev.radius, ev.beam_nodes, rp, steady=steady)
+    assert blocks.pairs == whole.pairs and np.array_equal(blocks.nodes, whole.nodes)
+    monkeypatch.undo()
     report, _ = tess.find_unclean()  # steady, with the hulls
     plain = Tessellator(lat, lat.region(), "cnt", 0, 16)
     plain._steady_layers = lambda idx: None

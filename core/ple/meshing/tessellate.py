@@ -79,7 +79,7 @@ PLACED_VERTICES = 1 << 20  # template vertices the unclean check places at once 
 HULL_VERTICES = 64  # hub templates up to this many vertices are their own hull points (``_hull_ids``)
 STEADY_MIN_LAYERS = 6  # the unclean check looks up anchors and border layers only from this many inner layers on
 MAX_CHECK_GROUPS = 500_000  # streamed regions up to this size are checked for unclean hubs first
-CHECK_ELEMENT_BYTES = 640  # peak bytes of that check per hub and beam, evaluation included (measured 540-620)
+CHECK_ELEMENT_BYTES = 340  # peak bytes of that check per hub and beam, evaluation and start-up in (measured 230-310)
 BOX_TRIANGLES = 1 << 22  # triangles of a streamed box, at most (about: the estimate is from above)
 TEMPLATE_CHUNK = 768  # hub shapes per template task (fixed: the output must not depend on the workers)
 POOL_MAP_MIN = 1 << 20  # pooled buffers from this size on are mapped in small pages (``fresh_buffer``)
@@ -335,7 +335,7 @@ class Tessellator:
         idx = np.asarray(ev.node_index, np.int64)
         if len(idx) == 0:
             return find_unclean(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 2)), np.zeros(0)), ev
-        tids, m, _, _ = self.instances(idx)
+        tids, m = self.instances(idx)[:2]  # not the neighbourhoods (0.4 GB at 10⁶ hubs), held while the check runs
         rp_t = np.array([t.geometry.r_plus for t, _ in self.tpl_list])
         clean_t = np.array([bool(t.geometry.clean) for t, _ in self.tpl_list])
         pulled_t = np.array([bool(t.geometry.pulled) for t, _ in self.tpl_list])

@@ -33,10 +33,11 @@ import numpy as np
 from ..algebra.elements import segment_distance
 from ..algebra.vectors import runs
 from ..errors import PleError
-from ..queries.overlaps import non_incident_pairs
+from ..queries.overlaps import incident_keys, non_incident_pairs
 from .selfcheck import self_intersections
 from .weld import COLLAPSE_GRIDS, edge_manifold, snap, sorted_edges, weld
 
+QUERY_BLOCK = 1 << 19  # elements looked up against the query elements' table at a time (``_query_pairs``)
 TRIM = 0.5  # beams are tested from half their contact distance on (the rest is inside S⁺ of their hub)
 SPHERE_SEGMENTS = 32
 BALL_TURNS = np.array([0.6180339887498949, 0.41421356237309515, 0.7320508075688772])  # golden ratio, √2, √3
@@ -129,30 +130,43 @@ def find_unclean(center, radius, beam_nodes, r_plus, shrunk=None, points=None, m
     bad = np.zeros(n, bool) if shrunk is None else np.asarray(shrunk, bool).copy()
     shrunk_count = int(bad.sum())
     # elements: hubs (point, radius r⁺) and beams (trimmed segment, radius max r)
-    a, b = c[bn[:, 0]], c[bn[:, 1]]
-    length = np.linalg.norm(b - a, axis=1)
-    u = (b - a) / np.where(length > 0, length, 1)[:, None]
+    # written in place (per beam a direction and one product at a time: the check's memory follows
+    # its elements, not its temporaries)
+    seg0, seg1 = np.empty((n + m, 3)), np.empty((n + m, 3))
+    seg0[:n], seg1[:n] = c, c
+    np.take(c, bn[:, 0], axis=0, out=seg0[n:])
+    np.take(c, bn[:, 1], axis=0, out=seg1[n:])
+    u = seg1[n:] - seg0[n:]
+    length = np.linalg.norm(u, axis=1)
+    u /= np.where(length > 0, length, 1)[:, None]
     ta = TRIM * np.sqrt(np.maximum(rp[bn[:, 0]] ** 2 - rad[bn[:, 0]] ** 2, 0))
     tb = TRIM * np.sqrt(np.maximum(rp[bn[:, 1]] ** 2 - rad[bn[:, 1]] ** 2, 0))
-    seg0 = np.concatenate([c, a + u * ta[:, None]])
-    seg1 = np.concatenate([c, b - u * tb[:, None]])
-    del a, b, u, length, ta, tb  # (per beam: the check's memory follows its elements)
+    step = u * ta[:, None]
+    seg0[n:] += step
+    np.multiply(u, tb[:, None], out=step)
+    seg1[n:] -= step
+    del u, step, length, ta, tb
     rr = np.concatenate([rp, np.maximum(rad[bn[:, 0]], rad[bn[:, 1]])])
     ends = np.concatenate([np.repeat(np.arange(n)[:, None], 2, axis=1), bn])
-    kinds = np.concatenate([np.zeros(n, np.int64), np.ones(m, np.int64)])
-    lo = np.minimum(seg0, seg1) - rr[:, None]
-    hi = np.maximum(seg0, seg1) + rr[:, None]
+    kinds = np.concatenate([np.zeros(n, np.int8), np.ones(m, np.int8)])
+
+    def boxes(rows=slice(None)):  # the elements' bounding boxes, made for the rows searched at a time
+        s0, s1, r_ = seg0[rows], seg1[rows], rr[rows, None]
+        return np.minimum(s0, s1) - r_, np.maximum(s0, s1) + r_
+
     anchored = None
     if steady is not None:
         node_index, ka, kb, shrink = steady
-        layer = np.asarray(node_index, np.int64)[:, 2][ends]
-        kmin, kmax = layer.min(axis=1), layer.max(axis=1)
+        layer = np.asarray(node_index)[:, 2].astype(np.int32)  # per node; its two ends per element
+        kmin = np.minimum(layer[ends[:, 0]], layer[ends[:, 1]])
+        kmax = np.maximum(layer[ends[:, 0]], layer[ends[:, 1]])
+        del layer
         inside = (kmin >= ka) & (kmax < kb)
         anchored = inside & (kmin == ka)
         query = ~inside | anchored
-        candidates = _query_pairs(ends, kinds, lo, hi, bn, query)
+        candidates = _query_pairs(ends, kinds, boxes, bn, query)
     else:
-        candidates = non_incident_pairs(ends, kinds, lo, hi, bn)
+        candidates = non_incident_pairs(ends, kinds, *boxes(), bn)
     # the one candidate search of non-incident elements (``queries.overlaps``), tested here with
     # the junctions' spheres S⁺: elements that share a ball, and hubs joined by a beam, are the
     # junctions' business
@@ -273,16 +287,20 @@ def _hulls_apart(pairs, points, margin: float, meet: bool = False) -> np.ndarray
     return apart
 
 
-def _query_pairs(ends, kinds, lo, hi, bn, query):
+def _query_pairs(ends, kinds, boxes, bn, query):
     """Non-incident candidate pairs (blocks of element ids) with at least one element in
     ``query`` (E,) bool: the query elements among themselves, then against all the others (the
-    query elements the grid's table, the others looked up in blocks: memory follows the few)."""
+    query elements the grid's table, the others looked up QUERY_BLOCK at a time: their boxes
+    (``boxes(rows)``), the copies and the grid's temporaries follow the few and one block, not
+    the lattice)."""
     q, rest = np.flatnonzero(query), np.flatnonzero(~query)
-    for i, j in non_incident_pairs(ends[q], kinds[q], lo[q], hi[q], bn):
+    keys = incident_keys(ends, bn)
+    for i, j in non_incident_pairs(ends[q], kinds[q], *boxes(q), bn, keys=keys):
         yield q[i], q[j]
-    order = np.concatenate([q, rest])
-    for i, j in non_incident_pairs(ends[order], kinds[order], lo[order], hi[order], bn, split=len(q)):
-        yield order[i], order[j]
+    for a in range(0, len(rest), QUERY_BLOCK):
+        order = np.concatenate([q, rest[a:a + QUERY_BLOCK]])
+        for i, j in non_incident_pairs(ends[order], kinds[order], *boxes(order), bn, split=len(q), keys=keys):
+            yield order[i], order[j]
 
 
 def _layer_keys(idx: np.ndarray, kb: int) -> tuple[np.ndarray, np.int64]:

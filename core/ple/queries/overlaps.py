@@ -165,18 +165,25 @@ def _explicit(ev: Evaluation, margin: float, first: bool = False, max_pairs: flo
     return out
 
 
+def incident_keys(ends: np.ndarray, beam_nodes: np.ndarray) -> tuple[int, np.ndarray]:
+    """(nn, sorted keys a · nn + b of every beam's two end nodes, both ways): what
+    ``non_incident_pairs`` looks two balls up in; computed once for a search made in blocks."""
+    bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
+    nn = max(int(ends.max()) if len(ends) else -1, int(bn.max()) if len(bn) else -1) + 1
+    return nn, np.sort(np.concatenate([bn[:, 0] * nn + bn[:, 1], bn[:, 1] * nn + bn[:, 0]]))
+
+
 def non_incident_pairs(ends: np.ndarray, kinds: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray,
-                       beam_nodes: np.ndarray, margin: float = 0.0, split: int | None = None):
+                       beam_nodes: np.ndarray, margin: float = 0.0, split: int | None = None, keys=None):
     """Pairs (i, j), i < j, of explicit elements whose boxes (grown by margin / 2, ``grid_pairs``)
     meet and which are not incident: they share no ball, and are not two balls joined by a beam.
     ``ends`` (E, 2): node rows of each element (a ball: (n, n)); ``kinds`` (E,): 0 ball, 1 beam;
     ``beam_nodes`` (M, 2) the beams' node rows. Yielded in blocks of index arrays. The one
     candidate search of unclean elements: ``unclean_pairs`` tests the pairs exactly, the
     tessellation (``meshing.unclean``) with its conservative junction spheres. ``split``: only
-    pairs i < split <= j (``grid_pairs``)."""
-    bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
-    nn = max(int(ends.max()) if len(ends) else -1, int(bn.max()) if len(bn) else -1) + 1
-    edge_keys = np.sort(np.concatenate([bn[:, 0] * nn + bn[:, 1], bn[:, 1] * nn + bn[:, 0]]))
+    pairs i < split <= j (``grid_pairs``). ``keys``: ``incident_keys`` of all the elements, when
+    these are a block of them."""
+    nn, edge_keys = incident_keys(ends, beam_nodes) if keys is None else keys
     for i, j in grid_pairs(box_lo, box_hi, margin, split):
         ia, ib = ends[i], ends[j]
         shared = (ia[:, :1] == ib).any(axis=1) | (ia[:, 1:] == ib).any(axis=1)
