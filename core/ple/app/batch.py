@@ -27,11 +27,12 @@ from ..io.files import atomic_write_text, check_output_dir, plain_name, write_ma
 from ..io.formats import format_named
 from ..meshing.styles import style as style_named
 from ..meshing.tessellate import resolve_style
-from ..model.budget import MESH_TRIANGLE_BYTES, default_max_memory, mesh_triangles, require
-from ..program.runner import DEFAULT_TIMEOUT, run_program
-from ..program.runtime import Param, load_program_file, parse_param_value
+from ..model.budget import MESH_TRIANGLE_BYTES, mesh_triangles, require
+from ..program.runner import program_inputs, run_program
+from ..program.runtime import Param, parse_param_value
 from ..program.sources import resolve_source
 from .cluster import check_scheduler, dask_client, run_tasks, showing
+from .jobs import program_limits
 from .pipeline import MeshRequest, write_mesh
 
 KIND = "ple-batch"  # the output-folder marker's kind
@@ -75,16 +76,16 @@ def _value_text(v) -> str:
     return str(v).replace(os.sep, "_")
 
 
-def plan(source: str, sweeps: list[str], fmt: str) -> tuple[str, list[Variant]]:
-    """The variants of a sweep over a program's inputs (the program is compiled once)."""
+def plan(source: str, sweeps: list[str], fmt: str, limits: tuple | None = None) -> tuple[str, list[Variant]]:
+    """The variants of a sweep over a program's inputs (the program is compiled once, contained
+    under ``limits``: ``runner.program_inputs``)."""
     format_named(fmt)
     path = resolve_source(source)
     if path.suffix != ".py":
         if sweeps:
             raise PleError(f"{source}: a .json lattice file has no inputs to sweep")
         return str(path), [Variant({}, f"{path.stem}.{fmt}")]
-    prog = load_program_file(path)
-    known = {p.name: p for p in prog.parameters()}
+    known = {p.name: p for p in program_inputs(str(path), *program_limits(limits))}
     axes: dict[str, list] = {}
     for s in sweeps:
         if "=" not in s:
@@ -111,8 +112,7 @@ def _run_variant(source: str, params: dict, style: str, levels, region, out: str
     (``watertight`` read back from the file written)."""
     import trimesh
     t0 = time.perf_counter()
-    timeout, memory = limits or (DEFAULT_TIMEOUT, None)
-    memory = memory or default_max_memory()
+    timeout, memory = program_limits(limits)
     lat = run_program(source, params, timeout, memory)
     r = lat.region(region)
     lv, seg = resolve_style(style if style != "balls-beams" else "cnt", levels, None)
@@ -137,7 +137,7 @@ def run_batch(source: str, sweeps: list[str], out_dir, style: str = "refined", f
     address); a variant whose worker dies is rerun, then reported by name."""
     style_named(style)
     check_scheduler(scheduler, jobs)  # before anything is created
-    path, variants = plan(source, sweeps, fmt)
+    path, variants = plan(source, sweeps, fmt, limits)
     out = Path(out_dir)
     manifest_path = out / "manifest.json"
     manifest = check_batch_dir(out)

@@ -4,9 +4,11 @@
 process, one part after the other: the reference path).
 
 A worker killed in the middle of a part loses nothing: Dask reruns the part on another worker,
-and the part is written atomically, so no half-written part remains. A part that fails (a
-program that raises) is recorded by name in the manifest; the others go on. On a terminal a
-job shows Dask's own progress bar and the address of its dashboard, both on stderr.
+and the part is written atomically, so no half-written part remains. A worker runs the job's
+program contained, under the job's limits (``Job.limits``). A part that fails (a program that
+raises, or runs past its time or memory limit) is recorded by name in the manifest; the others
+go on. On a terminal a job shows Dask's own progress bar and the address of its dashboard, both
+on stderr.
 """
 
 from __future__ import annotations
@@ -288,7 +290,7 @@ def _run_parts(client, job: Job, todo, url, manifest, save, progress) -> None:
     """Every part of ``todo`` through ``run_tasks``; the manifest is saved at most every
     SAVE_EVERY seconds and at the end (a part finished but not yet recorded when the client dies
     is only computed again), so thousands of small parts do not rewrite it thousands of times."""
-    args = [(job.kind, job.settings, part, url) for part in todo]
+    args = [(job.kind, job.settings, part, url, job.limits) for part in todo]  # the limits go to every worker
     last = -SAVE_EVERY  # the first finished part is recorded at once
     try:
         for part, result in run_tasks(client, compute_part, args, todo, job.kind, [p.name for p in todo], progress):

@@ -11,8 +11,11 @@ computed by ``ple.app.cluster.run_job`` (Dask, an embedded local cluster by defa
 one). Re-running a job skips every part already written and valid (its hash matches the
 manifest): a crash or a Ctrl-C loses no finished work.
 
-A worker builds a job's lattice once and keeps it for the job's next parts (``job_lattice``):
-a part costs its own work, not the program's run, the filter's set-up or the query plans.
+Every run of a job's program, where the job is planned and on each worker, is contained
+(``ple.program.runner.run_program``: a child process whose whole tree ends with the run) under
+the command's limits, which travel with the job (``Job.limits``). A worker builds a job's
+lattice once and keeps it for the job's next parts (``job_lattice``): a part costs its own work,
+not the program's run, the filter's set-up or the query plans.
 """
 
 from __future__ import annotations
@@ -40,9 +43,10 @@ from ..io.files import TMP_TAG, atomic_path, plain_name
 from ..io.formats import format_named
 from ..io.slices import slice_meta, write_slices
 from ..meshing.styles import style as style_named
+from ..model.budget import default_max_memory
 from ..model.lattice import Evaluation, Lattice, Region
-from ..program.runner import run_program
-from ..program.sources import load_lattice, resolve_source
+from ..program.runner import DEFAULT_TIMEOUT, check_timeout, run_program
+from ..program.sources import resolve_source
 from ..queries.biq import pmc
 from . import pipeline
 
@@ -60,14 +64,27 @@ class Part:
     params: dict
 
 
+Limits = tuple[float | None, int]  # (timeout s, None: none; memory bytes) of each run of a program
+
+
+def program_limits(limits: tuple | None = None) -> Limits:
+    """The limits of a job's program runs, ``(timeout, memory)`` as given, checked; a missing
+    one is the command line's default (``runner.DEFAULT_TIMEOUT``, ``budget.default_max_memory``)."""
+    timeout, memory = limits or (DEFAULT_TIMEOUT, None)
+    return check_timeout(timeout), int(memory or default_max_memory())
+
+
 @dataclass
 class Job:
     """What to compute: ``kind`` (sweep, mesh, filter), the parts and the job-wide settings that
-    every part needs (program source and inputs, style, …)."""
+    every part needs (program source and inputs, style, …). ``limits`` bound each run of the
+    program (``program_limits``), on every worker; they are not settings: a job resumed under
+    other limits makes the same parts."""
 
     kind: str
     settings: dict
     parts: list[Part] = field(default_factory=list)
+    limits: Limits = field(default_factory=program_limits)
 
 
 # ----- locations ------------------------------------------------------------------------------------
@@ -161,13 +178,15 @@ def _params(params) -> list | dict:
 
 
 # ----- building jobs --------------------------------------------------------------------------------
-def sweep_job(source: str, variants: list, style: str, fmt: str, levels=None, region=None) -> Job:
-    """One part per variant (``ple.app.batch.plan``): build, mesh, write in ``fmt``."""
+def sweep_job(source: str, variants: list, style: str, fmt: str, levels=None, region=None,
+              limits: tuple | None = None) -> Job:
+    """One part per variant (``ple.app.batch.plan``): build (contained, under ``limits``), mesh,
+    write in ``fmt``."""
     style_named(style)
     format_named(fmt)
     settings = {"source": str(resolve_source(source)), "style": style, "format": fmt, "levels": levels,
                 "region": region}
-    return Job("sweep", settings, [Part(v.filename, dict(v.params)) for v in variants])
+    return Job("sweep", settings, [Part(v.filename, dict(v.params)) for v in variants], program_limits(limits))
 
 
 MAX_PARTS = 100_000  # parts of one job: its manifest and task list are held whole
@@ -181,9 +200,10 @@ def _check_parts(r, box_groups: int, flag: str) -> None:
 
 
 def mesh_job(source: str, params: dict, style: str = "refined", levels=None, region=None,
-             box_groups: int = 1 << 14) -> Job:
+             box_groups: int = 1 << 14, limits: tuple | None = None) -> Job:
     """One binary-STL part per box of node-groups of ``region`` (``Lattice.iter_slabs`` order).
-    The region's float32 snap grid is computed here, once, and travels with the job.
+    The region's float32 snap grid is computed here, once, and travels with the job. The program
+    runs contained under ``limits`` (``program_limits``), here and on the workers.
 
     Regions up to ``MAX_CHECK_GROUPS`` groups are checked for unclean hubs first, as the
     streamed STL is (``checked_stream``); an unclean region is one part, meshed with its
@@ -193,7 +213,8 @@ def mesh_job(source: str, params: dict, style: str = "refined", levels=None, reg
     style_named(style)
     if style == "balls-beams":
         raise PleError("a partitioned mesh needs a closed style (refined, cnt or chocc)")
-    lat = run_program(source, params)  # contained (ple.program.runner), as every command's program
+    limits = program_limits(limits)
+    lat = run_program(source, params, *limits)  # contained (ple.program.runner), as every command's program
     r = lat.region(region)
     _check_parts(r, box_groups, "--box-groups")
     p = pipeline.plan(pipeline.MeshRequest(lat, r, style, levels))  # the one mesh pipeline, as ple mesh
@@ -202,45 +223,54 @@ def mesh_job(source: str, params: dict, style: str = "refined", levels=None, reg
     report = pipeline.check(p)
     if report is not None and len(report.nodes):
         settings["unclean"] = report.line()
-        return Job("mesh", settings, [Part("part_000000.stl", {"box": str(r), "unions": True})])
+        return Job("mesh", settings, [Part("part_000000.stl", {"box": str(r), "unions": True})], limits)
     if lat.group_map is not None:  # every hub its own template (``Lattice.per_hub``): no boxes of similar groups
-        return Job("mesh", settings, [Part("part_000000.stl", {"box": str(r), "whole": True})])
+        return Job("mesh", settings, [Part("part_000000.stl", {"box": str(r), "whole": True})], limits)
     parts = [Part(f"part_{n:06d}.stl", {"box": str(box)}) for n, box in enumerate(lat.iter_slabs(box_groups, r))]
-    return Job("mesh", settings, parts)
+    return Job("mesh", settings, parts, limits)
 
 
-def filter_job(lat_source: str, params: dict, region=None, slab_groups: int = 1 << 18, filter_spec=None) -> Job:
+def filter_job(lat_source: str, params: dict, region=None, slab_groups: int = 1 << 18, filter_spec=None,
+               limits: tuple | None = None) -> Job:
     """One ``.npz`` part per slab of a (filtered) lattice: its kept nodes and the beams whose
-    from-group lies in the slab (both ends kept), ends given as node indices."""
-    lat = run_program(lat_source, params)
+    from-group lies in the slab (both ends kept), ends given as node indices. The program runs
+    contained under ``limits``, here and on the workers."""
+    limits = program_limits(limits)
+    lat = run_program(lat_source, params, *limits)
     r = lat.region(region)
     _check_parts(r, slab_groups, "slab size")
     settings = {"source": str(resolve_source(lat_source)), "params": _params(params), "region": str(r),
                 "filter": filter_spec}
     parts = [Part(f"part_{n:06d}.npz", {"box": str(box)}) for n, box in enumerate(lat.iter_slabs(slab_groups, r))]
-    return Job("filter", settings, parts)
+    return Job("filter", settings, parts, limits)
 
 
-def count_job(lat_source: str, params, region=None, slab_groups: int = 1 << 19, filter_spec=None) -> Job:
+def count_job(lat_source: str, params, region=None, slab_groups: int = 1 << 19, filter_spec=None,
+              limits: tuple | None = None) -> Job:
     """One small JSON part per slab: the slab's kept nodes and the kept beams whose from-group
     lies in it (``kept_counts``). Nothing but numbers is written, so a 10⁹-beam lattice costs its
-    filter's work and a few bytes per slab."""
-    lat = load_lattice(lat_source, params)
+    filter's work and a few bytes per slab. The program runs contained under ``limits``, here and
+    on the workers."""
+    limits = program_limits(limits)
+    lat = run_program(lat_source, params, *limits)
     r = lat.region(region)
     settings = {"source": str(resolve_source(lat_source)), "params": _params(params), "region": str(r),
                 "filter": filter_spec}
     parts = [Part(f"part_{n:06d}.json", {"box": str(box)}) for n, box in enumerate(lat.iter_slabs(slab_groups, r))]
-    return Job("count", settings, parts)
+    return Job("count", settings, parts, limits)
 
 
 def slice_job(source: str, params, layer: float, pixel: float, bounds=None, layers_per_part: int = 32,
-              filter_spec=None) -> Job:
+              filter_spec=None, limits: tuple | None = None) -> Job:
     """Printer slices (``ple slice``) as one part per range of ``layers_per_part`` layers; the
-    box (default: the lattice's bounds) is computed here, once, and travels with the job."""
+    box (default: the lattice's bounds, its program run here, contained under ``limits``) is
+    computed here, once, and travels with the job; the workers run the program under ``limits``."""
     if int(layers_per_part) < 1:
         raise PleError(f"--layers-per-part must be at least 1, got {layers_per_part}")
-    lat = _with_filter(load_lattice(source, params), filter_spec)
-    lo, hi = lat.bounds() if bounds is None else bounds
+    limits = program_limits(limits)
+    if bounds is None:
+        bounds = _with_filter(run_program(source, params, *limits), filter_spec).bounds()
+    lo, hi = bounds
     zs, _, _ = layer_grid(np.asarray(lo, float), np.asarray(hi, float), layer, pixel)
     settings = {"source": str(resolve_source(source)), "params": _params(params), "filter": filter_spec,
                 "lo": np.asarray(lo, float).tolist(), "hi": np.asarray(hi, float).tolist(), "layer": float(layer),
@@ -248,7 +278,7 @@ def slice_job(source: str, params, layer: float, pixel: float, bounds=None, laye
     step = int(layers_per_part)
     parts = [Part(f"part_{n:06d}.npz", {"layers": [k, min(k + step, len(zs))]})
              for n, k in enumerate(range(0, len(zs), step))]
-    return Job("slice", settings, parts)
+    return Job("slice", settings, parts, limits)
 
 
 # ----- the worker's lattice ----------------------------------------------------------------------------
@@ -260,19 +290,30 @@ def _with_filter(lat: Lattice, spec) -> Lattice:
     return lat if spec is None else lat.unfiltered().with_filter(filter_from_dict(spec))
 
 
-def job_lattice(settings: dict) -> Lattice:
-    """The lattice of a job's settings, built once per worker process and kept for the job's next
-    parts (with the filter's index and the query plans it grows); keyed by the program's text, the
-    inputs and the filter, so an edited program is built again."""
+def job_lattice(settings: dict, limits: tuple | None = None) -> Lattice:
+    """The lattice of a job's settings, its program run contained under ``limits``
+    (``program_limits``) once per worker process, and kept for the job's next parts (with the
+    filter's index and the query plans it grows); keyed by the program's text, the inputs, the
+    filter and the limits, so an edited program, or one given more time, is built again. A run
+    that failed is kept as its error: the job's other parts on this worker fail at once with it,
+    rather than each waiting out the time limit again."""
+    limits = program_limits(limits)
     text = hashlib.sha256(Path(settings["source"]).read_bytes()).hexdigest()
-    key = (text, json.dumps(settings.get("params"), sort_keys=True), json.dumps(settings.get("filter"), sort_keys=True))
+    key = (text, json.dumps(settings.get("params"), sort_keys=True), json.dumps(settings.get("filter"), sort_keys=True),
+           limits)
     if key in _BUILT:
         _BUILT.move_to_end(key)
-        return _BUILT[key]
-    lat = _with_filter(load_lattice(settings["source"], settings["params"]), settings.get("filter"))
-    _BUILT[key] = lat
-    while len(_BUILT) > CACHE_SIZE:
-        _BUILT.popitem(last=False)
+    else:
+        try:
+            _BUILT[key] = _with_filter(run_program(settings["source"], settings["params"], *limits),
+                                       settings.get("filter"))
+        except PleError as exc:
+            _BUILT[key] = str(exc)
+        while len(_BUILT) > CACHE_SIZE:
+            _BUILT.popitem(last=False)
+    lat = _BUILT[key]
+    if isinstance(lat, str):
+        raise PleError(lat)
     return lat
 
 
@@ -291,20 +332,21 @@ def npz_bytes(compress: bool = False, **arrays) -> bytes:
 
 
 # ----- computing one part (runs on a worker) ----------------------------------------------------------
-def compute_part(kind: str, settings: dict, part: Part, url: str) -> dict:
-    """Compute ``part`` and write it under ``url``; returns its manifest entry. Runs in a worker:
-    everything it needs is in its arguments (no state shared with the client)."""
+def compute_part(kind: str, settings: dict, part: Part, url: str, limits: tuple | None = None) -> dict:
+    """Compute ``part`` and write it under ``url``, the job's program run under ``limits``
+    (``Job.limits``); returns its manifest entry. Runs in a worker: everything it needs is in its
+    arguments (no state shared with the client)."""
     t0, c0 = time.perf_counter(), time.process_time()
     fs, root = fsspec.core.url_to_fs(url)
-    data, extra = _PARTS[kind](settings, part)
+    data, extra = _PARTS[kind](settings, part, program_limits(limits))
     write_atomic(fs, posixpath.join(root, part.name), data)
     return {"params": part.params, "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest(),
             "seconds": round(time.perf_counter() - t0, 4), "cpu_seconds": round(time.process_time() - c0, 4), **extra}
 
 
-def _sweep_part(settings: dict, part: Part) -> tuple[bytes, dict]:
+def _sweep_part(settings: dict, part: Part, limits: Limits) -> tuple[bytes, dict]:
     import trimesh
-    lat = load_lattice(settings["source"], part.params)
+    lat = run_program(settings["source"], part.params, *limits)
     p = pipeline.plan(pipeline.MeshRequest(lat, settings["region"], settings["style"], settings["levels"]))
     mesh = trimesh.Trimesh(*pipeline.mesh(p), process=False)  # the triangles ple mesh writes
     extra = {"triangles": int(len(mesh.faces))}
@@ -313,8 +355,8 @@ def _sweep_part(settings: dict, part: Part) -> tuple[bytes, dict]:
     return mesh_bytes(mesh, settings["format"]), extra
 
 
-def _mesh_part(settings: dict, part: Part) -> tuple[bytes, dict]:
-    lat = job_lattice(settings)
+def _mesh_part(settings: dict, part: Part, limits: Limits) -> tuple[bytes, dict]:
+    lat = job_lattice(settings, limits)
     p = pipeline.plan(pipeline.MeshRequest(lat, settings["region"], settings["style"], settings["levels"]))
     if part.params.get("unions") or part.params.get("whole"):  # an unclean or group-mapped region: one mesh,
         # with its unions, the triangles ``ple mesh`` writes
@@ -325,8 +367,8 @@ def _mesh_part(settings: dict, part: Part) -> tuple[bytes, dict]:
     return STL_HEADER + np.uint32(len(rec)).tobytes() + rec.tobytes(), {"triangles": int(len(rec))}
 
 
-def _filter_part(settings: dict, part: Part) -> tuple[bytes, dict]:
-    lat = job_lattice(settings)
+def _filter_part(settings: dict, part: Part, limits: Limits) -> tuple[bytes, dict]:
+    lat = job_lattice(settings, limits)
     box = lat.region(part.params["box"])
     nodes, rows = lat.region_rows(box)
     beam_index, ends = owned_beams(lat, box, rows, lat.region(settings["region"]))
@@ -335,15 +377,15 @@ def _filter_part(settings: dict, part: Part) -> tuple[bytes, dict]:
     return data, {"nodes": int(len(nodes.node_index)), "beams": int(len(beam_index))}
 
 
-def _count_part(settings: dict, part: Part) -> tuple[bytes, dict]:
-    lat = job_lattice(settings)
+def _count_part(settings: dict, part: Part, limits: Limits) -> tuple[bytes, dict]:
+    lat = job_lattice(settings, limits)
     nodes, beams = kept_counts(lat, lat.region(part.params["box"]), lat.region(settings["region"]))
     return json.dumps({"box": part.params["box"], "nodes": nodes, "beams": beams}).encode(), {"nodes": nodes,
                                                                                               "beams": beams}
 
 
-def _slice_part(settings: dict, part: Part) -> tuple[bytes, dict]:
-    lat = job_lattice(settings)
+def _slice_part(settings: dict, part: Part, limits: Limits) -> tuple[bytes, dict]:
+    lat = job_lattice(settings, limits)
     k0, k1 = part.params["layers"]
     index, zs, masks, filled, width = [], [], [], 0, 0
     for k, z, mask in iter_slices(lambda p: pmc(lat, p), np.array(settings["lo"]), np.array(settings["hi"]),

@@ -6,7 +6,7 @@ from ..app.batch import run_batch
 from ..io.files import strict_json
 from ..io.formats import FORMAT_NAMES
 from ..meshing.styles import DEFAULT_STYLE, STYLE_NAMES
-from .common import add_program_limits, max_memory
+from .common import add_program_limits, limits
 
 
 def register(sub) -> None:
@@ -30,6 +30,6 @@ def register(sub) -> None:
 
 def run(args) -> int:
     result = run_batch(args.lattice, args.param, args.out, args.style, args.format, args.levels, args.region,
-                       args.jobs, limits=(args.timeout, max_memory(args)), scheduler=args.scheduler)
+                       args.jobs, limits=limits(args), scheduler=args.scheduler)
     print(strict_json(result, "the batch summary", indent=1))
     return 2 if result["failed"] else 0  # a variant the program rejects is bad input

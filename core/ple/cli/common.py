@@ -46,9 +46,15 @@ def max_memory(args=None) -> int:
     return parse_size(text) if text else default_max_memory()
 
 
+def limits(args) -> tuple[float, int]:
+    """(--timeout, --max-memory in bytes) of a command: the limits of each run of its program,
+    in this process's child and on the workers of its job (``ple.app.jobs.Job.limits``)."""
+    return args.timeout, max_memory(args)
+
+
 def lattice_from_args(args) -> Lattice:
     """The lattice of a command's LATTICE, its program contained (``ple.program.runner``)."""
-    lat = with_body_args(args, run_program(args.lattice, args.param, args.timeout, max_memory(args)))
+    lat = with_body_args(args, run_program(args.lattice, args.param, *limits(args)))
     if getattr(args, "skin", None) is not None:
         body_of(lat, "--skin")  # the body the skin lines: --body, or the lattice's own body filter
     if getattr(args, "cleanup", False):
@@ -59,7 +65,7 @@ def lattice_from_args(args) -> Lattice:
 
 def contained(args):
     """``source, params -> Lattice`` with the command's limits (for --coarse lattices)."""
-    return lambda source, params=None: run_program(source, params, args.timeout, max_memory(args))
+    return lambda source, params=None: run_program(source, params, *limits(args))
 
 
 def add_body_args(p: argparse.ArgumentParser) -> None:

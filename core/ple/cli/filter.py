@@ -24,6 +24,7 @@ from .common import (
     add_lattice_args,
     contained,
     lattice_from_args,
+    limits,
     max_memory,
     parse_implicit,
     parse_stencil,
@@ -88,8 +89,8 @@ def write(args, lat: Lattice) -> int:
     if args.parts:  # one part per slab, on Dask workers; the filter travels as data
         spec = None if lat.filter is None else filter_to_dict(lat.filter)  # the program's and the flags'
         make = count_job if args.count else filter_job
-        status = report_job(run_job(make(args.lattice, args.param, args.region, args.slab_groups, spec), args.parts,
-                                    args.scheduler, args.workers))
+        job = make(args.lattice, args.param, args.region, args.slab_groups, spec, limits(args))
+        status = report_job(run_job(job, args.parts, args.scheduler, args.workers))
         if status == 0 and args.count:
             totals = count_totals(args.parts)
             print(f"kept: {totals['nodes']:,} nodes of {region_nodes(lat, lat.region(args.region)):,}, "

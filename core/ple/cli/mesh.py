@@ -40,7 +40,7 @@ from ..model.budget import (
     streamed_stl_bytes,
 )
 from ..program.meshes import mesh_contained
-from .common import add_cluster_args, add_lattice_args, lattice_from_args, max_memory, report_job
+from .common import add_cluster_args, add_lattice_args, lattice_from_args, limits, max_memory, report_job
 
 MAX_MESH_GROUPS = 20_000_000  # streamed binary STL
 MAX_MEMORY_GROUPS = 500_000  # formats built in memory (trimesh) and --beam-lattice
@@ -168,7 +168,7 @@ def run_parts(args) -> int:
         raise PleError(f"--out {args.out}: a partitioned mesh assembles into binary .stl")
     if args.box_groups < 1:
         raise PleError(f"--box-groups must be at least 1, got {args.box_groups}")
-    job = mesh_job(args.lattice, args.param, args.style, args.levels, args.region, args.box_groups)
+    job = mesh_job(args.lattice, args.param, args.style, args.levels, args.region, args.box_groups, limits(args))
     if job.settings["unclean"]:
         print(f"{job.settings['unclean']}: one part")
     status = report_job(run_job(job, args.parts, args.scheduler, args.workers))

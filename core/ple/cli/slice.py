@@ -15,7 +15,7 @@ from ..filters.ir import filter_to_dict
 from ..model.budget import fast_bounds
 from ..queries.biq import pmc
 from .clg import add_slice_args, slice_with
-from .common import add_cluster_args, add_lattice_args, lattice_from_args, report_job
+from .common import add_cluster_args, add_lattice_args, lattice_from_args, limits, report_job
 
 
 def register(sub) -> None:
@@ -40,7 +40,8 @@ def run(args) -> int:
         lo, hi = parse_bounds(args.bounds, None, None)
     if args.parts:
         spec = None if lat.filter is None else filter_to_dict(lat.filter)
-        job = slice_job(args.lattice, args.param, args.layer, args.pixel, (lo, hi), args.layers_per_part, spec)
+        job = slice_job(args.lattice, args.param, args.layer, args.pixel, (lo, hi), args.layers_per_part, spec,
+                        limits(args))
         status = report_job(run_job(job, args.parts, args.scheduler, args.workers))
         if status == 0 and args.out:
             man = assemble_slices(args.parts, args.out)

@@ -48,7 +48,7 @@ from ..model.grading import RadiusField
 from ..model.groupmap import GroupMap
 from ..model.lattice import MAX_COUNT, BeamPattern, Direction, Lattice, Node
 from . import proctree
-from .runtime import ROOT_PACKAGE, compile_program
+from .runtime import ROOT_PACKAGE, compile_program, load_program_file
 from .sources import load_lattice, resolve_source
 
 DEFAULT_TIMEOUT = 30.0
@@ -469,6 +469,14 @@ def run_program(source: str, params=None, timeout: float | None = DEFAULT_TIMEOU
     name = str(path)
     lat = Job(lambda: load_lattice(source, params), name, timeout, memory, hints=hints).result()
     return _checked(lat, name)
+
+
+def program_inputs(source: str, timeout: float | None = DEFAULT_TIMEOUT, memory: int | None = None,
+                   hints: Hints = CLI_HINTS) -> list:
+    """The inputs (``runtime.Param``) of the program file or preset ``source``, its module's top
+    level run contained as ``run_program`` runs it (``lattice()`` itself is not called)."""
+    path = resolve_source(source)
+    return Job(lambda: load_program_file(path).parameters(), str(path), timeout, memory, hints=hints).result()
 
 
 def run_text(text: str, name: str, params: dict | None = None, timeout: float | None = DEFAULT_TIMEOUT,
