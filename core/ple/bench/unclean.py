@@ -108,9 +108,9 @@ CASES = [("fig6_3", 0, "refined", 4), ("curved", 40, "cnt", 0), ("curved", 40, "
          ("tenth", 70, "cnt", 0),
          # thick: every hub unclean, one cluster with no free beam, meshed in slabs (ple.meshing.slabs); each
          # at a size one union still finishes and at about 10x its groups
-         ("thick_octet", 8, "cnt", 0), ("thick_octet", 17, "cnt", 0), ("thick_octet", 8, "refined", 2),
+         ("thick_octet", 8, "cnt", 0), ("thick_octet", 17, "cnt", 0), ("thick_octet", 8, "refined", 3),
          ("shrunk_graded", 10, "cnt", 0), ("shrunk_graded", 22, "cnt", 0),
-         ("thick_bcc_screw", 6, "cnt", 0), ("thick_bcc_screw", 12, "cnt", 0)]
+         ("thick_bcc_screw", 6, "cnt", 0), ("thick_bcc_screw", 12, "cnt", 0), ("thick_bcc_screw", 6, "refined", 3)]
 
 
 def add_arguments(p) -> None:
