@@ -38,12 +38,14 @@ from .model import (
     uid,
 )
 
+PARTS = {"G", "u", "v", "w", "cage", "region"}  # what every rig has (template nodes and corners come and go)
+
 
 def refresh(rig, force: bool = False, prepared=None, live: bool = False) -> str | None:
     """Read user moves, re-evaluate and redraw if anything changed; returns an error or None.
     ``prepared``: (lattice, evaluation) a job computed for the rig as it is now, drawn instead
     of evaluating again unless the user moved something since. ``live``: a move in progress
-    (the depsgraph handler): a region of more than ``LIVE_ELEMENTS`` is drawn as its hull until
+    (the depsgraph handler): a region of more than ``drawing.LIVE_ELEMENTS`` is drawn as its hull until
     the moves pause (``settle``). A move of G alone, where the drawing moves rigidly, moves the
     region's object and rewrites nothing.
 
@@ -64,7 +66,8 @@ def refresh(rig, force: bool = False, prepared=None, live: bool = False) -> str 
                     rig.ple.status = ""
                 return None
             placed_only = (st.rigid and new and not force and prepared is None and signature(rig) == st.signature
-                           and all(isinstance(e, snippets.SetPlacement) for e in new))
+                           and all(isinstance(e, snippets.SetPlacement) for e in new)
+                           and PARTS <= set(parts(rig)))  # a drawing to keep (not parts built again)
             if prepared is not None and not new:
                 (lat, ev), at = prepared, np.eye(4)
             else:
@@ -80,7 +83,7 @@ def refresh(rig, force: bool = False, prepared=None, live: bool = False) -> str 
             return str(exc)
         add_edits(rig, new)
         st.lattice = lat
-        if not {"G", "u", "v", "w", "cage", "region"} <= set(parts(rig)):
+        if not PARTS <= set(parts(rig)):
             build_parts(rig, lat)  # a copy (Shift+D) or a rig whose parts were deleted
         if draw_rig(rig, lat, ev, st, at, live):
             _settle_later()

@@ -127,6 +127,11 @@ def case_move_of_g_moves_the_object_only():
     want = placed("cubic", sim)
     want.set_u(10, core.Translation(core.Vec(1.1, 0, 0)))  # U's frame moved in G's coordinates
     base.assert_region_is(rig, want, "0:4,0:3,0:2")
+    bpy.data.objects.remove(region)  # a script deleted the drawing: the next move of G draws it again
+    sim = move_g(rig, angle=-0.2, shift=(0.5, 0.5, 0.0), scale=0.9)
+    want = placed("cubic", sim)
+    want.set_u(10, core.Translation(core.Vec(1.1, 0, 0)))
+    base.assert_region_is(rig, want, "0:4,0:3,0:2")
 
 
 def case_move_of_g_through_a_filter_redraws():
