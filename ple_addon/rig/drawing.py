@@ -42,8 +42,6 @@ def draw_rig(rig, lat, ev, st: RigState, at=None, live: bool = False) -> bool:
     if tuple(rig.ple.counts) != lat.counts:
         rig.ple.counts = lat.counts
     st.rigid = moves_rigidly(rig, lat) and np.array_equal(at, lat.placement.matrix)  # drawn before G
-    if ev is not None and ev is not KEPT and not isinstance(ev, Drawn):
-        ev = Drawn.of(ev)  # a job's evaluation (a filter's)
     if "region" in p:
         if ev is not KEPT:
             full = ev is None or len(ev.center) + len(ev.beam_nodes) <= LIVE_ELEMENTS or not live

@@ -23,6 +23,7 @@ from .edits import baseline, user_edits
 from .model import (
     PARAM_PREFIX,
     PART_ROLES,
+    Drawn,
     add_edits,
     all_rigs,
     base_lattice,
@@ -68,8 +69,9 @@ def refresh(rig, force: bool = False, prepared=None, live: bool = False) -> str 
             placed_only = (st.rigid and new and not force and prepared is None and signature(rig) == st.signature
                            and all(isinstance(e, snippets.SetPlacement) for e in new)
                            and PARTS <= set(parts(rig)))  # a drawing to keep (not parts built again)
-            if prepared is not None and not new:
-                (lat, ev), at = prepared, np.eye(4)
+            if prepared is not None and not new:  # a job's evaluation (a filter's), in the rig's coordinates
+                lat, ev = prepared
+                ev, at = (None if ev is None else Drawn.of(ev)), np.eye(4)
             else:
                 lat = lattice_of(rig, st, new)  # new edits are kept only if the lattice they give is valid
                 if placed_only and moves_rigidly(rig, lat):
