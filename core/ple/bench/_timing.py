@@ -6,6 +6,8 @@ import subprocess
 import time
 from pathlib import Path
 
+from ..errors import PleError
+
 
 def best_of(fn, repeat: int = 3) -> float:
     """Best wall time in seconds of ``repeat`` calls of ``fn()``."""
@@ -52,3 +54,16 @@ def peak_pss(cmd: list[str], every: float = 0.01) -> dict:
     out, err = proc.communicate()
     return {"returncode": proc.returncode, "peak_bytes": peak, "seconds": time.perf_counter() - t0,
             "stdout": out.strip(), "stderr": err.strip()}
+
+
+def checkout(rev: str, into: Path, *paths: str) -> Path:
+    """``paths`` of the repository holding this package at ``rev``, extracted into ``into``
+    (``git archive``): a benchmark's baseline, today's code beside ours in the same run."""
+    root = Path(__file__).resolve().parents[3]
+    try:
+        archive = subprocess.run(["git", "-C", str(root), "archive", rev, *paths], capture_output=True,
+                                 check=True).stdout
+    except (OSError, subprocess.CalledProcessError) as exc:
+        raise PleError(f"--baseline-rev {rev}: cannot read it from the repository ({exc})") from None
+    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
+    return into

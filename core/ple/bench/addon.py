@@ -15,6 +15,7 @@ import tempfile
 from pathlib import Path
 
 from ..errors import PleError
+from ._timing import checkout
 
 ROOT = Path(__file__).resolve().parents[3]
 CHILD = ROOT / "benchmarks" / "addon_redraw.py"  # the Blender side, outside the core (no bpy here)
@@ -42,17 +43,6 @@ def _cases(text: str) -> list[tuple[int, int]]:
     return out
 
 
-def _baseline(rev: str, into: Path) -> Path:
-    """The core and add-on at ``rev``, extracted from the repository (``git archive``)."""
-    try:
-        archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "core", "ple_addon"], capture_output=True,
-                                 check=True).stdout
-    except (OSError, subprocess.CalledProcessError) as exc:
-        raise PleError(f"--baseline-rev {rev}: cannot read it from the repository ({exc})") from None
-    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
-    return into
-
-
 def _blender(root: Path, count: int, region: int, edits: int) -> dict:
     res = subprocess.run([sys.executable, str(CHILD), str(root), str(count), str(region), str(edits)],
                          capture_output=True, text=True, cwd=tempfile.gettempdir(),
@@ -71,7 +61,7 @@ def run(args) -> dict:
     cases = _cases(args.cases)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        today = _baseline(args.baseline_rev, Path(tmp))
+        today = checkout(args.baseline_rev, Path(tmp), "core", "ple_addon")
         for count, region in cases:
             ours = _blender(ROOT, count, region, args.edits)
             base = _blender(today, count, region, args.edits)

@@ -13,6 +13,7 @@ import tempfile
 from pathlib import Path
 
 from ..errors import PleError
+from ._timing import checkout
 
 ROOT = Path(__file__).resolve().parents[3]
 BASELINE_REV = "68b3830"  # before the check was made in blocks (its grid, boxes and neighbourhoods)
@@ -53,12 +54,7 @@ def _check(core: Path, name: str, style: str) -> dict:
 def run(args) -> dict:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        try:
-            archive = subprocess.run(["git", "-C", str(ROOT), "archive", args.baseline_rev, "core"],
-                                     capture_output=True, check=True).stdout
-        except (OSError, subprocess.CalledProcessError) as exc:
-            raise PleError(f"--baseline-rev {args.baseline_rev}: cannot read it from the repository ({exc})") from None
-        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
+        checkout(args.baseline_rev, Path(tmp), "core")
         for name in args.lattices.split(","):
             ours = _check(ROOT / "core", name, args.style)
             base = _check(Path(tmp) / "core", name, args.style)

@@ -19,7 +19,7 @@ from ..io.slices import write_pmc_slices
 from ..model.budget import require
 from ..program.clg_sources import run_clg
 from ..program.meshes import mesh_clg_contained
-from .common import add_program_limits, max_memory
+from .common import add_program_limits, limits, max_memory
 
 
 def _source(p) -> None:
@@ -71,7 +71,7 @@ def add_slice_args(q, out_required: bool = True) -> None:
 
 
 def _load(args):
-    return compiled(run_clg(args.source, args.param, args.timeout, max_memory(args)))
+    return compiled(run_clg(args.source, args.param, *limits(args)))
 
 
 def _npy(path: str, what: str, cols: int) -> np.ndarray:
