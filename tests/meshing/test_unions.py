@@ -224,21 +224,25 @@ def test_clusters_cut_across_free_beams_mesh_their_union(style, levels, monkeypa
         assert abs(cut.volume - est) <= 4 * err and abs(cut.volume / est - 1) < 0.01
 
 
-def test_a_cut_ring_lies_on_the_beams_tangent_cone():
+@pytest.mark.parametrize("segments", [32, 48])
+def test_a_cut_ring_lies_on_the_beams_tangent_cone(segments):
     """The cut ring of a beam between two balls: centred on the axis halfway along the bare part,
     normal to it, on the outer tangent cone of the two balls (radii scaled so that the ring's
-    polygon has the exact circle's area)."""
-    from ple.meshing.unions import TANGENT_SCALE, _cut_ring
+    polygon has the exact circle's area), a polygon of the cluster's segments."""
+    from ple.meshing.unions import _cut_ring
 
     c = np.array([[0.0, 0.0, 0.0], [2.0, 1.0, 0.5]])
     rad = np.array([0.3, 0.2])
-    ring = _cut_ring(0, c, rad, np.array([[0, 1]]), np.array([0]), 0.0)
+    ring = _cut_ring(0, c, rad, np.array([[0, 1]]), np.array([0]), 0.0, segments)
+    assert len(ring) == segments
+    # the n-gon of circumradius s has area n s² sin(2π/n) / 2: π for this s
+    scale = np.sqrt(2 * np.pi / (segments * np.sin(2 * np.pi / segments)))
     length = float(np.linalg.norm(c[1]))
     a = c[1] / length
     centre = ring.mean(axis=0)
     assert np.allclose(np.cross(centre, a), 0, atol=1e-12)  # on the axis
     assert np.allclose((ring - centre) @ a, 0, atol=1e-12)  # normal to it
-    r1, r2 = rad * TANGENT_SCALE
+    r1, r2 = rad * scale
     cos_t = (r1 - r2) / length
     p = float(centre @ a)
     # the outer tangent line in a meridian plane, through the two tangent points

@@ -262,7 +262,7 @@ def _foreseen_limit(p: MeshPlan) -> None:
     ``max_memory`` (``tessellate.foreseen_union``: overlapping balls, a lower bound)."""
     if not p.checked or p.cut or p.request.max_memory is None:
         return
-    f = foreseen_union(p.lattice, p.region)
+    f = foreseen_union(p.lattice, p.region, p.segments)
     if f is not None:
         _union_within(p, f.bytes, "a local union of unclean hubs, foreseen from the balls that overlap", f.hubs,
                       f.beams, f"{f.ball_pairs:,} overlapping balls", f.slabs)

@@ -31,8 +31,8 @@ import numpy as np
 
 from ..errors import PleError
 from .selfcheck import self_intersections
-from .unclean import BALL_TURNS, SPHERE_SEGMENTS, match_rows, on_grid
-from .unions import UNION_TRIANGLE_BYTES, Elements, manifold3d_module, open_rings, piece_estimate, stoppable
+from .unclean import TURN_TRIES, match_rows, on_grid
+from .unions import UNION_TRIANGLE_BYTES, Elements, ball_triangles, cut_bound, manifold3d_module, open_rings, piece_estimate, stoppable
 from .weld import sorted_edges
 
 SLAB_TRIANGLES = 1_500_000  # input triangles of one slab's union (about 0.9 GB at UNION_TRIANGLE_BYTES)
@@ -45,14 +45,14 @@ CLEARANCE = 2.0**-20  # of the cluster's size: how far a cut plane stays from ev
 def element_triangles(cluster) -> np.ndarray:
     """Input triangles of each element of a cluster, in ``element_hulls``' order, from above
     (as ``unions.piece_estimate``): a polygonal ball per hub, two balls' worth per beam or half."""
-    ball = 2 * SPHERE_SEGMENTS * (SPHERE_SEGMENTS // 2)
+    ball = ball_triangles(cluster.segments)
     n = len(cluster.hubs), len(cluster.beams), len(cluster.halves)
     return np.concatenate([np.full(n[0], ball), np.full(n[1] + n[2], 2 * ball)]).astype(np.int64)
 
 
 def element_extents(cluster, center, radius, beam_nodes) -> np.ndarray:
     """(E, 2, 3): each element's box (low, high corner), from its balls' bounding spheres."""
-    c, r = np.asarray(center, float), np.asarray(radius, float) * 1.02
+    c, r = np.asarray(center, float), np.asarray(radius, float) * cut_bound(cluster.segments)
     bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
     ends = np.concatenate([np.stack([cluster.hubs, cluster.hubs], 1), bn[cluster.beams],
                            bn[cluster.halves[:, 0]] if len(cluster.halves) else np.zeros((0, 2), np.int64)])
@@ -115,8 +115,10 @@ def slab_loads(weights, lo, hi, cuts) -> list:
 def unite_in_slabs(cluster, center, radius, beam_nodes, rings: dict, grid: float, limit: int = SLAB_TRIANGLES):
     """The pieces (vertices, faces) of a cluster cut into slabs (module docstring), each open along
     its seams and along the rings it shares with clean junctions (``unions.unite_cluster``'s
-    ``rings``). Tries the balls as they are, then turned (as ``unite_cluster``), each at up to
-    ``SEAM_TRIES`` positions of each plane. Only the elements of one slab are held at a time."""
+    ``rings``). Tries the balls all turned one way, then each its own (``TURN_TRIES`` after the
+    first: a cluster this large is a thick lattice, whose symmetric beams meet tangentially on
+    balls as they are, and a failed try costs a slab), each at up to ``SEAM_TRIES`` positions of
+    each plane. Only the elements of one slab are held at a time."""
     manifold3d = manifold3d_module()
     weights = element_triangles(cluster)
     ext = element_extents(cluster, center, radius, beam_nodes)
@@ -124,7 +126,7 @@ def unite_in_slabs(cluster, center, radius, beam_nodes, rings: dict, grid: float
     if not len(cuts):
         raise PleError("a cluster that fits one union is not cut into slabs")
     last = None
-    for turns in (None, BALL_TURNS):
+    for turns in TURN_TRIES[1:]:
         try:
             return _slabs(Elements(manifold3d, cluster, center, radius, beam_nodes, rings, turns), cuts, ext, axis,
                           grid)

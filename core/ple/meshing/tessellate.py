@@ -55,7 +55,7 @@ from .skin import clip_bodies, clip_to_bodies
 from .slabs import unite_in_slabs_stoppable
 from .styles import DEFAULT_LEVELS, DEFAULT_SEGMENTS
 from .styles import style as style_named
-from .unclean import SEPARATION_GRIDS, component_labels, find_unclean
+from .unclean import SEPARATION_GRIDS, ball_segments, component_labels, find_unclean
 from .unions import (
     BATCH_TRIANGLES,
     CUT,
@@ -990,7 +990,7 @@ def tessellate(lat: Lattice, region=None, style: str = "refined", levels: int | 
 def leave_to_unions(tess: Tessellator, ev, report) -> list:
     """Tell the fast path which hubs and beams the local unions of ``report`` mesh
     (``ple.meshing.unions``); returns the clusters."""
-    cl = clusters(report, ev.beam_nodes, ev.center, ev.radius)
+    cl = clusters(report, ev.beam_nodes, ev.center, ev.radius, ball_segments(tess.segments))
     idx = np.asarray(ev.node_index, np.int64)
     hubs = np.concatenate([c.hubs for c in cl]) if cl else np.zeros(0, np.int64)
     beams = np.concatenate([c.beams for c in cl]) if cl else np.zeros(0, np.int64)
@@ -1016,7 +1016,7 @@ class ForeseenUnion:
     bytes: int
 
 
-def foreseen_union(lat: Lattice, region=None) -> ForeseenUnion | None:
+def foreseen_union(lat: Lattice, region=None, segments: int | None = None) -> ForeseenUnion | None:
     """The largest local union foreseen before the unclean check, cheaply, from the balls alone:
     two balls that overlap (centres nearer than their radii's sum) are unclean hubs of one local
     union (their meshes would meet, and no free beam joins them), so the connected groups of the
@@ -1024,7 +1024,8 @@ def foreseen_union(lat: Lattice, region=None) -> ForeseenUnion | None:
     one's estimate (``unions.piece_estimate``, or its largest slab's) is a lower bound of what the
     check will find. None when no ball overlaps another, or when more than ``FORESIGHT_PAIRS``
     candidate pairs would have to be looked at (the check then decides). A region of more than
-    ``SAMPLED_GROUPS`` groups is looked at whole only where its corners or middle overlap."""
+    ``SAMPLED_GROUPS`` groups is looked at whole only where its corners or middle overlap.
+    ``segments``: the mesh's (its unions' balls: ``unclean.ball_segments``)."""
     lat, r = lat.per_hub(region)
     if r.groups > SAMPLED_GROUPS and not any(len(_overlapping_balls(lat.evaluate(b))) for b in _sample_blocks(r)):
         return None
@@ -1037,7 +1038,7 @@ def foreseen_union(lat: Lattice, region=None) -> ForeseenUnion | None:
     hubs = np.flatnonzero(label == int(np.argmax(sizes)))
     bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
     beams = np.flatnonzero(np.isin(bn, hubs).any(axis=1))
-    peak, count = slabs.union_peak(Cluster(hubs, beams), ev.center, ev.radius, bn)
+    peak, count = slabs.union_peak(Cluster(hubs, beams, segments=ball_segments(segments)), ev.center, ev.radius, bn)
     return ForeseenUnion(len(hubs), len(beams), len(pairs), count, int(peak))
 
 
@@ -1352,7 +1353,7 @@ def _grown(c, hubs_in: list, bn, others: list):
     merged = [p for p in others if np.isin(p.beams, beams).any() or np.isin(p.hubs, hubs_in).any()]
     hubs = np.unique(np.concatenate([c.hubs, hubs_in, *[p.hubs for p in merged]])).astype(np.int64)
     allb = np.unique(np.concatenate([c.beams, beams, *[p.beams for p in merged]])).astype(np.int64)
-    return Cluster(hubs, allb), merged
+    return Cluster(hubs, allb, segments=c.segments), merged
 
 
 def iter_triangles(lat: Lattice, region=None, style: str = "refined", levels: int | None = None,

@@ -24,6 +24,7 @@ diagonals is a cluster of two beams. ``piece_estimate`` gives both before any un
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import os
 from dataclasses import dataclass, field
@@ -34,7 +35,7 @@ from ..algebra.elements import segment_distance
 from ..algebra.vectors import perpendicular_frames, runs
 from ..errors import PleError
 from .selfcheck import search_cell, self_intersections
-from .unclean import BALL_TURNS, SPHERE_SEGMENTS, component_labels, match_rows, on_grid, on_one_ring, ring_of_vertices
+from .unclean import BALL_TURNS, SPHERE_SEGMENTS, TURN_TRIES, component_labels, match_rows, on_grid, on_one_ring, ring_of_vertices
 from .weld import COLLAPSE_GRIDS, snap
 
 UNION_TRIANGLE_BYTES = 600  # peak bytes per input triangle of a manifold3d union and its repair (measured, rounded up)
@@ -59,19 +60,22 @@ CUT = 2  # the end of a ring key (beam row, CUT) naming the ring where a cluster
 class Cluster:
     """One local union: hubs (rows of the evaluation) meshed as balls, beams (rows) as hulls,
     and halves (H, 2: beam row, end 0|1) of beams cut across (``split``): the hull of the ball
-    at that end and the beam's cut ring, whose key in the rings is (beam row, CUT)."""
+    at that end and the beam's cut ring, whose key in the rings is (beam row, CUT). ``segments``:
+    of its polygonal balls and cut rings (``unclean.ball_segments`` of the mesh's)."""
 
     hubs: np.ndarray
     beams: np.ndarray
     halves: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    segments: int = SPHERE_SEGMENTS
 
 
-def clusters(report, beam_nodes, center=None, radius=None) -> list:
+def clusters(report, beam_nodes, center=None, radius=None, segments: int = SPHERE_SEGMENTS) -> list:
     """The clusters of an unclean report (``find_unclean``): connected groups of the graph whose
     vertices are the elements of E and B (module docstring) and whose edges are the overlapping
     pairs and the incidences of E's hubs. beam_nodes (M, 2) node rows. With the balls (center
     (N, 3), radius (N,)) and the report's r⁺, a clean hub whose S⁺ a neighbouring ball of E
-    reaches (its contact disk towards that ball is not safe from it) joins E, until none does."""
+    reaches (its contact disk towards that ball is not safe from it) joins E, until none does.
+    ``segments``: the clusters' (``Cluster``)."""
     bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
     n, m = len(report.shrunk), len(bn)
     pairs = np.asarray(report.element_pairs, np.int64).reshape(-1, 2)
@@ -101,10 +105,14 @@ def clusters(report, beam_nodes, center=None, radius=None) -> list:
     members = np.flatnonzero(np.concatenate([hub_e, beam_b]))
     order = members[np.argsort(label[members], kind="stable")]
     cuts = np.flatnonzero(np.diff(label[order])) + 1
-    return [Cluster(c[c < n], c[c >= n] - n) for c in np.split(order, cuts)]
+    return [Cluster(c[c < n], c[c >= n] - n, segments=segments) for c in np.split(order, cuts)]
 
 
-CUT_BOUND = 1.02  # a polygonal ball, or a beam's polygon, lies within this times its radius (unit_ball: 1.0036)
+def cut_bound(segments: int) -> float:
+    """A polygonal ball of ``segments`` (``unit_ball``: its vertices on a sphere scaled to the exact
+    volume, 1.0076 at 32 segments, 1.030 at 16), or a beam's polygon, lies within this times its
+    radius: 1/cos²(π/segments) bounds the scale, and 1.02 is kept as the least."""
+    return max(1.02, 1.0 / math.cos(math.pi / segments) ** 2)
 
 
 def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 0.0):
@@ -114,11 +122,11 @@ def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 
     (it is in none of ``report``'s element pairs) is cut by the plane normal to it halfway along
     its bare part, when each half clears what the other end brings (§3: a beam is the hull of its
     two balls; the half at a ball is the hull of that ball and the cut ring): the other end's ball
-    and its other beams, each taken as a capsule (segment, radius × ``CUT_BOUND``), the half as
+    and its other beams, each taken as a capsule (segment, radius × ``cut_bound``), the half as
     the capsule of its frustum, more than ``margin`` apart. Everything else a half could meet
     shares no ball with the beam and is in a pair with it, so it is not cut. The pieces are the
     connected groups of hubs, beams and halves (pairs and incidences); a beam whose halves land in
-    one piece stays whole. Returns (clusters, cut rings {(beam row, CUT): (SPHERE_SEGMENTS, 3)}):
+    one piece stays whole. Returns (clusters, cut rings {(beam row, CUT): (cluster.segments, 3)}):
     each ring lies on the tangent cone of the beam, and both halves' unions take it as their
     rim, so they meet exactly there."""
     hubs = np.sort(np.asarray(cluster.hubs, np.int64))
@@ -130,7 +138,7 @@ def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 
     beams = np.asarray(cluster.beams, np.int64)
     ends = bn[beams]
     inner = np.isin(ends, hubs).all(axis=1) & (ends[:, 0] != ends[:, 1]) & ~np.isin(beams, report.paired_beams())
-    rings = {(j, CUT): r for j, r in _cut_rings(beams[inner], c, rad, bn, beams, margin).items()}
+    rings = {(j, CUT): r for j, r in _cut_rings(beams[inner], c, rad, bn, beams, margin, cluster.segments).items()}
     if not rings:
         return None
     cut = np.array(sorted(j for j, _ in rings), np.int64)
@@ -156,23 +164,24 @@ def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 
         both = np.unique(hv[:, 0], return_counts=True)
         both = both[0][both[1] == 2]  # both halves here: the beam stays whole
         out.append(Cluster(hubs[label[:h] == g], np.sort(np.concatenate([whole[label[h:h + w] == g], both])),
-                           hv[~np.isin(hv[:, 0], both)]))
+                           hv[~np.isin(hv[:, 0], both)], cluster.segments))
     used = {j for piece in out for j, _ in piece.halves.tolist()}
     return out, {k: r for k, r in rings.items() if k[0] in used}
 
 
-def _cut_ring(j: int, c, rad, bn, beams, margin: float):
+def _cut_ring(j: int, c, rad, bn, beams, margin: float, segments: int = SPHERE_SEGMENTS):
     """The cut ring of beam j (``split``), or None when its halves do not clear the other end."""
-    return _cut_rings(np.array([j], np.int64), c, rad, bn, beams, margin).get(int(j))
+    return _cut_rings(np.array([j], np.int64), c, rad, bn, beams, margin, segments).get(int(j))
 
 
-def _cut_rings(js: np.ndarray, c, rad, bn, beams, margin: float) -> dict:
+def _cut_rings(js: np.ndarray, c, rad, bn, beams, margin: float, segments: int = SPHERE_SEGMENTS) -> dict:
     """The cut rings of the beams ``js`` of a cluster (its ``beams``) whose halves clear the other
-    end (``split``): {beam row: ring (SPHERE_SEGMENTS, 3)}, all tested at once."""
+    end (``split``): {beam row: ring (segments, 3)}, all tested at once."""
     x, y = bn[js, 0], bn[js, 1]
+    bound = cut_bound(segments)
     axis = c[y] - c[x]
     length = np.linalg.norm(axis, axis=1)
-    rx, ry = rad[x] * TANGENT_SCALE, rad[y] * TANGENT_SCALE
+    rx, ry = rad[x] * tangent_scale(segments), rad[y] * tangent_scale(segments)
     ok = length > np.abs(rx - ry)
     length = np.where(ok, length, 1.0)
     a = axis / length[:, None]
@@ -180,18 +189,18 @@ def _cut_rings(js: np.ndarray, c, rad, bn, beams, margin: float) -> dict:
     sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
     px, py = rx * cos_t, length + ry * cos_t  # the tangent circles' positions along the axis, radii ρ
     rho_x, rho_y = rx * sin_t, ry * sin_t
-    lo, hi = np.maximum(px, rad[x] * CUT_BOUND), np.minimum(py, length - rad[y] * CUT_BOUND)
+    lo, hi = np.maximum(px, rad[x] * bound), np.minimum(py, length - rad[y] * bound)
     ok &= hi > lo
     p = 0.5 * (lo + hi)
     rho = rho_x + (rho_y - rho_x) * (p - px) / np.where(py > px, py - px, 1.0)
     # each beam's two sides: the other end's half (its frustum) against `near`'s ball and its other beams
     near = np.concatenate([x, y])
     start, stop = np.concatenate([p, px]), np.concatenate([py, p])
-    r_half = np.concatenate([np.maximum(rho, rho_y), np.maximum(rho_x, rho)]) * CUT_BOUND
+    r_half = np.concatenate([np.maximum(rho, rho_y), np.maximum(rho_x, rho)]) * bound
     a2, cx2 = np.concatenate([a, a]), np.concatenate([c[x], c[x]])
     s0, s1 = cx2 + start[:, None] * a2, cx2 + stop[:, None] * a2
     gap = segment_distance(s0, s1, c[near], c[near])
-    clear = gap > rad[near] * CUT_BOUND + r_half + margin
+    clear = gap > rad[near] * bound + r_half + margin
     # the cluster's beams at each near hub, but the beam itself
     ends = bn[beams]
     hub, beam = np.concatenate([ends[:, 0], ends[:, 1]]), np.concatenate([beams, beams])
@@ -204,7 +213,7 @@ def _cut_rings(js: np.ndarray, c, rad, bn, beams, margin: float) -> dict:
     keep = other != np.concatenate([js, js])[side]
     side, other = side[keep], other[keep]
     o = bn[other]
-    reach = np.maximum(rad[o[:, 0]], rad[o[:, 1]]) * CUT_BOUND
+    reach = np.maximum(rad[o[:, 0]], rad[o[:, 1]]) * bound
     hit = segment_distance(s0[side], s1[side], c[o[:, 0]], c[o[:, 1]]) <= reach + r_half[side] + margin
     clear[side[hit]] = False
     ok &= clear[:len(js)] & clear[len(js):]
@@ -212,7 +221,7 @@ def _cut_rings(js: np.ndarray, c, rad, bn, beams, margin: float) -> dict:
     if not len(k):
         return {}
     e1, e2 = perpendicular_frames(a[k])
-    ang = 2 * np.pi * np.arange(SPHERE_SEGMENTS) / SPHERE_SEGMENTS
+    ang = 2 * np.pi * np.arange(segments) / segments
     rings = ((c[x[k]] + p[k, None] * a[k])[:, None] + rho[k, None, None]
              * (np.cos(ang)[None, :, None] * e1[:, None] + np.sin(ang)[None, :, None] * e2[:, None]))
     return dict(zip(js[k].tolist(), rings))
@@ -229,9 +238,14 @@ def excluded(report, beam_nodes) -> tuple[np.ndarray, np.ndarray]:
 def piece_estimate(cluster: Cluster) -> tuple[int, int]:
     """(input triangles, peak bytes) of a cluster's union, from above: a polygonal ball per hub,
     a hull per beam of at most two balls' vertices (a contact ring has fewer than a ball)."""
-    ball = 2 * SPHERE_SEGMENTS * (SPHERE_SEGMENTS // 2)
+    ball = ball_triangles(cluster.segments)
     tris = (len(cluster.hubs) + 2 * len(cluster.beams) + 2 * len(cluster.halves)) * ball
     return tris, tris * UNION_TRIANGLE_BYTES
+
+
+def ball_triangles(segments: int) -> int:
+    """Triangles of a polygonal ball of ``segments`` (from above: manifold3d's sphere)."""
+    return 2 * segments * (segments // 2)
 
 
 def unit_ball(manifold3d, segments: int = SPHERE_SEGMENTS):
@@ -244,20 +258,23 @@ def unit_ball(manifold3d, segments: int = SPHERE_SEGMENTS):
 _UNIT: dict = {}
 
 
-def _unit_vertices(manifold3d) -> np.ndarray:
-    """The vertices of ``unit_ball`` (computed once per process)."""
-    if "v" not in _UNIT:
-        _UNIT["v"] = np.asarray(unit_ball(manifold3d).to_mesh64().vert_properties[:, :3], float)
-    return _UNIT["v"]
+def _unit_vertices(manifold3d, segments: int = SPHERE_SEGMENTS) -> np.ndarray:
+    """The vertices of ``unit_ball`` (computed once per process and segment count)."""
+    if segments not in _UNIT:
+        _UNIT[segments] = np.asarray(unit_ball(manifold3d, segments).to_mesh64().vert_properties[:, :3], float)
+    return _UNIT[segments]
 
 
-# a SPHERE_SEGMENTS-gon of this circumradius has the area of the unit circle (a cut ring's, so
-# that the beam keeps the cross-section of the exact one, as ``unit_ball`` its volume)
-TANGENT_SCALE = float(np.sqrt(2 * np.pi / (SPHERE_SEGMENTS * np.sin(2 * np.pi / SPHERE_SEGMENTS))))
+def tangent_scale(segments: int) -> float:
+    """The circumradius of a ``segments``-gon whose area is the unit circle's (a cut ring's, so that
+    the beam keeps the cross-section of the exact one, as ``unit_ball`` its volume)."""
+    return float(np.sqrt(2 * np.pi / (segments * np.sin(2 * np.pi / segments))))
+
+
 CAP_ROWS = 2  # rows of a ball's vertices beyond the tangent circle that its beams' hulls take in
 
 
-def beam_points(ends, centers) -> np.ndarray:
+def beam_points(ends, centers, segments: int = SPHERE_SEGMENTS) -> np.ndarray:
     """Points whose convex hull, with the balls, is a cluster's beam (§3: a beam is the hull of
     its two balls): ``ends`` two items, each a ball's vertices (P, 3) (its centre in ``centers``)
     or a ring (k, 3), told apart by ``centers`` (None for a ring). A ball enters by its cap only:
@@ -280,7 +297,7 @@ def beam_points(ends, centers) -> np.ndarray:
         toward = a if e == 0 else -a
         # the tangent circle of the outer cone of the two ends (each as its bounding sphere)
         cos_t = np.clip((reach[e] - reach[1 - e]) / length, -1.0, 1.0)
-        angle = np.arccos(cos_t) + CAP_ROWS * 2 * np.pi / SPHERE_SEGMENTS
+        angle = np.arccos(cos_t) + CAP_ROWS * 2 * np.pi / segments
         w = p - mids[e]
         cos_v = (w @ toward) / np.maximum(np.linalg.norm(w, axis=1), 1e-300)
         out.append(p[cos_v >= np.cos(min(angle, np.pi))])
@@ -364,10 +381,12 @@ def unite_cluster(cluster: Cluster, center, radius, beam_nodes, rings: dict, gri
     coordinates (clockwise about the beam, as the fast path placed them) for each end of the
     cluster's beams that is not one of its hubs. Tries the balls as they are, then each turned
     its own way (identical balls give symmetric lattices coplanar faces that a Boolean may leave
-    overlapping)."""
+    overlapping): ``TURN_TRIES``, from the second on for a cluster of ``STOPPABLE_TRIANGLES`` or
+    more (a thick lattice, whose symmetric beams meet tangentially on balls as they are: a failed
+    try costs as much as the union)."""
     manifold3d = manifold3d_module()
     last = None
-    for turns in (None, BALL_TURNS):
+    for turns in TURN_TRIES[piece_estimate(cluster)[0] >= STOPPABLE_TRIANGLES:]:
         try:
             v, f, keys = _united(manifold3d, cluster, center, radius, beam_nodes, rings, turns)
             centre = v.mean(axis=0) if len(v) else np.zeros(3)
@@ -450,7 +469,9 @@ class Elements:
 
     def __init__(self, manifold3d, cluster, center, radius, beam_nodes, rings, turns):
         self.manifold3d, self.cluster, self.rings, self.turns = manifold3d, cluster, rings, turns
-        self.unit = _unit_vertices(manifold3d)
+        self.unit = _unit_vertices(manifold3d, cluster.segments)
+        if turns == "all":  # every ball by one turn (``TURN_TRIES``)
+            self.unit = _turned(self.unit, BALL_TURNS)
         self.c, self.rad = np.asarray(center, float), np.asarray(radius, float)
         self.bn = np.asarray(beam_nodes, np.int64).reshape(-1, 2)
         self.own = set(cluster.hubs.tolist())
@@ -460,7 +481,7 @@ class Elements:
         self.keys = sorted(k for k in rings if k[1] == CUT or int(self.bn[k[0], k[1]]) not in self.own)
 
     def ball(self, x: int) -> np.ndarray:
-        u = self.unit if self.turns is None else _turned(self.unit, np.modf(x * self.turns)[0])
+        u = self.unit if self.turns != "each" else _turned(self.unit, np.modf(x * BALL_TURNS)[0])
         return u * self.rad[x] + self.c[x]
 
     def points(self, i: int) -> np.ndarray:
@@ -472,10 +493,10 @@ class Elements:
             j = int(self.cluster.beams[i - self.hubs])
             x = [int(bn[j, e]) for e in (0, 1)]
             return beam_points([self.ball(x[e]) if x[e] in own else rings[(j, e)] for e in (0, 1)],
-                               [c[x[e]] if x[e] in own else None for e in (0, 1)])
+                               [c[x[e]] if x[e] in own else None for e in (0, 1)], self.cluster.segments)
         j, e = (int(t) for t in self.cluster.halves[i - self.hubs - self.beams])
         x = int(bn[j, e])
-        return beam_points([self.ball(x), rings[(j, CUT)]], [c[x], None])
+        return beam_points([self.ball(x), rings[(j, CUT)]], [c[x], None], self.cluster.segments)
 
     def hull(self, i: int):
         p = self.manifold3d.Manifold.hull_points(self.points(i))
