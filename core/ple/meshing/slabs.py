@@ -32,7 +32,16 @@ import numpy as np
 from ..errors import PleError
 from .selfcheck import self_intersections
 from .unclean import TURN_TRIES, match_rows, on_grid
-from .unions import UNION_TRIANGLE_BYTES, Elements, ball_triangles, cut_bound, manifold3d_module, open_rings, piece_estimate, stoppable
+from .unions import (
+    UNION_TRIANGLE_BYTES,
+    Elements,
+    ball_triangles,
+    cut_bound,
+    manifold3d_module,
+    open_rings,
+    piece_estimate,
+    stoppable,
+)
 from .weld import sorted_edges
 
 SLAB_TRIANGLES = 1_500_000  # input triangles of one slab's union (about 0.9 GB at UNION_TRIANGLE_BYTES)

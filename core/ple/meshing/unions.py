@@ -35,7 +35,16 @@ from ..algebra.elements import segment_distance
 from ..algebra.vectors import perpendicular_frames, runs
 from ..errors import PleError
 from .selfcheck import search_cell, self_intersections
-from .unclean import BALL_TURNS, SPHERE_SEGMENTS, TURN_TRIES, component_labels, match_rows, on_grid, on_one_ring, ring_of_vertices
+from .unclean import (
+    BALL_TURNS,
+    SPHERE_SEGMENTS,
+    TURN_TRIES,
+    component_labels,
+    match_rows,
+    on_grid,
+    on_one_ring,
+    ring_of_vertices,
+)
 from .weld import COLLAPSE_GRIDS, snap
 
 UNION_TRIANGLE_BYTES = 600  # peak bytes per input triangle of a manifold3d union and its repair (measured, rounded up)
