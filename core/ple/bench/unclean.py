@@ -16,7 +16,7 @@ Cases (what users print: thick, dense, curved):
 
 Each case runs in a fresh process (wall and CPU seconds, peak resident memory, triangles, the
 estimate our budget checks); the baseline is one ``Manifold.batch_boolean`` of every ball
-(``SPHERE_SEGMENTS`` segments) and every cone-beam (``batch_hull`` of its two balls), in a fresh
+(``unclean.ball_segments`` of ours, ``--segments``) and every cone-beam (``batch_hull`` of its two balls), in a fresh
 process too, stopped after ``--union-timeout`` seconds (reported as a lower bound).
 """
 
@@ -47,7 +47,7 @@ from ..meshing.tessellate import (
     resolve_style,
     union_pieces,
 )
-from ..meshing.unclean import UncleanReport
+from ..meshing.unclean import UncleanReport, ball_segments
 from ..meshing.weld import grid_spacing
 from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, mesh_triangles
 from ..model.lattice import Lattice, Region
@@ -58,21 +58,23 @@ import json, os, resource, sys, time
 import numpy as np
 from ple.bench.unclean import case_lattice
 name, n, style, levels, out = sys.argv[1], int(sys.argv[2]), sys.argv[3], int(sys.argv[4]), sys.argv[5]
+segments = int(sys.argv[6]) or None  # of the mesh (0: the style's default); its unions' balls: ball_segments
 lat = case_lattice(name, n)
 import ple.meshing.tessellate, ple.app.pipeline, manifold3d  # the process's own baseline, before any work
 base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1e3
 t0, c0 = time.perf_counter(), time.process_time()
 if name == "tenth":
     from ple.bench.unclean import write_tenth
-    tris, report, estimate = write_tenth(lat, out, style, levels)
+    tris, report, estimate = write_tenth(lat, out, style, levels, segments=segments)
 else:
     from ple.app.pipeline import MeshRequest, write_mesh
     from ple.bench.unclean import stream_estimate
     info = {}
     from ple.model.budget import default_max_memory
-    tris = write_mesh(MeshRequest(lat, style=style, levels=levels, max_memory=default_max_memory()), out, info=info)
+    tris = write_mesh(MeshRequest(lat, style=style, levels=levels, segments=segments, max_memory=default_max_memory()),
+                      out, info=info)
     report = info["unclean"]
-    estimate = stream_estimate(lat, style, levels, report)
+    estimate = stream_estimate(lat, style, levels, report, segments)
 estimate += base
 wall, cpu = time.perf_counter() - t0, time.process_time() - c0
 ru, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -124,7 +126,10 @@ def add_arguments(p) -> None:
                         "half this machine; the speed-up is then a lower bound)")
     p.add_argument("--union-segments", default="",
                    help="comma-separated segment counts (e.g. 16) of further manifold3d baselines, beside the one "
-                        "at SPHERE_SEGMENTS (32, our unions' balls); rows get manifold3d_union_<s>, wall_speedup_<s>")
+                        "at our unions' ball segments; rows get manifold3d_union_<s>, wall_speedup_<s>")
+    p.add_argument("--segments", type=int, default=0,
+                   help="segments of our meshes (default: the style's, 16); our unions' balls and the baseline's "
+                        "take unclean.ball_segments of it (at least 32)")
     p.add_argument("--scale", type=float, default=100.0,
                    help="every case's n in percent of its size (default 100: the issue's sizes)")
     p.add_argument("--verify", action="store_true",
@@ -192,12 +197,12 @@ def case_lattice(name: str, n: int):
     return lat
 
 
-def write_tenth(lat, out, style: str, levels: int, fraction: float = 0.1, seed: int = 0):
+def write_tenth(lat, out, style: str, levels: int, fraction: float = 0.1, seed: int = 0, segments=None):
     """The ``tenth`` case: a random tenth of the hubs unclean (as if their junctions had shrunk),
     streamed to binary STL as ``ple mesh`` streams an unclean region. Returns (triangles, report,
     estimated peak bytes)."""
     r = lat.region()
-    lv, sg = resolve_style(style, levels, None)
+    lv, sg = resolve_style(style, levels, segments)
     grid = grid_spacing(*lat.bounds(r))
     tess = Tessellator(lat, r, style, lv, sg, grid=grid)
     ev = lat.evaluate(r)
@@ -212,15 +217,15 @@ def write_tenth(lat, out, style: str, levels: int, fraction: float = 0.1, seed: 
     chunks = [map(encode, merged(union_pieces(tess, ev, cl, report))),
               iter_triangles(lat, r, style, lv, sg, _tess=tess, encode=encode)]
     tris = write_stl(out, itertools.chain(*chunks), header=stl_header("mm"), pool=pool)
-    return tris, report, stream_estimate(lat, style, levels, report)
+    return tris, report, stream_estimate(lat, style, levels, report, segments)
 
 
-def stream_estimate(lat, style: str, levels: int, report) -> float:
+def stream_estimate(lat, style: str, levels: int, report, segments=None) -> float:
     """Peak bytes of streaming a region to STL beyond the process's own: its evaluation (the
     cleanliness check holds it), the boxes alive at once (two, each at most BOX_TRIANGLES) and the
     largest local union (``unions.piece_estimate``); the check's own peak includes the evaluation."""
     r = lat.region()
-    lv, sg = resolve_style(style, levels, None)
+    lv, sg = resolve_style(style, levels, segments)
     box = min(mesh_triangles(lat, r, style, lv, sg), BOX_TRIANGLES) * MESH_TRIANGLE_BYTES
     return (max(evaluation_bytes(lat, r), check_bytes(lat, r)) + 2 * box
             + (report.union_bytes if report is not None else 0))
@@ -273,7 +278,7 @@ def _block_union(name: str, n: int, args) -> dict:
     and beams): a union's work grows at least linearly with its elements, so the scaled time is
     a lower bound of the whole union's (never an estimate from above)."""
     m = max(2, n // 3)
-    got = _run(UNION, [name, n, m], args.union_timeout, args.union_memory * 1e9)
+    got = _run(UNION, [name, n, m, ball_segments(args.segments or None)], args.union_timeout, args.union_memory * 1e9)
     if "cpu_seconds" not in got:
         return {"block": m, "block_union": got}
     lat = case_lattice(name, n)
@@ -291,12 +296,14 @@ def run(args) -> dict:
             if wanted is not None and name not in wanted:
                 continue
             n = max(2, int(round(n * args.scale / 100))) if n else 0
-            ours = _run(CHILD, [name, n, style, levels, os.path.join(d, "o.stl")])
-            row = {"case": name, "n": n, "style": style, "levels": levels, "ours": ours}
+            ours = _run(CHILD, [name, n, style, levels, os.path.join(d, "o.stl"), args.segments or 0])
+            balls = ball_segments(args.segments or None)  # our unions' balls, and so the baseline's
+            row = {"case": name, "n": n, "style": style, "levels": levels, "segments": args.segments or None,
+                   "ball_segments": balls, "ours": ours}
             if "seconds" in ours:
                 ours["triangles_per_s"] = ours["triangles"] / max(ours["seconds"], 1e-9)
                 ours["peak_over_estimate"] = ours["peak_rss_gb"] / max(ours["estimate_gb"], 1e-9)
-            base = _run(UNION, [name, n], args.union_timeout, args.union_memory * 1e9)
+            base = _run(UNION, [name, n, 0, balls], args.union_timeout, args.union_memory * 1e9)
             row["manifold3d_union"] = base
             if "cpu_seconds" not in base and n:
                 base.update(_block_union(name, n, args))
