@@ -303,3 +303,60 @@ def test_turned_copies_take_a_kept_piece(monkeypatch):
     assert len(whole.faces) == len(plain.faces)
     assert whole.volume == pytest.approx(plain.volume, rel=1e-5)
     assert tessellate_module.ShapeCache is unions.ShapeCache
+
+
+def test_balls_turned_all_one_way_stay_translates_of_each_other():
+    """``TURN_TRIES``: "all" turns every polygonal ball by one turn (each ball minus its centre,
+    over its radius, is the same point set, and not the unturned one); "each" turns each ball its
+    own way. Every one keeps the exact ball's volume (``unit_ball``) and its vertices on the
+    sphere of radius ``cut_bound`` or less."""
+    import manifold3d
+    from ple.meshing.unions import Cluster, Elements, cut_bound
+
+    c = np.array([[0.0, 0.0, 0.0], [1.0, 0.5, 0.0], [3.0, 1.0, 2.0]])
+    rad = np.array([0.2, 0.3, 0.25])
+    cl = Cluster(np.arange(3), np.zeros(0, np.int64))
+    unit = {t: [(Elements(manifold3d, cl, c, rad, np.zeros((0, 2), np.int64), {}, t).ball(x) - c[x]) / rad[x]
+                for x in range(3)] for t in (None, "all", "each")}
+    assert all(np.allclose(u, unit["all"][0], atol=1e-12) for u in unit["all"])
+    assert not np.allclose(unit["all"][0], unit[None][0])
+    assert not np.allclose(unit["each"][1], unit["each"][2])
+    for t, balls in unit.items():
+        for u in balls:
+            hull = manifold3d.Manifold.hull_points(u)
+            assert abs(hull.volume() / (4 / 3 * np.pi) - 1) < 1e-9, t
+            assert np.linalg.norm(u, axis=1).max() <= cut_bound(cl.segments)
+
+
+@pytest.mark.parametrize("segments, balls", [(None, 32), (16, 32), (32, 32), (40, 40), (45, 48)])
+def test_union_balls_follow_the_meshs_segments(segments, balls, monkeypatch):
+    """``unclean.ball_segments``: a union's balls take the mesh's segment count (a multiple of 4,
+    at least 32), and the clusters ``tessellate`` unites carry it: each ball of a united cluster
+    has the 4·n² + 2 vertices of manifold3d's sphere of s segments (an octahedron whose edges are
+    cut in n = s/4)."""
+    import manifold3d
+    import ple.meshing.tessellate as tessellate_module
+    from ple.meshing.unclean import ball_segments
+    from ple.meshing.unions import Elements
+
+    assert ball_segments(segments) == balls
+    lat = Lattice()
+    a = lat.add_node(Pt(0, 0, 0), 0.1)
+    for off in [(1, 0, 0), (0, 1, 0), (1, 1, 0), (-1, 1, 0)]:
+        lat.add_beam(a, a, *off)
+    lat.set_u(3, Translation(Vec(1, 0, 0)))
+    lat.set_v(3, Translation(Vec(0, 1, 0)))
+    seen = []
+    real = tessellate_module.clusters
+
+    def spy(*args):
+        got = real(*args)
+        seen.extend(got)
+        return got
+
+    monkeypatch.setattr(tessellate_module, "clusters", spy)
+    mesh = tessellate(lat, style="cnt", segments=segments)
+    assert mesh.is_watertight and seen and {c.segments for c in seen} == {ball_segments(segments)}
+    ev = lat.evaluate(lat.region())
+    ball = Elements(manifold3d, seen[0], ev.center, ev.radius, ev.beam_nodes, {}, None).ball(0)
+    assert len(ball) == 4 * (balls // 4) ** 2 + 2

@@ -40,6 +40,12 @@ from .weld import COLLAPSE_GRIDS, edge_manifold, snap, sorted_edges, weld
 QUERY_BLOCK = 1 << 19  # elements looked up against the query elements' table at a time (``_query_pairs``)
 TRIM = 0.5  # beams are tested from half their contact distance on (the rest is inside S⁺ of their hub)
 SPHERE_SEGMENTS = 32  # the fewest segments of a union's polygonal balls (``ball_segments``)
+BALL_TURNS = np.array([0.6180339887498949, 0.41421356237309515, 0.7320508075688772])  # golden ratio, √2, √3
+# how a union's polygonal balls are turned, tried in this order (``unions.Elements``): as they are;
+# all by one turn (BALL_TURNS), which keeps them translates of each other (their beams' hulls stay
+# long quads, and copies stay copies) but off the lattice's axes, where cone-beams of a symmetric
+# lattice meet tangentially; each its own way (ball x by frac(x · BALL_TURNS)), the last resort
+TURN_TRIES = (None, "all", "each")
 
 
 def ball_segments(segments: int | None = None) -> int:
@@ -50,12 +56,6 @@ def ball_segments(segments: int | None = None) -> int:
     if segments is None:
         return SPHERE_SEGMENTS
     return 4 * -(-max(int(segments), SPHERE_SEGMENTS) // 4)
-BALL_TURNS = np.array([0.6180339887498949, 0.41421356237309515, 0.7320508075688772])  # golden ratio, √2, √3
-# how a union's polygonal balls are turned, tried in this order (``unions.Elements``): as they are;
-# all by one turn (BALL_TURNS), which keeps them translates of each other (their beams' hulls stay
-# long quads, and copies stay copies) but off the lattice's axes, where cone-beams of a symmetric
-# lattice meet tangentially; each its own way (ball x by frac(x · BALL_TURNS)), the last resort
-TURN_TRIES = (None, "all", "each")
 
 
 @dataclass
