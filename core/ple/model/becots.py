@@ -482,6 +482,14 @@ def _axis_by_common_centre(A, B, C, D, du) -> np.ndarray | None:
     return axis_of(res.x)
 
 
+ANGLE_ROUNDING = 1e-14  # radians: a fitted rotation angle this small is the corners' rounding, not a turn
+
+
+def _unrounded(angle: float) -> float:
+    """``angle``, or exactly 0.0 within ``ANGLE_ROUNDING``."""
+    return 0.0 if abs(angle) <= ANGLE_ROUNDING else angle
+
+
 def _field_with_axis(A, B, C, D, axis, ku: int, kv: int) -> BeCOTSField:
     """U, V about axis T through a common fixed point, from the corners projected onto the
     plane through A normal to T (Eq. 4.9, planar spiral similarities of §2.4.6)."""
@@ -494,8 +502,9 @@ def _field_with_axis(A, B, C, D, axis, ku: int, kv: int) -> BeCOTSField:
     qu = (z["C"] - z["D"]) / (z["B"] - z["A"])  # U takes A'B' to D'C'
     qv = (z["C"] - z["B"]) / (z["D"] - z["A"])  # V takes A'D' to B'C'
     lu, lv = math.log(abs(qu)), math.log(abs(qv))
-    wu = math.atan2(qu.imag, qu.real) + TWO_PI * ku
-    wv = math.atan2(qv.imag, qv.real) + TWO_PI * kv
+    # an angle within rounding of the corners is none (edges AB ∥ DC give U a pure dilation, on any CPU)
+    wu = _unrounded(math.atan2(qu.imag, qu.real)) + TWO_PI * ku
+    wv = _unrounded(math.atan2(qv.imag, qv.real)) + TWO_PI * kv
     if abs(qu - 1) >= abs(qv - 1) and abs(qu - 1) > 1e-12:
         f = (z["D"] - qu * z["A"]) / (1 - qu)  # fixed point of U: F' = (D' - q A') / (1 - q)
     elif abs(qv - 1) > 1e-12:
