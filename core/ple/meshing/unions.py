@@ -190,7 +190,8 @@ def _cut_rings(js: np.ndarray, c, rad, bn, beams, margin: float, segments: int =
     bound = cut_bound(segments)
     axis = c[y] - c[x]
     length = np.linalg.norm(axis, axis=1)
-    rx, ry = rad[x] * tangent_scale(segments), rad[y] * tangent_scale(segments)
+    scale = tangent_scale(segments)
+    rx, ry = rad[x] * scale, rad[y] * scale
     ok = length > np.abs(rx - ry)
     length = np.where(ok, length, 1.0)
     a = axis / length[:, None]
