@@ -1252,17 +1252,21 @@ class _UnionQueue:
         for _ in range(MAX_CLUSTER_GROWTH):
             parts, cut_rings = [c], {}
             if cut:
-                got = split(c, self.report, self.ev.center, self.ev.radius, bn, SEPARATION_GRIDS * self.tess.grid)
+                got = split(c, self.report, self.ev.center, self.ev.radius, bn, SEPARATION_GRIDS * self.tess.grid,
+                            self._linear if self.tess.lat.group_map is None else None)
                 if got is None:
                     self._settle(c, rg)
                     return
                 parts, cut_rings = got
             pieces, touched = [], []
+            of_beam: dict = {}  # the cluster's ring keys by beam row, looked up per part
+            for k in rg:
+                of_beam.setdefault(k[0], []).append(k)
             for part in parts:
                 prg = rg
                 if part is not c:
-                    own, beams = set(part.hubs.tolist()), set(part.beams.tolist())
-                    prg = {k: r for k, r in rg.items() if k[0] in beams and int(bn[k]) not in own}
+                    own = set(part.hubs.tolist())
+                    prg = {k: rg[k] for j in part.beams.tolist() for k in of_beam.get(j, ()) if int(bn[k]) not in own}
                     prg.update({(j, CUT): cut_rings[(j, CUT)] for j, _ in part.halves.tolist()})
                 got = self._pieces(part, prg)
                 if isinstance(got, RingTouchedError):
@@ -1278,6 +1282,12 @@ class _UnionQueue:
             c, rg = self._grow(c, touched)
         raise PleError(f"an unclean cluster of {len(c.hubs):,} hubs and {len(c.beams):,} beams keeps "
                        "touching the clean junctions around it")
+
+    def _linear(self, rows) -> np.ndarray:
+        """The linear parts (K, 3, 3) of the similarities that place the groups of beams ``rows``
+        (their first ends'): the frames of their cut rings (``unions.split``)."""
+        g = self.idx[self.bn[np.asarray(rows, np.int64), 0], :3]
+        return self.tess.lat.group_matrices(g[:, 0], g[:, 1], g[:, 2])[:, :3, :3]
 
     def _pieces(self, c, rg):
         """A cluster's pieces: from the cache, or its union (put in the cache), or, when its union

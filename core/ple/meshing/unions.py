@@ -124,7 +124,7 @@ def cut_bound(segments: int) -> float:
     return max(1.02, 1.0 / math.cos(math.pi / segments) ** 2)
 
 
-def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 0.0):
+def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 0.0, linear=None):
     """A cluster cut across some of its beams into smaller ones, or None (no cut, or one piece).
 
     A beam between two hubs of the cluster that overlaps nothing it does not share a ball with
@@ -137,7 +137,10 @@ def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 
     connected groups of hubs, beams and halves (pairs and incidences); a beam whose halves land in
     one piece stays whole. Returns (clusters, cut rings {(beam row, CUT): (cluster.segments, 3)}):
     each ring lies on the tangent cone of the beam, and both halves' unions take it as their
-    rim, so they meet exactly there."""
+    rim, so they meet exactly there. ``linear(rows)`` (K, 3, 3): the linear part of the similarity
+    that places each beam's group; a ring's first vertex is then chosen in the group's own frame,
+    so the rings of copies of a cluster (along a rotation, a screw) are copies, vertex for vertex,
+    and so are the pieces (``ShapeCache``'s turned copies). Without it, in world axes."""
     hubs = np.sort(np.asarray(cluster.hubs, np.int64))
     if len(hubs) < 2 or len(cluster.halves):
         return None
@@ -147,7 +150,8 @@ def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 
     beams = np.asarray(cluster.beams, np.int64)
     ends = bn[beams]
     inner = np.isin(ends, hubs).all(axis=1) & (ends[:, 0] != ends[:, 1]) & ~np.isin(beams, report.paired_beams())
-    rings = {(j, CUT): r for j, r in _cut_rings(beams[inner], c, rad, bn, beams, margin, cluster.segments).items()}
+    rings = {(j, CUT): r for j, r in _cut_rings(beams[inner], c, rad, bn, beams, margin, cluster.segments,
+                                                linear).items()}
     if not rings:
         return None
     cut = np.array(sorted(j for j, _ in rings), np.int64)
@@ -178,14 +182,16 @@ def split(cluster: Cluster, report, center, radius, beam_nodes, margin: float = 
     return out, {k: r for k, r in rings.items() if k[0] in used}
 
 
-def _cut_ring(j: int, c, rad, bn, beams, margin: float, segments: int = SPHERE_SEGMENTS):
+def _cut_ring(j: int, c, rad, bn, beams, margin: float, segments: int = SPHERE_SEGMENTS, linear=None):
     """The cut ring of beam j (``split``), or None when its halves do not clear the other end."""
-    return _cut_rings(np.array([j], np.int64), c, rad, bn, beams, margin, segments).get(int(j))
+    return _cut_rings(np.array([j], np.int64), c, rad, bn, beams, margin, segments, linear).get(int(j))
 
 
-def _cut_rings(js: np.ndarray, c, rad, bn, beams, margin: float, segments: int = SPHERE_SEGMENTS) -> dict:
+def _cut_rings(js: np.ndarray, c, rad, bn, beams, margin: float, segments: int = SPHERE_SEGMENTS,
+               linear=None) -> dict:
     """The cut rings of the beams ``js`` of a cluster (its ``beams``) whose halves clear the other
-    end (``split``): {beam row: ring (segments, 3)}, all tested at once."""
+    end (``split``): {beam row: ring (segments, 3)}, all tested at once; their first vertices
+    in the frames of ``linear`` (``split``)."""
     x, y = bn[js, 0], bn[js, 1]
     bound = cut_bound(segments)
     axis = c[y] - c[x]
@@ -230,11 +236,30 @@ def _cut_rings(js: np.ndarray, c, rad, bn, beams, margin: float, segments: int =
     k = np.flatnonzero(ok)
     if not len(k):
         return {}
-    e1, e2 = perpendicular_frames(a[k])
+    e1, e2 = ring_frames(a[k], None if linear is None else linear(js[k]))
     ang = 2 * np.pi * np.arange(segments) / segments
     rings = ((c[x[k]] + p[k, None] * a[k])[:, None] + rho[k, None, None]
              * (np.cos(ang)[None, :, None] * e1[:, None] + np.sin(ang)[None, :, None] * e2[:, None]))
     return dict(zip(js[k].tolist(), rings))
+
+
+def ring_frames(axes: np.ndarray, linear=None) -> tuple[np.ndarray, np.ndarray]:
+    """(e1, e2) (K, 3) orthonormal to unit ``axes`` (K, 3), right-handed: ``perpendicular_frames``
+    of each axis seen from its frame (``linear`` (K, 3, 3), a similarity's linear part), carried
+    back by it, so that an axis moved by a similarity gets its frame moved too (world axes
+    without ``linear``, or where a frame is degenerate)."""
+    if linear is None or not len(axes):
+        return perpendicular_frames(axes)
+    m = np.asarray(linear, float).reshape(-1, 3, 3)
+    local = np.linalg.solve(m, axes[:, :, None])[:, :, 0]  # the axis in its group's frame
+    local /= np.linalg.norm(local, axis=1, keepdims=True)
+    e1 = np.einsum("kab,kb->ka", m, perpendicular_frames(local)[0])
+    e1 -= np.einsum("ki,ki->k", e1, axes)[:, None] * axes  # exactly normal to the axis (rounding)
+    norm = np.linalg.norm(e1, axis=1)
+    world = perpendicular_frames(axes)
+    ok = np.isfinite(norm) & (norm > 1e-6 * np.linalg.norm(m.reshape(len(m), -1), axis=1))
+    e1 = np.where(ok[:, None], e1 / np.where(ok, norm, 1.0)[:, None], world[0])
+    return e1, np.cross(axes, e1)
 
 
 def excluded(report, beam_nodes) -> tuple[np.ndarray, np.ndarray]:
