@@ -17,7 +17,10 @@ Cases (what users print: thick, dense, curved):
 Each case runs in a fresh process (wall and CPU seconds, peak resident memory, triangles, the
 estimate our budget checks); the baseline is one ``Manifold.batch_boolean`` of every ball
 (``unclean.ball_segments`` of ours, ``--segments``) and every cone-beam (``batch_hull`` of its two balls), in a fresh
-process too, stopped after ``--union-timeout`` seconds (reported as a lower bound).
+process too, stopped after ``--union-timeout`` seconds (reported as a lower bound). The thick
+cases also stand beside manifold3d's ``level_set`` of the exact solid (``ple.bench._level_set``: the
+edge length calibrated to 1 % volume on a corner block, its volume against the union's), stopped
+after the same time.
 """
 
 from __future__ import annotations
@@ -102,6 +105,24 @@ parts = balls + [manifold3d.Manifold.batch_hull([balls[a], balls[b]]) for a, b i
 u = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add)
 tris = u.num_tri()
 print(json.dumps({"triangles": int(tris), "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - c0,
+                  "volume": float(u.volume()), "peak_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6}))
+"""
+
+LEVEL_SET = r"""
+import json, resource, sys, time
+from ple.bench._level_set import calibrated_edge, level_set_mesh
+from ple.bench.unclean import case_lattice
+from ple.model.lattice import Region
+lat = case_lattice(sys.argv[1], int(sys.argv[2]))
+t0, c0 = time.perf_counter(), time.process_time()
+cal = calibrated_edge(lat.evaluate(Region(0, 2, 0, 2, 0, 2)))  # on the corner block of 2^3 groups
+t1, c1 = time.perf_counter(), time.process_time()
+ev = lat.evaluate(lat.region())
+m = level_set_mesh(ev.center, ev.radius, ev.beam_nodes, cal["edge"])
+tris = m.num_tri()
+print(json.dumps({"triangles": int(tris), "volume": float(m.volume()), "edge": cal["edge"],
+                  "calibration": cal, "calibration_seconds": t1 - t0, "seconds": time.perf_counter() - t1,
+                  "cpu_seconds": time.process_time() - c1,
                   "peak_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6}))
 """
 
@@ -113,6 +134,9 @@ CASES = [("fig6_3", 0, "refined", 4), ("curved", 40, "cnt", 0), ("curved", 40, "
          ("thick_octet", 8, "cnt", 0), ("thick_octet", 17, "cnt", 0), ("thick_octet", 8, "refined", 3),
          ("shrunk_graded", 10, "cnt", 0), ("shrunk_graded", 22, "cnt", 0),
          ("thick_bcc_screw", 6, "cnt", 0), ("thick_bcc_screw", 12, "cnt", 0), ("thick_bcc_screw", 6, "refined", 3)]
+
+
+THICK = ("thick_octet", "shrunk_graded", "thick_bcc_screw")  # every hub unclean: beside a level set too
 
 
 def add_arguments(p) -> None:
@@ -130,6 +154,9 @@ def add_arguments(p) -> None:
     p.add_argument("--segments", type=int, default=0,
                    help="segments of our meshes (default: the style's, 16); our unions' balls and the baseline's "
                         "take unclean.ball_segments of it (at least 32)")
+    p.add_argument("--no-level-set", action="store_true",
+                   help="skip the manifold3d level_set baseline of the thick cases (at the edge length that puts a "
+                        "corner block's volume within 1 %%, ple.bench._level_set; stopped after --union-timeout)")
     p.add_argument("--scale", type=float, default=100.0,
                    help="every case's n in percent of its size (default 100: the issue's sizes)")
     p.add_argument("--verify", action="store_true",
@@ -290,7 +317,7 @@ def _block_union(name: str, n: int, args) -> dict:
 
 def run(args) -> dict:
     wanted = None if args.cases == "all" else set(args.cases.split(","))
-    rows = []
+    rows, level_sets = [], {}
     with tempfile.TemporaryDirectory(prefix="ple-bench-unclean-") as d:
         for name, n, style, levels in CASES:
             if wanted is not None and name not in wanted:
@@ -314,6 +341,16 @@ def run(args) -> dict:
                 row["speedup_is_lower_bound"] = "cpu_seconds" not in base
                 if "process_wall_seconds" in base:  # both processes' wall time, start-up included
                     row["wall_speedup"] = base["process_wall_seconds"] / max(ours["process_wall_seconds"], 1e-9)
+            if name in THICK and not args.no_level_set:  # one per lattice (its styles' rows share it)
+                if (name, n) not in level_sets:
+                    level_sets[name, n] = ls = _run(LEVEL_SET, [name, n], args.union_timeout, args.union_memory * 1e9)
+                    if "volume" in ls and "volume" in base:
+                        ls["volume_vs_union"] = ls["volume"] / base["volume"] - 1.0
+                    if "process_wall_seconds" in ls:  # what meshing waits: the edge's calibration left out
+                        ls["process_wall_seconds"] -= ls["calibration_seconds"]
+                row["manifold3d_level_set"] = ls = level_sets[name, n]
+                if "process_wall_seconds" in ls and "process_wall_seconds" in ours:
+                    row["wall_speedup_level_set"] = ls["process_wall_seconds"] / max(ours["process_wall_seconds"], 1e-9)
             if args.verify and name != "tenth":  # tenth's unclean hubs are chosen, not found: not ple mesh's file
                 save_ir(case_lattice(name, n), os.path.join(d, "case.json"))
                 row["verify"] = _verify(os.path.join(d, "case.json"), style, levels, os.path.join(d, "v.stl"))
