@@ -63,8 +63,11 @@ def test_a_cluster_without_free_beams_meshes_slab_by_slab(make, within, monkeypa
     lat = make()
     cl, _ = _cluster(lat)
     whole = max(piece_estimate(c)[0] for c in cl)  # one cluster holds every hub, or the thick end's
-    limit = whole // 4
+    # the estimate is from above (1,024 triangles a ball, 2,048 a beam); the slabs count the hulls as
+    # made (512 and about 270, fewer clipped): a 24th of the estimate is about a quarter of the elements
+    limit = whole // 24
     monkeypatch.setattr(slabs, "SLAB_TRIANGLES", limit)
+    monkeypatch.setattr(slabs, "SLAB_INPUT", limit)
     mesh = tessellate(lat, None, "cnt", segments=16)
     report = mesh.metadata["ple_unclean"]
     assert report.union_slabs >= 3 and report.united >= 3  # planned slabs, and the unions made (planes may merge)
@@ -78,7 +81,7 @@ def test_a_cluster_without_free_beams_meshes_slab_by_slab(make, within, monkeypa
     one = tessellate(lat, None, "cnt", segments=16)
     assert one.metadata["ple_unclean"].union_slabs == 1
     assert abs(mesh.volume / one.volume - 1) < 2e-3
-    monkeypatch.setattr(slabs, "SLAB_TRIANGLES", limit)
+    monkeypatch.setattr(slabs, "SLAB_TRIANGLES", limit)  # (SLAB_INPUT is still the limit)
     out = tmp_path / "slabs.stl"
     info: dict = {}
     write_mesh(MeshRequest(lat, style="cnt", segments=16, max_groups=8), out, info=info)
@@ -110,6 +113,41 @@ def test_the_estimate_is_the_largest_slab():
     assert all(0 < x <= limit + group for x in loads)
     peak, n = slabs.slab_plan_bytes(c, ev.center, ev.radius, ev.beam_nodes, limit)
     assert n == len(cuts) and peak == max(loads) * slabs.UNION_TRIANGLE_BYTES < piece_estimate(c)[1]
+
+
+def test_slab_load_bounds_the_clipped_hulls_and_the_plane_is_the_farthest():
+    """``_SlabContext.clipped`` counts a slab's input from above: for random planes it is at least
+    the triangles of the elements' hulls as manifold3d makes them and clips them (and within 2.5x
+    of it); ``next_plane`` ends a slab at the farthest position whose count keeps the limit."""
+    from ple.meshing.unions import Elements
+
+    cl, ev = _cluster(thick_octet(4))
+    c = cl[0]
+    make = Elements(manifold3d, c, ev.center, ev.radius, ev.beam_nodes, {}, "all")
+    w = slabs.element_triangles(c)
+    ext = slabs.element_extents(c, ev.center, ev.radius, ev.beam_nodes)
+    axis = 0
+    lo, hi = ext[:, 0, axis], ext[:, 1, axis]
+    ctx = slabs._SlabContext(make, w, lo, hi, axis, 1e-6, 10.0)
+    rng = np.random.default_rng(1)
+    for _ in range(6):
+        a, b = np.sort(rng.uniform(lo.min(), hi.max(), size=2))
+        reach = np.flatnonzero((hi > a) & (lo < b)).tolist()
+        bound = sum(ctx.clipped(i, a, b) for i in reach)
+        real = 0
+        for i in reach:
+            h = make.hull(i)
+            m = h.to_mesh64()
+            v, f = np.asarray(m.vert_properties[:, :3], float), np.asarray(m.tri_verts, np.int64)
+            inside = v[:, axis].min() >= a and v[:, axis].max() <= b
+            real += h.num_tri() if inside else manifold3d.Manifold.hull_points(slabs._clip(v, f, a, b, axis)).num_tri()
+        assert real <= bound <= 2.5 * real
+    count = lambda b: sum(ctx.clipped(i, -math.inf, b) for i in np.flatnonzero(lo < b).tolist())  # noqa: E731
+    limit = count(math.inf) // 3
+    cut = ctx.next_plane(-math.inf, limit, -math.inf)
+    assert math.isfinite(cut) and count(cut) <= limit
+    later = ctx.ends[ctx.ends > cut + ctx.clear]
+    assert len(later) and count(float(later[0])) > limit
 
 
 def test_strict_hull_drops_collinear_crossings():

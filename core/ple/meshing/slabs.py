@@ -1,8 +1,10 @@
 """A cluster too large for one union, cut into slabs: memory bounded by the slab, not the cluster.
 
 A cluster with no free beam (``unions.split`` finds none: thick octets, all-shrunk junctions)
-can hold most of a lattice. It is cut by planes normal to its longest axis into slabs of about
-``SLAB_TRIANGLES`` input triangles (``plan_slabs``), and each slab is one manifold3d union:
+can hold most of a lattice. It is cut by planes normal to its longest axis into slabs of at most
+``SLAB_TRIANGLES`` input triangles, and each slab is one manifold3d union. The estimate checked
+before anything is made counts every element whole in each slab it reaches (``plan_slabs``); the
+slabs are planned as they are made, from their elements as clipped (``_SlabContext.next_plane``):
 
 1. Each ball and beam is a convex solid (``unions.Elements``, made when a slab needs it). One
    that crosses a cut plane is clipped there *before* the union: its cap on the plane is the
@@ -44,11 +46,15 @@ from .unions import (
 )
 from .weld import sorted_edges
 
-SLAB_TRIANGLES = 1_500_000  # input triangles of one slab's union (about 0.9 GB at UNION_TRIANGLE_BYTES)
+SLAB_TRIANGLES = 1_500_000  # estimated input triangles of one slab's union (about 0.9 GB at UNION_TRIANGLE_BYTES)
+SLAB_INPUT = 300_000  # input triangles of one slab's union as made (manifold3d's batch union grows faster
+# than its input: one slab of 1.5e6 ran for minutes past 3 GB, where 2.3e5 took 8 s and 0.25 GB)
 SEAM_TOLERANCE = 2.0**-32  # of the cluster's size: a vertex this near a plane is on it; a seam's sure vertex
 LOOSE = 2.0**14  # tolerances (2^-18 of the size): how far apart two sides put a crossing of nearly tangent edges
 SEAM_TRIES = 4  # plane positions tried before a cluster is refused
 CLEARANCE = 2.0**-20  # of the cluster's size: how far a cut plane stays from every element's vertex
+BALL_SHIFT = 0.25  # of a slab: how far a plane moves to keep off the balls (``_SlabContext.plane``)
+PLANE_STEPS = 4096  # positions along the cluster, besides its elements' low ends, where a slab may end
 
 
 def element_triangles(cluster) -> np.ndarray:
@@ -121,13 +127,16 @@ def slab_loads(weights, lo, hi, cuts) -> list:
     return [int(weights[(hi > a) & (lo < b)].sum()) for a, b in zip(edges[:-1], edges[1:])]
 
 
-def unite_in_slabs(cluster, center, radius, beam_nodes, rings: dict, grid: float, limit: int = SLAB_TRIANGLES):
+def unite_in_slabs(cluster, center, radius, beam_nodes, rings: dict, grid: float, limit: int = SLAB_TRIANGLES,
+                   made: int = SLAB_INPUT):
     """The pieces (vertices, faces) of a cluster cut into slabs (module docstring), each open along
     its seams and along the rings it shares with clean junctions (``unions.unite_cluster``'s
     ``rings``). Tries the balls all turned one way, then each its own (``TURN_TRIES`` after the
     first: a cluster this large is a thick lattice, whose symmetric beams meet tangentially on
     balls as they are, and a failed try costs a slab), each at up to ``SEAM_TRIES`` positions of
-    each plane. Only the elements of one slab are held at a time."""
+    each plane. Only the elements of one slab are held at a time. ``limit``: the estimate's slab
+    (``plan_slabs``: whether the cluster is cut at all); ``made``: each slab's input triangles as
+    its elements are made and clipped (``_SlabContext.next_plane``)."""
     manifold3d = manifold3d_module()
     weights = element_triangles(cluster)
     ext = element_extents(cluster, center, radius, beam_nodes)
@@ -137,8 +146,8 @@ def unite_in_slabs(cluster, center, radius, beam_nodes, rings: dict, grid: float
     last = None
     for turns in TURN_TRIES[1:]:
         try:
-            return _slabs(Elements(manifold3d, cluster, center, radius, beam_nodes, rings, turns), cuts, ext, axis,
-                          grid)
+            return _slabs(Elements(manifold3d, cluster, center, radius, beam_nodes, rings, turns), weights, ext, axis,
+                          grid, made)
         except PleError as exc:  # a plane that no try could place: the balls turned, as unite_cluster does
             last = exc
     raise PleError(f"an unclean cluster of {len(cluster.hubs):,} hubs and {len(cluster.beams):,} beams cut "
@@ -147,42 +156,48 @@ def unite_in_slabs(cluster, center, radius, beam_nodes, rings: dict, grid: float
 
 def unite_in_slabs_stoppable(cluster, center, radius, beam_nodes, rings: dict, grid: float) -> list:
     """``unite_in_slabs`` in a child process that a signal stops (``unions.stoppable``)."""
-    return stoppable(unite_in_slabs, cluster, center, radius, beam_nodes, rings, grid, SLAB_TRIANGLES)
+    return stoppable(unite_in_slabs, cluster, center, radius, beam_nodes, rings, grid, SLAB_TRIANGLES, SLAB_INPUT)
 
 
 def _made(make, i: int, axis: int):
-    """Element i as (hull, vertices, faces, its low and high end along ``axis``)."""
-    h = make.hull(i)
-    m = h.to_mesh64()
+    """Element i as (its hull's vertices, faces, its low and high end along ``axis``, its
+    vertices' and its edges' low and high ends along it, each sorted). The hull itself is not
+    kept (manifold3d's structure is about 10 times the arrays, and a slab plan makes thousands
+    ahead): a slab makes it again from its vertices."""
+    m = make.hull(i).to_mesh64()
     v, f = np.asarray(m.vert_properties[:, :3], float), np.asarray(m.tri_verts, np.int64)
-    return h, v, f, float(v[:, axis].min()), float(v[:, axis].max())
+    x = v[:, axis]
+    e = x[sorted_edges(f, len(v))]
+    return v, f, float(x.min()), float(x.max()), np.sort(x), np.sort(e.min(axis=1)), np.sort(e.max(axis=1))
 
 
 class SeamMismatchError(PleError):
     """The two sides of a seam do not match: the plane between them is moved."""
 
 
-def _slabs(make, cuts, ext, axis, grid):
-    """Every slab's piece (module docstring). Each plane is placed off the balls and rings where
-    it can be, and off the vertices of the elements that reach it; the elements reaching past it
+def _slabs(make, weights, ext, axis, grid, limit):
+    """Every slab's piece (module docstring). Each plane is the farthest from the last one at
+    which the slab between them holds at most ``limit`` input triangles, counted from its
+    elements as clipped (``_SlabContext.next_plane``), placed off the balls and rings where it
+    can be, and off the vertices of the elements that reach it; the elements reaching past it
     are kept for the next slab, the others let go. A seam that does not match moves its plane
     and makes the last slab again (up to 2 ``SEAM_TRIES`` times); a slab the grid folds is made
     once more with its high plane moved, then given up (the caller turns the balls: a fold inside
     a slab is a symmetric lattice's, which no plane moves)."""
     lo, hi = ext[:, 0, axis], ext[:, 1, axis]
     size = float((ext[:, 1].max(axis=0) - ext[:, 0].min(axis=0)).max()) or 1.0
-    ctx = _SlabContext(make, lo, hi, axis, grid, size)
-    span = (float(lo.min()), float(hi.max()))
-    gaps = np.diff([span[0], *np.asarray(cuts, float).tolist(), span[1]])
+    ctx = _SlabContext(make, weights, lo, hi, axis, grid, size)
     pieces: list = []
     last = None  # the last slab: (its low plane, the seam it took, its high plane)
-    a, prev, k, tries = -math.inf, None, 0, 0
-    while k <= len(cuts):
+    a, prev, tries, beyond = -math.inf, None, 0, -math.inf
+    while True:
         b = math.inf
-        if k < len(cuts):
-            b = ctx.plane(float(cuts[k]) + _nudge(tries) * min(gaps[k], gaps[k + 1]), a)
-            if b is None:
-                k += 1
+        cut = ctx.next_plane(a, limit, beyond)
+        if math.isfinite(cut):
+            gap = cut - (a if math.isfinite(a) else ctx.span[0])
+            b = ctx.plane(cut + _nudge(tries) * gap, a)
+            if b is None:  # no place near it: the slab reaches to the next element's end
+                beyond = cut
                 continue
         try:
             piece, seam, b = ctx.slab(a, b, prev)
@@ -191,7 +206,7 @@ def _slabs(make, cuts, ext, axis, grid):
                 raise
             tries += 1  # the low plane moves: the last slab is made again up to it
             a0, prev0, _ = last
-            moved = ctx.plane(a + _nudge(tries) * (a - a0 if math.isfinite(a0) else gaps[0]), a0)
+            moved = ctx.plane(a + _nudge(tries) * (a - a0 if math.isfinite(a0) else a - ctx.span[0]), a0)
             if moved is None:
                 raise
             pieces[-1], prev, a = *ctx.slab(a0, moved, prev0)[:2], moved
@@ -205,9 +220,10 @@ def _slabs(make, cuts, ext, axis, grid):
         if piece is not None:
             pieces.append(piece)
             last = (a, prev, b)
-        prev, a, k, tries = seam, b, k + 1, 0
+        if not math.isfinite(b):
+            return pieces
+        prev, a, tries, beyond = seam, b, 0, b
         ctx.let_go(b)
-    return pieces
 
 
 def _nudge(t: int) -> float:
@@ -219,8 +235,11 @@ class _SlabContext:
     """What the slabs of one cluster share: its elements (made when a slab needs them, let go when
     no later slab does), the balls and rings a plane keeps off, the tolerances."""
 
-    def __init__(self, make, lo, hi, axis, grid, size):
-        self.make, self.lo, self.hi, self.axis, self.grid = make, lo, hi, axis, grid
+    def __init__(self, make, weights, lo, hi, axis, grid, size):
+        self.make, self.weights, self.lo, self.hi, self.axis, self.grid = make, weights, lo, hi, axis, grid
+        # where a slab may end: every element's low end, and a fine grid between (a row of a lattice
+        # starts at one end, and a slab to the next row's may hold far more than the limit)
+        self.ends = np.unique(np.concatenate([lo, np.linspace(lo.min(), hi.max(), PLANE_STEPS)]))
         self.tol, self.clear = SEAM_TOLERANCE * size, CLEARANCE * size
         self.ring_pts = {k: np.asarray(make.rings[k], float) for k in make.keys}
         self.rings_at = [(float(r[:, axis].min()), float(r[:, axis].max())) for r in self.ring_pts.values()]
@@ -229,11 +248,64 @@ class _SlabContext:
         self.built: dict = {}  # element -> _made's
 
     def plane(self, c: float, a: float) -> float | None:
-        """A plane near ``c`` above ``a``, off the balls and rings where it can be (None: none)."""
+        """A plane near ``c`` above ``a``, off the balls and rings where it can be (None: none).
+        Off the balls only within ``BALL_SHIFT`` of the slab from ``a`` to ``c``: on curved rows
+        the balls' spans along the axis cover it end to end, and the nearest place off them
+        would make one slab of most of the cluster."""
         within = (max(a, self.span[0]) + self.clear, self.span[1] - self.clear)
+        shift = BALL_SHIFT * (c - max(a, self.span[0]))
         b = _nearest_free(c, self.rings_at + self.balls_at, self.clear, *within)
-        b = _nearest_free(c, self.rings_at, self.clear, *within) if b is None else b
+        if b is None or abs(b - c) > shift:
+            b = _nearest_free(c, self.rings_at, self.clear, *within)
         return None if b is None or b <= a else b
+
+    def next_plane(self, a: float, limit: int, beyond: float) -> float:
+        """The position past ``beyond`` (``ends``) farthest from the plane ``a`` at which the slab
+        from ``a`` holds at most ``limit`` input triangles (``load``), or inf when all the rest
+        does; the first position past ``beyond`` when even that slab holds more. Doubling steps
+        over the positions, then halving: the load only grows with the slab."""
+        ends = self.ends[np.searchsorted(self.ends, max(a, beyond) + self.clear, "right"):]
+        if not len(ends) or self.load(a, math.inf, limit) <= limit:
+            return math.inf
+        good, step = -1, 1  # ends[good] fits (-1: none tried)
+        while good + step < len(ends) and self.load(a, float(ends[good + step]), limit) <= limit:
+            good += step
+            step *= 2
+        bad = min(good + step, len(ends))  # ends[bad] does not fit (or is past the last)
+        while bad - good > 1:
+            mid = (good + bad) // 2
+            good, bad = (mid, bad) if self.load(a, float(ends[mid]), limit) <= limit else (good, mid)
+        return float(ends[max(good, 0)])
+
+    def load(self, a: float, b: float, limit: int) -> int:
+        """Input triangles of the slab between a and b, from above: an element inside it has its
+        own; a clipped one at most 2P - 4, P its vertices between the planes and its edges
+        crossing them (the points of its hull, ``_clip``), and never more than its own. Counted
+        from the elements' unclipped estimates first (``element_triangles``): only when those
+        pass ``limit`` are the elements made and counted, nearest ``a`` first, until the count
+        passes ``limit`` (then it is returned as it stands: only ``<= limit`` is asked)."""
+        reach = np.flatnonzero((self.hi > a) & (self.lo < b))
+        if int(self.weights[reach].sum()) <= limit:
+            return int(self.weights[reach].sum())
+        total = 0
+        for i in reach[np.argsort(self.lo[reach], kind="stable")].tolist():
+            if total > limit:
+                break
+            total += self.clipped(i, a, b)
+        return total
+
+    def clipped(self, i: int, a: float, b: float) -> int:
+        """Triangles of element i between the planes a and b, from above (``load``)."""
+        if i not in self.built:
+            self.built[i] = _made(self.make, i, self.axis)
+        _, f, elo, ehi, xs, emin, emax = self.built[i]
+        if elo >= a and ehi <= b:
+            return len(f)
+        p = int(np.searchsorted(xs, b) - np.searchsorted(xs, a, "right"))
+        for c in (a, b):
+            if math.isfinite(c):
+                p += int(np.searchsorted(emin, c) - np.searchsorted(emax, c))
+        return min(len(f), max(2 * p - 4, 0))
 
     def slab(self, a: float, b: float, prev):
         """(piece, high seam, the high plane as placed) of the slab between a and b."""
@@ -243,16 +315,16 @@ class _SlabContext:
             for i in want.tolist():
                 if i not in self.built:
                     self.built[i] = _made(self.make, i, axis)
-            near = [e[1][:, axis] for i, e in self.built.items() if e[3] - clear <= b <= e[4] + clear]
+            near = [e[4] for i, e in self.built.items() if e[2] - clear <= b <= e[3] + clear]
             if not near or np.abs(np.concatenate(near) - b).min() > clear:
                 break
             b += clear
         solids = []
         clip = self.make.manifold3d.Manifold.hull_points
         for i in want.tolist():
-            h, v, f, elo, ehi = self.built[i]
+            v, f, elo, ehi = self.built[i][:4]
             if ehi > a and elo < b:
-                solids.append(h if elo >= a and ehi <= b else clip(_clip(v, f, a, b, axis)))
+                solids.append(clip(v) if elo >= a and ehi <= b else clip(_clip(v, f, a, b, axis)))
         if not solids:  # a gap between elements (nothing crosses its planes): no piece
             if prev is not None and len(prev[0]):
                 raise SeamMismatchError("a slab of an unclean cluster holds nothing past a seam")
@@ -262,7 +334,7 @@ class _SlabContext:
 
     def let_go(self, a: float) -> None:
         """Forget the elements that end below the plane ``a`` (no later slab reaches them)."""
-        self.built = {i: e for i, e in self.built.items() if e[4] > a}
+        self.built = {i: e for i, e in self.built.items() if e[3] > a}
 
 
 def _slab_piece(manifold3d, solids, a, b, axis, prev, ring_pts, grid, tol):
