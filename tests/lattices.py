@@ -73,3 +73,15 @@ def clean_centred_lattice(v_count: int, v) -> Lattice:
     lat.set_w(v_count, Scaling(1.1, [0.7, 0.6, -9]))
     return lat
 
+
+
+def two_ball_hull_volume(r1: float, r2: float, length: float) -> float:
+    """The closed-form volume of the convex hull of two balls (radii r1, r2, centres ``length``
+    apart): two spherical caps and the frustum between the tangent circles."""
+    cos_t = (r1 - r2) / length
+    sin_t = np.sqrt(1 - cos_t**2)
+    rho1, rho2 = r1 * sin_t, r2 * sin_t
+    h = length + (r2 - r1) * cos_t
+    cap = lambda r, hh: np.pi * hh * hh * (3 * r - hh) / 3  # noqa: E731
+    return float(cap(r1, r1 * (1 + cos_t)) + np.pi * h * (rho1**2 + rho1 * rho2 + rho2**2) / 3
+                 + cap(r2, r2 * (1 - cos_t)))

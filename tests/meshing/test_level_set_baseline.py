@@ -4,10 +4,9 @@ volume to 1 %."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
+from lattices import two_ball_hull_volume
 from ple.bench._level_set import TARGET, UnionDistance, calibrated_edge, level_set_mesh, round_cone_distance
 
 
@@ -49,13 +48,7 @@ def test_calibrated_level_set_holds_the_closed_form_volume_of_a_round_cone():
     at the calibrated edge, the level set's volume is within 1 % of the closed form."""
     c = np.array([[0.0, 0.0, 0.0], [1.5, 0.4, 0.2]])
     r1, r2 = 0.35, 0.2
-    length = float(np.linalg.norm(c[1] - c[0]))
-    cos_t = (r1 - r2) / length
-    sin_t = math.sqrt(1 - cos_t**2)
-    rho1, rho2 = r1 * sin_t, r2 * sin_t
-    h = length + (r2 - r1) * cos_t
-    cap = lambda r, hh: math.pi * hh * hh * (3 * r - hh) / 3  # noqa: E731
-    exact = cap(r1, r1 * (1 + cos_t)) + math.pi * h * (rho1**2 + rho1 * rho2 + rho2**2) / 3 + cap(r2, r2 * (1 - cos_t))
+    exact = two_ball_hull_volume(r1, r2, float(np.linalg.norm(c[1] - c[0])))
 
     class Block:
         center, radius, beam_nodes = c, np.array([r1, r2]), np.array([[0, 1]])

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from lattices import two_ball_hull_volume
 from ple.algebra.similarity import Rotation, Translation
 from ple.algebra.vectors import Pt, Vec
 from ple.app.pipeline import MeshRequest, write_mesh
@@ -173,13 +174,7 @@ def test_beam_hull_of_two_balls_has_the_closed_form_volume(seed):
     parts = [unit.scale([r, r, r]).translate(list(c)) for c, r in ((c1, r1), (c2, r2))]
     parts.append(manifold3d.Manifold.hull_points(beam_points([v * r1 + c1, v * r2 + c2], [c1, c2])))
     got = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add).volume()
-    cos_t = (r1 - r2) / length
-    sin_t = np.sqrt(1 - cos_t**2)
-    rho1, rho2 = r1 * sin_t, r2 * sin_t
-    h = length + (r2 - r1) * cos_t
-    cap = lambda r, hh: np.pi * hh * hh * (3 * r - hh) / 3  # noqa: E731
-    exact = cap(r1, r1 * (1 + cos_t)) + np.pi * h * (rho1**2 + rho1 * rho2 + rho2**2) / 3 + cap(r2, r2 * (1 - cos_t))
-    assert abs(got / exact - 1) < 0.005
+    assert abs(got / two_ball_hull_volume(r1, r2, length) - 1) < 0.005
 
 
 @pytest.mark.parametrize("style, levels", [("cnt", 0), ("refined", 4)])
