@@ -65,7 +65,8 @@ class UnionDistance:
         self.cell = float(np.median(hi - lo)) or 1.0
         self.origin = lo.min(axis=0)
         cells: dict = {}
-        a, b = np.floor((lo - self.origin) / self.cell).astype(int), np.floor((hi - self.origin) / self.cell).astype(int)
+        a = np.floor((lo - self.origin) / self.cell).astype(int)
+        b = np.floor((hi - self.origin) / self.cell).astype(int)
         self.elements = [(tuple(c[x]), tuple(c[y]), float(r[x]), float(r[y])) for x, y in ends.tolist()]
         for e in range(len(ends)):
             for key in np.ndindex(*(b[e] - a[e] + 1)):

@@ -105,7 +105,8 @@ parts = balls + [manifold3d.Manifold.batch_hull([balls[a], balls[b]]) for a, b i
 u = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add)
 tris = u.num_tri()
 print(json.dumps({"triangles": int(tris), "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - c0,
-                  "volume": float(u.volume()), "peak_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6}))
+                  "volume": float(u.volume()),
+                  "peak_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6}))
 """
 
 LEVEL_SET = r"""
