@@ -286,7 +286,7 @@ def test_copies_along_a_screw_take_kept_pieces(monkeypatch):
     import ple.meshing.unions as unions
     from ple.bench.unclean import case_lattice
 
-    lat = case_lattice("thick_bcc_screw", 5)
+    lat = case_lattice("thick_bcc_screw", 6).with_counts(2, 2, 6)
     made = []
     real = tessellate_module.unite_stoppable
     monkeypatch.setattr(tessellate_module, "unite_stoppable", lambda *a: (made.append(1), real(*a))[1])
