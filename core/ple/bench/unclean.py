@@ -55,6 +55,7 @@ from ..meshing.weld import grid_spacing
 from ..model.budget import MESH_TRIANGLE_BYTES, evaluation_bytes, mesh_triangles
 from ..model.lattice import Lattice, Region
 from ..program.sources import load_lattice
+from ._level_set import unit_deficit
 
 CHILD = r"""
 import json, os, resource, sys, time
@@ -347,6 +348,9 @@ def run(args) -> dict:
                     level_sets[name, n] = ls = _run(LEVEL_SET, [name, n], args.union_timeout, args.union_memory * 1e9)
                     if "volume" in ls and "volume" in base:
                         ls["volume_vs_union"] = ls["volume"] / base["volume"] - 1.0
+                        # against the exact solid, as far as the union tells it: its polygonal balls
+                        # hold unit_deficit of the exact balls' volume (2.2 % under at 32 segments)
+                        ls["volume_vs_exact"] = ls["volume"] * unit_deficit(balls) / base["volume"] - 1.0
                     if "process_wall_seconds" in ls:  # what meshing waits: the edge's calibration left out
                         ls["process_wall_seconds"] -= ls["calibration_seconds"]
                 row["manifold3d_level_set"] = ls = level_sets[name, n]
