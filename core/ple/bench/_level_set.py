@@ -9,8 +9,8 @@ the elements whose box, grown by ``reach``, meets them: a point farther than tha
 element gets -``reach`` (the crossings are interpolated between grid points at most one edge from
 the surface, whose values are exact). The edge length is calibrated on the lattice's corner block
 of 2³ groups: the largest of ``EDGES`` (fractions of the smallest radius) whose mesh's volume is
-within ``TARGET`` of that block's exact volume (``unions.exact_union_volume``, analytic where the
-block is a single ball, else a ``CALIBRATION_SEGMENTS`` union: 0.2 % under at most).
+within ``TARGET`` of that block's exact volume (``reference_volume``: a ``CALIBRATION_SEGMENTS``
+union divided by its balls' deficit).
 """
 
 from __future__ import annotations
@@ -67,10 +67,10 @@ class UnionDistance:
         cells: dict = {}
         a = np.floor((lo - self.origin) / self.cell).astype(int)
         b = np.floor((hi - self.origin) / self.cell).astype(int)
-        self.elements = [(tuple(c[x]), tuple(c[y]), float(r[x]), float(r[y])) for x, y in ends.tolist()]
+        elements = [(tuple(c[x]), tuple(c[y]), float(r[x]), float(r[y])) for x, y in ends.tolist()]
         for e in range(len(ends)):
             for key in np.ndindex(*(b[e] - a[e] + 1)):
-                cells.setdefault((a[e][0] + key[0], a[e][1] + key[1], a[e][2] + key[2]), []).append(self.elements[e])
+                cells.setdefault((a[e][0] + key[0], a[e][1] + key[1], a[e][2] + key[2]), []).append(elements[e])
         self.cells = cells
 
     def __call__(self, x: float, y: float, z: float) -> float:
@@ -100,16 +100,21 @@ def unit_deficit(segments: int) -> float:
     return float(manifold3d.Manifold.sphere(1.0, segments).volume()) / (4 * math.pi / 3)
 
 
-def reference_volume(center, radius, beam_nodes, segments: int = CALIBRATION_SEGMENTS) -> float:
-    """The exact union's volume, from a union of ``segments``-segment balls and their hulls
-    (divided by the polygonal ball's volume deficit, ``unit_deficit``)."""
-    import manifold3d  # noqa: PLC0415
+def element_union(center, radius, beam_nodes, segments: int):
+    """One manifold3d batch union of every ball (a ``segments``-segment sphere) and every beam (the
+    hull of its two balls): the baseline of ``ple bench unclean`` (a lazy Manifold)."""
+    import manifold3d  # noqa: PLC0415 - the baseline's package
 
     unit = manifold3d.Manifold.sphere(1.0, segments)
     balls = [unit.scale([float(q)] * 3).translate(list(map(float, p))) for p, q in zip(center, radius)]
     parts = balls + [manifold3d.Manifold.batch_hull([balls[a], balls[b]]) for a, b in np.asarray(beam_nodes).tolist()]
-    u = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add)
-    return float(u.volume()) / unit_deficit(segments)
+    return manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add)
+
+
+def reference_volume(center, radius, beam_nodes, segments: int = CALIBRATION_SEGMENTS) -> float:
+    """The exact union's volume, from ``element_union`` at ``segments`` divided by the polygonal
+    ball's volume deficit (``unit_deficit``)."""
+    return float(element_union(center, radius, beam_nodes, segments).volume()) / unit_deficit(segments)
 
 
 def calibrated_edge(ev_block, target: float = TARGET) -> dict:

@@ -90,7 +90,6 @@ print(json.dumps({"triangles": int(tris), "seconds": wall, "cpu_seconds": cpu + 
 
 UNION = r"""
 import json, resource, sys, time
-import numpy as np
 import manifold3d
 from ple.bench.unclean import case_lattice
 from ple.meshing.unclean import SPHERE_SEGMENTS
@@ -100,10 +99,8 @@ from ple.model.lattice import Region
 m = int(sys.argv[3]) if len(sys.argv) > 3 else 0  # a corner block of m³ groups only (0: the whole lattice)
 segments = int(sys.argv[4]) if len(sys.argv) > 4 else SPHERE_SEGMENTS  # of every ball (and so of every hull)
 ev = lat.evaluate(Region(0, m, 0, m, 0, m) if m else lat.region())
-unit = manifold3d.Manifold.sphere(1.0, segments)
-balls = [unit.scale([r] * 3).translate(list(c)) for c, r in zip(ev.center, ev.radius)]
-parts = balls + [manifold3d.Manifold.batch_hull([balls[a], balls[b]]) for a, b in ev.beam_nodes]
-u = manifold3d.Manifold.batch_boolean(parts, manifold3d.OpType.Add)
+from ple.bench._level_set import element_union
+u = element_union(ev.center, ev.radius, ev.beam_nodes, segments)
 tris = u.num_tri()
 print(json.dumps({"triangles": int(tris), "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - c0,
                   "volume": float(u.volume()),
