@@ -91,6 +91,46 @@ def test_a_cluster_without_free_beams_meshes_slab_by_slab(make, within, monkeypa
     assert abs(back.volume / mesh.volume - 1) < 1e-5
 
 
+def _without_shifts(monkeypatch):
+    """Every slab made (no lattice translation offered to ``slabs._Period``)."""
+    from ple.meshing import tessellate as tess_module
+
+    monkeypatch.setattr(tess_module._UnionQueue, "_shifts", lambda self: np.zeros((0, 3)))
+
+
+@pytest.mark.parametrize("graded", [False, True], ids=["repeating", "graded_middle"])
+def test_periods_of_a_translation_are_copied_slabs(graded, monkeypatch):
+    """All-shrunk junctions 3 x 12 x 2 repeat along V (a translation): cut along it into slabs
+    smaller than a period, one period is united and the later ones are its copies (its pieces
+    moved, their seams walked onto their neighbours'). The mesh is closed, oriented and free of
+    self-intersections (exact), holds the Monte Carlo volume, and has the triangles and volume of
+    the same lattice with every slab united. Graded in its middle (radii change between y = 2 and
+    y = 3.5), the copies stop where the balls stop being translates and start again after."""
+    from ple.model.grading import LinearGradient
+
+    lat = shrunk_graded().with_counts(3, 12, 2)
+    if graded:
+        lat.radius_field = LinearGradient((0, 2, 0), (0, 3.5, 0), 1.0, 0.9)
+    cl, _ = _cluster(lat)
+    limit = max(piece_estimate(c)[0] for c in cl) // 40  # about a third of a period
+    monkeypatch.setattr(slabs, "SLAB_TRIANGLES", limit)
+    monkeypatch.setattr(slabs, "SLAB_INPUT", limit)
+    mesh = tessellate(lat, None, "cnt", segments=16)
+    report = mesh.metadata["ple_unclean"]
+    assert report.slab_copies >= 3 and report.united >= 3
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    check = trimesh.Trimesh(v, f, process=True)
+    assert check.is_watertight and check.is_winding_consistent and check.volume > 0
+    assert len(self_intersections(v, f)) == 0
+    est, err = monte_carlo_volume(lat, lat.region(), samples=400_000, seed=5)
+    assert abs(mesh.volume - est) < 0.01 * est + 4 * err
+    _without_shifts(monkeypatch)
+    made = tessellate(lat, None, "cnt", segments=16)
+    assert made.metadata["ple_unclean"].slab_copies == 0
+    assert made.metadata["ple_unclean"].united == report.united + report.slab_copies
+    assert len(made.faces) == len(mesh.faces) and abs(made.volume / mesh.volume - 1) < 1e-7
+
+
 def test_the_estimate_is_the_largest_slab():
     """With a limit of twice the heaviest cross-section (recounted at every element's end), every
     slab of the plan holds about the limit at most and none is empty; the estimate is the largest

@@ -128,15 +128,18 @@ def slab_loads(weights, lo, hi, cuts) -> list:
 
 
 def unite_in_slabs(cluster, center, radius, beam_nodes, rings: dict, grid: float, limit: int = SLAB_TRIANGLES,
-                   made: int = SLAB_INPUT):
-    """The pieces (vertices, faces) of a cluster cut into slabs (module docstring), each open along
+                   made: int = SLAB_INPUT, shifts=()):
+    """(the pieces (vertices, faces), how many of them are copies) of a cluster cut into slabs
+    (module docstring), each open along
     its seams and along the rings it shares with clean junctions (``unions.unite_cluster``'s
     ``rings``). Tries the balls all turned one way, then each its own (``TURN_TRIES`` after the
     first: a cluster this large is a thick lattice, whose symmetric beams meet tangentially on
     balls as they are, and a failed try costs a slab), each at up to ``SEAM_TRIES`` positions of
     each plane. Only the elements of one slab are held at a time. ``limit``: the estimate's slab
     (``plan_slabs``: whether the cluster is cut at all); ``made``: each slab's input triangles as
-    its elements are made and clipped (``_SlabContext.next_plane``)."""
+    its elements are made and clipped (``_SlabContext.next_plane``). ``shifts``: translations (K, 3)
+    that may map the lattice onto itself (``_Period``): along the best of them the slabs of one
+    period are united once and the periods after it that are its translates are copies."""
     manifold3d = manifold3d_module()
     weights = element_triangles(cluster)
     ext = element_extents(cluster, center, radius, beam_nodes)
@@ -145,18 +148,21 @@ def unite_in_slabs(cluster, center, radius, beam_nodes, rings: dict, grid: float
         raise PleError("a cluster that fits one union is not cut into slabs")
     last = None
     for turns in TURN_TRIES[1:]:
-        try:
-            return _slabs(Elements(manifold3d, cluster, center, radius, beam_nodes, rings, turns), weights, ext, axis,
-                          grid, made)
-        except PleError as exc:  # a plane that no try could place: the balls turned, as unite_cluster does
-            last = exc
+        make = Elements(manifold3d, cluster, center, radius, beam_nodes, rings, turns)
+        period = _Period.best(make, ext, shifts, grid) if turns != "each" else None  # each its own: no translates
+        for per in ((period, None) if period is not None else (None,)):
+            try:
+                return _slabs(make, weights, ext, axis if per is None else per.axis, grid, made, per)
+            except PleError as exc:  # a plane that no try could place: the balls turned, as unite_cluster does
+                last = exc
     raise PleError(f"an unclean cluster of {len(cluster.hubs):,} hubs and {len(cluster.beams):,} beams cut "
                    f"into {len(cuts) + 1} slabs does not join ({last})")
 
 
-def unite_in_slabs_stoppable(cluster, center, radius, beam_nodes, rings: dict, grid: float) -> list:
+def unite_in_slabs_stoppable(cluster, center, radius, beam_nodes, rings: dict, grid: float, shifts=()) -> tuple:
     """``unite_in_slabs`` in a child process that a signal stops (``unions.stoppable``)."""
-    return stoppable(unite_in_slabs, cluster, center, radius, beam_nodes, rings, grid, SLAB_TRIANGLES, SLAB_INPUT)
+    return stoppable(unite_in_slabs, cluster, center, radius, beam_nodes, rings, grid, SLAB_TRIANGLES, SLAB_INPUT,
+                     shifts)
 
 
 def _made(make, i: int, axis: int):
@@ -175,7 +181,7 @@ class SeamMismatchError(PleError):
     """The two sides of a seam do not match: the plane between them is moved."""
 
 
-def _slabs(make, weights, ext, axis, grid, limit):
+def _slabs(make, weights, ext, axis, grid, limit, period=None):
     """Every slab's piece (module docstring). Each plane is the farthest from the last one at
     which the slab between them holds at most ``limit`` input triangles, counted from its
     elements as clipped (``_SlabContext.next_plane``), placed off the balls and rings where it
@@ -183,25 +189,46 @@ def _slabs(make, weights, ext, axis, grid, limit):
     are kept for the next slab, the others let go. A seam that does not match moves its plane
     and makes the last slab again (up to 2 ``SEAM_TRIES`` times); a slab the grid folds is made
     once more with its high plane moved, then given up (the caller turns the balls: a fold inside
-    a slab is a symmetric lattice's, which no plane moves)."""
+    a slab is a symmetric lattice's, which no plane moves). With a ``period`` (``_Period``), the
+    slabs of one period are made and the periods after it that are its translates are copied."""
     lo, hi = ext[:, 0, axis], ext[:, 1, axis]
     size = float((ext[:, 1].max(axis=0) - ext[:, 0].min(axis=0)).max()) or 1.0
     ctx = _SlabContext(make, weights, lo, hi, axis, grid, size)
+    if period is not None:
+        period.start(lo, hi, ctx.clear)
     pieces: list = []
+    copies = 0
     last = None  # the last slab: (its low plane, the seam it took, its high plane)
     a, prev, tries, beyond = -math.inf, None, 0, -math.inf
     while True:
+        if period is not None and period.ready(a):  # the template period is made: its translates are copied
+            n = len(pieces)
+            a, prev, copied = period.copies(ctx, a, prev, pieces)
+            copies += len(pieces) - n
+            if copied:
+                last, tries, beyond = copied, 0, a
+                ctx.let_go(a)
+            period.idle(a)
         b = math.inf
         cut = ctx.next_plane(a, limit, beyond)
         if math.isfinite(cut):
             gap = cut - (a if math.isfinite(a) else ctx.span[0])
             b = ctx.plane(cut + _nudge(tries) * gap, a)
-            if b is None:  # no place near it: the slab reaches to the next element's end
-                beyond = cut
+            if b is None and (period is None or not period.recording):  # no place near it: the slab reaches to
+                beyond = cut  # the next element's end
                 continue
+        if period is not None and period.recording:  # the template's last slab ends on the period's plane
+            close = period.closing
+            if b is None or b > close - CLOSE_SLACK * (close - a):
+                b = close
+        elif period is not None and period.window and a < period.window[0] and b > period.window[1]:  # the plane that
+            b = ctx.plane(period.window[1], a)  # starts a template: in its window, off the balls where it can be
+            if b is None or not period.window[0] <= b <= period.window[1]:
+                b = period.window[1]
         try:
-            piece, seam, b = ctx.slab(a, b, prev)
+            piece, seam, b, info = ctx.slab(a, b, prev)
         except SeamMismatchError:
+            period = None
             if last is None or tries >= 2 * SEAM_TRIES:
                 raise
             tries += 1  # the low plane moves: the last slab is made again up to it
@@ -213,6 +240,7 @@ def _slabs(make, weights, ext, axis, grid, limit):
             last = (a0, prev0, a)
             continue
         except PleError:  # a fold on the grid inside the slab: once more with the high plane moved,
+            period = None
             if not math.isfinite(b) or tries:  # then the balls are turned (the caller)
                 raise
             tries += 1
@@ -220,10 +248,176 @@ def _slabs(make, weights, ext, axis, grid, limit):
         if piece is not None:
             pieces.append(piece)
             last = (a, prev, b)
+        if period is not None and not period.made(b, piece, info):
+            period = None
         if not math.isfinite(b):
-            return pieces
+            return pieces, copies
         prev, a, tries, beyond = seam, b, 0, b
         ctx.let_go(b)
+
+
+CLOSE_SLACK = 0.2  # of a slab: a template slab planned to end this near the period's plane ends on it
+
+
+class _Period:
+    """A translation ``t`` that maps the cluster onto itself where it can (``sigma``: element i to
+    the element that is its translate, -1 where there is none), and the slabs along ``axis``
+    (t's largest component, ``s`` > 0) that it maps to slabs (planes ``s`` apart). A period
+    [q, q + s] whose elements all have translates, and whose translate holds only translates
+    (``window``: where q may be), is made slab by slab (the template); then each slab of each
+    later period is the template's slab moved by p t, for as long as the elements reaching it are
+    exactly the p-th images of the template slab's (``copies``); then the next window is sought.
+    A copy is moved onto the grid by a multiple of four grid steps (so its rounding to the grid,
+    and to twice the grid, is the template's, which ``on_grid`` checked), its seams by p t
+    exactly; its low seam is walked onto the last slab's (``_matched``), and the faces near either
+    seam are checked exactly (``_check_moved``). A copy that fails ends the copies: the slabs
+    after it are made."""
+
+    def __init__(self, axis: int, t: np.ndarray, sigma: np.ndarray, grid: float, tol: float):
+        self.axis, self.t, self.sigma, self.grid, self.tol = axis, t, sigma, grid, tol
+        self.s = float(t[axis])
+        self.template: list = []
+        self.recording, self.closing, self.window = False, math.inf, None
+
+    @staticmethod
+    def best(make, ext, shifts, grid: float) -> _Period | None:
+        """The shift whose copies would cover the most of the cluster, or None when none would
+        cover any."""
+        shifts = np.asarray(shifts, float).reshape(-1, 3)
+        size = float((ext[:, 1].max(axis=0) - ext[:, 0].min(axis=0)).max()) or 1.0
+        best, most = None, 0
+        for t in shifts:
+            axis = int(np.argmax(np.abs(t)))
+            if abs(t[axis]) <= CLEARANCE * size:
+                continue
+            t = t if t[axis] > 0 else -t
+            sigma = shift_map(make, t, SEAM_TOLERANCE * size)
+            # the share of elements with a translate, less the periods a run of copies leaves made
+            # at its ends (the first, the template, the last, and a half for the planes)
+            n = float((sigma >= 0).mean()) - 3.5 * t[axis] / float(np.ptp(ext[:, :, axis]))
+            if n > most:
+                best, most = _Period(axis, t, sigma, grid, SEAM_TOLERANCE * size), n
+        return best
+
+    def start(self, lo, hi, clear) -> None:
+        has_pre = np.zeros(len(self.sigma), bool)
+        has_pre[self.sigma[self.sigma >= 0]] = True
+        s, none = self.s, self.sigma < 0
+        # a template at q needs every element reaching [q, q + s] to have an image, and every one
+        # reaching [q + s, q + 2s] a preimage: the positions each element rules out
+        self.blocked = sorted(zip(np.concatenate([lo[none] - s, lo[~has_pre] - 2 * s]).tolist(),
+                                  np.concatenate([hi[none], hi[~has_pre] - s]).tolist()))
+        self.clear, self.begin, self.end = clear, float(lo.min()), float(hi.max())
+        self.idle(-math.inf)
+
+    def idle(self, a: float) -> None:
+        """No template: the next window past the plane ``a`` (None when there is none)."""
+        self.template, self.recording, self.window = [], False, None
+        x = max(a, self.begin) + self.clear
+        for u, w in self.blocked:  # sorted by their starts: the first gap past x
+            if w + self.clear <= x:
+                continue
+            if u - self.clear > x:
+                break
+            x = w + self.clear
+        else:
+            return
+        if x < self.end:
+            nxt = min((u for u, _ in self.blocked if u - self.clear > x), default=math.inf)
+            self.window = (x, nxt - self.clear)
+
+    def ready(self, a: float) -> bool:
+        return bool(self.template) and not self.recording and a == self.closing
+
+    def made(self, b, piece, info) -> bool:
+        """Take a slab just made, ending at the plane ``b``; False when the template broke."""
+        if self.recording:
+            if piece is None:
+                return False
+            self.template.append((b, piece, info))
+            if b == self.closing:
+                self.recording = False
+            return b <= self.closing
+        if self.window is None or not math.isfinite(b):
+            return True
+        if b > self.window[1]:
+            self.idle(b)
+        elif b >= self.window[0]:  # the period from b is the template
+            self.recording, self.closing, self.q0 = True, b + self.s, b
+        return True
+
+    def copies(self, ctx, a, prev, pieces):
+        """The template's translates, appended to ``pieces`` while they hold; (the plane where
+        they end, its seam, the last slab's (low plane, seam it took, high plane) or None)."""
+        q = [self.q0] + [t[0] for t in self.template[:-1]]  # each template slab's low plane
+        cur = [info[0] for *_, info in self.template]
+        last, p = None, 1
+        while True:
+            for i, (_, piece, info) in enumerate(self.template):
+                img = self.sigma[cur[i]] if len(cur[i]) else cur[i]
+                if (img < 0).any():
+                    return a, prev, last
+                cur[i] = img
+                b = q[i + 1] + p * self.s if i + 1 < len(q) else q[0] + (p + 1) * self.s
+                want = ctx.reach(a, b)
+                if len(want) != len(img) or not np.array_equal(want, np.sort(img)):
+                    return a, prev, last
+                try:
+                    got, seam = _copied(piece, info, p * self.t, self.grid, prev, self.tol, self.axis, b)
+                except SeamMismatchError:
+                    return a, prev, last
+                pieces.append(got)
+                last, a, prev = (a, prev, b), b, seam
+                ctx.let_go(a)
+            p += 1
+
+
+def shift_map(make, t, tol: float) -> np.ndarray:
+    """(E,) each element of a cluster (``Elements``' order) to the one that is its translate by
+    ``t`` (balls of the same radius whose centres are t apart within ``tol``; beams between
+    translated balls), -1 where there is none and for elements with a ring (the fast path's
+    floats, which a translate does not carry)."""
+    from scipy.spatial import cKDTree  # noqa: PLC0415 - optional package
+
+    hubs = np.asarray(make.cluster.hubs, np.int64)
+    sigma = np.full(make.count, -1, np.int64)
+    if not len(hubs):
+        return sigma
+    c, rad = make.c[hubs], make.rad[hubs]
+    d, j = cKDTree(c).query(c + t, distance_upper_bound=tol)
+    ok = np.isfinite(d)
+    ok[ok] = np.abs(rad[j[ok]] - rad[ok]) <= tol
+    sigma[:len(hubs)][ok] = j[ok]
+    image = np.full(int(max(hubs.max(), make.bn.max(initial=0))) + 1, -1, np.int64)
+    image[hubs[ok]] = hubs[j[ok]]
+    beams = np.asarray(make.cluster.beams, np.int64)
+    if len(beams):
+        ends = make.bn[beams]
+        inside = np.isin(ends, hubs).all(axis=1)
+        where = {(int(x), int(y)): k for k, (x, y) in enumerate(ends.tolist())}
+        to = image[ends]
+        for k in np.flatnonzero(inside & (to >= 0).all(axis=1)).tolist():
+            m = where.get((int(to[k, 0]), int(to[k, 1])), -1)
+            if m >= 0 and inside[m]:
+                sigma[len(hubs) + k] = len(hubs) + m
+    return sigma
+
+
+def _copied(piece, info, t, grid, prev, tol, axis, b):
+    """The template slab's ``piece`` moved by ``t`` (``_Period``): (piece, its high seam)."""
+    v, f = piece
+    _, low_edges, high_ids, at = info
+    out = v + np.round(t / (4 * grid)) * (4 * grid)
+    seam_ids = np.unique(np.concatenate([low_edges.reshape(-1), high_ids]))
+    out[seam_ids] = v[seam_ids] + t
+    out[high_ids, axis] = b
+    if (prev is None) != (not len(low_edges)):
+        raise SeamMismatchError("a copied slab has a seam where the last slab had none, or none where it had one")
+    if len(low_edges):  # its low seam onto the last slab's floats (the faces near them checked there)
+        out = _matched(out, f, low_edges[:, ::-1], prev, tol)
+    if len(high_ids):
+        _check_moved(out, f, high_ids)
+    return (out, f), (out[high_ids], at)
 
 
 def _nudge(t: int) -> float:
@@ -307,11 +501,17 @@ class _SlabContext:
                 p += int(np.searchsorted(emin, c) - np.searchsorted(emax, c))
         return min(len(f), max(2 * p - 4, 0))
 
+    def reach(self, a: float, b: float) -> np.ndarray:
+        """The elements reaching into the slab between a and b (sorted)."""
+        return np.flatnonzero((self.hi > a) & (self.lo < b))
+
     def slab(self, a: float, b: float, prev):
-        """(piece, high seam, the high plane as placed) of the slab between a and b."""
+        """(piece, high seam, the high plane as placed, (the elements reaching in, and the
+        piece's low seam edges, high seam vertices and edges: ``_slab_piece``)) of the slab
+        between a and b."""
         axis, clear = self.axis, self.clear
         for _ in range(64):  # the elements reaching in; the plane stepped past their vertices
-            want = np.flatnonzero((self.hi > a) & (self.lo < b))
+            want = self.reach(a, b)
             for i in want.tolist():
                 if i not in self.built:
                     self.built[i] = _made(self.make, i, axis)
@@ -328,9 +528,10 @@ class _SlabContext:
         if not solids:  # a gap between elements (nothing crosses its planes): no piece
             if prev is not None and len(prev[0]):
                 raise SeamMismatchError("a slab of an unclean cluster holds nothing past a seam")
-            return None, None, b
-        piece, seam = _slab_piece(self.make.manifold3d, solids, a, b, axis, prev, self.ring_pts, self.grid, self.tol)
-        return piece, seam, b
+            return None, None, b, None
+        piece, seam, ends = _slab_piece(self.make.manifold3d, solids, a, b, axis, prev, self.ring_pts, self.grid,
+                                        self.tol)
+        return piece, seam, b, (want, *ends)
 
     def let_go(self, a: float) -> None:
         """Forget the elements that end below the plane ``a`` (no later slab reaches them)."""
@@ -340,7 +541,8 @@ class _SlabContext:
 def _slab_piece(manifold3d, solids, a, b, axis, prev, ring_pts, grid, tol):
     """One slab's union, on the grid with its seams pinned, opened along them (its low seam given
     the last slab's floats, ``_matched``) and along its rings; returns (piece, its high seam for
-    the next slab: (points, directed edges into them))."""
+    the next slab: (points, directed edges into them), (its low seam's directed edges, its high
+    seam's vertices and the edges into them, in the piece's vertices))."""
     out = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add).to_mesh64()
     v, f = np.array(out.vert_properties[:, :3], float), np.asarray(out.tri_verts, np.int64)
     low, high = _on_plane(v, a, axis, tol), _on_plane(v, b, axis, tol)
@@ -375,7 +577,8 @@ def _slab_piece(manifold3d, solids, a, b, axis, prev, ring_pts, grid, tol):
     remap[used] = np.arange(len(used))
     seam = open_edges[on_high]  # directed as this slab's faces leave them
     ids, at = np.unique(seam, return_inverse=True)
-    return (v[used], remap[f]), (v[ids], at.reshape(-1, 2))
+    at = at.reshape(-1, 2)
+    return (v[used], remap[f]), (v[ids], at), (remap[open_edges[on_low]], remap[ids], at)
 
 
 def _recapped(manifold3d, v, f, on, c, axis) -> np.ndarray:

@@ -1170,6 +1170,7 @@ class _UnionQueue:
         self.unsettled: list = []  # clusters of a flushed batch not settled yet
         self.gone: set = set()  # ids of clusters merged into a grown one
         self.united = 0  # unions made (the other pieces are copies)
+        self.slab_copies = 0  # slabs copied from a period's (``slabs._Period``)
 
     def run(self):
         while self.pending:
@@ -1201,6 +1202,7 @@ class _UnionQueue:
         self._flush()
         if self.report is not None:
             self.report.united = self.united
+            self.report.slab_copies = self.slab_copies
         for _, pieces in self.done.values():
             yield from pieces
 
@@ -1289,16 +1291,31 @@ class _UnionQueue:
         g = self.idx[self.bn[np.asarray(rows, np.int64), 0], :3]
         return self.tess.lat.group_matrices(g[:, 0], g[:, 1], g[:, 2])[:, :3, :3]
 
+    def _shifts(self) -> np.ndarray:
+        """The translations among the similarities that step the lattice's groups, in world axes
+        (``G U G⁻¹``, ``G V G⁻¹``, ``G W G⁻¹`` where those are translations): where the lattice
+        repeats, its slabs are copies (``slabs._Period``, which checks each copy element by
+        element). None for a group map (Möbius, warps)."""
+        lat = self.tess.lat
+        if lat.group_map is not None:
+            return np.zeros((0, 3))
+        m = lat.group_matrices([0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1])
+        step = m[1:] @ np.linalg.inv(m[0])[None]
+        linear = np.abs(step[:, :3, :3] - np.eye(3)).max(axis=(1, 2)) <= 1e-12
+        return step[linear, :3, 3]
+
     def _pieces(self, c, rg):
         """A cluster's pieces: from the cache, or its union (put in the cache), or, when its union
         is planned in slabs (``slabs.union_peak``), its slabs' (``slabs.unite_in_slabs``); the
         RingTouchedError when a union touches one of its rings."""
         if slabs.union_peak(c, self.ev.center, self.ev.radius, self.bn)[1] > 1:  # as it was estimated
             try:
-                got = unite_in_slabs_stoppable(c, self.ev.center, self.ev.radius, self.bn, rg, self.tess.grid)
+                got, copies = unite_in_slabs_stoppable(c, self.ev.center, self.ev.radius, self.bn, rg,
+                                                       self.tess.grid, self._shifts())
             except RingTouchedError as exc:
                 return exc
-            self.united += len(got)
+            self.united += len(got) - copies
+            self.slab_copies += copies
             return got
         piece = self._piece(c, rg)
         return piece if isinstance(piece, RingTouchedError) else [piece]

@@ -71,6 +71,7 @@ class UncleanReport:
     shrunk: np.ndarray | None = None  # (N,) hubs whose ACHoCC shrank its caps
     clusters: int = 0  # local unions (``ple.meshing.unions``), once the stream has split them
     united: int = 0  # unions made by manifold3d once the stream has settled them (the rest: kept shapes' copies)
+    slab_copies: int = 0  # slabs of clusters without free beams copied from a period's (``slabs._Period``)
     union_bytes: int = 0  # the largest cluster's union (its largest slab's), estimated from above (peak bytes)
     union_hubs: int = 0  # that cluster's hubs, beams and overlapping element pairs, and the slabs it is cut into
     union_beams: int = 0
