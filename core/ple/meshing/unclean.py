@@ -108,7 +108,8 @@ class UncleanReport:
         close = f", {self.close_junctions:,} close junction pairs" if self.close_junctions else ""
         local = f" in {self.clusters:,} local unions" if self.clusters else ""
         if self.clusters and self.united:
-            local += f" ({self.united:,} united, the others copies of those)"
+            copied = f", {self.slab_copies:,} slabs copied from a period's" if self.slab_copies else ""
+            local += f" ({self.united:,} united{copied}, the others copies of those)"
         return (f"unclean lattice: {len(self.nodes):,} hubs in {self.components:,} neighbourhoods "
                 f"({self.pairs:,} overlapping element pairs, {self.shrunk_hubs:,} shrunk junctions{close}) "
                 f"united with manifold3d{local}")
