@@ -13,6 +13,7 @@ from ple.app.pipeline import MeshRequest, write_mesh
 from ple.bench.unclean import case_lattice
 from ple.cli.main import main
 from ple.cli.mesh import monte_carlo_volume
+from ple.errors import PleError
 from ple.io.export import read_back
 from ple.meshing import slabs
 from ple.meshing.selfcheck import self_intersections
@@ -239,17 +240,19 @@ BALLS_50 = (
     "    return lat\n")
 
 
-def test_a_union_the_balls_foresee_is_refused_before_the_check(tmp_path, capsys, monkeypatch):
+@pytest.mark.parametrize("door", [("--style", "cnt"), ("--style", "refined"), ("--beam-lattice",)])
+def test_a_union_the_balls_foresee_is_refused_before_the_check(tmp_path, capsys, monkeypatch, door):
     """Cubic 10³ whose balls (radius 50, cell 1) all overlap: refused before the unclean check,
     naming its 1,000 hubs, 2,700 beams and C(1000, 2) = 499,500 overlapping balls; the check
-    (which would enumerate millions of element pairs) never runs."""
+    (which would enumerate millions of element pairs) never runs. --beam-lattice's fallback mesh
+    is the same pipeline under the same --max-memory (it once ran its unions unestimated)."""
     import ple.app.pipeline as pipeline
 
     prog = tmp_path / "r50.py"
     prog.write_text(BALLS_50)
     monkeypatch.setattr(pipeline, "checked_stream", lambda *a, **k: pytest.fail("the check ran"))
-    out = tmp_path / "r50.stl"
-    assert main(["mesh", str(prog), "--style", "cnt", "--max-memory", "1500M", "--out", str(out)]) == 2
+    out = tmp_path / ("r50.3mf" if door == ("--beam-lattice",) else "r50.stl")
+    assert main(["mesh", str(prog), *door, "--max-memory", "1500M", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "foreseen" in err and "1,000 hubs" in err and "2,700 beams" in err and "499,500 overlapping balls" in err
     assert not out.exists()
@@ -274,3 +277,18 @@ def test_the_foreseen_union_is_within_the_checks():
             near = np.linalg.norm(c[:, None] - c[None], axis=2) < rad[:, None] + rad[None]
             assert f.ball_pairs == (near.sum() - len(c)) // 2
     assert foreseen_union(load_lattice("cubic", {"n": 20})) is None
+
+
+def test_a_request_without_a_limit_is_held_to_the_default(monkeypatch):
+    """A door that gives no max_memory (the add-on, batch, a script) is held to the default
+    limit (``PLE_MAX_MEMORY``), not left unlimited: the radius-50 cubic is refused before its
+    unions, naming them."""
+    import ple.app.pipeline as pipeline
+
+    monkeypatch.setenv("PLE_MAX_MEMORY", "1500M")
+    monkeypatch.setattr(pipeline, "checked_stream", lambda *a, **k: pytest.fail("the check ran"))
+    namespace: dict = {}
+    exec(BALLS_50, namespace)
+    lat = namespace["lattice"]()
+    with pytest.raises(PleError, match="1,000 hubs.*499,500 overlapping balls"):
+        pipeline.mesh(pipeline.plan(pipeline.MeshRequest(lat, None, "cnt")))

@@ -66,6 +66,7 @@ from ..model.budget import (
     MESH_TRIANGLE_BYTES,
     Estimate,
     big,
+    default_max_memory,
     evaluation_bytes,
     hub_triangles,
     human,
@@ -94,7 +95,8 @@ class MeshRequest:
     the defaults); ``fillet``: refined junction fillet in ball radii; ``unit``: the coordinates'
     unit in files; ``max_groups``: node-groups per streamed box at most; ``workers``: threads
     assembling boxes (the output does not depend on them); ``max_memory``: bytes a local union of
-    unclean hubs may take (None: unlimited); ``contain``: runs the Booleans that cut a lattice
+    unclean hubs may take (None: the default, ``budget.default_max_memory``, so that every door
+    estimates its unions); ``contain``: runs the Booleans that cut a lattice
     filling a body by ``any`` (``ple.program.meshes.mesh_contained``)."""
 
     lattice: Lattice
@@ -260,7 +262,7 @@ def _checked(p: MeshPlan, encode=None):
 def _foreseen_limit(p: MeshPlan) -> None:
     """Refuse before the unclean check a local union that the balls alone show will pass
     ``max_memory`` (``tessellate.foreseen_union``: overlapping balls, a lower bound)."""
-    if not p.checked or p.cut or p.request.max_memory is None:
+    if not p.checked or p.cut:
         return
     f = foreseen_union(p.lattice, p.region, p.segments)
     if f is not None:
@@ -271,7 +273,7 @@ def _foreseen_limit(p: MeshPlan) -> None:
 def _union_limit(p: MeshPlan, report) -> None:
     """Refuse before they run the local unions whose largest estimate, with the region's
     evaluation, passes ``max_memory``."""
-    if report is not None and report.clusters and p.request.max_memory is not None:  # one local union at a time
+    if report is not None and report.clusters:  # one local union at a time
         _union_within(p, report.union_bytes, f"the largest of {report.clusters:,} local unions of unclean hubs",
                       report.union_hubs, report.union_beams, f"{report.union_pairs:,} overlapping pairs",
                       report.union_slabs)
@@ -282,7 +284,12 @@ def _union_within(p: MeshPlan, peak: int, whose: str, hubs: int, beams: int, pai
     cut = f", cut into {slabs} slabs" if slabs > 1 else ""
     require(peak + evaluation_bytes(p.lattice, p.region),
             f"{whose} ({hubs:,} hubs, {beams:,} beams, {pairs}{cut}), with the region's evaluation, of region "
-            f"{p.region}", p.request.max_memory, "choose a smaller --region")
+            f"{p.region}", _limit(p), "choose a smaller --region")
+
+
+def _limit(p: MeshPlan) -> float:
+    """The bytes a local union of the plan may take: its request's ``max_memory``, else the default."""
+    return p.request.max_memory if p.request.max_memory is not None else default_max_memory()
 
 
 def _in_memory(p: MeshPlan, report=None) -> trimesh.Trimesh:

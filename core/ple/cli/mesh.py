@@ -119,7 +119,7 @@ def run(args) -> int:
     elif args.beam_lattice:
         request = MeshRequest(lat, region, args.fallback if args.fallback != "none" else DEFAULT_FALLBACK,
                               args.levels, args.segments, unit=args.unit, max_groups=max_groups,
-                              workers=stream_workers(args.workers), contain=contain)
+                              workers=stream_workers(args.workers), max_memory=max_memory(args), contain=contain)
         got = write_beam_lattice(request, args.out, args.fallback, info)
         if info["unclean"] is not None and len(info["unclean"].nodes):
             print(info["unclean"].line())
