@@ -292,3 +292,26 @@ def test_a_request_without_a_limit_is_held_to_the_default(monkeypatch):
     lat = namespace["lattice"]()
     with pytest.raises(PleError, match="1,000 hubs.*499,500 overlapping balls"):
         pipeline.mesh(pipeline.plan(pipeline.MeshRequest(lat, None, "cnt")))
+
+
+def test_balls_across_the_whole_cluster_are_not_cut_into_slabs():
+    """Where every element reaches across most of the cluster (radius 50 on a unit cell: each
+    ball covers all ten cells), the greedy plan does cut, but each of its slabs holds nearly the
+    whole union again (``slab_loads``: more than ``SLAB_GAIN`` of it): the estimate keeps one
+    union, and so does the mesh (they share ``union_peak``)."""
+    from ple.meshing.tessellate import foreseen_union
+    from ple.meshing.unions import Cluster
+
+    namespace: dict = {}
+    exec(BALLS_50, namespace)
+    lat = namespace["lattice"]()
+    f = foreseen_union(lat)
+    assert (f.hubs, f.ball_pairs, f.slabs) == (1000, 499_500, 1)
+    ev = lat.evaluate(lat.region(None))
+    bn = np.asarray(ev.beam_nodes, np.int64).reshape(-1, 2)
+    whole = Cluster(np.arange(len(ev.center)), np.arange(len(bn)), segments=16)
+    w, ext = slabs.element_triangles(whole), slabs.element_extents(whole, ev.center, ev.radius, bn)
+    axis, cuts = slabs.plan_slabs(w, ext)
+    assert len(cuts) >= 1
+    assert min(slabs.slab_loads(w, ext[:, 0, axis], ext[:, 1, axis], cuts)) > slabs.SLAB_GAIN * w.sum()
+    assert slabs.union_peak(whole, ev.center, ev.radius, bn)[1] == 1

@@ -54,6 +54,7 @@ LOOSE = 2.0**14  # tolerances (2^-18 of the size): how far apart two sides put a
 SEAM_TRIES = 4  # plane positions tried before a cluster is refused
 CLEARANCE = 2.0**-20  # of the cluster's size: how far a cut plane stays from every element's vertex
 BALL_SHIFT = 0.25  # of a slab: how far a plane moves to keep off the balls (``_SlabContext.plane``)
+SLAB_GAIN = 0.5  # the largest slab's share of the whole cluster's input, at most, for a cut to pay
 PLANE_STEPS = 4096  # positions along the cluster, besides its elements' low ends, where a slab may end
 
 
@@ -113,12 +114,15 @@ def slab_plan_bytes(cluster, center, radius, beam_nodes, limit: int | None = Non
 def union_peak(cluster, center, radius, beam_nodes) -> tuple[int, int]:
     """(peak bytes, slabs) of a cluster's union as ``tessellate`` runs it: one union
     (``unions.piece_estimate``), or, past ``SLAB_TRIANGLES`` input triangles and where the plan
-    cuts it, its slabs (the largest one's bytes)."""
+    cuts it, its slabs (the largest one's bytes). A plan whose largest slab holds more than
+    ``SLAB_GAIN`` of the whole (elements that each reach across most of the cluster: balls far
+    larger than the cell) is not cut: every slab would be nearly the whole union again."""
     tris, peak = piece_estimate(cluster)
     if tris <= SLAB_TRIANGLES:
         return peak, 1
     slab_peak, cuts = slab_plan_bytes(cluster, center, radius, beam_nodes)
-    return (slab_peak, cuts + 1) if cuts else (peak, 1)
+    gain = slab_peak <= SLAB_GAIN * tris * UNION_TRIANGLE_BYTES
+    return (slab_peak, cuts + 1) if cuts and gain else (peak, 1)
 
 
 def slab_loads(weights, lo, hi, cuts) -> list:
