@@ -7,6 +7,7 @@ project's core, an independent process with its own packages."""
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -153,14 +154,19 @@ def case_every_preset():
     """Every preset of the Add menu added, tessellated and exported with its defaults."""
     out = {}
     for name in ple_ext.corelink.presets.preset_names():
+        t = [time.perf_counter()]
         assert bpy.ops.ple.lattice_add(source="PRESET", preset=name) == {"FINISHED"}, name
         rig = bpy.context.active_object
         before = {o.name for o in bpy.data.objects}
+        t.append(time.perf_counter())
         assert bpy.ops.ple.tessellate() == {"FINISHED"}, name
         made = [bpy.data.objects[n] for n in {o.name for o in bpy.data.objects} - before]
         assert len(made) == 1 and len(made[0].data.polygons) > 0, name
+        t.append(time.perf_counter())
         assert bpy.ops.ple.export(rig=rig.name, filepath=str(Path.cwd() / f"{name}.stl")) == {"FINISHED"}, name
-        out[name] = {"tessellated": len(made[0].data.polygons), "status": rig.ple.status}
+        t.append(time.perf_counter())
+        out[name] = {"tessellated": len(made[0].data.polygons), "status": rig.ple.status,
+                     "seconds": [round(b - a, 2) for a, b in zip(t[:-1], t[1:])]}  # add, tessellate, export
         bpy.ops.wm.read_homefile(use_empty=True)  # the next preset in an empty scene
     save("presets.json", out)
 
