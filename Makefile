@@ -67,7 +67,7 @@ $(BPY_VENV)/.installed:
 	touch $@
 
 test-blender: $(STAMP) $(WHEELS) $(BPY_VENV)/.installed
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest tests/addon/test_bpy_only.py -m bpy_only
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest tests/addon/test_bpy_only.py -m bpy_only -n $(TEST_WORKERS) --dist load --durations=10
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -28,7 +28,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 NOT_SHIPPED = {"build.py", "batch.py"}  # repository tools, not part of the add-on
-IGNORE_NAMES = ("__pycache__", "*.pyc", "*.so", "*.c")  # pure Python: numpy encodes STL, assembles boxes
+IGNORE_NAMES = ("__pycache__", "*.pyc", "*.so", "*.pyd", "*.c")  # compiled modules are added by ``compiled_modules``
 IGNORE = shutil.ignore_patterns(*IGNORE_NAMES)
 NOT_VENDORED = ("cli", "bench")  # the core's doors for the command line: the extension needs only the library layers
 # every package the vendored core imports beyond Blender's own (numpy, requests, zstandard), pinned to
@@ -119,10 +119,33 @@ def fetch_wheels(dest: Path = WHEEL_DIR) -> bool:
     return True
 
 
-def stage(dest: Path, wheels: list[Path], plat: str) -> dict:
+def compiled_modules(plat: str) -> dict[str, Path]:
+    """The core's compiled modules (``core/ple/**/*.c``, built by ``make setup``) that this Python
+    imports, by module name, when it can serve the zip of ``plat``: the same platform and
+    Blender's Python 3.11. Empty otherwise (another platform's zip; a module whose optional build
+    failed is left out with a warning): the core then runs its numpy form of the same
+    computation, about 9× slower on the checks of unclean hubs."""
+    import importlib.machinery
+    import importlib.util
+
+    if plat != this_platform() or sys.version_info[:2] != (3, 11):
+        return {}
+    found = {}
+    for c in sorted((ROOT / "core" / "ple").rglob("*.c")):
+        name = ".".join(c.relative_to(ROOT / "core").with_suffix("").parts)
+        spec = importlib.util.find_spec(name)
+        if spec is None or not str(spec.origin).endswith(tuple(importlib.machinery.EXTENSION_SUFFIXES)):
+            print(f"warning: {name} is not built; the {plat} zip runs its numpy form", file=sys.stderr)
+            continue
+        found[name] = Path(spec.origin)
+    return found
+
+
+def stage(dest: Path, wheels: list[Path], plat: str, compiled: dict[str, Path] | None = None) -> dict:
     """Copy manifest, add-on, vendored core and presets into ``dest``, and ``wheels`` (listed in
     the staged manifest with ``platforms = [plat]``; none: a pure-Python package for any
-    platform); returns the manifest."""
+    platform) and the ``compiled`` modules of ``compiled_modules`` beside their sources in the
+    vendored core; returns the manifest."""
     manifest = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
     dest.mkdir(parents=True, exist_ok=True)
     text = (ROOT / "blender_manifest.toml").read_text()
@@ -146,6 +169,8 @@ def stage(dest: Path, wheels: list[Path], plat: str) -> dict:
     (vendor / "__init__.py").write_text('"""Vendored copy of the PLE core package (built by ple_addon/build.py)."""\n')
     shutil.copytree(ROOT / "core" / "ple", vendor / "ple", ignore=shutil.ignore_patterns(*NOT_VENDORED, *IGNORE_NAMES))
     shutil.copytree(ROOT / "presets", vendor / "ple" / "presets", ignore=IGNORE)
+    for name, so in (compiled or {}).items():  # imported relatively (``from . import _selfcheck``)
+        shutil.copy2(so, vendor.joinpath(*name.split(".")[:-1]) / so.name)
     return manifest
 
 
@@ -158,7 +183,7 @@ def build(out_dir: Path, wheels: Path | None = WHEEL_DIR, plat: str | None = Non
     bundled = wheels_for(plat, wheels) if wheels is not None else []
     with tempfile.TemporaryDirectory(prefix="ple-ext-") as tmp:
         src = Path(tmp) / "ple"
-        manifest = stage(src, bundled, plat)
+        manifest = stage(src, bundled, plat, compiled_modules(plat) if bundled else None)
         out_dir.mkdir(parents=True, exist_ok=True)
         suffix = f"-{plat}" if bundled else ""
         zip_path = out_dir / f"{manifest['id']}-{manifest['version']}{suffix}.zip"

@@ -96,10 +96,21 @@ def test_same_triangles_every_door(bare_blender, tmp_path):
 
 
 def test_the_packages_come_from_the_zip(bare_blender, tmp_path):
+    """The wheels' packages, the vendored core and its compiled modules (one per C source of the
+    core, as fast as in ple's own venv) are imported from the installed zip."""
+    import importlib.machinery
+
+    compiled = [".".join(c.relative_to(ROOT / "core").with_suffix("").parts)
+                for c in sorted((ROOT / "core" / "ple").rglob("*.c"))]
+    assert compiled, "the core has C sources"
+    (tmp_path / "compiled.json").write_text(json.dumps(compiled))
     run(bare_blender, tmp_path, "wheels_from_the_zip")
     where = json.loads((tmp_path / "modules.json").read_text())
+    assert set(where) == {"scipy", "manifold3d", "rtree", "trimesh", "ple", *compiled}
     for name, path in where.items():
         assert "extensions" in path and str(ROOT) not in path and sys.prefix not in path, (name, path)
+    for name in compiled:
+        assert where[name].endswith(tuple(importlib.machinery.EXTENSION_SUFFIXES)), (name, where[name])
 
 
 def test_unclean_export_and_tessellate_are_ple_mesh(bare_blender, tmp_path):
@@ -159,12 +170,18 @@ def test_clg_preview(bare_blender, tmp_path):
     assert made["status"] == "" and made["polygons"] > 0 and made["vertices"] > 0
 
 
-def test_every_preset_adds_tessellates_and_exports(bare_blender, tmp_path):
+SHARDS = 2  # the presets in two halves, one per core (make test-blender runs two workers)
+
+
+@pytest.mark.parametrize("shard", range(SHARDS))
+def test_every_preset_adds_tessellates_and_exports(bare_blender, tmp_path, shard):
     from ple.program.presets import preset_names
 
+    names = sorted(preset_names())[shard::SHARDS]
+    (tmp_path / "shard.json").write_text(json.dumps(names))
     run(bare_blender, tmp_path, "every_preset")
     made = json.loads((tmp_path / "presets.json").read_text())
-    assert sorted(made) == sorted(preset_names())
+    assert sorted(made) == names
     for name, entry in made.items():
         mesh = trimesh.load(tmp_path / f"{name}.stl")
         assert len(mesh.faces) > 0 and entry["tessellated"] > 0, name
